@@ -1,0 +1,372 @@
+//! The wrist body model: coordinates, axes, signs, markers and segment parameters.
+//!
+//! This is the single place these conventions live; the simulator, the reference solvers,
+//! the features, the file writers and the docs read them from here.
+//!
+//! # Frames
+//! * **Lab** (as OpenSim): X anterior, Y up, Z to the subject's right.
+//! * **Forearm** (origin at the wrist joint centre): x volar (the way the palm faces at zero
+//!   angles), y proximal along the forearm's long axis, z radial (thumb side); right-handed.
+//!   With the shoulder at 0° flexion, elbow extended and the forearm mid-prone (thumb forward),
+//!   forearm x = lab −Z, y = lab +Y, z = lab +X.
+//! * **Hand** (origin at the wrist joint centre): equal to the forearm frame at zero angles.
+//!
+//! # Wrist coordinates, in order (s_p, e_f, ad_ab)
+//! The hand's orientation in the forearm frame is `R = Rot(a1, q1) · Rot(a2, q2) · Rot(a3, q3)`
+//! (intrinsic rotations about axes carried along the chain), with the axes below.
+
+use nalgebra::{Isometry3, Point3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3};
+
+/// One wrist degree of freedom.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Coordinate {
+    /// Name used in files and model cards (OpenSim-style).
+    pub name: &'static str,
+    /// What a positive angle means.
+    pub positive: &'static str,
+    /// Rotation axis, in the frame of the previous link of the chain, at zero angles.
+    pub axis: [f64; 3],
+    /// Anatomical range of motion `(min, max)` in radians (see [`COORDINATES`]).
+    pub range: (f64, f64),
+}
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+
+/// The three wrist coordinates in the canonical order `(s_p, e_f, ad_ab)`.
+///
+/// Ranges are typical active ranges of motion from the neutral (mid-prone, straight wrist)
+/// position (AAOS / Norkin & White): pronation and supination 80° each, flexion 80°,
+/// extension 70°, ulnar deviation (adduction) 30°, radial deviation (abduction) 20°.
+pub const COORDINATES: [Coordinate; 3] = [
+    Coordinate {
+        name: "ra_wr_s_p",
+        positive: "supination",
+        axis: [0.0, -1.0, 0.0],
+        range: (-80.0 * DEG, 80.0 * DEG),
+    },
+    Coordinate {
+        name: "ra_wr_e_f",
+        positive: "flexion",
+        axis: [0.0, 0.0, 1.0],
+        range: (-70.0 * DEG, 80.0 * DEG),
+    },
+    Coordinate {
+        name: "ra_wr_ad_ab",
+        positive: "adduction (ulnar deviation)",
+        axis: [1.0, 0.0, 0.0],
+        range: (-20.0 * DEG, 30.0 * DEG),
+    },
+];
+
+/// Number of wrist coordinates.
+pub const N_COORDINATES: usize = 3;
+
+/// The two rigid segments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Segment {
+    /// Fixed in the lab at the shoulder pose.
+    Forearm,
+    /// Attached to the forearm by the 3-DoF wrist.
+    Hand,
+}
+
+impl Segment {
+    /// Lower-case name used in feature names and files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Segment::Forearm => "forearm",
+            Segment::Hand => "hand",
+        }
+    }
+}
+
+/// One marker: its label and the segment it sits on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Marker {
+    /// Label used in TRC/C3D files and feature names.
+    pub name: &'static str,
+    /// Segment carrying it.
+    pub segment: Segment,
+    /// Where it sits.
+    pub description: &'static str,
+    /// Default position in the segment's frame, metres, for the default subject.
+    pub offset: [f64; 3],
+}
+
+/// The six markers in canonical order: three on the forearm, then three on the hand.
+///
+/// A marker frame is these six positions `x, y, z` in this order (18 values). Within a
+/// segment the order matters: the technical frame is built from markers 0, 1, 2 of it.
+pub const MARKERS: [Marker; 6] = [
+    Marker {
+        name: "RSP",
+        segment: Segment::Forearm,
+        description: "radial styloid process",
+        offset: [0.000, 0.010, 0.030],
+    },
+    Marker {
+        name: "USP",
+        segment: Segment::Forearm,
+        description: "ulnar styloid process",
+        offset: [-0.010, 0.010, -0.025],
+    },
+    Marker {
+        name: "FAP",
+        segment: Segment::Forearm,
+        description: "dorsal forearm, two thirds of the way to the elbow",
+        offset: [-0.025, 0.180, 0.000],
+    },
+    Marker {
+        name: "MC2",
+        segment: Segment::Hand,
+        description: "head of the 2nd metacarpal (dorsal)",
+        offset: [-0.010, -0.080, 0.025],
+    },
+    Marker {
+        name: "MC5",
+        segment: Segment::Hand,
+        description: "head of the 5th metacarpal (dorsal)",
+        offset: [-0.010, -0.075, -0.025],
+    },
+    Marker {
+        name: "MCB",
+        segment: Segment::Hand,
+        description: "base of the 3rd metacarpal (dorsal)",
+        offset: [-0.020, -0.030, 0.000],
+    },
+];
+
+/// Number of markers in a frame.
+pub const N_MARKERS: usize = MARKERS.len();
+/// Values in one marker frame (`x, y, z` per marker).
+pub const MARKER_FRAME_LEN: usize = 3 * N_MARKERS;
+/// Index of a segment's first marker in [`MARKERS`] (each segment has three, contiguous).
+pub fn first_marker(segment: Segment) -> usize {
+    match segment {
+        Segment::Forearm => 0,
+        Segment::Hand => 3,
+    }
+}
+
+/// Inertial and geometric parameters of one segment, in its own frame (SI units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SegmentParams {
+    /// Length along the long axis, m.
+    pub length: f64,
+    /// Mass, kg.
+    pub mass: f64,
+    /// Centre of mass in the segment frame, m.
+    pub com: [f64; 3],
+    /// Principal moments of inertia about the centre of mass, along the segment axes
+    /// `(x, y, z)`, kg·m².
+    pub inertia: [f64; 3],
+}
+
+/// A subject: segment parameters and marker placement.
+///
+/// [`BodyModel::default`] is an adult male from de Leva (1996), "Adjustments to
+/// Zatsiorsky-Seluyanov's segment inertia parameters", J. Biomech. 29(9), Table 4
+/// (body mass 73 kg): forearm 1.62 % of body mass, length 0.2689 m, centre of mass 45.74 %
+/// from the elbow, radii of gyration 27.6 / 26.5 / 12.1 % (sagittal / transverse /
+/// longitudinal); hand 0.61 %, 0.0862 m (wrist centre to 3rd metacarpal head), centre of
+/// mass 79.0 % from the wrist, radii of gyration 62.8 / 51.3 / 40.1 %; upper arm 0.2817 m.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BodyModel {
+    /// Upper arm length (shoulder to elbow), m: places the forearm in the lab.
+    pub upper_arm_length: f64,
+    /// Forearm parameters (frame at the wrist joint centre, y proximal).
+    pub forearm: SegmentParams,
+    /// Hand parameters (frame at the wrist joint centre, −y distal).
+    pub hand: SegmentParams,
+    /// Marker positions in their segment's frame, in [`MARKERS`] order, m.
+    pub marker_offsets: [[f64; 3]; N_MARKERS],
+    /// Shoulder centre in the lab, m.
+    pub shoulder: [f64; 3],
+}
+
+/// Body mass of the default subject, kg.
+pub const DEFAULT_BODY_MASS: f64 = 73.0;
+
+impl Default for BodyModel {
+    fn default() -> Self {
+        let m = DEFAULT_BODY_MASS;
+        let forearm_len = 0.2689;
+        let forearm_mass = 0.0162 * m;
+        // Forearm centre of mass lies 45.74 % of the length from the elbow, i.e. proximal of
+        // the wrist by (1 - 0.4574) L.
+        let forearm_com_from_wrist = (1.0 - 0.4574) * forearm_len;
+        let hand_len = 0.0862;
+        let hand_mass = 0.0061 * m;
+        let gyr = |mass: f64, len: f64, sag: f64, trans: f64, long: f64| {
+            // Segment x is volar (antero-posterior: rotation about it is frontal-plane, i.e.
+            // the "transverse" radius in de Leva's naming), z is radial (sagittal-plane
+            // rotation), y is the long axis.
+            [
+                mass * (trans * len).powi(2),
+                mass * (long * len).powi(2),
+                mass * (sag * len).powi(2),
+            ]
+        };
+        BodyModel {
+            upper_arm_length: 0.2817,
+            forearm: SegmentParams {
+                length: forearm_len,
+                mass: forearm_mass,
+                com: [0.0, forearm_com_from_wrist, 0.0],
+                inertia: gyr(forearm_mass, forearm_len, 0.276, 0.265, 0.121),
+            },
+            hand: SegmentParams {
+                length: hand_len,
+                mass: hand_mass,
+                com: [0.0, -0.790 * hand_len, 0.0],
+                inertia: gyr(hand_mass, hand_len, 0.628, 0.513, 0.401),
+            },
+            marker_offsets: MARKERS.map(|mk| mk.offset),
+            shoulder: [0.0, 1.40, 0.20],
+        }
+    }
+}
+
+impl BodyModel {
+    /// A subject scaled from the default: lengths and marker offsets by `length_factor`,
+    /// masses by `mass_factor`, inertias by `mass_factor · length_factor²`.
+    pub fn scaled(length_factor: f64, mass_factor: f64) -> Self {
+        let base = Self::default();
+        let scale_seg = |s: SegmentParams| SegmentParams {
+            length: s.length * length_factor,
+            mass: s.mass * mass_factor,
+            com: s.com.map(|c| c * length_factor),
+            inertia: s.inertia.map(|i| i * mass_factor * length_factor * length_factor),
+        };
+        BodyModel {
+            upper_arm_length: base.upper_arm_length * length_factor,
+            forearm: scale_seg(base.forearm),
+            hand: scale_seg(base.hand),
+            marker_offsets: base.marker_offsets.map(|o| o.map(|c| c * length_factor)),
+            shoulder: base.shoulder,
+        }
+    }
+
+    /// Pose of the forearm frame in the lab for a shoulder flexion angle (radians, positive
+    /// raises the arm forward), with the elbow extended and the forearm mid-prone.
+    pub fn forearm_pose(&self, shoulder_flexion: f64) -> Isometry3<f64> {
+        // Forearm axes in the lab at zero flexion: x = -Z, y = +Y, z = +X.
+        let neutral = Rotation3::from_matrix_unchecked(nalgebra::Matrix3::new(
+            0.0, 0.0, 1.0, //
+            0.0, 1.0, 0.0, //
+            -1.0, 0.0, 0.0,
+        ));
+        let flexion = Rotation3::from_axis_angle(&Vector3::z_axis(), shoulder_flexion);
+        let arm_length = self.upper_arm_length + self.forearm.length;
+        let wrist = Vector3::from(self.shoulder) + flexion * Vector3::new(0.0, -arm_length, 0.0);
+        Isometry3::from_parts(
+            Translation3::from(wrist),
+            UnitQuaternion::from_rotation_matrix(&(flexion * neutral)),
+        )
+    }
+
+    /// Marker positions in the lab for wrist angles `q` and a forearm pose, as one frame of
+    /// [`MARKER_FRAME_LEN`] values in [`MARKERS`] order.
+    pub fn marker_frame(&self, q: &[f64; 3], forearm_pose: &Isometry3<f64>) -> [f64; MARKER_FRAME_LEN] {
+        let hand_pose = forearm_pose * Isometry3::from_parts(
+            Translation3::identity(),
+            UnitQuaternion::from_rotation_matrix(&wrist_rotation(q)),
+        );
+        let mut frame = [0.0; MARKER_FRAME_LEN];
+        for (i, marker) in MARKERS.iter().enumerate() {
+            let pose = match marker.segment {
+                Segment::Forearm => forearm_pose,
+                Segment::Hand => &hand_pose,
+            };
+            let p = pose * Point3::from(self.marker_offsets[i]);
+            frame[3 * i..3 * i + 3].copy_from_slice(p.coords.as_slice());
+        }
+        frame
+    }
+}
+
+/// Unit rotation axis of coordinate `i`.
+fn axis(i: usize) -> Unit<Vector3<f64>> {
+    Unit::new_unchecked(Vector3::from(COORDINATES[i].axis))
+}
+
+/// Orientation of the hand in the forearm frame for wrist angles `q` (radians).
+pub fn wrist_rotation(q: &[f64; 3]) -> Rotation3<f64> {
+    Rotation3::from_axis_angle(&axis(0), q[0])
+        * Rotation3::from_axis_angle(&axis(1), q[1])
+        * Rotation3::from_axis_angle(&axis(2), q[2])
+}
+
+/// Wrist angles `(s_p, e_f, ad_ab)` of a hand orientation in the forearm frame: the inverse
+/// of [`wrist_rotation`] for `|e_f| < 90°` (the middle angle is the one that can gimbal-lock).
+///
+/// Works for any mutually orthogonal axis triple: with `a3 = s (a1 × a2)`, `s = ±1`,
+/// `q2 = asin(s a1ᵀRa3)`, `q1 = atan2(−s a2ᵀRa3, a3ᵀRa3)`, `q3 = atan2(−s a1ᵀRa2, a1ᵀRa1)`.
+pub fn wrist_angles(r: &Rotation3<f64>) -> [f64; 3] {
+    let (a1, a2, a3) = (axis(0).into_inner(), axis(1).into_inner(), axis(2).into_inner());
+    let s = a1.cross(&a2).dot(&a3).signum();
+    let m = r.matrix();
+    let ra3 = m * a3;
+    let ra2 = m * a2;
+    let ra1 = m * a1;
+    let q2 = (s * a1.dot(&ra3)).clamp(-1.0, 1.0).asin();
+    let q1 = (-s * a2.dot(&ra3)).atan2(a3.dot(&ra3));
+    let q3 = (-s * a1.dot(&ra2)).atan2(a1.dot(&ra1));
+    [q1, q2, q3]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn in_range(i: usize) -> std::ops::Range<f64> {
+        let (lo, hi) = COORDINATES[i].range;
+        lo..hi
+    }
+
+    proptest! {
+        #[test]
+        fn wrist_angles_inverts_wrist_rotation(q0 in in_range(0), q1 in in_range(1), q2 in in_range(2)) {
+            let q = [q0, q1, q2];
+            let back = wrist_angles(&wrist_rotation(&q));
+            for i in 0..3 {
+                prop_assert!((back[i] - q[i]).abs() < 1e-12, "{q:?} -> {back:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn positive_angles_move_the_hand_as_named() {
+        // The hand's distal direction is forearm -y; its palm normal is +x.
+        let distal = Vector3::new(0.0, -1.0, 0.0);
+        let palm = Vector3::new(1.0, 0.0, 0.0);
+        // Flexion moves the distal hand volar (+x).
+        assert!((wrist_rotation(&[0.0, 0.3, 0.0]) * distal).x > 0.2);
+        // Adduction (ulnar deviation) moves it ulnar (-z).
+        assert!((wrist_rotation(&[0.0, 0.0, 0.3]) * distal).z < -0.2);
+        // Supination turns the palm normal radially (+z) from mid-prone.
+        assert!((wrist_rotation(&[0.3, 0.0, 0.0]) * palm).z > 0.2);
+    }
+
+    #[test]
+    fn forearm_pose_matches_documented_axes() {
+        let body = BodyModel::default();
+        let pose = body.forearm_pose(0.0);
+        let r = pose.rotation.to_rotation_matrix();
+        assert!((r * Vector3::x() - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-12);
+        assert!((r * Vector3::y() - Vector3::y()).norm() < 1e-12);
+        // Forward flexion of 90° points the arm forward (+X).
+        let raised = body.forearm_pose(std::f64::consts::FRAC_PI_2);
+        assert!(raised.translation.vector.x > 0.5);
+    }
+
+    #[test]
+    fn scaled_subject_scales_lengths_and_masses() {
+        let base = BodyModel::default();
+        let big = BodyModel::scaled(1.2, 1.1);
+        assert!((big.hand.length - 1.2 * base.hand.length).abs() < 1e-15);
+        assert!((big.hand.mass - 1.1 * base.hand.mass).abs() < 1e-15);
+        assert!((big.marker_offsets[3][1] - 1.2 * base.marker_offsets[3][1]).abs() < 1e-15);
+    }
+}

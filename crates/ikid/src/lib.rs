@@ -1,0 +1,37 @@
+//! ikid: real-time inverse kinematics and dynamics of the human wrist from motion-capture
+//! markers.
+//!
+//! A small MLP over a short window of marker frames predicts the wrist's three angles (or
+//! torques). This crate is the pure core: the [`body`] model and its conventions, the
+//! [`features`] a network sees, the allocation-free [`net`] kernels, [`model`] files and the
+//! frame-by-frame [`stream`].
+//!
+//! ```no_run
+//! let model = ikid::Model::load("wrist-ik.safetensors")?;
+//! let mut stream = model.stream();
+//! # let frames: Vec<[f32; 18]> = vec![];
+//! for frame in &frames {
+//!     if let Some(angles) = stream.push(frame)? {
+//!         println!("s_p {:.3} e_f {:.3} ad_ab {:.3} rad", angles[0], angles[1], angles[2]);
+//!     }
+//! }
+//! # Ok::<(), ikid::Error>(())
+//! ```
+
+#![deny(missing_docs)]
+
+pub mod body;
+pub mod error;
+pub mod features;
+pub mod model;
+pub mod net;
+pub mod stream;
+pub mod testing;
+
+pub use error::{Error, Result};
+pub use features::FeatureSet;
+pub use model::{Model, ModelCard, OutputSpec};
+pub use stream::Stream;
+
+/// This crate's version.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");

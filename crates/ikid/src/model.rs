@@ -1,0 +1,394 @@
+//! Model files: one `.safetensors` holding the MLP's tensors and a JSON model card.
+//!
+//! Tensors (all F32, looked up by name, torch layout):
+//! `layers.{k}.weight` `[out, in]`, `layers.{k}.bias` `[out]` for `k = 0..n_layers`,
+//! `input.scale`, `input.shift` `[window × features]`, `output.scale`, `output.shift` `[outputs]`.
+//! The network computes `y = out(L_n(…L_1(x ∘ input.scale + input.shift)))` with
+//! `out(h) = h ∘ output.scale + output.shift`; `x` is the window of per-frame features,
+//! oldest frame first. The card ([`ModelCard`]) is JSON under the metadata key
+//! [`CARD_KEY`]. The loader checks everything and names what is wrong.
+
+use crate::error::{Error, Result};
+use crate::features::FeatureSet;
+use crate::net::{Activation, Affine, Dense, Mlp, PackedMlp};
+use crate::stream::Stream;
+use nalgebra::{DMatrix, DVector};
+use safetensors::{Dtype, SafeTensors, tensor::TensorView};
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+use std::sync::Arc;
+
+/// Metadata key holding the model card.
+pub const CARD_KEY: &str = "ikid";
+/// Value of the card's `format` field.
+pub const FORMAT: &str = "ikid-model";
+/// The model card version this build reads and writes.
+pub const FORMAT_VERSION: u64 = 1;
+/// Tasks a model card may declare.
+pub const TASKS: [&str; 3] = ["ik", "id", "chain"];
+/// Longest window accepted (frames); guards against absurd allocations from tampered cards.
+pub const MAX_WINDOW: usize = 4096;
+
+/// One network output: its name and SI unit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSpec {
+    /// E.g. `"ra_wr_s_p"`.
+    pub name: String,
+    /// E.g. `"rad"` or `"N*m"`.
+    pub unit: String,
+}
+
+/// The model card: what the network is, how to feed it, where it came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelCard {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Always [`FORMAT_VERSION`] for files this build reads.
+    pub format_version: u64,
+    /// Short model name, e.g. `"wrist-ik"`.
+    pub name: String,
+    /// One of [`TASKS`].
+    pub task: String,
+    /// A [`FeatureSet`] name.
+    pub feature_set: String,
+    /// The feature set's per-frame feature names, in order (checked against the build's).
+    pub feature_names: Vec<String>,
+    /// Frames per window (≥ 1).
+    pub window: usize,
+    /// Which frame of the window is predicted; only `"newest"` (causal) exists now.
+    pub predicted_frame: String,
+    /// Frame rate the model was trained at, Hz.
+    pub frame_rate_hz: f64,
+    /// Outputs, in order.
+    pub outputs: Vec<OutputSpec>,
+    /// Activation after each dense layer: `"relu"` or `"identity"`.
+    pub activations: Vec<String>,
+    /// How the scaling tensors were fitted (informational), e.g. `{"input": "minmax(-1,1)"}`.
+    #[serde(default)]
+    pub scaling: BTreeMap<String, String>,
+    /// Training data provenance (simulator version, seed, hash, ...), free-form.
+    #[serde(default)]
+    pub provenance: serde_json::Map<String, serde_json::Value>,
+    /// Evaluation metrics the model shipped with, free-form.
+    #[serde(default)]
+    pub metrics: serde_json::Map<String, serde_json::Value>,
+}
+
+impl ModelCard {
+    /// A card with the required fields and empty provenance/metrics.
+    pub fn new(name: &str, task: &str, feature_set: FeatureSet, window: usize, frame_rate_hz: f64, outputs: Vec<OutputSpec>, activations: &[Activation]) -> Self {
+        ModelCard {
+            format: FORMAT.into(),
+            format_version: FORMAT_VERSION,
+            name: name.into(),
+            task: task.into(),
+            feature_set: feature_set.name().into(),
+            feature_names: feature_set.feature_names(),
+            window,
+            predicted_frame: "newest".into(),
+            frame_rate_hz,
+            outputs,
+            activations: activations.iter().map(|a| a.name().into()).collect(),
+            scaling: BTreeMap::new(),
+            provenance: Default::default(),
+            metrics: Default::default(),
+        }
+    }
+
+    /// Parses and checks a card (everything that does not need the tensors).
+    pub fn from_json(json: &str) -> Result<Self> {
+        let value: serde_json::Value = serde_json::from_str(json).map_err(|e| Error::ModelCard(format!("not valid JSON: {e}")))?;
+        match value.get("format").and_then(|v| v.as_str()) {
+            Some(FORMAT) => {}
+            other => return Err(Error::ModelCard(format!("field \"format\" is {other:?}, expected {FORMAT:?}"))),
+        }
+        match value.get("format_version").and_then(|v| v.as_u64()) {
+            Some(FORMAT_VERSION) => {}
+            Some(found) => return Err(Error::UnsupportedVersion { found, supported: FORMAT_VERSION }),
+            None => return Err(Error::ModelCard("field \"format_version\" is missing or not an integer".into())),
+        }
+        let card: ModelCard = serde_json::from_value(value).map_err(|e| Error::ModelCard(e.to_string()))?;
+        card.validate()?;
+        Ok(card)
+    }
+
+    /// The card as JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).expect("a model card always serialises")
+    }
+
+    fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::ModelCard(m));
+        if !TASKS.contains(&self.task.as_str()) {
+            return bad(format!("field \"task\" is {:?}, expected one of {TASKS:?}", self.task));
+        }
+        let set = FeatureSet::from_name(&self.feature_set)?;
+        let names = set.feature_names();
+        if self.feature_names != names {
+            let i = (0..names.len().max(self.feature_names.len()))
+                .find(|&i| self.feature_names.get(i) != names.get(i))
+                .unwrap_or(0);
+            return bad(format!(
+                "field \"feature_names\"[{i}] is {:?}, feature set {:?} has {:?} ({} names)",
+                self.feature_names.get(i),
+                self.feature_set,
+                names.get(i),
+                names.len()
+            ));
+        }
+        if !(1..=MAX_WINDOW).contains(&self.window) {
+            return bad(format!("field \"window\" is {}, expected 1..={MAX_WINDOW}", self.window));
+        }
+        if self.predicted_frame != "newest" {
+            return bad(format!("field \"predicted_frame\" is {:?}, expected \"newest\"", self.predicted_frame));
+        }
+        if !(self.frame_rate_hz.is_finite() && self.frame_rate_hz > 0.0) {
+            return bad(format!("field \"frame_rate_hz\" is {}, expected a positive number", self.frame_rate_hz));
+        }
+        if self.outputs.is_empty() {
+            return bad("field \"outputs\" is empty".into());
+        }
+        if self.activations.is_empty() {
+            return bad("field \"activations\" is empty: the model has no layers".into());
+        }
+        for (k, a) in self.activations.iter().enumerate() {
+            parse_activation(a).map_err(|_| Error::ModelCard(format!("field \"activations\"[{k}] is {a:?}, expected \"relu\" or \"identity\"")))?;
+        }
+        Ok(())
+    }
+}
+
+fn parse_activation(name: &str) -> Result<Activation, ()> {
+    match name {
+        "relu" => Ok(Activation::Relu),
+        "identity" => Ok(Activation::Identity),
+        _ => Err(()),
+    }
+}
+
+/// A loaded, validated model. Cheap to clone (shared); `Send + Sync`: many threads may
+/// share one model, each with its own [`Stream`].
+#[derive(Debug, Clone)]
+pub struct Model {
+    inner: Arc<Inner>,
+}
+
+#[derive(Debug)]
+struct Inner {
+    card: ModelCard,
+    feature_set: FeatureSet,
+    mlp: Mlp,
+    packed: PackedMlp,
+}
+
+impl Model {
+    /// Loads and validates a `.safetensors` model file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.display().to_string(), source })?;
+        Self::from_bytes(&bytes)
+    }
+
+    /// Validates a model held in memory (the bytes of a `.safetensors` file).
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self> {
+        let (_, meta) = SafeTensors::read_metadata(bytes).map_err(|e| Error::Container(e.to_string()))?;
+        let tensors = SafeTensors::deserialize(bytes).map_err(|e| Error::Container(e.to_string()))?;
+        let json = meta
+            .metadata()
+            .as_ref()
+            .and_then(|m| m.get(CARD_KEY))
+            .ok_or_else(|| Error::ModelCard(format!("the file's __metadata__ has no {CARD_KEY:?} key: not an ikid model file")))?;
+        let card = ModelCard::from_json(json)?;
+        let set = FeatureSet::from_name(&card.feature_set)?;
+        let n_in = card.window * set.feature_len();
+        let n_layers = card.activations.len();
+
+        let mut used = Vec::new();
+        let mut get = |name: String, shape: &[Option<usize>]| -> Result<(Vec<usize>, Vec<f32>)> {
+            let t = tensors.tensor(&name).map_err(|_| Error::MissingTensor { name: name.clone() })?;
+            let v = read_f32(&name, &t, shape)?;
+            used.push(name);
+            Ok(v)
+        };
+        let vector = |(_, v): (Vec<usize>, Vec<f32>)| DVector::from_vec(v);
+
+        let input = Affine {
+            scale: vector(get("input.scale".into(), &[Some(n_in)])?),
+            shift: vector(get("input.shift".into(), &[Some(n_in)])?),
+        };
+        let mut layers = Vec::with_capacity(n_layers);
+        let mut width = n_in;
+        for (k, act) in card.activations.iter().enumerate() {
+            let expect_out = (k + 1 == n_layers).then_some(card.outputs.len());
+            let (shape, w) = get(format!("layers.{k}.weight"), &[expect_out, Some(width)])?;
+            let n_out = shape[0];
+            let (_, b) = get(format!("layers.{k}.bias"), &[Some(n_out)])?;
+            layers.push(Dense {
+                weight: DMatrix::from_row_slice(n_out, width, &w),
+                bias: DVector::from_vec(b),
+                activation: parse_activation(act).expect("validated with the card"),
+            });
+            width = n_out;
+        }
+        let output = Affine {
+            scale: vector(get("output.scale".into(), &[Some(width)])?),
+            shift: vector(get("output.shift".into(), &[Some(width)])?),
+        };
+        if let Some(extra) = tensors.names().into_iter().find(|n| !used.iter().any(|u| u == *n)) {
+            return Err(Error::UnexpectedTensor { name: extra.to_string() });
+        }
+        let mlp = Mlp::new(input, layers, output)?;
+        Ok(Self::assemble(card, set, mlp))
+    }
+
+    /// Builds a model from a card and a network (e.g. random weights for benchmarks),
+    /// checking that they fit each other.
+    pub fn from_parts(card: ModelCard, mlp: Mlp) -> Result<Self> {
+        // One validation path: write and re-read.
+        Self::from_bytes(&to_bytes(&card, &mlp)?)
+    }
+
+    fn assemble(card: ModelCard, feature_set: FeatureSet, mlp: Mlp) -> Self {
+        let packed = PackedMlp::new(&mlp);
+        Model { inner: Arc::new(Inner { card, feature_set, mlp, packed }) }
+    }
+
+    /// The model as the bytes of a `.safetensors` file.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        to_bytes(&self.inner.card, &self.inner.mlp).expect("a loaded model always serialises")
+    }
+
+    /// Writes the model file atomically (a temporary file renamed into place), so a failure
+    /// never leaves a partial file at `path`.
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
+        let path = path.as_ref();
+        let io = |source| Error::Io { path: path.display().to_string(), source };
+        let tmp = path.with_extension("safetensors.partial");
+        std::fs::write(&tmp, self.to_bytes()).map_err(io)?;
+        std::fs::rename(&tmp, path).map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            io(e)
+        })
+    }
+
+    /// The model card.
+    pub fn card(&self) -> &ModelCard {
+        &self.inner.card
+    }
+
+    /// The network (plain nalgebra form, scaling not folded).
+    pub fn mlp(&self) -> &Mlp {
+        &self.inner.mlp
+    }
+
+    pub(crate) fn packed(&self) -> &PackedMlp {
+        &self.inner.packed
+    }
+
+    /// How frames are turned into network inputs.
+    pub fn feature_set(&self) -> FeatureSet {
+        self.inner.feature_set
+    }
+
+    /// Frames per window.
+    pub fn window(&self) -> usize {
+        self.inner.card.window
+    }
+
+    /// Values per input frame.
+    pub fn frame_len(&self) -> usize {
+        self.inner.feature_set.frame_len()
+    }
+
+    /// Values per prediction.
+    pub fn n_outputs(&self) -> usize {
+        self.inner.card.outputs.len()
+    }
+
+    /// A new stream over this model (allocates its buffers once, here).
+    pub fn stream(&self) -> Stream {
+        Stream::new(self.clone())
+    }
+
+    /// Predictions for a recording of `n` frames: one per full window, `n - window + 1` rows
+    /// (row `i` is the prediction for frame `i + window - 1`), or 0 if `n < window`.
+    pub fn n_predictions(&self, n_frames: usize) -> usize {
+        (n_frames + 1).saturating_sub(self.window())
+    }
+
+    /// Predicts a whole recording. `frames` holds `n` frames back to back; `out` receives
+    /// [`n_predictions(n)`](Self::n_predictions) rows of [`n_outputs`](Self::n_outputs).
+    /// Gives exactly the values a [`Stream`] fed the same frames gives. Returns the rows.
+    pub fn predict(&self, frames: &[f32], out: &mut [f32]) -> Result<usize> {
+        let set = self.feature_set();
+        let (fl, nf, w, no) = (set.frame_len(), set.feature_len(), self.window(), self.n_outputs());
+        if frames.len() % fl != 0 {
+            return Err(Error::BadArgument {
+                what: "frames",
+                detail: format!("{} values is not a whole number of {fl}-value frames", frames.len()),
+            });
+        }
+        let rows = self.n_predictions(frames.len() / fl);
+        if out.len() != rows * no {
+            return Err(Error::BadArgument {
+                what: "output buffer",
+                detail: format!("has {} values, expected {rows} rows × {no} = {}", out.len(), rows * no),
+            });
+        }
+        let mut features = vec![0f32; frames.len() / fl * nf];
+        set.compute_rows(frames, &mut features)?;
+        let mut scratch = self.packed().scratch();
+        // Windows of consecutive frames are contiguous slices of the feature rows.
+        for (i, row) in out.chunks_exact_mut(no).enumerate() {
+            self.packed().forward(&features[i * nf..(i + w) * nf], &mut scratch, row);
+        }
+        Ok(rows)
+    }
+}
+
+fn read_f32(name: &str, t: &TensorView<'_>, expected: &[Option<usize>]) -> Result<(Vec<usize>, Vec<f32>)> {
+    if t.dtype() != Dtype::F32 {
+        return Err(Error::WrongDtype { name: name.into(), dtype: format!("{:?}", t.dtype()) });
+    }
+    let shape = t.shape().to_vec();
+    let fits = shape.len() == expected.len() && shape.iter().zip(expected).all(|(s, e)| e.is_none_or(|e| *s == e) && *s > 0);
+    if !fits {
+        return Err(Error::ShapeMismatch {
+            name: name.into(),
+            found: shape,
+            expected: expected.iter().map(|e| e.unwrap_or(0)).collect(),
+        });
+    }
+    // `fs::read` gives no alignment guarantee: decode each value (weights are copied once).
+    let values: Vec<f32> = t.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    if let Some(index) = values.iter().position(|v| !v.is_finite()) {
+        return Err(Error::NonFiniteWeight { name: name.into(), index, value: values[index] });
+    }
+    Ok((shape, values))
+}
+
+/// Serialises a card and network to `.safetensors` bytes (the one writer of the format).
+pub fn to_bytes(card: &ModelCard, mlp: &Mlp) -> Result<Vec<u8>> {
+    let row_major = |m: &DMatrix<f32>| m.transpose().as_slice().to_vec();
+    let mut tensors: Vec<(String, Vec<usize>, Vec<f32>)> = vec![
+        ("input.scale".into(), vec![mlp.input.len()], mlp.input.scale.as_slice().to_vec()),
+        ("input.shift".into(), vec![mlp.input.len()], mlp.input.shift.as_slice().to_vec()),
+        ("output.scale".into(), vec![mlp.output.len()], mlp.output.scale.as_slice().to_vec()),
+        ("output.shift".into(), vec![mlp.output.len()], mlp.output.shift.as_slice().to_vec()),
+    ];
+    for (k, l) in mlp.layers.iter().enumerate() {
+        tensors.push((format!("layers.{k}.weight"), vec![l.weight.nrows(), l.weight.ncols()], row_major(&l.weight)));
+        tensors.push((format!("layers.{k}.bias"), vec![l.bias.len()], l.bias.as_slice().to_vec()));
+    }
+    let bytes: Vec<(String, Vec<usize>, Vec<u8>)> =
+        tensors.into_iter().map(|(n, s, v)| (n, s, v.iter().flat_map(|x| x.to_le_bytes()).collect())).collect();
+    let views = bytes
+        .iter()
+        .map(|(n, s, b)| Ok((n.as_str(), TensorView::new(Dtype::F32, s.clone(), b).map_err(|e| Error::Container(e.to_string()))?)))
+        .collect::<Result<Vec<_>>>()?;
+    let meta = HashMap::from([(CARD_KEY.to_string(), card.to_json())]);
+    safetensors::serialize(views, Some(meta)).map_err(|e| Error::Container(e.to_string()))
+}

@@ -1,0 +1,81 @@
+//! Frame-by-frame inference over a fixed ring window, without heap allocation per frame.
+
+use crate::error::Result;
+use crate::model::Model;
+use crate::net::Scratch;
+
+/// A causal stream over a [`Model`]: push one frame at a time, get the prediction for the
+/// newest frame once the window is full.
+///
+/// All buffers are allocated in [`Model::stream`]; [`push`](Stream::push) never allocates
+/// (proved by `tests/allocations.rs`). A frame that is refused (wrong length, NaN,
+/// degenerate markers) leaves the window exactly as it was.
+#[derive(Debug, Clone)]
+pub struct Stream {
+    model: Model,
+    /// `window` feature rows; row `head` is the next to overwrite (the oldest once full).
+    ring: Vec<f32>,
+    head: usize,
+    filled: usize,
+    /// Features of the frame being pushed, before it is accepted into the ring.
+    incoming: Vec<f32>,
+    /// The window flattened oldest → newest: the network input.
+    input: Vec<f32>,
+    scratch: Scratch,
+    output: Vec<f32>,
+}
+
+impl Stream {
+    pub(crate) fn new(model: Model) -> Self {
+        let nf = model.feature_set().feature_len();
+        let w = model.window();
+        Stream {
+            ring: vec![0.0; w * nf],
+            head: 0,
+            filled: 0,
+            incoming: vec![0.0; nf],
+            input: vec![0.0; w * nf],
+            scratch: model.packed().scratch(),
+            output: vec![0.0; model.n_outputs()],
+            model,
+        }
+    }
+
+    /// The model this stream runs.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// Frames currently held (saturates at the window length).
+    pub fn filled(&self) -> usize {
+        self.filled
+    }
+
+    /// Pushes one frame ([`Model::frame_len`] values). Returns `None` until the window is
+    /// full, then the prediction for this frame ([`Model::n_outputs`] values).
+    pub fn push(&mut self, frame: &[f32]) -> Result<Option<&[f32]>> {
+        let set = self.model.feature_set();
+        set.compute(frame, &mut self.incoming, 0)?;
+        let nf = self.incoming.len();
+        let w = self.model.window();
+        self.ring[self.head * nf..(self.head + 1) * nf].copy_from_slice(&self.incoming);
+        self.head = (self.head + 1) % w;
+        self.filled = (self.filled + 1).min(w);
+        if self.filled < w {
+            return Ok(None);
+        }
+        // Unroll the ring oldest-first: rows head.. then ..head.
+        let split = self.head * nf;
+        let tail = self.ring.len() - split;
+        self.input[..tail].copy_from_slice(&self.ring[split..]);
+        self.input[tail..].copy_from_slice(&self.ring[..split]);
+        self.model.packed().forward(&self.input, &mut self.scratch, &mut self.output);
+        Ok(Some(&self.output))
+    }
+
+    /// Forgets every frame held (e.g. after a gap in the recording).
+    pub fn reset(&mut self) {
+        self.head = 0;
+        self.filled = 0;
+    }
+}

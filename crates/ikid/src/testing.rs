@@ -1,0 +1,78 @@
+//! Random models and frames for tests, benchmarks and examples (seeded, reproducible).
+
+use crate::body::{BodyModel, COORDINATES};
+use crate::features::FeatureSet;
+use crate::model::{Model, ModelCard, OutputSpec};
+use crate::net::{Activation, Affine, Dense, Mlp};
+use nalgebra::{DMatrix, DVector};
+
+/// A small deterministic generator (SplitMix64): enough for weights and test frames, and
+/// keeps the core free of a `rand` dependency.
+#[derive(Debug, Clone)]
+pub struct SplitMix(u64);
+
+impl SplitMix {
+    /// Seeded generator.
+    pub fn new(seed: u64) -> Self {
+        SplitMix(seed)
+    }
+
+    /// Next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `[lo, hi)`.
+    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// An IK-style model with random weights: `window` frames of `set`, ReLU hidden layers of
+/// the given widths, `n_outputs` identity outputs. Weights are scaled (He-style) so
+/// activations stay O(1), as in a trained network.
+pub fn random_model(set: FeatureSet, window: usize, hidden: &[usize], n_outputs: usize, seed: u64) -> Model {
+    let mut rng = SplitMix::new(seed);
+    let widths: Vec<usize> = std::iter::once(window * set.feature_len()).chain(hidden.iter().copied()).chain([n_outputs]).collect();
+    let layers: Vec<Dense> = widths
+        .windows(2)
+        .enumerate()
+        .map(|(k, w)| {
+            let bound = (6.0 / w[0] as f64).sqrt();
+            Dense {
+                weight: DMatrix::from_fn(w[1], w[0], |_, _| rng.uniform(-bound, bound) as f32),
+                bias: DVector::from_fn(w[1], |_, _| rng.uniform(-0.1, 0.1) as f32),
+                activation: if k + 2 == widths.len() { Activation::Identity } else { Activation::Relu },
+            }
+        })
+        .collect();
+    let activations: Vec<Activation> = layers.iter().map(|l| l.activation).collect();
+    let mlp = Mlp::new(Affine::identity(widths[0]), layers, Affine::identity(n_outputs)).expect("shapes chain");
+    let outputs = (0..n_outputs)
+        .map(|i| OutputSpec { name: COORDINATES.get(i).map_or(format!("out{i}"), |c| c.name.to_string()), unit: "rad".into() })
+        .collect();
+    let card = ModelCard::new("random", "ik", set, window, 1000.0, outputs, &activations);
+    Model::from_parts(card, mlp).expect("random model is valid")
+}
+
+/// `n` plausible frames for `set`, back to back: markers of the default subject at random
+/// wrist angles and shoulder poses, or random joint states.
+pub fn random_frames(set: FeatureSet, n: usize, seed: u64) -> Vec<f32> {
+    let mut rng = SplitMix::new(seed);
+    let body = BodyModel::default();
+    let mut out = Vec::with_capacity(n * set.frame_len());
+    for _ in 0..n {
+        if set == FeatureSet::JointState {
+            out.extend((0..set.frame_len()).map(|_| rng.uniform(-1.0, 1.0) as f32));
+        } else {
+            let q = COORDINATES.map(|c| rng.uniform(c.range.0, c.range.1));
+            let pose = body.forearm_pose(rng.uniform(-0.35, 0.8));
+            out.extend(body.marker_frame(&q, &pose).iter().map(|&v| v as f32));
+        }
+    }
+    out
+}
