@@ -113,7 +113,8 @@ impl PackedMlp {
                 PackedLayer { n_in, n_out, block, weights, bias, relu: l.activation == Activation::Relu, sparse_input }
             })
             .collect();
-        let max_width = layers.iter().map(PackedLayer::padded_out).max().unwrap_or(0);
+        // Scratch holds any layer's input (for the active list) or padded output.
+        let max_width = layers.iter().map(|l| l.padded_out().max(l.n_in)).max().unwrap_or(0);
         PackedMlp { n_in: mlp.n_inputs(), n_out: mlp.n_outputs(), layers, max_width, use_fma: fma_available() }
     }
 

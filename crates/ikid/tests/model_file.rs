@@ -1,0 +1,231 @@
+//! Model files: round trip, and every kind of bad file refused with an error naming the fault.
+
+use ikid::model::{CARD_KEY, to_bytes};
+use ikid::testing::{random_frames, random_model};
+use ikid::{Error, FeatureSet, Model};
+use safetensors::{Dtype, tensor::TensorView};
+use std::collections::HashMap;
+
+fn model() -> Model {
+    random_model(FeatureSet::Markers, 5, &[16, 12], 3, 5)
+}
+
+/// The model's tensors as (name, shape, f32 values) and its card as a JSON value.
+fn parts(m: &Model) -> (Vec<(String, Vec<usize>, Vec<f32>)>, serde_json::Value) {
+    let bytes = m.to_bytes();
+    let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+    let mut tensors: Vec<_> = st
+        .tensors()
+        .into_iter()
+        .map(|(n, t)| {
+            let v = t.data().chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect();
+            (n, t.shape().to_vec(), v)
+        })
+        .collect();
+    tensors.sort_by(|a, b| a.0.cmp(&b.0));
+    (tensors, serde_json::from_str(&m.card().to_json()).unwrap())
+}
+
+fn build(tensors: &[(String, Vec<usize>, Vec<f32>)], card: &serde_json::Value) -> Vec<u8> {
+    let bytes: Vec<(String, Vec<usize>, Vec<u8>)> =
+        tensors.iter().map(|(n, s, v)| (n.clone(), s.clone(), v.iter().flat_map(|x| x.to_le_bytes()).collect())).collect();
+    let views: Vec<_> = bytes.iter().map(|(n, s, b)| (n.as_str(), TensorView::new(Dtype::F32, s.clone(), b).unwrap())).collect();
+    safetensors::serialize(views, Some(HashMap::from([(CARD_KEY.to_string(), card.to_string())]))).unwrap()
+}
+
+fn load_err(bytes: &[u8]) -> Error {
+    Model::from_bytes(bytes).expect_err("the file must be refused")
+}
+
+#[test]
+fn save_and_load_round_trip() {
+    let m = model();
+    let dir = std::env::temp_dir().join(format!("ikid-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("m.safetensors");
+    m.save(&path).unwrap();
+    let back = Model::load(&path).unwrap();
+    assert_eq!(back.card(), m.card());
+    assert_eq!(back.mlp(), m.mlp());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn missing_file_names_the_path() {
+    let err = Model::load("/nonexistent/wrist.safetensors").unwrap_err();
+    assert!(matches!(err, Error::Io { .. }) && err.to_string().contains("/nonexistent/wrist.safetensors"), "{err}");
+}
+
+#[test]
+fn truncated_file_is_refused() {
+    let bytes = model().to_bytes();
+    for cut in [0, 7, 100, bytes.len() / 2, bytes.len() - 1] {
+        let err = load_err(&bytes[..cut]);
+        assert!(matches!(err, Error::Container(_)), "cut at {cut}: {err}");
+    }
+}
+
+#[test]
+fn missing_tensor_is_named() {
+    let (mut t, card) = parts(&model());
+    t.retain(|(n, _, _)| n != "layers.1.bias");
+    let err = load_err(&build(&t, &card));
+    assert!(matches!(&err, Error::MissingTensor { name } if name == "layers.1.bias"), "{err}");
+}
+
+#[test]
+fn extra_tensor_is_named() {
+    let (mut t, card) = parts(&model());
+    t.push(("layers.9.weight".into(), vec![1], vec![0.0]));
+    let err = load_err(&build(&t, &card));
+    assert!(matches!(&err, Error::UnexpectedTensor { name } if name == "layers.9.weight"), "{err}");
+}
+
+#[test]
+fn shape_mismatch_is_named() {
+    let (mut t, card) = parts(&model());
+    let w = t.iter_mut().find(|(n, _, _)| n == "layers.1.weight").unwrap();
+    w.1 = vec![12, 15];
+    w.2.truncate(12 * 15);
+    let err = load_err(&build(&t, &card));
+    assert!(matches!(&err, Error::ShapeMismatch { name, .. } if name == "layers.1.weight"), "{err}");
+    assert!(err.to_string().contains("[12, 15]") && err.to_string().contains("16"), "{err}");
+}
+
+#[test]
+fn output_count_must_match_card() {
+    let (t, mut card) = parts(&model());
+    card["outputs"].as_array_mut().unwrap().pop();
+    let err = load_err(&build(&t, &card));
+    assert!(matches!(&err, Error::ShapeMismatch { name, .. } if name == "layers.2.weight"), "{err}");
+}
+
+#[test]
+fn non_finite_weight_is_named() {
+    let (mut t, card) = parts(&model());
+    t.iter_mut().find(|(n, _, _)| n == "layers.0.weight").unwrap().2[5] = f32::NAN;
+    let err = load_err(&build(&t, &card));
+    assert!(matches!(&err, Error::NonFiniteWeight { name, index: 5, .. } if name == "layers.0.weight"), "{err}");
+    let (mut t, card) = parts(&model());
+    t.iter_mut().find(|(n, _, _)| n == "input.scale").unwrap().2[0] = f32::INFINITY;
+    assert!(matches!(load_err(&build(&t, &card)), Error::NonFiniteWeight { .. }));
+}
+
+#[test]
+fn wrong_dtype_is_named() {
+    let m = model();
+    let bytes = m.to_bytes();
+    let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+    let f64_data: Vec<u8> = st.tensor("output.shift").unwrap().data().chunks_exact(4)
+        .flat_map(|b| (f32::from_le_bytes(b.try_into().unwrap()) as f64).to_le_bytes()).collect();
+    let mut views: Vec<(String, TensorView<'_>)> = st.tensors().into_iter().filter(|(n, _)| n != "output.shift").collect();
+    views.push(("output.shift".into(), TensorView::new(Dtype::F64, vec![3], &f64_data).unwrap()));
+    let meta = HashMap::from([(CARD_KEY.to_string(), m.card().to_json())]);
+    let err = load_err(&safetensors::serialize(views, Some(meta)).unwrap());
+    assert!(matches!(&err, Error::WrongDtype { name, .. } if name == "output.shift"), "{err}");
+    assert!(err.to_string().contains("F64"), "{err}");
+}
+
+#[test]
+fn card_problems_are_named() {
+    let (t, card) = parts(&model());
+    let with = |key: &str, value: serde_json::Value| {
+        let mut c = card.clone();
+        c[key] = value;
+        load_err(&build(&t, &c))
+    };
+    assert!(matches!(with("format_version", 2.into()), Error::UnsupportedVersion { found: 2, supported: 1 }));
+    assert!(matches!(with("feature_set", "pixels".into()), Error::UnknownFeatureSet { .. }));
+    for (key, value, needle) in [
+        ("window", serde_json::json!(0), "window"),
+        ("format", serde_json::json!("onnx"), "format"),
+        ("task", serde_json::json!("dance"), "task"),
+        ("frame_rate_hz", serde_json::json!(-5.0), "frame_rate_hz"),
+        ("predicted_frame", serde_json::json!("middle"), "predicted_frame"),
+        ("activations", serde_json::json!(["relu", "gelu", "identity"]), "activations"),
+        ("feature_names", serde_json::json!(["RSP.x"]), "feature_names"),
+    ] {
+        let err = with(key, value);
+        assert!(matches!(err, Error::ModelCard(_)) && err.to_string().contains(needle), "{key}: {err}");
+    }
+    let mut c = card.clone();
+    c.as_object_mut().unwrap().remove("window");
+    assert!(load_err(&build(&t, &c)).to_string().contains("window"));
+    let no_card = safetensors::serialize(Vec::<(&str, TensorView<'_>)>::new(), None).unwrap();
+    assert!(load_err(&no_card).to_string().contains("no \"ikid\" key"));
+}
+
+#[test]
+fn stream_fills_then_predicts_and_matches_batch_bit_for_bit() {
+    let m = random_model(FeatureSet::Basis, 5, &[32, 32], 3, 9);
+    let frames = random_frames(FeatureSet::Basis, 50, 10);
+    let mut batch = vec![0f32; m.n_predictions(50) * 3];
+    assert_eq!(m.predict(&frames, &mut batch).unwrap(), 46);
+    let mut stream = m.stream();
+    let mut streamed = Vec::new();
+    for (i, f) in frames.chunks_exact(18).enumerate() {
+        match stream.push(f).unwrap() {
+            None => assert!(i < 4, "frame {i} gave nothing"),
+            Some(out) => streamed.extend_from_slice(out),
+        }
+    }
+    assert_eq!(streamed.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), batch.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+    // And both match the plain nalgebra oracle on the same window.
+    let mut features = vec![0f32; 50 * 24];
+    FeatureSet::Basis.compute_rows(&frames, &mut features).unwrap();
+    let want = m.mlp().forward_reference(&features[10 * 24..15 * 24]);
+    for (g, w) in batch[10 * 3..11 * 3].iter().zip(&want) {
+        assert!((g - w).abs() <= 1e-5 * w.abs().max(1e-3), "{g} vs {w}");
+    }
+}
+
+#[test]
+fn refused_frame_leaves_the_window_unchanged() {
+    let m = model();
+    let frames = random_frames(FeatureSet::Markers, 8, 1);
+    let mut a = m.stream();
+    let mut b = m.stream();
+    for f in frames.chunks_exact(18).take(6) {
+        a.push(f).unwrap();
+        b.push(f).unwrap();
+        let mut bad = f.to_vec();
+        bad[4] = f32::NAN;
+        let err = b.push(&bad).unwrap_err();
+        assert!(err.to_string().contains("USP.y"), "{err}");
+        assert!(matches!(b.push(&f[..17]), Err(Error::FrameLength { found: 17, expected: 18, .. })));
+    }
+    let last = &frames[7 * 18..];
+    assert_eq!(a.push(last).unwrap().map(<[f32]>::to_vec), b.push(last).unwrap().map(<[f32]>::to_vec));
+}
+
+#[test]
+fn reset_forgets_the_window() {
+    let m = model();
+    let frames = random_frames(FeatureSet::Markers, 10, 1);
+    let mut s = m.stream();
+    for f in frames.chunks_exact(18).take(5) {
+        s.push(f).unwrap();
+    }
+    s.reset();
+    assert_eq!(s.filled(), 0);
+    assert!(s.push(&frames[..18]).unwrap().is_none());
+}
+
+#[test]
+fn predict_checks_its_buffers() {
+    let m = model();
+    let frames = random_frames(FeatureSet::Markers, 10, 1);
+    assert!(matches!(m.predict(&frames[..17], &mut []), Err(Error::BadArgument { what: "frames", .. })));
+    assert!(matches!(m.predict(&frames, &mut [0.0; 5]), Err(Error::BadArgument { what: "output buffer", .. })));
+    assert_eq!(m.predict(&frames[..3 * 18], &mut []).unwrap(), 0);
+    let mut bad = frames.clone();
+    bad[6 * 18 + 2] = f32::NAN;
+    let err = m.predict(&bad, &mut [0.0; 18]).unwrap_err();
+    assert!(err.to_string().contains("frame 6") && err.to_string().contains("RSP.z"), "{err}");
+}
+
+#[test]
+fn to_bytes_refuses_nothing_valid() {
+    let m = model();
+    assert_eq!(to_bytes(m.card(), m.mlp()).unwrap(), m.to_bytes());
+}
