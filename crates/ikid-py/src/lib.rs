@@ -1,1 +1,26 @@
-//! placeholder
+//! Python bindings of the ikid core (`ikid._native`): registration only.
+//!
+//! Each core module has one binding file here holding conversion and nothing else; NumPy
+//! conversion lives in `conv.rs`, the exception hierarchy in `errors.rs`.
+//!
+//! Threading: every class is safe to share between threads. Array work (`predict`,
+//! `compute_features`) and `Stream.push` release the GIL; a `Stream` is used by one thread
+//! at a time (concurrent calls on the same stream raise `RuntimeError`, "already borrowed").
+
+mod body;
+mod conv;
+mod errors;
+mod features;
+mod model;
+
+use pyo3::prelude::*;
+
+#[pymodule(gil_used = false)]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", ikid::VERSION)?;
+    errors::register(m)?;
+    body::register(m)?;
+    features::register(m)?;
+    model::register(m)?;
+    Ok(())
+}

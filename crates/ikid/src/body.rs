@@ -285,6 +285,26 @@ impl BodyModel {
     }
 }
 
+impl BodyModel {
+    /// Marker frames for a whole trajectory: `q` holds `n` angle triples back to back
+    /// (radians), the result `n` frames of [`MARKER_FRAME_LEN`] values (metres, lab frame).
+    pub fn marker_frames(&self, q: &[f64], shoulder_flexion: f64) -> crate::Result<Vec<f64>> {
+        use crate::Error;
+        if q.len() % N_COORDINATES != 0 {
+            return Err(Error::BadArgument { what: "q", detail: format!("{} values is not a whole number of angle triples", q.len()) });
+        }
+        if let Some(i) = q.iter().position(|v| !v.is_finite()) {
+            let name = COORDINATES[i % N_COORDINATES].name;
+            return Err(Error::BadArgument { what: "q", detail: format!("row {}: {name} is {}", i / N_COORDINATES, q[i]) });
+        }
+        if !shoulder_flexion.is_finite() {
+            return Err(Error::BadArgument { what: "shoulder_flexion", detail: format!("is {shoulder_flexion}") });
+        }
+        let pose = self.forearm_pose(shoulder_flexion);
+        Ok(q.chunks_exact(N_COORDINATES).flat_map(|c| self.marker_frame(&[c[0], c[1], c[2]], &pose)).collect())
+    }
+}
+
 /// Unit rotation axis of coordinate `i`.
 fn axis(i: usize) -> Unit<Vector3<f64>> {
     Unit::new_unchecked(Vector3::from(COORDINATES[i].axis))

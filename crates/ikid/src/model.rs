@@ -120,6 +120,17 @@ impl ModelCard {
         serde_json::to_string(self).expect("a model card always serialises")
     }
 
+    /// The activations as the kernel's enum (validated with the card).
+    pub fn parsed_activations(&self) -> Result<Vec<Activation>> {
+        self.activations
+            .iter()
+            .enumerate()
+            .map(|(k, a)| {
+                parse_activation(a).map_err(|_| Error::ModelCard(format!("field \"activations\"[{k}] is {a:?}, expected \"relu\" or \"identity\"")))
+            })
+            .collect()
+    }
+
     fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::ModelCard(m));
         if !TASKS.contains(&self.task.as_str()) {
@@ -154,10 +165,7 @@ impl ModelCard {
         if self.activations.is_empty() {
             return bad("field \"activations\" is empty: the model has no layers".into());
         }
-        for (k, a) in self.activations.iter().enumerate() {
-            parse_activation(a).map_err(|_| Error::ModelCard(format!("field \"activations\"[{k}] is {a:?}, expected \"relu\" or \"identity\"")))?;
-        }
-        Ok(())
+        self.parsed_activations().map(|_| ())
     }
 }
 

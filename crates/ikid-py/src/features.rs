@@ -1,0 +1,43 @@
+//! Feature sets: the same computation training and inference use.
+
+use crate::conv::with_floats;
+use crate::errors::{IntoPy, input};
+use ikid::FeatureSet;
+use ikid::features::FEATURE_SETS;
+use numpy::{IntoPyArray, PyArray2, PyArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("FEATURE_SETS", FEATURE_SETS.map(FeatureSet::name).to_vec())?;
+    m.add_function(wrap_pyfunction!(feature_set_info, m)?)?;
+    m.add_function(wrap_pyfunction!(compute_features, m)?)?;
+    Ok(())
+}
+
+/// Sizes and names of a feature set: `frame_len`, `feature_len`, `frame_names`, `feature_names`.
+#[pyfunction]
+fn feature_set_info<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyDict>> {
+    let set = FeatureSet::from_name(name).py_err()?;
+    let d = PyDict::new(py);
+    d.set_item("name", set.name())?;
+    d.set_item("frame_len", set.frame_len())?;
+    d.set_item("feature_len", set.feature_len())?;
+    d.set_item("frame_names", set.frame_names())?;
+    d.set_item("feature_names", set.feature_names())?;
+    Ok(d)
+}
+
+/// Features of every frame: `frames` is `(n, frame_len)`, the result `(n, feature_len)` float32.
+#[pyfunction]
+fn compute_features<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>, feature_set: &str) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let set = FeatureSet::from_name(feature_set).py_err()?;
+    with_floats(frames, "frames", 2, |values, shape| {
+        if shape[1] != set.frame_len() {
+            return Err(input(format!("frames: {} columns, feature set {:?} takes {}", shape[1], set.name(), set.frame_len())));
+        }
+        let mut out = vec![0f32; shape[0] * set.feature_len()];
+        py.detach(|| set.compute_rows(values, &mut out)).py_err()?;
+        out.into_pyarray(py).reshape([shape[0], set.feature_len()])
+    })
+}

@@ -1,0 +1,221 @@
+//! `Model` and `Stream`: thin wrappers over the core's, NumPy in and out.
+
+use crate::conv::{with_floats, with_frame};
+use crate::errors::{IntoPy, input};
+use ikid::ModelCard;
+use ikid::net::{Affine, Dense, Mlp};
+use nalgebra::{DMatrix, DVector};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyBytes;
+use std::path::PathBuf;
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Model>()?;
+    m.add_class::<Stream>()?;
+    m.add_function(wrap_pyfunction!(build_model, m)?)?;
+    Ok(())
+}
+
+/// A loaded, validated model. Immutable; share it between threads freely.
+#[pyclass(module = "ikid", frozen)]
+pub struct Model {
+    inner: ikid::Model,
+}
+
+#[pymethods]
+impl Model {
+    /// Loads and validates a `.safetensors` model file.
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let inner = py.detach(|| ikid::Model::load(&path)).py_err()?;
+        Ok(Model { inner })
+    }
+
+    /// Validates a model from the bytes of a `.safetensors` file.
+    #[staticmethod]
+    fn from_bytes(data: &[u8]) -> PyResult<Self> {
+        Ok(Model { inner: ikid::Model::from_bytes(data).py_err()? })
+    }
+
+    /// The model card as a dict.
+    #[getter]
+    fn card<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        py.import("json")?.call_method1("loads", (self.inner.card().to_json(),))
+    }
+
+    #[getter]
+    fn name(&self) -> &str {
+        &self.inner.card().name
+    }
+
+    #[getter]
+    fn task(&self) -> &str {
+        &self.inner.card().task
+    }
+
+    #[getter]
+    fn feature_set(&self) -> &'static str {
+        self.inner.feature_set().name()
+    }
+
+    #[getter]
+    fn window(&self) -> usize {
+        self.inner.window()
+    }
+
+    #[getter]
+    fn frame_len(&self) -> usize {
+        self.inner.frame_len()
+    }
+
+    #[getter]
+    fn frame_names(&self) -> Vec<String> {
+        self.inner.feature_set().frame_names()
+    }
+
+    #[getter]
+    fn n_outputs(&self) -> usize {
+        self.inner.n_outputs()
+    }
+
+    #[getter]
+    fn output_names(&self) -> Vec<String> {
+        self.inner.card().outputs.iter().map(|o| o.name.clone()).collect()
+    }
+
+    #[getter]
+    fn output_units(&self) -> Vec<String> {
+        self.inner.card().outputs.iter().map(|o| o.unit.clone()).collect()
+    }
+
+    #[getter]
+    fn frame_rate_hz(&self) -> f64 {
+        self.inner.card().frame_rate_hz
+    }
+
+    #[getter]
+    fn layer_widths(&self) -> Vec<usize> {
+        self.inner.mlp().widths()
+    }
+
+    /// Predictions for a whole recording `(n, frame_len)`: `(n - window + 1, n_outputs)`,
+    /// row `i` for frame `i + window - 1`. Releases the GIL.
+    fn predict<'py>(&self, py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let (fl, no) = (self.inner.frame_len(), self.inner.n_outputs());
+        with_floats(frames, "frames", 2, |values, shape| {
+            if shape[1] != fl {
+                return Err(input(format!(
+                    "frames: {} columns, the model's feature set {:?} takes {fl} per frame",
+                    shape[1],
+                    self.inner.feature_set().name()
+                )));
+            }
+            let rows = self.inner.n_predictions(shape[0]);
+            let mut out = vec![0f32; rows * no];
+            py.detach(|| self.inner.predict(values, &mut out)).py_err()?;
+            out.into_pyarray(py).reshape([rows, no])
+        })
+    }
+
+    /// A new frame-by-frame stream over this model.
+    fn stream(&self) -> Stream {
+        Stream { inner: self.inner.stream() }
+    }
+
+    /// Writes the model file (atomically: never a partial file).
+    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        py.detach(|| self.inner.save(&path)).py_err()
+    }
+
+    /// The bytes of the model's `.safetensors` file.
+    fn to_bytes<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        PyBytes::new(py, &self.inner.to_bytes())
+    }
+
+    fn __repr__(&self) -> String {
+        let c = self.inner.card();
+        format!(
+            "Model(name={:?}, task={:?}, feature_set={:?}, window={}, layers={:?}, outputs={:?})",
+            c.name,
+            c.task,
+            c.feature_set,
+            c.window,
+            self.inner.mlp().widths(),
+            c.outputs.iter().map(|o| o.name.as_str()).collect::<Vec<_>>()
+        )
+    }
+}
+
+/// A causal frame-by-frame stream. One thread at a time.
+#[pyclass(module = "ikid")]
+pub struct Stream {
+    inner: ikid::Stream,
+}
+
+#[pymethods]
+impl Stream {
+    /// Pushes one frame; returns `None` until the window is full, then the prediction for
+    /// this frame (float32 array of `n_outputs`). A refused frame leaves the window as it was.
+    fn push<'py>(&mut self, py: Python<'py>, frame: &Bound<'py, PyAny>) -> PyResult<Option<Bound<'py, PyArray1<f32>>>> {
+        let stream = &mut self.inner;
+        with_frame(frame, |values| {
+            let out = py.detach(|| stream.push(values).map(|o| o.map(<[f32]>::to_vec))).py_err()?;
+            Ok(out.map(|o| o.into_pyarray(py)))
+        })
+    }
+
+    /// Forgets every frame held.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// Frames held (up to the window length).
+    #[getter]
+    fn filled(&self) -> usize {
+        self.inner.filled()
+    }
+
+    /// The model this stream runs.
+    #[getter]
+    fn model(&self) -> Model {
+        Model { inner: self.inner.model().clone() }
+    }
+}
+
+/// Builds (and validates) a model from a card and torch-layout arrays; used by the exporter
+/// so that the file format has one writer, the core's.
+#[pyfunction]
+fn build_model(
+    card_json: &str,
+    weights: Vec<Bound<'_, PyAny>>,
+    biases: Vec<Bound<'_, PyAny>>,
+    input_scale: &Bound<'_, PyAny>,
+    input_shift: &Bound<'_, PyAny>,
+    output_scale: &Bound<'_, PyAny>,
+    output_shift: &Bound<'_, PyAny>,
+) -> PyResult<Model> {
+    let card = ModelCard::from_json(card_json).py_err()?;
+    let activations = card.parsed_activations().py_err()?;
+    if weights.len() != activations.len() || biases.len() != activations.len() {
+        return Err(input(format!(
+            "the card lists {} layers but {} weights and {} biases were given",
+            activations.len(),
+            weights.len(),
+            biases.len()
+        )));
+    }
+    let vector = |obj: &Bound<'_, PyAny>, what: &str| with_floats(obj, what, 1, |v, _| Ok(DVector::from_column_slice(v)));
+    let mut layers = Vec::with_capacity(weights.len());
+    for (k, ((w, b), act)) in weights.iter().zip(&biases).zip(activations).enumerate() {
+        let weight = with_floats(w, &format!("weights[{k}]"), 2, |v, s| Ok(DMatrix::from_row_slice(s[0], s[1], v)))?;
+        layers.push(Dense { weight, bias: vector(b, &format!("biases[{k}]"))?, activation: act });
+    }
+    let mlp = Mlp::new(
+        Affine { scale: vector(input_scale, "input_scale")?, shift: vector(input_shift, "input_shift")? },
+        layers,
+        Affine { scale: vector(output_scale, "output_scale")?, shift: vector(output_shift, "output_shift")? },
+    )
+    .py_err()?;
+    Ok(Model { inner: ikid::Model::from_parts(card, mlp).py_err()? })
+}

@@ -1,0 +1,73 @@
+"""Shared fixtures: small models built with NumPy only (no torch), and marker frames."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ikid
+from ikid import _native
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # for `training`
+
+
+def make_card(feature_set: str = "markers", window: int = 5, activations=("relu", "relu", "identity"), **extra):
+    card = {
+        "format": "ikid-model",
+        "format_version": 1,
+        "name": "test",
+        "task": "ik",
+        "feature_set": feature_set,
+        "feature_names": ikid.feature_set_info(feature_set)["feature_names"],
+        "window": window,
+        "predicted_frame": "newest",
+        "frame_rate_hz": 1000.0,
+        "outputs": [{"name": n, "unit": "rad"} for n in ikid.coordinate_names()],
+        "activations": list(activations),
+    }
+    card.update(extra)
+    return card
+
+
+def make_model(feature_set: str = "markers", window: int = 5, hidden=(32, 32), seed: int = 0) -> ikid.Model:
+    rng = np.random.default_rng(seed)
+    n_in = window * ikid.feature_set_info(feature_set)["feature_len"]
+    widths = [n_in, *hidden, 3]
+    weights = [rng.uniform(-1, 1, (o, i)).astype(np.float32) / np.sqrt(i) for i, o in zip(widths, widths[1:])]
+    biases = [rng.uniform(-0.1, 0.1, o).astype(np.float32) for o in widths[1:]]
+    acts = ["relu"] * len(hidden) + ["identity"]
+    card = make_card(feature_set, window, acts)
+    return _native.build_model(
+        json.dumps(card),
+        weights,
+        biases,
+        rng.uniform(0.5, 2, n_in).astype(np.float32),
+        rng.uniform(-1, 1, n_in).astype(np.float32),
+        np.full(3, 0.5, np.float32),
+        np.full(3, 0.1, np.float32),
+    )
+
+
+def marker_frames(n: int, seed: int = 0) -> np.ndarray:
+    """Plausible marker frames: a fixed layout (metres) moved by small random motions."""
+    rng = np.random.default_rng(seed)
+    base = np.array(
+        [[0, 0.01, 0.03], [-0.01, 0.01, -0.025], [-0.025, 0.18, 0], [-0.01, -0.08, 0.025], [-0.01, -0.075, -0.025], [-0.02, -0.03, 0]]
+    )
+    frames = base[None] + 0.005 * np.cumsum(rng.normal(size=(n, 6, 3)), axis=0)
+    return frames.reshape(n, 18).astype(np.float32)
+
+
+@pytest.fixture
+def model() -> ikid.Model:
+    return make_model()
+
+
+@pytest.fixture
+def frames() -> np.ndarray:
+    return marker_frames(40)

@@ -1,0 +1,136 @@
+"""The Python surface of Model and Stream: shapes, dtypes, layouts, errors."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+from conftest import make_model, marker_frames
+
+import ikid
+
+
+def test_predict_shape_and_alignment(model, frames):
+    out = model.predict(frames)
+    assert out.shape == (len(frames) - model.window + 1, 3) and out.dtype == np.float32
+    # Row i is the prediction for frame i + window - 1, identical to the stream's.
+    stream = model.stream()
+    streamed = [stream.push(f) for f in frames]
+    assert all(s is None for s in streamed[: model.window - 1])
+    np.testing.assert_array_equal(np.stack(streamed[model.window - 1 :]), out)
+
+
+def test_short_recordings_give_no_rows(model, frames):
+    assert model.predict(frames[:3]).shape == (0, 3)
+
+
+def test_float64_lists_and_strided_inputs_agree(model, frames):
+    want = model.predict(frames)
+    np.testing.assert_array_equal(model.predict(frames.astype(np.float64)), want)
+    np.testing.assert_array_equal(model.predict(frames.tolist()), want)
+    wide = np.zeros((len(frames), 36), np.float32)
+    wide[:, ::2] = frames  # non-contiguous view
+    np.testing.assert_array_equal(model.predict(wide[:, ::2]), want)
+    np.testing.assert_array_equal(model.predict(np.asfortranarray(frames)), want)
+    stream = model.stream()
+    for f in wide[:, ::2][: model.window - 1]:
+        assert stream.push(f) is None
+    np.testing.assert_array_equal(stream.push(frames[model.window - 1].astype(np.float64)), want[0])
+
+
+def test_wrong_dtype_is_refused(model, frames):
+    with pytest.raises(ikid.InputError, match="dtype int64"):
+        model.predict(frames.astype(np.int64))
+    with pytest.raises(ikid.InputError, match="dtype complex"):
+        model.stream().push(frames[0].astype(np.complex64))
+    with pytest.raises(ikid.InputError, match="frame"):
+        model.stream().push("not numbers")
+
+
+def test_wrong_shapes_are_refused(model, frames):
+    with pytest.raises(ikid.InputError, match="17 columns.*18"):
+        model.predict(frames[:, :17])
+    with pytest.raises(ikid.InputError, match="2-D"):
+        model.predict(frames[0])
+    with pytest.raises(ikid.InputError, match="17 values.*expects 18"):
+        model.stream().push(frames[0, :17])
+
+
+def test_nan_is_an_error_naming_the_marker_never_a_silent_output(model, frames):
+    bad = frames.copy()
+    bad[7, 13] = np.nan  # MC5.y
+    with pytest.raises(ikid.InputError, match=r"frame 7: value MC5\.y is NaN"):
+        model.predict(bad)
+    stream = model.stream()
+    for f in frames[:6]:
+        stream.push(f)
+    with pytest.raises(ikid.InputError, match="MC5.y"):
+        stream.push(bad[7])
+    # The refused frame did not enter the window.
+    ref = model.stream()
+    for f in frames[:6]:
+        ref.push(f)
+    np.testing.assert_array_equal(stream.push(frames[6]), ref.push(frames[6]))
+
+
+def test_reset_and_filled(model, frames):
+    stream = model.stream()
+    for f in frames[:3]:
+        stream.push(f)
+    assert stream.filled == 3
+    stream.reset()
+    assert stream.filled == 0 and stream.push(frames[0]) is None
+    assert stream.model.name == model.name
+
+
+def test_card_properties(model):
+    assert model.task == "ik" and model.feature_set == "markers" and model.window == 5
+    assert model.frame_len == 18 and model.n_outputs == 3
+    assert model.output_names == ikid.coordinate_names() and model.output_units == ["rad"] * 3
+    assert model.layer_widths == [90, 32, 32, 3]
+    assert model.frame_names[:3] == ["RSP.x", "RSP.y", "RSP.z"]
+    card = model.card
+    assert card["format_version"] == 1 and card["frame_rate_hz"] == 1000.0
+    assert "Model(name=" in repr(model)
+
+
+def test_save_load_round_trip(tmp_path, model, frames):
+    path = tmp_path / "m.safetensors"
+    model.save(path)
+    again = ikid.load(path)
+    np.testing.assert_array_equal(again.predict(frames), model.predict(frames))
+    assert ikid.load(str(path)).card == model.card
+    assert ikid.Model.from_bytes(model.to_bytes()).card == model.card
+
+
+def test_bad_files_raise_model_file_error(tmp_path, model):
+    data = model.to_bytes()
+    truncated = tmp_path / "truncated.safetensors"
+    truncated.write_bytes(data[: len(data) // 2])
+    with pytest.raises(ikid.ModelFileError, match="not a valid safetensors"):
+        ikid.load(truncated)
+    with pytest.raises(FileNotFoundError, match="no model file 'nope'"):
+        ikid.load("nope")
+    with pytest.raises(FileNotFoundError):
+        ikid.Model.load(tmp_path / "missing.safetensors")
+
+
+def test_threads_share_a_model_with_their_own_streams(frames):
+    model = make_model(hidden=(64, 64))
+    data = marker_frames(400, seed=3)
+    want = model.predict(data)
+    results: dict[int, np.ndarray] = {}
+
+    def run(k: int) -> None:
+        stream = model.stream()
+        results[k] = np.stack([o for f in data if (o := stream.push(f)) is not None])
+
+    threads = [threading.Thread(target=run, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    assert sorted(results) == [0, 1, 2, 3]
+    for out in results.values():
+        np.testing.assert_array_equal(out, want)

@@ -1,0 +1,174 @@
+"""Export a torch MLP to ikid's ``.safetensors`` model format (and to ONNX for interop).
+
+The file is written by the Rust core (``ikid._native.build_model`` + ``Model.save``), so the
+format has exactly one writer and every exported file has passed the loader's validation.
+
+The network must be a chain of ``nn.Linear`` layers with ``nn.ReLU`` between them (an
+``nn.Sequential``, optionally wrapped by ``torch.compile`` or ``DataParallel``); scaling is
+given separately as per-element affine maps ``x * scale + shift``:
+
+    net_input = window_features * input_scale + input_shift
+    prediction = net(net_input) * output_scale + output_shift
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+import ikid
+from ikid import _native
+
+#: Units of each task's outputs (SI, as everywhere inside ikid).
+TASK_UNITS = {"ik": "rad", "id": "N*m", "chain": "N*m"}
+
+
+@dataclass
+class Affine:
+    """Element-wise ``x * scale + shift``."""
+
+    scale: np.ndarray
+    shift: np.ndarray
+
+    @staticmethod
+    def identity(n: int) -> Affine:
+        return Affine(np.ones(n, np.float32), np.zeros(n, np.float32))
+
+    @staticmethod
+    def minmax(lo: np.ndarray, hi: np.ndarray, target: tuple[float, float] = (-1.0, 1.0)) -> Affine:
+        """Maps ``[lo, hi]`` onto ``target`` (sklearn's MinMaxScaler); constant columns map to the midpoint."""
+        lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+        span = np.where(hi > lo, hi - lo, 1.0)
+        scale = (target[1] - target[0]) / span
+        shift = target[0] - lo * scale
+        shift = np.where(hi > lo, shift, 0.5 * (target[0] + target[1]) - lo * scale)
+        return Affine(scale.astype(np.float32), shift.astype(np.float32))
+
+    def inverse(self) -> Affine:
+        """The map undoing this one (for output scaling: network units -> SI)."""
+        scale = 1.0 / self.scale.astype(np.float64)
+        return Affine(scale.astype(np.float32), (-self.shift * scale).astype(np.float32))
+
+
+@dataclass
+class ModelSpec:
+    """Everything the model card says besides the weights."""
+
+    name: str
+    task: str
+    feature_set: str
+    window: int = 5
+    frame_rate_hz: float = 1000.0
+    output_names: Sequence[str] = field(default_factory=ikid.coordinate_names)
+    output_units: Sequence[str] | None = None
+    scaling: Mapping[str, str] = field(default_factory=dict)
+    provenance: Mapping[str, Any] = field(default_factory=dict)
+    metrics: Mapping[str, Any] = field(default_factory=dict)
+
+
+def linear_layers(net: nn.Module) -> list[tuple[nn.Linear, str]]:
+    """The ``(Linear, activation)`` chain of ``net``; refuses anything else by name."""
+    net = getattr(net, "_orig_mod", net)  # torch.compile
+    net = getattr(net, "module", net)  # DataParallel / DistributedDataParallel
+    chain: list[tuple[nn.Linear, str]] = []
+    for name, module in net.named_children():
+        if isinstance(module, nn.Linear):
+            chain.append((module, "identity"))
+        elif isinstance(module, nn.ReLU):
+            if not chain or chain[-1][1] != "identity":
+                raise ValueError(f"module {name!r}: ReLU must follow a Linear layer")
+            chain[-1] = (chain[-1][0], "relu")
+        elif isinstance(module, (nn.Identity, nn.Dropout)):
+            continue
+        else:
+            raise ValueError(f"module {name!r} ({type(module).__name__}) is not supported: use Linear and ReLU only")
+    if not chain:
+        raise ValueError("the network has no Linear layers")
+    return chain
+
+
+def card_for(spec: ModelSpec, activations: Sequence[str]) -> dict[str, Any]:
+    """The model card (see crates/ikid/src/model.rs for the schema)."""
+    info = ikid.feature_set_info(spec.feature_set)
+    units = spec.output_units or [TASK_UNITS[spec.task]] * len(spec.output_names)
+    return {
+        "format": "ikid-model",
+        "format_version": 1,
+        "name": spec.name,
+        "task": spec.task,
+        "feature_set": spec.feature_set,
+        "feature_names": info["feature_names"],
+        "window": spec.window,
+        "predicted_frame": "newest",
+        "frame_rate_hz": spec.frame_rate_hz,
+        "outputs": [{"name": n, "unit": u} for n, u in zip(spec.output_names, units, strict=True)],
+        "activations": list(activations),
+        "scaling": dict(spec.scaling),
+        "provenance": dict(spec.provenance),
+        "metrics": dict(spec.metrics),
+    }
+
+
+def export(
+    net: nn.Module,
+    path: str | Path,
+    spec: ModelSpec,
+    input_scaling: Affine | None = None,
+    output_scaling: Affine | None = None,
+) -> ikid.Model:
+    """Write ``net`` as an ikid model file at ``path`` and return it loaded from there."""
+    chain = linear_layers(net)
+    weights = [lin.weight.detach().cpu().float().numpy() for lin, _ in chain]
+    biases = [
+        (lin.bias.detach().cpu().float().numpy() if lin.bias is not None else np.zeros(lin.out_features, np.float32))
+        for lin, _ in chain
+    ]
+    n_in, n_out = weights[0].shape[1], weights[-1].shape[0]
+    inp = input_scaling or Affine.identity(n_in)
+    out = output_scaling or Affine.identity(n_out)
+    card = card_for(spec, [act for _, act in chain])
+    model = _native.build_model(json.dumps(card), weights, biases, inp.scale, inp.shift, out.scale, out.shift)
+    model.save(Path(path))
+    return ikid.load(Path(path))
+
+
+class _Scaled(nn.Module):
+    """``net`` wrapped with its scaling, so the ONNX graph gives SI outputs from raw features."""
+
+    def __init__(self, net: nn.Module, inp: Affine, out: Affine):
+        super().__init__()
+        self.net = net
+        for name, arr in [("in_scale", inp.scale), ("in_shift", inp.shift), ("out_scale", out.scale), ("out_shift", out.shift)]:
+            self.register_buffer(name, torch.as_tensor(np.asarray(arr, np.float32)))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x * self.in_scale + self.in_shift) * self.out_scale + self.out_shift
+
+
+def export_onnx(
+    net: nn.Module,
+    path: str | Path,
+    n_inputs: int,
+    input_scaling: Affine | None = None,
+    output_scaling: Affine | None = None,
+) -> None:
+    """Write ``net`` with its scaling as ONNX: input ``window`` ``[batch, n_inputs]`` -> ``output``."""
+    n_out = linear_layers(net)[-1][0].out_features
+    wrapped = _Scaled(net, input_scaling or Affine.identity(n_inputs), output_scaling or Affine.identity(n_out)).eval()
+    example = torch.zeros(1, n_inputs)
+    torch.onnx.export(
+        wrapped,
+        (example,),
+        str(path),
+        input_names=["window"],
+        output_names=["output"],
+        dynamic_axes={"window": {0: "batch"}, "output": {0: "batch"}},
+        dynamo=False,
+    )
