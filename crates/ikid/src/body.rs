@@ -290,7 +290,7 @@ impl BodyModel {
     /// (radians), the result `n` frames of [`MARKER_FRAME_LEN`] values (metres, lab frame).
     pub fn marker_frames(&self, q: &[f64], shoulder_flexion: f64) -> crate::Result<Vec<f64>> {
         use crate::Error;
-        if q.len() % N_COORDINATES != 0 {
+        if !q.len().is_multiple_of(N_COORDINATES) {
             return Err(Error::BadArgument { what: "q", detail: format!("{} values is not a whole number of angle triples", q.len()) });
         }
         if let Some(i) = q.iter().position(|v| !v.is_finite()) {

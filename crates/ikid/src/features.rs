@@ -153,7 +153,7 @@ impl FeatureSet {
     /// receives whole feature rows. Errors name the frame at fault.
     pub fn compute_rows(self, frames: &[f32], out: &mut [f32]) -> Result<()> {
         let (fl, nf) = (self.frame_len(), self.feature_len());
-        if frames.len() % fl != 0 {
+        if !frames.len().is_multiple_of(fl) {
             return Err(Error::FrameLength { feature_set: self.name(), found: frames.len() % fl, expected: fl });
         }
         let n = frames.len() / fl;

@@ -333,7 +333,7 @@ impl Model {
     pub fn predict(&self, frames: &[f32], out: &mut [f32]) -> Result<usize> {
         let set = self.feature_set();
         let (fl, nf, w, no) = (set.frame_len(), set.feature_len(), self.window(), self.n_outputs());
-        if frames.len() % fl != 0 {
+        if !frames.len().is_multiple_of(fl) {
             return Err(Error::BadArgument {
                 what: "frames",
                 detail: format!("{} values is not a whole number of {fl}-value frames", frames.len()),

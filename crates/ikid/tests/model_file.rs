@@ -6,12 +6,15 @@ use ikid::{Error, FeatureSet, Model};
 use safetensors::{Dtype, tensor::TensorView};
 use std::collections::HashMap;
 
+/// A tensor as (name, shape, f32 values).
+type Tensor = (String, Vec<usize>, Vec<f32>);
+
 fn model() -> Model {
     random_model(FeatureSet::Markers, 5, &[16, 12], 3, 5)
 }
 
 /// The model's tensors as (name, shape, f32 values) and its card as a JSON value.
-fn parts(m: &Model) -> (Vec<(String, Vec<usize>, Vec<f32>)>, serde_json::Value) {
+fn parts(m: &Model) -> (Vec<Tensor>, serde_json::Value) {
     let bytes = m.to_bytes();
     let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
     let mut tensors: Vec<_> = st
@@ -26,7 +29,7 @@ fn parts(m: &Model) -> (Vec<(String, Vec<usize>, Vec<f32>)>, serde_json::Value) 
     (tensors, serde_json::from_str(&m.card().to_json()).unwrap())
 }
 
-fn build(tensors: &[(String, Vec<usize>, Vec<f32>)], card: &serde_json::Value) -> Vec<u8> {
+fn build(tensors: &[Tensor], card: &serde_json::Value) -> Vec<u8> {
     let bytes: Vec<(String, Vec<usize>, Vec<u8>)> =
         tensors.iter().map(|(n, s, v)| (n.clone(), s.clone(), v.iter().flat_map(|x| x.to_le_bytes()).collect())).collect();
     let views: Vec<_> = bytes.iter().map(|(n, s, b)| (n.as_str(), TensorView::new(Dtype::F32, s.clone(), b).unwrap())).collect();
