@@ -43,9 +43,11 @@ fn predict(c: &mut Criterion) {
         let frames = random_frames(set, N, 2);
         let mut out = vec![0f32; model.n_predictions(N) * model.n_outputs()];
         group.throughput(Throughput::Elements(model.n_predictions(N) as u64));
-        group.bench_with_input(BenchmarkId::new(label, N), &frames, |b, frames| {
-            b.iter(|| model.predict(black_box(frames), &mut out).unwrap())
-        });
+        for threads in [1, 2] {
+            group.bench_with_input(BenchmarkId::new(format!("{label}/threads{threads}"), N), &frames, |b, frames| {
+                b.iter(|| model.predict_with_threads(black_box(frames), &mut out, threads).unwrap())
+            });
+        }
     }
     group.finish();
 }

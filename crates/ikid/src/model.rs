@@ -329,8 +329,16 @@ impl Model {
 
     /// Predicts a whole recording. `frames` holds `n` frames back to back; `out` receives
     /// [`n_predictions(n)`](Self::n_predictions) rows of [`n_outputs`](Self::n_outputs).
-    /// Gives exactly the values a [`Stream`] fed the same frames gives. Returns the rows.
+    /// Gives exactly the values a [`Stream`] fed the same frames gives. Runs on up to
+    /// [`std::thread::available_parallelism`] threads. Returns the number of rows.
     pub fn predict(&self, frames: &[f32], out: &mut [f32]) -> Result<usize> {
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        self.predict_with_threads(frames, out, threads)
+    }
+
+    /// [`predict`](Self::predict) on at most `threads` threads (1 = the calling thread only).
+    /// Every thread count gives bit-identical results.
+    pub fn predict_with_threads(&self, frames: &[f32], out: &mut [f32], threads: usize) -> Result<usize> {
         let set = self.feature_set();
         let (fl, nf, w, no) = (set.frame_len(), set.feature_len(), self.window(), self.n_outputs());
         if !frames.len().is_multiple_of(fl) {
@@ -348,10 +356,26 @@ impl Model {
         }
         let mut features = vec![0f32; frames.len() / fl * nf];
         set.compute_rows(frames, &mut features)?;
-        let mut scratch = self.packed().scratch();
-        // Windows of consecutive frames are contiguous slices of the feature rows.
-        for (i, row) in out.chunks_exact_mut(no).enumerate() {
-            self.packed().forward(&features[i * nf..(i + w) * nf], &mut scratch, row);
+        // Below a few hundred rows a thread costs more than it saves.
+        const MIN_ROWS_PER_THREAD: usize = 256;
+        let threads = threads.clamp(1, rows.div_ceil(MIN_ROWS_PER_THREAD).max(1));
+        let rows_per_thread = rows.div_ceil(threads).max(1);
+        let run = |first_row: usize, chunk: &mut [f32]| {
+            let mut scratch = self.packed().scratch();
+            // Windows of consecutive frames are contiguous slices of the feature rows.
+            for (k, row) in chunk.chunks_exact_mut(no).enumerate() {
+                let i = first_row + k;
+                self.packed().forward(&features[i * nf..(i + w) * nf], &mut scratch, row);
+            }
+        };
+        if threads == 1 {
+            run(0, out);
+        } else {
+            std::thread::scope(|scope| {
+                for (t, chunk) in out.chunks_mut(rows_per_thread * no).enumerate() {
+                    scope.spawn(move || run(t * rows_per_thread, chunk));
+                }
+            });
         }
         Ok(rows)
     }

@@ -232,3 +232,19 @@ fn to_bytes_refuses_nothing_valid() {
     let m = model();
     assert_eq!(to_bytes(m.card(), m.mlp()).unwrap(), m.to_bytes());
 }
+
+#[test]
+fn threaded_predict_is_bit_identical_to_single_threaded() {
+    let m = random_model(FeatureSet::Relative, 5, &[48, 48], 3, 2);
+    let frames = random_frames(FeatureSet::Relative, 2000, 3);
+    let rows = m.n_predictions(2000);
+    let run = |threads: usize| {
+        let mut out = vec![0f32; rows * 3];
+        m.predict_with_threads(&frames, &mut out, threads).unwrap();
+        out.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    };
+    let one = run(1);
+    for threads in [2, 3, 8] {
+        assert_eq!(run(threads), one, "{threads} threads");
+    }
+}
