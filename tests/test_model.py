@@ -134,3 +134,16 @@ def test_threads_share_a_model_with_their_own_streams(frames):
     assert sorted(results) == [0, 1, 2, 3]
     for out in results.values():
         np.testing.assert_array_equal(out, want)
+
+
+def test_push_many_in_packets_equals_push(model, frames):
+    want = model.predict(frames)
+    stream = model.stream()
+    got = np.concatenate([stream.push_many(frames[i : i + 7]) for i in range(0, len(frames), 7)])
+    np.testing.assert_array_equal(got, want)
+    bad = frames[:6].copy()
+    bad[3, 0] = np.nan
+    with pytest.raises(ikid.InputError, match="frame 3: value RSP.x"):
+        model.stream().push_many(bad)
+    with pytest.raises(ikid.InputError, match="17 columns"):
+        model.stream().push_many(frames[:, :17])

@@ -4,8 +4,10 @@
 //! conversion lives in `conv.rs`, the exception hierarchy in `errors.rs`.
 //!
 //! Threading: every class is safe to share between threads. Array work (`predict`,
-//! `compute_features`) and `Stream.push` release the GIL; a `Stream` is used by one thread
-//! at a time (concurrent calls on the same stream raise `RuntimeError`, "already borrowed").
+//! `compute_features`, `Stream.push_many`, `Model.load`) releases the GIL; a single-frame
+//! `Stream.push` keeps it (its few microseconds cost less than releasing it). A `Stream` is
+//! used by one thread at a time (concurrent calls on one stream raise `RuntimeError`,
+//! "already borrowed").
 
 mod body;
 mod conv;

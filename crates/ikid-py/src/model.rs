@@ -157,11 +157,30 @@ pub struct Stream {
 impl Stream {
     /// Pushes one frame; returns `None` until the window is full, then the prediction for
     /// this frame (float32 array of `n_outputs`). A refused frame leaves the window as it was.
+    /// Holds the GIL (a push takes microseconds); `push_many` releases it.
     fn push<'py>(&mut self, py: Python<'py>, frame: &Bound<'py, PyAny>) -> PyResult<Option<Bound<'py, PyArray1<f32>>>> {
         let stream = &mut self.inner;
         with_frame(frame, |values| {
-            let out = py.detach(|| stream.push(values).map(|o| o.map(<[f32]>::to_vec))).py_err()?;
-            Ok(out.map(|o| o.into_pyarray(py)))
+            // The GIL stays held: releasing and re-taking it costs more than the few
+            // microseconds of work (measured: +0.3–0.8 µs per push on the thesis net).
+            let out = stream.push(values).map(|o| o.is_some()).py_err()?;
+            Ok(out.then(|| PyArray1::from_slice(py, stream.output())))
+        })
+    }
+
+    /// Pushes a block of frames `(n, frame_len)`; returns the predictions of the frames that
+    /// completed a window, `(k, n_outputs)`. Stops at the first refused frame (its error is
+    /// raised; the frames before it stay pushed). Releases the GIL.
+    fn push_many<'py>(&mut self, py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let stream = &mut self.inner;
+        let (fl, no) = (stream.model().frame_len(), stream.model().n_outputs());
+        with_floats(frames, "frames", 2, |values, shape| {
+            if shape[1] != fl {
+                return Err(input(format!("frames: {} columns, the model takes {fl} per frame", shape[1])));
+            }
+            let mut out = vec![0f32; stream.rows_for(shape[0]) * no];
+            let rows = py.detach(|| stream.push_many(values, &mut out)).py_err()?;
+            out.into_pyarray(py).reshape([rows, no])
         })
     }
 

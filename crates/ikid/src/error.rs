@@ -116,3 +116,14 @@ pub enum Error {
         detail: String,
     },
 }
+
+impl Error {
+    /// The same error attributed to frame `frame` of a larger call (per-frame errors only).
+    pub fn renumbered(self, frame: usize) -> Self {
+        match self {
+            Error::NonFiniteInput { field, value, .. } => Error::NonFiniteInput { frame, field, value },
+            Error::DegenerateSegment { segment, .. } => Error::DegenerateSegment { frame, segment },
+            other => other,
+        }
+    }
+}

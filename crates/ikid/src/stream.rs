@@ -1,6 +1,6 @@
 //! Frame-by-frame inference over a fixed ring window, without heap allocation per frame.
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::model::Model;
 use crate::net::Scratch;
 
@@ -71,6 +71,47 @@ impl Stream {
         self.input[tail..].copy_from_slice(&self.ring[..split]);
         self.model.packed().forward(&self.input, &mut self.scratch, &mut self.output);
         Ok(Some(&self.output))
+    }
+
+    /// Pushes `frames` (whole frames back to back, e.g. a packet from the acquisition
+    /// system) and writes one output row into `out` for each frame that completes a window.
+    /// Returns the number of rows written. Stops at the first refused frame with its error
+    /// (numbered within `frames`); the frames before it stay pushed. Does not allocate.
+    pub fn push_many(&mut self, frames: &[f32], out: &mut [f32]) -> Result<usize> {
+        let (fl, no) = (self.model.frame_len(), self.model.n_outputs());
+        if !frames.len().is_multiple_of(fl) {
+            return Err(Error::FrameLength { feature_set: self.model.feature_set().name(), found: frames.len() % fl, expected: fl });
+        }
+        let n = frames.len() / fl;
+        let max_rows = self.rows_for(n);
+        if out.len() < max_rows * no {
+            return Err(Error::BadArgument {
+                what: "output buffer",
+                detail: format!("has {} values, {max_rows} rows × {no} = {} needed", out.len(), max_rows * no),
+            });
+        }
+        let mut rows = 0;
+        for (i, frame) in frames.chunks_exact(fl).enumerate() {
+            match self.push(frame) {
+                Ok(Some(o)) => {
+                    out[rows * no..(rows + 1) * no].copy_from_slice(o);
+                    rows += 1;
+                }
+                Ok(None) => {}
+                Err(e) => return Err(e.renumbered(i)),
+            }
+        }
+        Ok(rows)
+    }
+
+    /// Rows [`push_many`](Self::push_many) will write for `n_frames` more frames.
+    pub fn rows_for(&self, n_frames: usize) -> usize {
+        (n_frames + self.filled + 1).saturating_sub(self.model.window()).min(n_frames)
+    }
+
+    /// The last prediction (valid after a `push` that returned `Some`).
+    pub fn output(&self) -> &[f32] {
+        &self.output
     }
 
     /// Forgets every frame held (e.g. after a gap in the recording).

@@ -248,3 +248,25 @@ fn threaded_predict_is_bit_identical_to_single_threaded() {
         assert_eq!(run(threads), one, "{threads} threads");
     }
 }
+
+#[test]
+fn push_many_equals_pushing_one_by_one() {
+    let m = model();
+    let frames = random_frames(FeatureSet::Markers, 23, 4);
+    let mut one = m.stream();
+    let want: Vec<f32> = frames.chunks_exact(18).filter_map(|f| one.push(f).unwrap().map(<[f32]>::to_vec)).flatten().collect();
+    let mut many = m.stream();
+    let mut got = Vec::new();
+    // In packets of 3 frames: the first packets fill the window.
+    for packet in frames.chunks(3 * 18) {
+        let mut out = vec![0f32; many.rows_for(packet.len() / 18) * 3];
+        let rows = many.push_many(packet, &mut out).unwrap();
+        assert_eq!(rows * 3, out.len());
+        got.extend(out);
+    }
+    assert_eq!(got, want);
+    let mut bad = frames[..4 * 18].to_vec();
+    bad[2 * 18 + 5] = f32::NAN;
+    let err = m.stream().push_many(&bad, &mut [0.0; 12]).unwrap_err();
+    assert!(err.to_string().starts_with("frame 2: value USP.z"), "{err}");
+}
