@@ -10,7 +10,7 @@
 
 use crate::error::{Error, Result};
 use crate::features::FeatureSet;
-use crate::net::{Activation, Affine, Dense, Mlp, PackedMlp};
+use crate::net::{Activation, Affine, BATCH, Dense, Mlp, PackedMlp};
 use crate::stream::Stream;
 use nalgebra::{DMatrix, DVector};
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
@@ -360,12 +360,23 @@ impl Model {
         const MIN_ROWS_PER_THREAD: usize = 256;
         let threads = threads.clamp(1, rows.div_ceil(MIN_ROWS_PER_THREAD).max(1));
         let rows_per_thread = rows.div_ceil(threads).max(1);
+        let net = self.packed();
+        // Windows of consecutive frames are contiguous slices of the feature rows.
+        let window = |i: usize| &features[i * nf..(i + w) * nf];
         let run = |first_row: usize, chunk: &mut [f32]| {
-            let mut scratch = self.packed().scratch();
-            // Windows of consecutive frames are contiguous slices of the feature rows.
-            for (k, row) in chunk.chunks_exact_mut(no).enumerate() {
-                let i = first_row + k;
-                self.packed().forward(&features[i * nf..(i + w) * nf], &mut scratch, row);
+            let mut scratch = net.scratch();
+            let mut batch_scratch = net.batch_scratch();
+            let mut groups = chunk.chunks_exact_mut(BATCH * no);
+            let mut row = first_row;
+            for group in &mut groups {
+                let mut rows = group.chunks_exact_mut(no);
+                let outs = std::array::from_fn(|_| rows.next().expect("BATCH rows per group"));
+                net.forward_batch(std::array::from_fn(|s| window(row + s)), &mut batch_scratch, outs);
+                row += BATCH;
+            }
+            for out in groups.into_remainder().chunks_exact_mut(no) {
+                net.forward(window(row), &mut scratch, out);
+                row += 1;
             }
         };
         if threads == 1 {

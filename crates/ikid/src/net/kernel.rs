@@ -20,29 +20,29 @@
 use super::mlp::{Activation, Mlp};
 
 /// Outputs per block for layers wider than [`SMALL_BLOCK`].
-const BLOCK: usize = 64;
+pub(super) const BLOCK: usize = 64;
 /// Outputs per block for layers with at most this many outputs.
-const SMALL_BLOCK: usize = 8;
+pub(super) const SMALL_BLOCK: usize = 8;
 /// Independent accumulator sets (interleaved over inputs) of the portable kernel.
 const LANES: usize = 4;
 
 /// One packed dense layer.
 #[derive(Debug, Clone)]
-struct PackedLayer {
-    n_in: usize,
-    n_out: usize,
-    block: usize,
+pub(super) struct PackedLayer {
+    pub(super) n_in: usize,
+    pub(super) n_out: usize,
+    pub(super) block: usize,
     /// `[n_blocks][n_in][block]`.
-    weights: Vec<f32>,
+    pub(super) weights: Vec<f32>,
     /// `[n_blocks * block]`, zero-padded.
-    bias: Vec<f32>,
-    relu: bool,
+    pub(super) bias: Vec<f32>,
+    pub(super) relu: bool,
     /// Input comes from a ReLU: list the nonzero inputs and skip the rest.
-    sparse_input: bool,
+    pub(super) sparse_input: bool,
 }
 
 impl PackedLayer {
-    fn padded_out(&self) -> usize {
+    pub(super) fn padded_out(&self) -> usize {
         self.bias.len()
     }
 }
@@ -50,20 +50,20 @@ impl PackedLayer {
 /// An [`Mlp`] packed for the fast kernel. Immutable and `Sync`: many streams share one.
 #[derive(Debug, Clone)]
 pub struct PackedMlp {
-    layers: Vec<PackedLayer>,
+    pub(super) layers: Vec<PackedLayer>,
     n_in: usize,
     n_out: usize,
     max_width: usize,
-    use_fma: bool,
+    pub(super) use_fma: bool,
 }
 
 /// Per-caller work space for [`PackedMlp::forward`]; create once, reuse for every call.
 #[derive(Debug, Clone)]
 pub struct Scratch {
-    a: Vec<f32>,
-    b: Vec<f32>,
+    pub(super) a: Vec<f32>,
+    pub(super) b: Vec<f32>,
     /// Indices of the nonzero inputs of the current layer.
-    active: Vec<u32>,
+    pub(super) active: Vec<u32>,
 }
 
 impl PackedMlp {
@@ -160,7 +160,7 @@ impl PackedMlp {
     }
 }
 
-fn fma_available() -> bool {
+pub(super) fn fma_available() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
@@ -183,7 +183,7 @@ fn forward_avx2_fma(net: &PackedMlp, x: &[f32], scratch: &mut Scratch, out: &mut
 }
 
 /// The portable path (any CPU; also the test of the packing independent of the SIMD code).
-fn forward_portable(net: &PackedMlp, x: &[f32], scratch: &mut Scratch, out: &mut [f32]) {
+pub(super) fn forward_portable(net: &PackedMlp, x: &[f32], scratch: &mut Scratch, out: &mut [f32]) {
     forward_with(net, x, scratch, out, |layer, input, active, y| match layer.block {
         BLOCK => portable_layer::<BLOCK>(layer, input, active, y),
         _ => portable_layer::<SMALL_BLOCK>(layer, input, active, y),
@@ -205,12 +205,7 @@ fn forward_with(
     let last = net.layers.len() - 1;
     for (k, layer) in net.layers.iter().enumerate() {
         let input: &[f32] = if k == 0 { x } else { &src[..layer.n_in] };
-        // Branch-free compaction of the nonzero inputs (all of them for a dense input).
-        let mut n = 0;
-        for (j, &v) in input.iter().enumerate() {
-            active[n] = j as u32;
-            n += usize::from(!layer.sparse_input || v != 0.0);
-        }
+        let n = active_inputs(layer, input, active);
         let y = &mut dst[..layer.padded_out()];
         layer_fn(layer, input, &active[..n], y);
         if k == last {
@@ -218,6 +213,18 @@ fn forward_with(
         }
         std::mem::swap(&mut src, &mut dst);
     }
+}
+
+/// Lists the inputs a layer must read into `active` (all, or the nonzero ones after a ReLU).
+#[inline(always)]
+pub(super) fn active_inputs(layer: &PackedLayer, input: &[f32], active: &mut [u32]) -> usize {
+    // Branch-free compaction.
+    let mut n = 0;
+    for (j, &v) in input.iter().enumerate() {
+        active[n] = j as u32;
+        n += usize::from(!layer.sparse_input || v != 0.0);
+    }
+    n
 }
 
 /// Portable kernel: `LANES` interleaved accumulator sets of `B` outputs per block.
@@ -252,7 +259,7 @@ fn portable_layer<const B: usize>(layer: &PackedLayer, x: &[f32], active: &[u32]
 
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
-mod avx2 {
+pub(super) mod avx2 {
     use super::PackedLayer;
     use std::arch::x86_64::*;
 
@@ -262,7 +269,7 @@ mod avx2 {
     /// AVX2 kernel: `B` outputs per block as `V = B / 8` vectors, `LANES` interleaved
     /// accumulator sets (`LANES × V` registers) to hide the FMA latency.
     #[target_feature(enable = "avx2,fma")]
-    pub(super) fn layer<const B: usize, const V: usize, const LANES: usize>(layer: &PackedLayer, x: &[f32], active: &[u32], y: &mut [f32]) {
+    pub(in crate::net) fn layer<const B: usize, const V: usize, const LANES: usize>(layer: &PackedLayer, x: &[f32], active: &[u32], y: &mut [f32]) {
         assert!(B == 8 * V);
         let n_in = x.len();
         let split = active.len() - active.len() % LANES;

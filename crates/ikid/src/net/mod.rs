@@ -1,7 +1,10 @@
-//! Multilayer perceptrons: the plain nalgebra form (the oracle) and the packed fast form.
+//! Multilayer perceptrons: the plain nalgebra form (the oracle) and the packed fast form,
+//! one sample at a time (`kernel`) or four (`batch`).
 
+mod batch;
 mod kernel;
 mod mlp;
 
+pub use batch::{BATCH, BatchScratch};
 pub use kernel::{PackedMlp, Scratch};
 pub use mlp::{Activation, Affine, Dense, Mlp};
