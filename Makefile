@@ -7,8 +7,15 @@ PY      := $(VENV)/bin/python
 PIP     := $(PY) -m pip
 WHEELS  := target/wheels
 CARGO   ?= cargo
+CC      ?= cc
+PREFIX  ?= /usr/local
+CBINDGEN := .tools/bin/cbindgen
+LIBDIR  := target/release
+CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
+LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
+VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo test test-rust test-python lint bench clean
+.PHONY: all venv wheel demo test test-rust test-python test-c lint bench clean capi c header check-header install
 
 all: wheel
 
@@ -33,22 +40,56 @@ wheel: $(VENV)/.created
 demo: wheel
 	$(PY) -m training.demo
 
-test: test-rust wheel test-python lint
+test: test-rust wheel c test-python check-header lint
 	@echo "make test: all suites passed"
 
 test-rust:
 	$(CARGO) test --workspace --exclude ikid-py
 
-test-python: wheel
+# Python tests, including the C ABI tests (tests/test_capi.py runs target/c/* under valgrind).
+test-python: wheel c
 	cd tests && ../$(PY) -m pytest -q -p no:cacheprovider .
 	$(PY) -m mypy.stubtest ikid._native
+
+test-c: c wheel
+	cd tests && ../$(PY) -m pytest -q -p no:cacheprovider test_capi.py
+
+# --- C ABI (libikid) ---------------------------------------------------------------------
+# cbindgen >= 0.29 reads edition-2024 attributes (Debian's 0.24 cannot): built once into .tools.
+$(CBINDGEN):
+	$(CARGO) install cbindgen --version 0.29.4 --locked --root .tools
+
+capi:
+	$(CARGO) build --release -p ikid-capi
+
+# Regenerate include/ikid.h after changing the ABI; check-header fails on any difference.
+header: $(CBINDGEN)
+	$(CBINDGEN) --config crates/ikid-capi/cbindgen.toml --crate ikid-capi --output include/ikid.h
+
+check-header: $(CBINDGEN)
+	$(CBINDGEN) --config crates/ikid-capi/cbindgen.toml --crate ikid-capi --output include/ikid.h --verify
+
+# The C test, example and ABI benchmark, built with plain cc against the committed header.
+c: capi
+	mkdir -p target/c
+	$(CC) $(CFLAGS_C) tests/c/test_capi.c -o target/c/test_capi $(LDLIBS_C)
+	$(CC) $(CFLAGS_C) examples/c/stream_csv.c -o target/c/stream_csv $(LDLIBS_C)
+	$(CC) $(CFLAGS_C) benches/c/abi_overhead.c -o target/c/abi_overhead $(LDLIBS_C)
+
+# Installs libikid (shared and static), ikid.h and a pkg-config file under PREFIX.
+install: capi
+	install -d $(PREFIX)/lib/pkgconfig $(PREFIX)/include
+	install -m 755 $(LIBDIR)/libikid.so $(PREFIX)/lib/
+	install -m 644 $(LIBDIR)/libikid.a $(PREFIX)/lib/
+	install -m 644 include/ikid.h $(PREFIX)/include/
+	sed -e 's|@PREFIX@|$(abspath $(PREFIX))|' -e 's|@VERSION@|$(VERSION)|' crates/ikid-capi/ikid.pc.in > $(PREFIX)/lib/pkgconfig/ikid.pc
 
 lint:
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 
 # Criterion benches, per-push latency distribution and the Python overhead, written to
 # docs/performance.md.
-bench: wheel
+bench: wheel c
 	$(CARGO) bench -p ikid --bench inference
 	$(PY) benches/report.py
 

@@ -1,0 +1,24 @@
+//! libikid: the C ABI of ikid. Opaque handles, status codes, a thread-local error message;
+//! no logic (every function forwards to the same function of the core crate).
+//!
+//! Conventions (as rustls-ffi): every symbol is prefixed `ikid_`; a handle is created by
+//! `ikid_*_new`/`ikid_model_load*` into an out-pointer and released by the NULL-safe
+//! `ikid_*_free`; every fallible function returns an [`ikid_status`] and writes its outputs
+//! only on success; after a failure `ikid_last_error()` gives a message naming what was
+//! wrong. No panic crosses the boundary: each body runs behind `catch_unwind` and a panic
+//! becomes `IKID_STATUS_PANIC`.
+//!
+//! Threads: a model may be shared by any number of threads; a stream is used by one thread
+//! at a time (give each thread its own). Streams hold their own reference to the model, so
+//! the model handle may be freed before its streams.
+
+#![allow(non_camel_case_types)] // C names in the C header
+#![allow(unsafe_code)] // the ABI is raw pointers; every dereference is checked first
+
+mod boundary;
+mod model;
+mod stream;
+
+pub use boundary::{ikid_last_error, ikid_status, ikid_status_message, ikid_version};
+pub use model::{ikid_model, ikid_model_info};
+pub use stream::ikid_stream;

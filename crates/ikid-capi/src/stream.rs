@@ -1,0 +1,128 @@
+//! Stream handles: frame-by-frame inference, one thread at a time per stream.
+
+use crate::boundary::{Failure, guard, ikid_status, non_null, non_null_mut, slice, slice_mut};
+use crate::model::ikid_model;
+use ikid_core::Stream;
+
+/// A causal frame-by-frame stream over a model (opaque). Use from one thread at a time.
+pub struct ikid_stream {
+    stream: Stream,
+}
+
+/// Creates a stream over `model`; on success `*out` receives a handle to release with
+/// `ikid_stream_free`. Allocates once, here; pushes never allocate.
+///
+/// # Safety
+/// `model` must be a live handle; `out` must point to writable storage.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_new(model: *const ikid_model, out: *mut *mut ikid_stream) -> ikid_status {
+    guard(|| {
+        let m = unsafe { non_null(model, "model") }?;
+        let out = unsafe { non_null_mut(out, "out") }?;
+        *out = Box::into_raw(Box::new(ikid_stream { stream: m.model.stream() }));
+        Ok(())
+    })
+}
+
+/// Pushes one frame of `frame_len` floats. `*ready` is set to false while the window is
+/// filling; once it is full it is set to true and `out` (room for `out_len` floats, at least
+/// `n_outputs`) receives the prediction for this frame. On failure nothing is written and
+/// the frame is not taken into the window.
+///
+/// # Safety
+/// `stream` must be a live handle used by no other thread meanwhile; `frame` must point to
+/// `frame_len` readable floats, `out` to `out_len` writable floats, `ready` to a bool.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_push(
+    stream: *mut ikid_stream,
+    frame: *const f32,
+    frame_len: usize,
+    out: *mut f32,
+    out_len: usize,
+    ready: *mut bool,
+) -> ikid_status {
+    guard(|| {
+        let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
+        let frame = unsafe { slice(frame, frame_len, "frame") }?;
+        let ready = unsafe { non_null_mut(ready, "ready") }?;
+        let n_out = s.model().n_outputs();
+        if out_len < n_out {
+            return Err(Failure::new(ikid_status::InvalidArgument, format!("out has room for {out_len} floats, the model gives {n_out}")));
+        }
+        let out = unsafe { slice_mut(out, n_out, "out") }?;
+        match s.push(frame)? {
+            Some(prediction) => {
+                out.copy_from_slice(prediction);
+                *ready = true;
+            }
+            None => *ready = false,
+        }
+        Ok(())
+    })
+}
+
+/// Pushes `n_frames` frames (`n_frames × frame_len` floats, e.g. a packet from the
+/// acquisition system) and writes one row of `n_outputs` into `out` for each frame that
+/// completes a window; `*rows` receives the row count. On failure (a refused frame)
+/// `ikid_last_error()` names the frame, `*rows` is not written and the contents of `out` are
+/// unspecified; the frames before the refused one stay pushed.
+///
+/// # Safety
+/// As `ikid_stream_push`, with `frames` holding `n_frames × frame_len` floats and `rows`
+/// pointing to writable storage.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_push_many(
+    stream: *mut ikid_stream,
+    frames: *const f32,
+    n_frames: usize,
+    frame_len: usize,
+    out: *mut f32,
+    out_len: usize,
+    rows: *mut usize,
+) -> ikid_status {
+    guard(|| {
+        let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
+        if frame_len != s.model().frame_len() {
+            return Err(Failure::new(ikid_status::InvalidArgument, format!("frame_len is {frame_len}, the model takes {}", s.model().frame_len())));
+        }
+        let total = n_frames
+            .checked_mul(frame_len)
+            .ok_or_else(|| Failure::new(ikid_status::InvalidArgument, "n_frames × frame_len overflows"))?;
+        let frames = unsafe { slice(frames, total, "frames") }?;
+        let rows = unsafe { non_null_mut(rows, "rows") }?;
+        let need = s.rows_for(n_frames) * s.model().n_outputs();
+        if out_len < need {
+            return Err(Failure::new(ikid_status::InvalidArgument, format!("out has room for {out_len} floats, {need} needed")));
+        }
+        let out = unsafe { slice_mut(out, need, "out") }?;
+        *rows = s.push_many(frames, out)?;
+        Ok(())
+    })
+}
+
+/// Forgets every frame held (e.g. after a gap in the recording).
+///
+/// # Safety
+/// `stream` must be a live handle used by no other thread meanwhile.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_reset(stream: *mut ikid_stream) -> ikid_status {
+    guard(|| {
+        unsafe { non_null_mut(stream, "stream") }?.stream.reset();
+        Ok(())
+    })
+}
+
+/// Releases a stream handle (NULL is ignored).
+///
+/// # Safety
+/// `stream` must be NULL or a handle from `ikid_stream_new` not yet freed.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_free(stream: *mut ikid_stream) {
+    if !stream.is_null() {
+        let _ = guard(|| {
+            // SAFETY: a handle from Box::into_raw, freed once (caller's contract).
+            drop(unsafe { Box::from_raw(stream) });
+            Ok(())
+        });
+    }
+}

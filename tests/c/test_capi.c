@@ -1,0 +1,195 @@
+/* Tests of libikid's C ABI: results equal the Python API's, every error path returns its
+ * status and a readable message, a model is shared by threads. Run under valgrind by
+ * tests/test_capi.py, which writes the fixtures:
+ *   test_capi MODEL FRAMES.csv EXPECTED.csv CORRUPT_MODEL
+ * FRAMES.csv: one frame per line (frame_len floats); EXPECTED.csv: predictions of frames
+ * window-1.. (n_outputs floats per line), from ikid.Model.predict. Prints "N passed, N failed". */
+#include "ikid.h"
+
+#include <math.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int passed = 0, failed = 0;
+
+#define CHECK(cond, ...)                                       \
+    do {                                                       \
+        if (cond) {                                            \
+            passed++;                                          \
+        } else {                                               \
+            failed++;                                          \
+            fprintf(stderr, "FAIL %s:%d: ", __FILE__, __LINE__); \
+            fprintf(stderr, __VA_ARGS__);                      \
+            fprintf(stderr, " (last error: %s)\n", ikid_last_error()); \
+        }                                                      \
+    } while (0)
+
+static float *read_csv(const char *path, size_t cols, size_t *rows) {
+    FILE *f = fopen(path, "r");
+    if (!f) { perror(path); exit(2); }
+    size_t cap = 1024, n = 0;
+    float *v = malloc(cap * sizeof *v);
+    double x;
+    while (fscanf(f, "%lf%*[, \n]", &x) == 1) {
+        if (n == cap) { cap *= 2; v = realloc(v, cap * sizeof *v); }
+        v[n++] = (float)x;
+    }
+    fclose(f);
+    *rows = n / cols;
+    return v;
+}
+
+static unsigned char *read_file(const char *path, size_t *len) {
+    FILE *f = fopen(path, "rb");
+    if (!f) { perror(path); exit(2); }
+    fseek(f, 0, SEEK_END);
+    *len = (size_t)ftell(f);
+    fseek(f, 0, SEEK_SET);
+    unsigned char *buf = malloc(*len);
+    if (fread(buf, 1, *len, f) != *len) { perror(path); exit(2); }
+    fclose(f);
+    return buf;
+}
+
+static int contains(const char *haystack, const char *needle) { return strstr(haystack, needle) != NULL; }
+
+struct shared {
+    const ikid_model *model;
+    const float *frames, *expected;
+    size_t n_frames, frame_len, n_out, window;
+    int mismatches;
+};
+
+static void *stream_all(void *arg) {
+    struct shared *s = arg;
+    ikid_stream *stream = NULL;
+    if (ikid_stream_new(s->model, &stream) != IKID_STATUS_OK) { s->mismatches = -1; return NULL; }
+    float out[16];
+    for (size_t i = 0; i < s->n_frames; i++) {
+        bool ready = false;
+        if (ikid_stream_push(stream, s->frames + i * s->frame_len, s->frame_len, out, 16, &ready) != IKID_STATUS_OK) s->mismatches++;
+        if (ready && memcmp(out, s->expected + (i - s->window + 1) * s->n_out, s->n_out * sizeof(float)) != 0) s->mismatches++;
+    }
+    ikid_stream_free(stream);
+    return NULL;
+}
+
+int main(int argc, char **argv) {
+    if (argc != 5) { fprintf(stderr, "usage: %s MODEL FRAMES.csv EXPECTED.csv CORRUPT_MODEL\n", argv[0]); return 2; }
+    const char *model_path = argv[1], *corrupt_path = argv[4];
+
+    CHECK(strcmp(ikid_version(), "") != 0 && strchr(ikid_version(), '.'), "version %s", ikid_version());
+    CHECK(contains(ikid_status_message(IKID_STATUS_INPUT), "frame"), "status message");
+    CHECK(strcmp(ikid_status_message(99), "unknown status") == 0, "unknown status message");
+
+    /* Loading: every failure has its status and a message naming the problem. */
+    ikid_model *model = NULL;
+    CHECK(ikid_model_load(NULL, &model) == IKID_STATUS_NULL_PARAMETER && contains(ikid_last_error(), "path is NULL"), "NULL path");
+    CHECK(ikid_model_load(model_path, NULL) == IKID_STATUS_NULL_PARAMETER && contains(ikid_last_error(), "out is NULL"), "NULL out");
+    CHECK(ikid_model_load("/nonexistent/m.safetensors", &model) == IKID_STATUS_IO && contains(ikid_last_error(), "/nonexistent/m.safetensors") && model == NULL, "missing file");
+    CHECK(ikid_model_load(corrupt_path, &model) == IKID_STATUS_MODEL_FILE && contains(ikid_last_error(), "safetensors") && model == NULL, "corrupt file");
+    size_t len = 0;
+    unsigned char *bytes = read_file(model_path, &len);
+    CHECK(ikid_model_load_bytes(bytes, len / 2, &model) == IKID_STATUS_MODEL_FILE && model == NULL, "truncated bytes");
+    CHECK(ikid_model_load_bytes(bytes, len, &model) == IKID_STATUS_OK && model != NULL, "load from bytes");
+    ikid_model_free(model);
+    free(bytes);
+    model = NULL;
+    CHECK(ikid_model_load(model_path, &model) == IKID_STATUS_OK && model != NULL, "load");
+
+    ikid_model_info info = {0};
+    CHECK(ikid_model_get_info(NULL, &info) == IKID_STATUS_NULL_PARAMETER, "info NULL model");
+    CHECK(ikid_model_get_info(model, &info) == IKID_STATUS_OK && info.frame_len == 18 && info.window == 5 && info.n_outputs == 3 && info.frame_rate_hz == 1000.0,
+          "info %zu %zu %zu %g", info.frame_len, info.window, info.n_outputs, info.frame_rate_hz);
+    CHECK(strcmp(ikid_model_output_name(model, 0), "ra_wr_s_p") == 0 && ikid_model_output_name(model, 3) == NULL, "output names");
+    CHECK(strcmp(ikid_model_frame_name(model, 10), "MC2.y") == 0 && ikid_model_frame_name(model, 18) == NULL, "frame names");
+    CHECK(strcmp(ikid_model_describe(model, 1), "ik") == 0 && strcmp(ikid_model_describe(model, 2), "markers") == 0 && ikid_model_describe(model, 7) == NULL, "describe");
+    CHECK(ikid_model_output_name(NULL, 0) == NULL && ikid_predict_rows(NULL, 10) == 0 && ikid_predict_rows(model, 10) == 6 && ikid_predict_rows(model, 3) == 0, "NULL-safe getters");
+
+    size_t n_frames = 0, n_expected = 0;
+    float *frames = read_csv(argv[2], info.frame_len, &n_frames);
+    float *expected = read_csv(argv[3], info.n_outputs, &n_expected);
+    CHECK(n_expected == n_frames - info.window + 1, "fixture sizes %zu %zu", n_frames, n_expected);
+
+    /* Streaming equals the Python API's predictions, bit for bit. */
+    ikid_stream *stream = NULL;
+    CHECK(ikid_stream_new(NULL, &stream) == IKID_STATUS_NULL_PARAMETER, "stream NULL model");
+    CHECK(ikid_stream_new(model, &stream) == IKID_STATUS_OK, "stream new");
+    float out[3] = {0};
+    bool ready = true;
+    int mismatches = 0, early = 0;
+    for (size_t i = 0; i < n_frames; i++) {
+        if (ikid_stream_push(stream, frames + i * 18, 18, out, 3, &ready) != IKID_STATUS_OK) mismatches++;
+        if (i + 1 < info.window) early += ready;
+        else if (!ready || memcmp(out, expected + (i - info.window + 1) * 3, sizeof out) != 0) mismatches++;
+    }
+    CHECK(mismatches == 0 && early == 0, "stream vs Python: %d mismatches, %d early outputs", mismatches, early);
+
+    /* Bad pushes: status, message, and nothing written. */
+    float sentinel[3] = {7, 7, 7};
+    ready = true;
+    CHECK(ikid_stream_push(stream, frames, 17, sentinel, 3, &ready) == IKID_STATUS_INPUT && contains(ikid_last_error(), "17 values") && ready && sentinel[0] == 7, "short frame");
+    float bad[18];
+    memcpy(bad, frames, sizeof bad);
+    bad[13] = NAN;
+    CHECK(ikid_stream_push(stream, bad, 18, sentinel, 3, &ready) == IKID_STATUS_INPUT && contains(ikid_last_error(), "MC5.y") && sentinel[0] == 7, "NaN marker: %s", ikid_last_error());
+    CHECK(ikid_stream_push(stream, frames, 18, sentinel, 2, &ready) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "room for 2"), "small out");
+    CHECK(ikid_stream_push(NULL, frames, 18, out, 3, &ready) == IKID_STATUS_NULL_PARAMETER, "NULL stream");
+    CHECK(ikid_stream_push(stream, NULL, 18, out, 3, &ready) == IKID_STATUS_NULL_PARAMETER && contains(ikid_last_error(), "frame is NULL"), "NULL frame");
+    CHECK(ikid_stream_push(stream, frames, 18, out, 3, NULL) == IKID_STATUS_NULL_PARAMETER, "NULL ready");
+    CHECK(ikid_stream_push(stream, (const float *)((const char *)frames + 1), 17, out, 3, &ready) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "aligned"), "misaligned frame");
+
+    /* Reset empties the window. */
+    CHECK(ikid_stream_reset(stream) == IKID_STATUS_OK && ikid_stream_reset(NULL) == IKID_STATUS_NULL_PARAMETER, "reset");
+    CHECK(ikid_stream_push(stream, frames, 18, out, 3, &ready) == IKID_STATUS_OK && !ready, "after reset");
+
+    /* push_many in packets of 7 equals the expected rows. */
+    ikid_stream_reset(stream);
+    float *rows_out = malloc(n_expected * 3 * sizeof(float));
+    size_t got = 0;
+    for (size_t i = 0; i < n_frames; i += 7) {
+        size_t k = n_frames - i < 7 ? n_frames - i : 7, rows = 0;
+        if (ikid_stream_push_many(stream, frames + i * 18, k, 18, rows_out + got * 3, 7 * 3, &rows) != IKID_STATUS_OK) break;
+        got += rows;
+    }
+    CHECK(got == n_expected && memcmp(rows_out, expected, n_expected * 3 * sizeof(float)) == 0, "push_many: %zu rows", got);
+
+    /* Whole-recording prediction. */
+    size_t rows = 0;
+    memset(rows_out, 0, n_expected * 3 * sizeof(float));
+    CHECK(ikid_predict(model, frames, n_frames, 18, rows_out, n_expected * 3, &rows) == IKID_STATUS_OK && rows == n_expected
+          && memcmp(rows_out, expected, n_expected * 3 * sizeof(float)) == 0, "predict");
+    CHECK(ikid_predict(model, frames, n_frames, 18, rows_out, 5, &rows) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "room for 5"), "predict small out");
+    CHECK(ikid_predict(model, frames, n_frames, 9, rows_out, n_expected * 3, &rows) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "frame_len is 9"), "predict frame_len");
+    CHECK(ikid_predict(model, frames, n_frames, 18, rows_out, n_expected * 3, NULL) == IKID_STATUS_NULL_PARAMETER, "predict NULL rows");
+    free(rows_out);
+
+    /* Threads share one model, each with its own stream. */
+    enum { THREADS = 4 };
+    pthread_t tid[THREADS];
+    struct shared sh[THREADS];
+    for (int t = 0; t < THREADS; t++) {
+        sh[t] = (struct shared){model, frames, expected, n_frames, 18, 3, info.window, 0};
+        pthread_create(&tid[t], NULL, stream_all, &sh[t]);
+    }
+    int thread_mismatches = 0;
+    for (int t = 0; t < THREADS; t++) {
+        pthread_join(tid[t], NULL);
+        thread_mismatches += sh[t].mismatches;
+    }
+    CHECK(thread_mismatches == 0, "%d threads: %d mismatches", THREADS, thread_mismatches);
+
+    /* The stream outlives its model handle; freeing NULL is a no-op. */
+    ikid_model_free(model);
+    CHECK(ikid_stream_push(stream, frames, 18, out, 3, &ready) == IKID_STATUS_OK, "stream after model free");
+    ikid_stream_free(stream);
+    ikid_stream_free(NULL);
+    ikid_model_free(NULL);
+    free(frames);
+    free(expected);
+
+    printf("%d passed, %d failed\n", passed, failed);
+    return failed != 0;
+}

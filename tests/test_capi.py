@@ -1,0 +1,105 @@
+"""libikid from C: the C test program (tests/c/test_capi.c) and the example host program,
+built by `make c` with plain cc against include/ikid.h, run under valgrind, checked against
+the Python API on the same model and frames; and a host build through pkg-config."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT, make_model, marker_frames
+
+BIN = ROOT / "target" / "c"
+VALGRIND = ["valgrind", "--error-exitcode=99", "--leak-check=full", "--errors-for-leak-kinds=definite,indirect", "-q"]
+
+
+def built(name: str) -> Path:
+    path = BIN / name
+    if not path.exists():
+        pytest.fail(f"{path} is missing: run `make c` (make test does)")
+    return path
+
+
+@pytest.fixture
+def fixtures(tmp_path):
+    model = make_model(hidden=(64, 64))
+    model_path = tmp_path / "model.safetensors"
+    model.save(model_path)
+    frames = marker_frames(120, seed=7)
+    expected = model.predict(frames)
+    np.savetxt(tmp_path / "frames.csv", frames, fmt="%.9g", delimiter=",")
+    np.savetxt(tmp_path / "expected.csv", expected, fmt="%.9g", delimiter=",")
+    corrupt = tmp_path / "corrupt.safetensors"
+    corrupt.write_bytes(model_path.read_bytes()[:100])
+    return tmp_path, model, frames, expected
+
+
+def run(cmd: list, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([str(c) for c in cmd], capture_output=True, text=True, timeout=300, **kw)
+
+
+def test_c_test_program_passes_under_valgrind(fixtures):
+    d = fixtures[0]
+    cmd = [built("test_capi"), d / "model.safetensors", d / "frames.csv", d / "expected.csv", d / "corrupt.safetensors"]
+    if shutil.which("valgrind"):
+        cmd = VALGRIND + cmd
+    result = run(cmd)
+    assert result.returncode == 0, result.stdout + result.stderr
+    last = result.stdout.strip().splitlines()[-1]
+    passed, failed = int(last.split()[0]), int(last.split()[2])
+    # Every CHECK in the source ran (none skipped by an early exit).
+    n_checks = (ROOT / "tests" / "c" / "test_capi.c").read_text().count("CHECK(") - 1  # minus the #define
+    assert failed == 0 and passed == n_checks, last
+
+
+def test_example_host_program_matches_python(fixtures):
+    d, model, frames, expected = fixtures
+    cmd = [built("stream_csv"), d / "model.safetensors", d / "frames.csv", "--every", "1"]
+    if shutil.which("valgrind"):
+        cmd = VALGRIND + cmd
+    result = run(cmd)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.strip().splitlines()
+    assert lines[0] == "frame," + ",".join(model.output_names)
+    rows = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+    np.testing.assert_array_equal(rows[:, 0], np.arange(model.window - 1, len(frames)))
+    np.testing.assert_allclose(rows[:, 1:], expected, atol=1e-6)  # printed with 6 decimals
+    assert "ikid_stream_push latency p50" in result.stderr
+
+
+def test_example_reports_a_bad_frame(fixtures):
+    d = fixtures[0]
+    frames = np.loadtxt(d / "frames.csv", delimiter=",")
+    frames[9, 4] = np.nan
+    np.savetxt(d / "bad.csv", frames, fmt="%.9g", delimiter=",")
+    result = run([built("stream_csv"), d / "model.safetensors", d / "bad.csv"])
+    assert result.returncode == 1 and "frame 9" in result.stderr and "USP.y" in result.stderr, result.stderr
+
+
+@pytest.mark.skipif(shutil.which("pkg-config") is None, reason="pkg-config not installed")
+@pytest.mark.parametrize("link", ["shared", "static"])
+def test_host_build_through_pkg_config(fixtures, tmp_path, link):
+    d = fixtures[0]
+    prefix = tmp_path / "prefix"
+    result = run(["make", "-s", "-C", ROOT, "install", f"PREFIX={prefix}"])
+    assert result.returncode == 0, result.stderr
+    env = {**os.environ, "PKG_CONFIG_PATH": str(prefix / "lib" / "pkgconfig")}
+    flags = ["--cflags", "--libs"] + (["--static"] if link == "static" else [])
+    pc = run(["pkg-config", *flags, "ikid"], env=env)
+    assert pc.returncode == 0, pc.stderr
+    args = pc.stdout.split()
+    if link == "static":  # prefer the archive over the shared library
+        args = [a for a in args if a != "-likid"] + [str(prefix / "lib" / "libikid.a")] + [a for a in args if a.startswith("-l") and a != "-likid"]
+    exe = tmp_path / f"host_{link}"
+    cc = run(["cc", "-std=c11", "-O2", "-Wall", "-Wextra", "-Werror", ROOT / "examples" / "c" / "stream_csv.c", "-o", exe, *args])
+    assert cc.returncode == 0, cc.stderr
+    run_env = {**os.environ, "LD_LIBRARY_PATH": str(prefix / "lib")}
+    result = run([exe, d / "model.safetensors", d / "frames.csv"], env=run_env)
+    assert result.returncode == 0 and result.stdout.startswith("frame,ra_wr_s_p"), result.stderr
+    if link == "static":
+        ldd = run(["ldd", exe])
+        assert "libikid" not in ldd.stdout
