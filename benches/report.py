@@ -74,6 +74,16 @@ def python_push(model: ikid.Model, n: int) -> dict[str, float]:
             "overhead_us": float(np.median(diffs))}
 
 
+def c_abi(label: str) -> dict[str, float]:
+    """The C ABI's cost over the Rust push (benches/c/abi_overhead.c, built by `make c`)."""
+    model = ikid.load(MODELS / f"{label}.safetensors")
+    csv = MODELS / f"{label}.frames.csv"
+    np.savetxt(csv, frames_for(model, 1000), fmt="%.9g", delimiter=",")
+    out = subprocess.run([str(ROOT / "target" / "c" / "abi_overhead"), str(MODELS / f"{label}.safetensors"), str(csv)],
+                         check=True, capture_output=True, text=True).stdout
+    return json.loads(out)
+
+
 def python_batch(model: ikid.Model, n: int = 10_000, repeat: int = 5) -> float:
     frames = frames_for(model, n)
     best = min(_timed(lambda: model.predict(frames)) for _ in range(repeat))
@@ -151,7 +161,26 @@ def main() -> None:
         fmt = lambda v: f"{v:.2f} µs" if v else "n/a"  # noqa: E731
         lines.append(f"| {label} | {fmt(one)} | {fmt(two)} | {py_ps:.2f} µs |")
     lines += ["", "Rust: criterion, 1000 frames per call (996 predictions), `Model::predict_with_threads`."]
-    lines += ["", "Zero heap allocations per push: proved by `crates/ikid/tests/allocations.rs` (counting allocator)."]
+    lines += [
+        "",
+        "## C ABI (`libikid`)",
+        "",
+        "| network | `ikid_stream_push` p50 | p99 | per frame, one call each | per frame, one `push_many` call | ABI overhead |",
+        "|---|---|---|---|---|---|",
+    ]
+    for label in rust:
+        c = c_abi(label)
+        lines.append(
+            f"| {label} | {c['push_p50_us']:.2f} µs | {c['push_p99_us']:.2f} µs | {c['push_per_frame_ns'] / 1000:.2f} µs | "
+            f"{c['push_many_per_frame_ns'] / 1000:.2f} µs | {c['abi_overhead_ns']:+.0f} ns |"
+        )
+    lines += [
+        "",
+        "`target/c/abi_overhead` (benches/c/abi_overhead.c): 200 interleaved rounds of 1000 frames, median; the",
+        "overhead is the per-frame difference between 1000 `ikid_stream_push` calls and one `ikid_stream_push_many`.",
+        "",
+        "Zero heap allocations per push: proved by `crates/ikid/tests/allocations.rs` (counting allocator).",
+    ]
     out = ROOT / "docs" / "performance.md"
     out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
