@@ -103,3 +103,22 @@ def test_host_build_through_pkg_config(fixtures, tmp_path, link):
     if link == "static":
         ldd = run(["ldd", exe])
         assert "libikid" not in ldd.stdout
+
+
+@pytest.mark.skipif(shutil.which("c++") is None, reason="no C++ compiler")
+def test_header_compiles_and_links_as_cpp(tmp_path):
+    src = tmp_path / "host.cpp"
+    src.write_text(
+        '#include "ikid.h"\n#include <cstdio>\n'
+        "int main() {\n"
+        "  ikid_model *m = nullptr;\n"
+        '  ikid_status s = ikid_model_load("/nonexistent.safetensors", &m);\n'
+        '  std::printf("%s|%d|%s\\n", ikid_version(), int(s), ikid_last_error());\n'
+        "  return m != nullptr;\n}\n"
+    )
+    exe = tmp_path / "host"
+    lib = ROOT / "target" / "release"
+    cc = run(["c++", "-std=c++17", "-Wall", "-Wextra", "-Werror", f"-I{ROOT / 'include'}", src, "-o", exe, f"-L{lib}", "-likid", f"-Wl,-rpath,{lib}"])
+    assert cc.returncode == 0, cc.stderr
+    out = run([exe]).stdout.strip().split("|")
+    assert out[1] == "3" and "/nonexistent.safetensors" in out[2], out
