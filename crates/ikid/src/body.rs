@@ -58,6 +58,9 @@ pub const COORDINATES: [Coordinate; 3] = [
     },
 ];
 
+/// Gravitational acceleration in the lab frame (Y up), m/s².
+pub const GRAVITY: [f64; 3] = [0.0, -9.81, 0.0];
+
 /// Number of wrist coordinates.
 pub const N_COORDINATES: usize = 3;
 

@@ -4,7 +4,8 @@
 //! A small MLP over a short window of marker frames predicts the wrist's three angles (or
 //! torques). This crate is the pure core: the [`body`] model and its conventions, the
 //! [`features`] a network sees, the allocation-free [`net`] kernels, [`model`] files and the
-//! frame-by-frame [`stream`].
+//! frame-by-frame [`stream`]; and the classical [`reference`] solvers (IK by segment fitting,
+//! ID by Newton–Euler) the networks are measured against.
 //!
 //! ```no_run
 //! let model = ikid::Model::load("wrist-ik.safetensors")?;
@@ -25,6 +26,7 @@ pub mod error;
 pub mod features;
 pub mod model;
 pub mod net;
+pub mod reference;
 pub mod stream;
 pub mod testing;
 

@@ -1,0 +1,156 @@
+//! Reference inverse dynamics: recursive Newton–Euler over the wrist's joint chain.
+//!
+//! The forearm is fixed in the lab; the three revolute joints share the wrist centre `O`
+//! (a fixed point), with two massless links between them and the hand last. Forward pass:
+//! link angular velocities and accelerations (`ω_i = ω_{i-1} + z_i q̇_i`,
+//! `α_i = α_{i-1} + z_i q̈_i + ω_{i-1} × z_i q̇_i`). Backward pass: the moment about `O` each
+//! link needs, `n_i = n_{i+1} + I_i α_i + ω_i × I_i ω_i + c_i × m_i (a_ci − g)`, and the joint
+//! torque is its component along the joint axis, `τ_i = z_i · n_i` (N·m, in coordinate order).
+
+use crate::body::{BodyModel, COORDINATES, GRAVITY, N_COORDINATES, SegmentParams};
+use crate::error::{Error, Result};
+use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
+
+/// Joint angles, velocities and accelerations (rad, rad/s, rad/s²), coordinate order.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct JointState {
+    /// Angles.
+    pub q: [f64; N_COORDINATES],
+    /// Angular velocities.
+    pub qd: [f64; N_COORDINATES],
+    /// Angular accelerations.
+    pub qdd: [f64; N_COORDINATES],
+}
+
+/// Joint torques `(s_p, e_f, ad_ab)` in N·m that produce `state` for the subject `body`
+/// with the forearm at `shoulder_flexion` (radians), under gravity.
+pub fn inverse_dynamics(body: &BodyModel, shoulder_flexion: f64, state: &JointState) -> Result<[f64; N_COORDINATES]> {
+    let values = state.q.iter().chain(&state.qd).chain(&state.qdd);
+    if let Some(i) = values.clone().position(|v| !v.is_finite()) {
+        let kind = ["q", "qd", "qdd"][i / N_COORDINATES];
+        return Err(Error::BadArgument {
+            what: "joint state",
+            detail: format!("{kind}.{} is {}", COORDINATES[i % N_COORDINATES].name, values.clone().nth(i).unwrap()),
+        });
+    }
+    let forearm = body.forearm_pose(shoulder_flexion).rotation.to_rotation_matrix();
+    let massless = SegmentParams { length: 0.0, mass: 0.0, com: [0.0; 3], inertia: [0.0; 3] };
+    let links = [massless, massless, body.hand];
+
+    // Forward: orientation, axis, angular velocity and acceleration of each link (lab frame).
+    let mut rotation = forearm;
+    let (mut omega, mut alpha) = (Vector3::zeros(), Vector3::zeros());
+    let mut axes = [Vector3::zeros(); N_COORDINATES];
+    let mut kin = [(Rotation3::identity(), Vector3::zeros(), Vector3::zeros()); N_COORDINATES];
+    for i in 0..N_COORDINATES {
+        let local = Unit::new_normalize(Vector3::from(COORDINATES[i].axis));
+        let z = rotation * local.into_inner();
+        let spin = z * state.qd[i];
+        alpha += z * state.qdd[i] + omega.cross(&spin);
+        omega += spin;
+        rotation *= Rotation3::from_axis_angle(&local, state.q[i]);
+        axes[i] = z;
+        kin[i] = (rotation, omega, alpha);
+    }
+
+    // Backward: moment about the wrist centre needed by links i.. (lab frame).
+    let g = Vector3::from(GRAVITY);
+    let mut moment = Vector3::zeros();
+    let mut tau = [0.0; N_COORDINATES];
+    for i in (0..N_COORDINATES).rev() {
+        let (r, w, a) = kin[i];
+        let link = &links[i];
+        let c = r * Vector3::from(link.com);
+        let inertia = r.matrix() * Matrix3::from_diagonal(&Vector3::from(link.inertia)) * r.matrix().transpose();
+        let a_com = a.cross(&c) + w.cross(&w.cross(&c));
+        moment += inertia * a + w.cross(&(inertia * w)) + c.cross(&(link.mass * (a_com - g)));
+        tau[i] = axes[i].dot(&moment);
+    }
+    Ok(tau)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Lagrangian of the hand: kinetic energy about the fixed wrist centre minus potential.
+    fn lagrangian(body: &BodyModel, shoulder: f64, q: [f64; 3], qd: [f64; 3]) -> f64 {
+        let forearm = body.forearm_pose(shoulder).rotation.to_rotation_matrix();
+        let hand = forearm * crate::body::wrist_rotation(&q);
+        // Angular velocity by finite difference of the orientation (independent of the RNEA's
+        // recursion): ω× ≈ (R(q + h q̇) − R(q − h q̇)) Rᵀ / 2h.
+        let h = 1e-6;
+        let step = |s: f64| forearm * crate::body::wrist_rotation(&std::array::from_fn(|i| q[i] + s * qd[i]));
+        let dr = (step(h).matrix() - step(-h).matrix()) / (2.0 * h);
+        let w_hat = dr * hand.matrix().transpose();
+        let omega = Vector3::new(w_hat[(2, 1)], w_hat[(0, 2)], w_hat[(1, 0)]);
+        let c = hand * Vector3::from(body.hand.com);
+        let i_com = hand.matrix() * Matrix3::from_diagonal(&Vector3::from(body.hand.inertia)) * hand.matrix().transpose();
+        let v = omega.cross(&c);
+        let kinetic = 0.5 * body.hand.mass * v.dot(&v) + 0.5 * omega.dot(&(i_com * omega));
+        let potential = -body.hand.mass * Vector3::from(GRAVITY).dot(&c);
+        kinetic - potential
+    }
+
+    /// τ = d/dt ∂L/∂q̇ − ∂L/∂q by central differences along q(t) = q + q̇ t + ½ q̈ t².
+    fn lagrange_torques(body: &BodyModel, shoulder: f64, s: &JointState) -> [f64; 3] {
+        let at = |t: f64| -> ([f64; 3], [f64; 3]) {
+            (std::array::from_fn(|i| s.q[i] + s.qd[i] * t + 0.5 * s.qdd[i] * t * t), std::array::from_fn(|i| s.qd[i] + s.qdd[i] * t))
+        };
+        let dl_dqd = |q: [f64; 3], qd: [f64; 3], i: usize| {
+            let e = 1e-4;
+            let (mut up, mut dn) = (qd, qd);
+            up[i] += e;
+            dn[i] -= e;
+            (lagrangian(body, shoulder, q, up) - lagrangian(body, shoulder, q, dn)) / (2.0 * e)
+        };
+        let dt = 1e-4;
+        std::array::from_fn(|i| {
+            let (qa, va) = at(dt);
+            let (qb, vb) = at(-dt);
+            let ddt = (dl_dqd(qa, va, i) - dl_dqd(qb, vb, i)) / (2.0 * dt);
+            let e = 1e-5;
+            let (mut up, mut dn) = (s.q, s.q);
+            up[i] += e;
+            dn[i] -= e;
+            let dl_dq = (lagrangian(body, shoulder, up, s.qd) - lagrangian(body, shoulder, dn, s.qd)) / (2.0 * e);
+            ddt - dl_dq
+        })
+    }
+
+    #[test]
+    fn rnea_agrees_with_the_lagrangian() {
+        let body = BodyModel::scaled(1.1, 0.9);
+        for (shoulder, state) in [
+            (0.0, JointState { q: [0.3, -0.5, 0.2], qd: [4.0, -6.0, 2.0], qdd: [120.0, -80.0, 40.0] }),
+            (0.8, JointState { q: [-1.0, 0.9, -0.3], qd: [-10.0, 3.0, -1.0], qdd: [-150.0, 200.0, 60.0] }),
+            (-0.35, JointState { q: [0.0, 0.0, 0.0], qd: [0.0; 3], qdd: [0.0; 3] }),
+        ] {
+            let rnea = inverse_dynamics(&body, shoulder, &state).unwrap();
+            let lag = lagrange_torques(&body, shoulder, &state);
+            for i in 0..3 {
+                assert!((rnea[i] - lag[i]).abs() < 2e-4 * (1.0 + lag[i].abs()), "{state:?}: {rnea:?} vs {lag:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn static_torque_is_the_gravity_moment() {
+        // Arm hanging, wrist straight: the hand's centre of mass is straight below the wrist,
+        // so gravity has no moment; flexed 90°, the flexion joint holds m g d.
+        let body = BodyModel::default();
+        let hanging = inverse_dynamics(&body, 0.0, &JointState::default()).unwrap();
+        assert!(hanging.iter().all(|t| t.abs() < 1e-12), "{hanging:?}");
+        let flexed = JointState { q: [0.0, std::f64::consts::FRAC_PI_2, 0.0], ..Default::default() };
+        let tau = inverse_dynamics(&body, 0.0, &flexed).unwrap();
+        let expect = body.hand.mass * 9.81 * body.hand.com[1].abs();
+        assert!((tau[1].abs() - expect).abs() < 1e-9, "{tau:?} vs {expect}");
+    }
+
+    #[test]
+    fn non_finite_state_is_named() {
+        let s = JointState { qd: [0.0, f64::NAN, 0.0], ..Default::default() };
+        let err = inverse_dynamics(&BodyModel::default(), 0.0, &s).unwrap_err();
+        assert!(err.to_string().contains("qd.ra_wr_e_f"), "{err}");
+    }
+}

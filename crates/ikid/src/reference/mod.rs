@@ -1,0 +1,12 @@
+//! Classical solvers in f64: the oracles the simulator is checked against and the
+//! baselines the networks must beat.
+//!
+//! * [`ik`]: fit each segment's frame to its markers (Kabsch/SVD on the body model's marker
+//!   offsets), then decompose the hand's orientation in the forearm frame in the joint order.
+//! * [`id`]: recursive Newton–Euler inverse dynamics of the wrist chain.
+
+pub mod id;
+pub mod ik;
+
+pub use id::{JointState, inverse_dynamics};
+pub use ik::{fit_segment, inverse_kinematics, inverse_kinematics_frame};
