@@ -32,6 +32,8 @@ from ikid._native import (
     compute_features,
     feature_set_info,
     forward_markers,
+    reference_id,
+    reference_ik,
 )
 
 __all__ = [
@@ -51,6 +53,8 @@ __all__ = [
     "forward_markers",
     "load",
     "marker_names",
+    "reference_id",
+    "reference_ik",
 ]
 
 _SHIPPED = Path(__file__).with_name("models")

@@ -20,6 +20,8 @@ __all__ = [
     "Stream",
     "build_model",
     "forward_markers",
+    "reference_ik",
+    "reference_id",
 ]
 
 __version__: str
@@ -91,4 +93,13 @@ class Stream:
 
 def forward_markers(
     q: _Floats, shoulder_flexion: float = 0.0, length_scale: float = 1.0, mass_scale: float = 1.0
+) -> npt.NDArray[np.float64]: ...
+def reference_ik(markers: _Floats, length_scale: float = 1.0, mass_scale: float = 1.0) -> npt.NDArray[np.float64]: ...
+def reference_id(
+    q: _Floats,
+    qd: _Floats,
+    qdd: _Floats,
+    shoulder_flexion: float = 0.0,
+    length_scale: float = 1.0,
+    mass_scale: float = 1.0,
 ) -> npt.NDArray[np.float64]: ...

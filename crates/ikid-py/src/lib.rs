@@ -14,6 +14,7 @@ mod conv;
 mod errors;
 mod features;
 mod model;
+mod reference;
 
 use pyo3::prelude::*;
 
@@ -24,5 +25,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     body::register(m)?;
     features::register(m)?;
     model::register(m)?;
+    reference::register(m)?;
     Ok(())
 }

@@ -69,6 +69,28 @@ pub fn inverse_dynamics(body: &BodyModel, shoulder_flexion: f64, state: &JointSt
     Ok(tau)
 }
 
+/// Torques for many joint states: `q`, `qd`, `qdd` hold `n` rows of [`N_COORDINATES`] each,
+/// `out` receives `n` rows of torques. Errors name the row.
+pub fn inverse_dynamics_rows(body: &BodyModel, shoulder_flexion: f64, q: &[f64], qd: &[f64], qdd: &[f64], out: &mut [f64]) -> Result<()> {
+    let n = q.len() / N_COORDINATES;
+    if [q.len(), qd.len(), qdd.len(), out.len()].iter().any(|&l| l != n * N_COORDINATES) || !q.len().is_multiple_of(N_COORDINATES) {
+        return Err(Error::BadArgument {
+            what: "joint states",
+            detail: format!("q, qd, qdd and out have {}, {}, {} and {} values; expected equal whole rows of 3", q.len(), qd.len(), qdd.len(), out.len()),
+        });
+    }
+    for i in 0..n {
+        let row = |v: &[f64]| [v[3 * i], v[3 * i + 1], v[3 * i + 2]];
+        let state = JointState { q: row(q), qd: row(qd), qdd: row(qdd) };
+        let tau = inverse_dynamics(body, shoulder_flexion, &state).map_err(|e| match e {
+            Error::BadArgument { what, detail } => Error::BadArgument { what, detail: format!("row {i}: {detail}") },
+            other => other,
+        })?;
+        out[3 * i..3 * i + 3].copy_from_slice(&tau);
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
