@@ -165,6 +165,11 @@ pub struct SegmentParams {
     pub inertia: [f64; 3],
 }
 
+/// The two links between the wrist's joints in the simulator and the reference dynamics:
+/// tiny but not zero (a rigid-body engine gives a massless dynamic body infinite mass).
+/// Their effect on the torques is below 1e-7 N·m.
+pub const VIRTUAL_LINK: SegmentParams = SegmentParams { length: 0.0, mass: 1e-6, com: [0.0; 3], inertia: [1e-10; 3] };
+
 /// A subject: segment parameters and marker placement.
 ///
 /// [`BodyModel::default`] is an adult male from de Leva (1996), "Adjustments to

@@ -27,6 +27,7 @@ pub mod features;
 pub mod model;
 pub mod net;
 pub mod reference;
+pub mod rng;
 pub mod stream;
 pub mod testing;
 

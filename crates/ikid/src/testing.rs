@@ -6,31 +6,7 @@ use crate::model::{Model, ModelCard, OutputSpec};
 use crate::net::{Activation, Affine, Dense, Mlp};
 use nalgebra::{DMatrix, DVector};
 
-/// A small deterministic generator (SplitMix64): enough for weights and test frames, and
-/// keeps the core free of a `rand` dependency.
-#[derive(Debug, Clone)]
-pub struct SplitMix(u64);
-
-impl SplitMix {
-    /// Seeded generator.
-    pub fn new(seed: u64) -> Self {
-        SplitMix(seed)
-    }
-
-    /// Next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
+pub use crate::rng::SplitMix;
 
 /// An IK-style model with random weights: `window` frames of `set`, ReLU hidden layers of
 /// the given widths, `n_outputs` identity outputs. Weights are scaled (He-style) so

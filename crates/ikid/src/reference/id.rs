@@ -1,13 +1,14 @@
 //! Reference inverse dynamics: recursive Newton–Euler over the wrist's joint chain.
 //!
 //! The forearm is fixed in the lab; the three revolute joints share the wrist centre `O`
-//! (a fixed point), with two massless links between them and the hand last. Forward pass:
+//! (a fixed point), with two tiny links between them ([`VIRTUAL_LINK`], as in the
+//! simulator) and the hand last. Forward pass:
 //! link angular velocities and accelerations (`ω_i = ω_{i-1} + z_i q̇_i`,
 //! `α_i = α_{i-1} + z_i q̈_i + ω_{i-1} × z_i q̇_i`). Backward pass: the moment about `O` each
 //! link needs, `n_i = n_{i+1} + I_i α_i + ω_i × I_i ω_i + c_i × m_i (a_ci − g)`, and the joint
 //! torque is its component along the joint axis, `τ_i = z_i · n_i` (N·m, in coordinate order).
 
-use crate::body::{BodyModel, COORDINATES, GRAVITY, N_COORDINATES, SegmentParams};
+use crate::body::{BodyModel, COORDINATES, GRAVITY, N_COORDINATES, VIRTUAL_LINK};
 use crate::error::{Error, Result};
 use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
 
@@ -34,8 +35,7 @@ pub fn inverse_dynamics(body: &BodyModel, shoulder_flexion: f64, state: &JointSt
         });
     }
     let forearm = body.forearm_pose(shoulder_flexion).rotation.to_rotation_matrix();
-    let massless = SegmentParams { length: 0.0, mass: 0.0, com: [0.0; 3], inertia: [0.0; 3] };
-    let links = [massless, massless, body.hand];
+    let links = [VIRTUAL_LINK, VIRTUAL_LINK, body.hand];
 
     // Forward: orientation, axis, angular velocity and acceleration of each link (lab frame).
     let mut rotation = forearm;

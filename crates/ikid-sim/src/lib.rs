@@ -1,0 +1,45 @@
+//! The wrist simulator: the forearm fixed in the lab at a shoulder pose, the hand driven
+//! through the three wrist joints by a computed-torque controller, stepped by rapier.
+//!
+//! * [`protocol`]: the prescribed motions (analytic q, q̇, q̈).
+//! * [`world`]: the rapier model built from `ikid::body` (the only place rapier types appear).
+//! * [`trial`]: runs a protocol and records ground truth: the angles, velocities and
+//!   accelerations rapier produced and the torques that produced them, plus the markers.
+
+#![deny(missing_docs)]
+
+pub mod protocol;
+pub mod trial;
+pub mod world;
+
+pub use trial::{SimConfig, Trial, simulate};
+
+/// What can go wrong setting up a simulation; messages name the parameter.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A parameter is out of its valid range.
+    #[error("{name} is {value}: {expected}")]
+    Parameter {
+        /// Parameter name.
+        name: &'static str,
+        /// Value given.
+        value: String,
+        /// What is accepted.
+        expected: String,
+    },
+    /// An error from the core (e.g. a non-finite joint state).
+    #[error(transparent)]
+    Core(#[from] ikid::Error),
+}
+
+/// Result alias of this crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+pub(crate) fn check(name: &'static str, value: f64, ok: bool, expected: &str) -> Result<()> {
+    if ok && value.is_finite() {
+        Ok(())
+    } else {
+        Err(Error::Parameter { name, value: value.to_string(), expected: expected.into() })
+    }
+}

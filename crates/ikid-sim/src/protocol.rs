@@ -1,0 +1,172 @@
+//! Prescribed wrist motions with analytic angles, velocities and accelerations.
+//!
+//! A protocol is a sequence of minimum-jerk (quintic) transitions, each a sigmoid from one
+//! posture to the next with zero velocity and acceleration at both ends, and holds between
+//! them. Targets stay within 95 % of each coordinate's anatomical range
+//! (`ikid::body::COORDINATES`).
+
+use ikid::body::{COORDINATES, N_COORDINATES};
+use ikid::reference::JointState;
+use ikid::rng::SplitMix;
+
+/// Fraction of the anatomical range targets may use.
+const RANGE_USE: f64 = 0.95;
+
+/// One transition from `from` to `to` starting at `start` (s) and lasting `duration` (s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Movement {
+    /// Start time, s.
+    pub start: f64,
+    /// Duration, s (a hold when `from == to`).
+    pub duration: f64,
+    /// Posture at the start, rad.
+    pub from: [f64; N_COORDINATES],
+    /// Posture at the end, rad.
+    pub to: [f64; N_COORDINATES],
+}
+
+/// A named sequence of movements (back to back, starting at t = 0 from neutral).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Protocol {
+    /// E.g. `"thesis"` or `"random"`.
+    pub name: String,
+    /// Movements in time order.
+    pub movements: Vec<Movement>,
+}
+
+impl Protocol {
+    fn build(name: &str, steps: impl IntoIterator<Item = ([f64; N_COORDINATES], f64)>) -> Self {
+        let mut movements = Vec::new();
+        let (mut t, mut at) = (0.0, [0.0; N_COORDINATES]);
+        for (to, duration) in steps {
+            movements.push(Movement { start: t, duration, from: at, to });
+            t += duration;
+            at = to;
+        }
+        Protocol { name: name.into(), movements }
+    }
+
+    /// The thesis' protocol for one shoulder pose: 42 single-DoF sigmoid movements, 14 per
+    /// coordinate, alternating 250 ms and 500 ms, out to ±30/60/90/50 % of the range side and
+    /// back to neutral, with 200 ms rests between movements.
+    pub fn thesis() -> Self {
+        let fractions = [0.3, -0.3, 0.6, -0.6, 0.9, -0.9, 0.5];
+        let mut steps = Vec::new();
+        for (dof, c) in COORDINATES.iter().enumerate() {
+            for (k, f) in fractions.iter().enumerate() {
+                let mut target = [0.0; N_COORDINATES];
+                target[dof] = if *f > 0.0 { f * c.range.1 } else { -f * c.range.0 };
+                let (out, back) = if k % 2 == 0 { (0.25, 0.5) } else { (0.5, 0.25) };
+                steps.push((target, out));
+                steps.push((target, 0.2));
+                steps.push(([0.0; N_COORDINATES], back));
+                steps.push(([0.0; N_COORDINATES], 0.2));
+            }
+        }
+        Self::build("thesis", steps)
+    }
+
+    /// Random smooth multi-DoF reaching lasting at least `seconds`: each movement takes
+    /// 0.25–1.0 s (speeds vary with distance and duration), moves each coordinate to a
+    /// random target with probability 0.8 (holds it otherwise), returns to neutral 15 % of
+    /// the time, and is followed by a hold of 0–0.4 s a third of the time.
+    pub fn random(seed: u64, seconds: f64) -> Self {
+        let mut rng = SplitMix::new(seed);
+        let mut steps = Vec::new();
+        let (mut t, mut at) = (0.0, [0.0; N_COORDINATES]);
+        while t < seconds {
+            let duration = rng.uniform(0.25, 1.0);
+            let to: [f64; N_COORDINATES] = if rng.uniform(0.0, 1.0) < 0.15 {
+                [0.0; N_COORDINATES]
+            } else {
+                std::array::from_fn(|i| {
+                    let (lo, hi) = COORDINATES[i].range;
+                    if rng.uniform(0.0, 1.0) < 0.8 { rng.uniform(RANGE_USE * lo, RANGE_USE * hi) } else { at[i] }
+                })
+            };
+            steps.push((to, duration));
+            t += duration;
+            if rng.uniform(0.0, 1.0) < 1.0 / 3.0 {
+                let hold = rng.uniform(0.0, 0.4);
+                steps.push((to, hold));
+                t += hold;
+            }
+            at = to;
+        }
+        Self::build("random", steps)
+    }
+
+    /// Total duration, s.
+    pub fn duration(&self) -> f64 {
+        self.movements.last().map_or(0.0, |m| m.start + m.duration)
+    }
+
+    /// Angles, velocities and accelerations at time `t` (s); holds the last posture after
+    /// the end.
+    pub fn sample(&self, t: f64) -> JointState {
+        let i = self.movements.partition_point(|m| m.start <= t).saturating_sub(1);
+        let Some(m) = self.movements.get(i) else { return JointState::default() };
+        let s = ((t - m.start) / m.duration).clamp(0.0, 1.0);
+        let moving = t < m.start + m.duration && m.duration > 0.0;
+        // Minimum-jerk profile p(s) = 10s³ − 15s⁴ + 6s⁵ and its time derivatives.
+        let p = s * s * s * (10.0 - 15.0 * s + 6.0 * s * s);
+        let (dp, ddp) = if moving {
+            let d = m.duration;
+            (30.0 * s * s * (1.0 - s) * (1.0 - s) / d, 60.0 * s * (1.0 - s) * (1.0 - 2.0 * s) / (d * d))
+        } else {
+            (0.0, 0.0)
+        };
+        let delta: [f64; N_COORDINATES] = std::array::from_fn(|k| m.to[k] - m.from[k]);
+        JointState {
+            q: std::array::from_fn(|k| m.from[k] + delta[k] * p),
+            qd: std::array::from_fn(|k| delta[k] * dp),
+            qdd: std::array::from_fn(|k| delta[k] * ddp),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thesis_protocol_has_42_movements_within_range() {
+        let p = Protocol::thesis();
+        let moves = p.movements.iter().filter(|m| m.from != m.to).count();
+        assert_eq!(moves, 42);
+        let durations: Vec<f64> = p.movements.iter().filter(|m| m.from != m.to).map(|m| m.duration).collect();
+        assert!(durations.iter().all(|d| *d == 0.25 || *d == 0.5));
+        for m in &p.movements {
+            for (k, c) in COORDINATES.iter().enumerate() {
+                assert!(m.to[k] >= c.range.0 && m.to[k] <= c.range.1);
+            }
+        }
+    }
+
+    #[test]
+    fn derivatives_match_finite_differences() {
+        let p = Protocol::random(3, 5.0);
+        let h = 1e-6;
+        for k in 1..400 {
+            let t = k as f64 * 0.0123;
+            let (a, b, c) = (p.sample(t - h), p.sample(t), p.sample(t + h));
+            for i in 0..3 {
+                assert!(((c.q[i] - a.q[i]) / (2.0 * h) - b.qd[i]).abs() < 1e-5, "qd at {t}");
+                assert!(((c.qd[i] - a.qd[i]) / (2.0 * h) - b.qdd[i]).abs() < 1e-3, "qdd at {t}");
+            }
+        }
+    }
+
+    #[test]
+    fn random_protocol_is_seeded_and_within_range() {
+        assert_eq!(Protocol::random(5, 10.0), Protocol::random(5, 10.0));
+        assert_ne!(Protocol::random(5, 10.0), Protocol::random(6, 10.0));
+        let p = Protocol::random(5, 30.0);
+        assert!(p.duration() >= 30.0);
+        for m in &p.movements {
+            for (k, c) in COORDINATES.iter().enumerate() {
+                assert!(m.to[k] >= RANGE_USE * c.range.0 - 1e-12 && m.to[k] <= RANGE_USE * c.range.1 + 1e-12);
+            }
+        }
+    }
+}
