@@ -26,6 +26,7 @@ pub mod error;
 pub mod features;
 pub mod model;
 pub mod net;
+pub mod noise;
 pub mod reference;
 pub mod rng;
 pub mod stream;
