@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo test test-rust test-python test-c lint bench clean capi c header check-header install
+.PHONY: all venv wheel demo data test test-rust test-python test-c lint bench clean capi c header check-header install
 
 all: wheel
 
@@ -39,6 +39,11 @@ wheel: $(VENV)/.created
 
 demo: wheel
 	$(PY) -m training.demo
+
+# Simulated datasets (gitignored): the thesis-sized set (3 shoulder poses x 42 movements)
+# and 18 random multi-DoF trials of 60 s (3 poses x 3 subject sizes x 2), in parallel.
+data: wheel
+	$(VENV)/bin/ikid dataset -o data
 
 test: test-rust wheel c test-python check-header lint
 	@echo "make test: all suites passed"
@@ -92,6 +97,7 @@ lint:
 bench: wheel c
 	$(CARGO) bench -p ikid --bench inference
 	$(PY) benches/report.py
+	$(CARGO) run --release -q -p ikid-sim --example sim_speed | tee -a docs/performance.md
 
 clean:
 	$(CARGO) clean

@@ -180,6 +180,9 @@ def main() -> None:
         "overhead is the per-frame difference between 1000 `ikid_stream_push` calls and one `ikid_stream_push_many`.",
         "",
         "Zero heap allocations per push: proved by `crates/ikid/tests/allocations.rs` (counting allocator).",
+        "",
+        "## Simulator (`cargo run --release -p ikid-sim --example sim_speed`, one core)",
+        "",
     ]
     out = ROOT / "docs" / "performance.md"
     out.write_text("\n".join(lines) + "\n")

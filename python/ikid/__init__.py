@@ -45,6 +45,7 @@ __all__ = [
     "Model",
     "ModelFileError",
     "Stream",
+    "Trial",
     "__version__",
     "available_models",
     "compute_features",
@@ -55,7 +56,10 @@ __all__ = [
     "marker_names",
     "reference_id",
     "reference_ik",
+    "simulate",
 ]
+
+from ikid.sim import Trial, simulate  # noqa: E402  (needs _native first)
 
 _SHIPPED = Path(__file__).with_name("models")
 

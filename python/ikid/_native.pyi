@@ -22,6 +22,11 @@ __all__ = [
     "forward_markers",
     "reference_ik",
     "reference_id",
+    "simulate",
+    "noise_uniform",
+    "noise_gaussian",
+    "noise_drift",
+    "noise_occlusion",
 ]
 
 __version__: str
@@ -102,4 +107,27 @@ def reference_id(
     shoulder_flexion: float = 0.0,
     length_scale: float = 1.0,
     mass_scale: float = 1.0,
+) -> npt.NDArray[np.float64]: ...
+def simulate(
+    protocol: str = "random",
+    seed: int = 0,
+    duration: float = 10.0,
+    shoulder_flexion: float = 0.0,
+    length_scale: float = 1.0,
+    mass_scale: float = 1.0,
+    dt: float = 0.001,
+    substeps: int = 1,
+    output_every: int = 1,
+) -> dict[str, Any]: ...
+def noise_uniform(markers: _Floats, fraction: float, seed: int) -> npt.NDArray[np.float64]: ...
+def noise_gaussian(markers: _Floats, sigma: float, seed: int) -> npt.NDArray[np.float64]: ...
+def noise_drift(markers: _Floats, amplitude: float, rate_hz: float, seed: int) -> npt.NDArray[np.float64]: ...
+def noise_occlusion(
+    markers: _Floats,
+    bursts_per_second: float,
+    min_s: float,
+    max_s: float,
+    rate_hz: float,
+    seed: int,
+    markers_affected: list[int] = ...,
 ) -> npt.NDArray[np.float64]: ...

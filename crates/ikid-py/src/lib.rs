@@ -15,6 +15,7 @@ mod errors;
 mod features;
 mod model;
 mod reference;
+mod sim;
 
 use pyo3::prelude::*;
 
@@ -26,5 +27,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     features::register(m)?;
     model::register(m)?;
     reference::register(m)?;
+    sim::register(m)?;
     Ok(())
 }

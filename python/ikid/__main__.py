@@ -1,0 +1,7 @@
+"""``python -m ikid`` = the ``ikid`` command."""
+
+import sys
+
+from ikid.cli import main
+
+sys.exit(main())

@@ -1,0 +1,114 @@
+"""Simulated trials (rapier wrist model in the Rust core) and their files.
+
+``simulate`` runs one trial; ``Trial.save`` writes ``<stem>.npz`` (all arrays + metadata)
+and the OpenSim files ``<stem>.trc`` (markers, mm), ``<stem>.mot`` (angles, degrees) and
+``<stem>.sto`` (torques), so the same trial opens in OpenSim.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ikid import _native
+from ikid.io import write_mot, write_sto, write_trc
+
+#: Noise models by name, each ``fn(markers, seed, **params) -> markers``.
+NOISE = {
+    "uniform": lambda m, seed, fraction: _native.noise_uniform(m, fraction, seed),
+    "gaussian": lambda m, seed, sigma: _native.noise_gaussian(m, sigma, seed),
+    "drift": lambda m, seed, amplitude, rate_hz: _native.noise_drift(m, amplitude, rate_hz, seed),
+    "occlusion": lambda m, seed, bursts_per_second, min_s, max_s, rate_hz, markers_affected=(): _native.noise_occlusion(
+        m, bursts_per_second, min_s, max_s, rate_hz, seed, list(markers_affected)
+    ),
+}
+
+
+@dataclass
+class Trial:
+    """One simulated recording: ground truth per frame, SI units."""
+
+    time: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    tau: np.ndarray
+    markers: np.ndarray
+    q_ref: np.ndarray
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def rate_hz(self) -> float:
+        return float(self.metadata["rate_hz"])
+
+    def with_noise(self, kind: str, seed: int, **params: Any) -> Trial:
+        """A copy whose markers carry noise model ``kind`` (see ``NOISE``), recorded in metadata."""
+        if kind not in NOISE:
+            raise _native.InputError(f"unknown noise {kind!r} (known: {', '.join(NOISE)})")
+        markers = NOISE[kind](self.markers, seed, **params)
+        meta = {**self.metadata, "noise": [*self.metadata.get("noise", []), {"kind": kind, "seed": seed, **params}]}
+        return Trial(self.time, self.q, self.qd, self.qdd, self.tau, markers, self.q_ref, meta)
+
+    def save(self, stem: str | os.PathLike[str]) -> list[Path]:
+        """Write ``stem.npz``, ``.trc``, ``.mot``, ``.sto``; returns the paths."""
+        stem = Path(stem)
+        stem.parent.mkdir(parents=True, exist_ok=True)
+        npz = stem.with_suffix(".npz")
+        tmp = npz.with_name(f".{npz.name}.partial.npz")
+        arrays = {k: getattr(self, k) for k in ("time", "q", "qd", "qdd", "tau", "markers", "q_ref")}
+        np.savez_compressed(tmp, **arrays, metadata=np.array(json.dumps(self.metadata)))
+        os.replace(tmp, npz)
+        return [
+            npz,
+            write_trc(stem.with_suffix(".trc"), self.time, self.markers, self.rate_hz),
+            write_mot(stem.with_suffix(".mot"), self.time, self.q),
+            write_sto(stem.with_suffix(".sto"), self.time, self.tau),
+        ]
+
+    @staticmethod
+    def load(path: str | os.PathLike[str]) -> Trial:
+        with np.load(path) as z:
+            meta = json.loads(str(z["metadata"]))
+            return Trial(*(z[k] for k in ("time", "q", "qd", "qdd", "tau", "markers", "q_ref")), metadata=meta)
+
+
+def simulate(
+    protocol: str = "random",
+    *,
+    seed: int = 0,
+    duration: float = 10.0,
+    shoulder_flexion: float = 0.0,
+    length_scale: float = 1.0,
+    mass_scale: float = 1.0,
+    dt: float = 0.001,
+    output_every: int = 1,
+    substeps: int = 1,
+) -> Trial:
+    """Simulate one trial. ``protocol``: ``"thesis"`` (42 single-DoF sigmoid movements) or
+    ``"random"`` (smooth multi-DoF reaching for ``duration`` s, seeded). ``shoulder_flexion``
+    in radians; the subject is the default one scaled by ``length_scale`` / ``mass_scale``."""
+    raw = _native.simulate(protocol, seed, duration, shoulder_flexion, length_scale, mass_scale, dt, substeps, output_every)
+    meta = {
+        "simulator": f"ikid-sim {_native.__version__} (rapier3d-f64 0.35.2)",
+        "protocol": raw.pop("protocol"),
+        "seed": seed if protocol == "random" else None,
+        "duration_s": duration if protocol == "random" else None,
+        "shoulder_flexion_rad": shoulder_flexion,
+        "length_scale": length_scale,
+        "mass_scale": mass_scale,
+        "dt": dt,
+        "substeps": substeps,
+        "rate_hz": 1.0 / (dt * output_every),
+        "coordinates": [c[0] for c in _native.COORDINATES],
+        "markers": [m[0] for m in _native.MARKERS],
+        "units": {"q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau": "N*m", "markers": "m", "time": "s"},
+    }
+    return Trial(**raw, metadata=meta)
+
+
+__all__ = ["NOISE", "Trial", "simulate"]
