@@ -97,7 +97,6 @@ lint:
 bench: wheel c
 	$(CARGO) bench -p ikid --bench inference
 	$(PY) benches/report.py
-	$(CARGO) run --release -q -p ikid-sim --example sim_speed | tee -a docs/performance.md
 
 clean:
 	$(CARGO) clean

@@ -183,6 +183,10 @@ def main() -> None:
         "",
         "## Simulator (`cargo run --release -p ikid-sim --example sim_speed`, one core)",
         "",
+        "```",
+        subprocess.run(["cargo", "run", "--release", "-q", "-p", "ikid-sim", "--example", "sim_speed"], cwd=ROOT, check=True,
+                       capture_output=True, text=True).stdout.strip(),
+        "```",
     ]
     out = ROOT / "docs" / "performance.md"
     out.write_text("\n".join(lines) + "\n")
