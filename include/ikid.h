@@ -19,7 +19,8 @@ typedef enum ikid_status {
   IKID_STATUS_IO = 3,
   // A model file is corrupt, truncated, or does not fit its model card.
   IKID_STATUS_MODEL_FILE = 4,
-  // A frame is unusable: wrong length, a missing (NaN) marker, degenerate markers.
+  // A frame is unusable: wrong length, a missing (NaN) marker, degenerate markers, or a
+  // non-finite prediction (input far outside the training range).
   IKID_STATUS_INPUT = 5,
   // An internal error (a bug): please report it with the message.
   IKID_STATUS_PANIC = 6,

@@ -147,3 +147,33 @@ def test_push_many_in_packets_equals_push(model, frames):
         model.stream().push_many(bad)
     with pytest.raises(ikid.InputError, match="17 columns"):
         model.stream().push_many(frames[:, :17])
+
+
+def test_review_regressions_inputs(model, frames):
+    # float64 frames with zero rows work like float32 ones
+    assert model.predict(np.zeros((0, 18))).shape == (0, 3)
+    # bytes, strings and ints are refused, not reinterpreted
+    for bad in (bytes(18), "x" * 18, np.arange(18)):
+        with pytest.raises(ikid.InputError):
+            model.stream().push(bad)
+    # the float64 fast path equals float32
+    s32, s64 = model.stream(), model.stream()
+    for f in frames[:6]:
+        a, b = s32.push(f), s64.push(f.astype(np.float64))
+    np.testing.assert_array_equal(a, b)
+
+
+def test_input_far_outside_training_range_is_an_error_not_nan(frames):
+    import json
+
+    from ikid import _native
+
+    from conftest import make_card
+
+    # A single linear layer summing 90 inputs: 90 x 1e37 overflows float32.
+    card = make_card(activations=["identity"])
+    m = _native.build_model(json.dumps(card), [np.ones((3, 90), np.float32)], [np.zeros(3, np.float32)],
+                            np.ones(90, np.float32), np.zeros(90, np.float32), np.ones(3, np.float32), np.zeros(3, np.float32))
+    huge = np.full((10, 18), 1e37, np.float32)
+    with pytest.raises(ikid.InputError, match="frame 4: the prediction is not finite"):
+        m.predict(huge)

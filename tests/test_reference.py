@@ -46,3 +46,13 @@ def test_reference_id_errors_name_the_row():
         ikid.reference_id(q, qd, q)
     with pytest.raises(ikid.InputError, match="whole rows"):
         ikid.reference_id(q, q[:2], q)
+
+
+def test_reference_id_refuses_non_finite_shoulder_and_overflow():
+    z = np.zeros((1, 3))
+    with pytest.raises(ikid.InputError, match="shoulder_flexion: is NaN"):
+        ikid.reference_id(z, z, z, shoulder_flexion=float("nan"))
+    with pytest.raises(ikid.InputError, match="non-finite"):
+        ikid.reference_id(z, np.full((1, 3), 1e200), z)
+    with pytest.raises(ikid.InputError, match="dtype"):
+        ikid.reference_ik(np.zeros((2, 18), complex))

@@ -124,3 +124,11 @@ def test_cli_simulate_writes_the_trial(tmp_path):
     assert math.isclose(t.metadata["shoulder_flexion_rad"], math.radians(-20))
     bad = subprocess.run([sys.executable, "-m", "ikid", "simulate", "--length-scale", "-1", "-o", str(out)], capture_output=True, text=True)
     assert bad.returncode == 2 and "length_scale" in bad.stderr
+
+
+def test_metadata_records_what_was_simulated_and_dotted_stems(tmp_path):
+    t = ikid.simulate("random", seed=1, duration=0.05)
+    assert t.metadata["duration_s"] == pytest.approx(len(t.time) * 0.001)
+    assert t.metadata["simulator"] == ikid.SIMULATOR and "rapier" in ikid.SIMULATOR
+    paths = t.save(tmp_path / "trial.v2")
+    assert [p.name for p in paths] == ["trial.v2.npz", "trial.v2.trc", "trial.v2.mot", "trial.v2.sto"]

@@ -22,6 +22,7 @@ __all__ = [
     "forward_markers",
     "reference_ik",
     "reference_id",
+    "SIMULATOR",
     "simulate",
     "noise_uniform",
     "noise_gaussian",
@@ -33,6 +34,7 @@ __version__: str
 COORDINATES: list[tuple[str, str, tuple[float, float]]]
 MARKERS: list[tuple[str, str, str]]
 FEATURE_SETS: list[str]
+SIMULATOR: str
 
 class IkidError(Exception): ...
 class ModelFileError(IkidError): ...

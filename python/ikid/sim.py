@@ -58,16 +58,20 @@ class Trial:
         """Write ``stem.npz``, ``.trc``, ``.mot``, ``.sto``; returns the paths."""
         stem = Path(stem)
         stem.parent.mkdir(parents=True, exist_ok=True)
-        npz = stem.with_suffix(".npz")
+
+        def named(ext: str) -> Path:  # stem + ext, even if the stem holds a dot ("trial.v2")
+            return stem.with_name(stem.name + ext)
+
+        npz = named(".npz")
         tmp = npz.with_name(f".{npz.name}.partial.npz")
         arrays = {k: getattr(self, k) for k in ("time", "q", "qd", "qdd", "tau", "markers", "q_ref")}
         np.savez_compressed(tmp, **arrays, metadata=np.array(json.dumps(self.metadata)))
         os.replace(tmp, npz)
         return [
             npz,
-            write_trc(stem.with_suffix(".trc"), self.time, self.markers, self.rate_hz),
-            write_mot(stem.with_suffix(".mot"), self.time, self.q),
-            write_sto(stem.with_suffix(".sto"), self.time, self.tau),
+            write_trc(named(".trc"), self.time, self.markers, self.rate_hz),
+            write_mot(named(".mot"), self.time, self.q),
+            write_sto(named(".sto"), self.time, self.tau),
         ]
 
     @staticmethod
@@ -94,10 +98,11 @@ def simulate(
     in radians; the subject is the default one scaled by ``length_scale`` / ``mass_scale``."""
     raw = _native.simulate(protocol, seed, duration, shoulder_flexion, length_scale, mass_scale, dt, substeps, output_every)
     meta = {
-        "simulator": f"ikid-sim {_native.__version__} (rapier3d-f64 0.35.2)",
+        "simulator": _native.SIMULATOR,
         "protocol": raw.pop("protocol"),
         "seed": seed if protocol == "random" else None,
-        "duration_s": duration if protocol == "random" else None,
+        # The random protocol runs at least `duration`: record what was simulated.
+        "duration_s": float(len(raw["time"]) * dt),
         "shoulder_flexion_rad": shoulder_flexion,
         "length_scale": length_scale,
         "mass_scale": mass_scale,

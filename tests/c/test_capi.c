@@ -162,8 +162,10 @@ int main(int argc, char **argv) {
     CHECK(ikid_predict(model, frames, n_frames, 18, rows_out, n_expected * 3, &rows) == IKID_STATUS_OK && rows == n_expected
           && memcmp(rows_out, expected, n_expected * 3 * sizeof(float)) == 0, "predict");
     CHECK(ikid_predict(model, frames, n_frames, 18, rows_out, 5, &rows) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "room for 5"), "predict small out");
-    CHECK(ikid_predict(model, frames, n_frames, 9, rows_out, n_expected * 3, &rows) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "frame_len is 9"), "predict frame_len");
+    CHECK(ikid_predict(model, frames, n_frames, 9, rows_out, n_expected * 3, &rows) == IKID_STATUS_INPUT && contains(ikid_last_error(), "frame_len is 9"), "predict frame_len");
     CHECK(ikid_predict(model, frames, n_frames, 18, rows_out, n_expected * 3, NULL) == IKID_STATUS_NULL_PARAMETER, "predict NULL rows");
+    CHECK(ikid_predict(model, NULL, 0, 18, NULL, 0, &rows) == IKID_STATUS_OK && rows == 0, "predict nothing into nothing");
+    CHECK(ikid_predict(model, frames, 3, 18, NULL, 0, &rows) == IKID_STATUS_OK && rows == 0, "short recording needs no out");
     free(rows_out);
 
     /* Threads share one model, each with its own stream. */

@@ -19,7 +19,8 @@ pub enum ikid_status {
     Io = 3,
     /// A model file is corrupt, truncated, or does not fit its model card.
     ModelFile = 4,
-    /// A frame is unusable: wrong length, a missing (NaN) marker, degenerate markers.
+    /// A frame is unusable: wrong length, a missing (NaN) marker, degenerate markers, or a
+    /// non-finite prediction (input far outside the training range).
     Input = 5,
     /// An internal error (a bug): please report it with the message.
     Panic = 6,
@@ -41,7 +42,9 @@ impl From<Error> for Failure {
     fn from(e: Error) -> Self {
         let status = match &e {
             Error::Io { .. } => ikid_status::Io,
-            Error::FrameLength { .. } | Error::NonFiniteInput { .. } | Error::DegenerateSegment { .. } => ikid_status::Input,
+            Error::FrameLength { .. } | Error::NonFiniteInput { .. } | Error::NonFiniteOutput { .. } | Error::DegenerateSegment { .. } => {
+                ikid_status::Input
+            }
             Error::BadArgument { .. } => ikid_status::InvalidArgument,
             _ => ikid_status::ModelFile,
         };
@@ -97,18 +100,23 @@ pub(crate) unsafe fn non_null_mut<'a, T>(ptr: *mut T, what: &str) -> Result<&'a 
     unsafe { ptr.as_mut() }.ok_or_else(|| Failure::new(ikid_status::NullParameter, format!("{what} is NULL")))
 }
 
-/// `len` values at `ptr` as a slice; NULL and misaligned pointers are refused.
+/// `len` values at `ptr` as a slice; NULL and misaligned pointers are refused (unless
+/// `len` is 0), as is a byte size beyond `isize::MAX`.
 ///
 /// # Safety
 /// A non-NULL, aligned `ptr` must point to `len` readable values for `'a`.
 pub(crate) unsafe fn slice<'a, T>(ptr: *const T, len: usize, what: &str) -> Result<&'a [T], Failure> {
+    if len == 0 {
+        return Ok(&[]); // nothing to read: any pointer, even NULL, will do
+    }
     if ptr.is_null() {
         return Err(Failure::new(ikid_status::NullParameter, format!("{what} is NULL")));
     }
     if !ptr.is_aligned() {
         return Err(Failure::new(ikid_status::InvalidArgument, format!("{what} is not aligned for its type")));
     }
-    // SAFETY: non-NULL and aligned; the caller guarantees `len` readable values.
+    check_size::<T>(len, what)?;
+    // SAFETY: non-NULL, aligned, size in range; the caller guarantees `len` readable values.
     Ok(unsafe { std::slice::from_raw_parts(ptr, len) })
 }
 
@@ -117,14 +125,25 @@ pub(crate) unsafe fn slice<'a, T>(ptr: *const T, len: usize, what: &str) -> Resu
 /// # Safety
 /// A non-NULL, aligned `ptr` must point to `len` writable values, not aliased, for `'a`.
 pub(crate) unsafe fn slice_mut<'a, T>(ptr: *mut T, len: usize, what: &str) -> Result<&'a mut [T], Failure> {
+    if len == 0 {
+        return Ok(&mut []); // nothing to write: any pointer, even NULL, will do
+    }
     if ptr.is_null() {
         return Err(Failure::new(ikid_status::NullParameter, format!("{what} is NULL")));
     }
     if !ptr.is_aligned() {
         return Err(Failure::new(ikid_status::InvalidArgument, format!("{what} is not aligned for its type")));
     }
-    // SAFETY: non-NULL and aligned; the caller guarantees `len` writable values.
+    check_size::<T>(len, what)?;
+    // SAFETY: non-NULL, aligned, size in range; the caller guarantees `len` writable values.
     Ok(unsafe { std::slice::from_raw_parts_mut(ptr, len) })
+}
+
+fn check_size<T>(len: usize, what: &str) -> Result<(), Failure> {
+    match len.checked_mul(std::mem::size_of::<T>()) {
+        Some(bytes) if bytes <= isize::MAX as usize => Ok(()),
+        _ => Err(Failure::new(ikid_status::InvalidArgument, format!("{what}: length {len} is too large"))),
+    }
 }
 
 /// The library version, e.g. `"0.1.0"` (static string).

@@ -182,7 +182,7 @@ pub unsafe extern "C" fn ikid_predict(
         let m = &unsafe { non_null(model, "model") }?.model;
         if frame_len != m.frame_len() {
             return Err(Failure::new(
-                ikid_status::InvalidArgument,
+                ikid_status::Input,
                 format!("frame_len is {frame_len}, the model's feature set {:?} takes {}", m.feature_set().name(), m.frame_len()),
             ));
         }
@@ -191,7 +191,7 @@ pub unsafe extern "C" fn ikid_predict(
             .ok_or_else(|| Failure::new(ikid_status::InvalidArgument, "n_frames × frame_len overflows"))?;
         let frames = unsafe { slice(frames, total, "frames") }?;
         let rows = unsafe { non_null_mut(rows, "rows") }?;
-        let need = m.n_predictions(n_frames) * m.n_outputs();
+        let need = m.n_predictions(n_frames) * m.n_outputs(); // ≤ n_frames × frame_len-sized input: no overflow
         if out_len < need {
             return Err(Failure::new(ikid_status::InvalidArgument, format!("out has room for {out_len} floats, {need} needed")));
         }

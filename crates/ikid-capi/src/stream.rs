@@ -83,7 +83,7 @@ pub unsafe extern "C" fn ikid_stream_push_many(
     guard(|| {
         let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
         if frame_len != s.model().frame_len() {
-            return Err(Failure::new(ikid_status::InvalidArgument, format!("frame_len is {frame_len}, the model takes {}", s.model().frame_len())));
+            return Err(Failure::new(ikid_status::Input, format!("frame_len is {frame_len}, the model takes {}", s.model().frame_len())));
         }
         let total = n_frames
             .checked_mul(frame_len)

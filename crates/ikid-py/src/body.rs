@@ -1,7 +1,7 @@
 //! The body model's names and ranges, read from the core (never restated in Python).
 
 use crate::conv::with_f64_rows;
-use crate::errors::{IntoPy, input};
+use crate::errors::IntoPy;
 use ikid::body::{BodyModel, COORDINATES, MARKERS};
 use numpy::{IntoPyArray, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
@@ -27,10 +27,7 @@ fn forward_markers<'py>(
     length_scale: f64,
     mass_scale: f64,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    if !(length_scale > 0.0 && length_scale.is_finite() && mass_scale > 0.0 && mass_scale.is_finite()) {
-        return Err(input(format!("length_scale and mass_scale must be positive, got {length_scale} and {mass_scale}")));
-    }
-    let body = BodyModel::scaled(length_scale, mass_scale);
+    let body = BodyModel::try_scaled(length_scale, mass_scale).py_err()?;
     with_f64_rows(q, "q", COORDINATES.len(), |values, n| {
         let frames = body.marker_frames(values, shoulder_flexion).py_err()?;
         frames.into_pyarray(py).reshape([n, ikid::body::MARKER_FRAME_LEN])

@@ -6,7 +6,7 @@ use pyo3::exceptions::{PyException, PyValueError};
 use pyo3::prelude::*;
 
 create_exception!(ikid, IkidError, PyException, "Base class of every error raised by ikid.");
-create_exception!(ikid, ModelFileError, IkidError, "A model file is missing, corrupt, or does not fit its model card.");
+create_exception!(ikid, ModelFileError, IkidError, "A model file is corrupt, truncated, or does not fit its model card (a missing file raises FileNotFoundError).");
 create_exception!(ikid, InputError, IkidError, "An input (frame, array, argument) is malformed; also a ValueError.");
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -25,7 +25,11 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 pub fn to_py(err: Error) -> PyErr {
     let msg = err.to_string();
     match err {
-        Error::FrameLength { .. } | Error::NonFiniteInput { .. } | Error::DegenerateSegment { .. } | Error::BadArgument { .. } => {
+        Error::FrameLength { .. }
+        | Error::NonFiniteInput { .. }
+        | Error::NonFiniteOutput { .. }
+        | Error::DegenerateSegment { .. }
+        | Error::BadArgument { .. } => {
             InputError::new_err(msg)
         }
         Error::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {

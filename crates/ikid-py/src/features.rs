@@ -18,7 +18,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 /// Sizes and names of a feature set: `frame_len`, `feature_len`, `frame_names`, `feature_names`.
 #[pyfunction]
 fn feature_set_info<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyDict>> {
-    let set = FeatureSet::from_name(name).py_err()?;
+    let set = feature_set(name)?;
     let d = PyDict::new(py);
     d.set_item("name", set.name())?;
     d.set_item("frame_len", set.frame_len())?;
@@ -31,7 +31,7 @@ fn feature_set_info<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyD
 /// Features of every frame: `frames` is `(n, frame_len)`, the result `(n, feature_len)` float32.
 #[pyfunction]
 fn compute_features<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>, feature_set: &str) -> PyResult<Bound<'py, PyArray2<f32>>> {
-    let set = FeatureSet::from_name(feature_set).py_err()?;
+    let set = self::feature_set(feature_set)?;
     with_floats(frames, "frames", 2, |values, shape| {
         if shape[1] != set.frame_len() {
             return Err(input(format!("frames: {} columns, feature set {:?} takes {}", shape[1], set.name(), set.frame_len())));
@@ -40,4 +40,10 @@ fn compute_features<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>, feature_se
         py.detach(|| set.compute_rows(values, &mut out)).py_err()?;
         out.into_pyarray(py).reshape([shape[0], set.feature_len()])
     })
+}
+
+/// A feature set named by the caller: an unknown name is the caller's input error here (in a
+/// model file it is a model-file error).
+fn feature_set(name: &str) -> PyResult<FeatureSet> {
+    FeatureSet::from_name(name).map_err(|e| input(e.to_string()))
 }

@@ -1,7 +1,7 @@
 //! The classical reference solvers (f64): segment-fit IK and Newton–Euler ID.
 
 use crate::conv::with_f64_rows;
-use crate::errors::{IntoPy, input};
+use crate::errors::IntoPy;
 use ikid::body::{BodyModel, MARKER_FRAME_LEN, N_COORDINATES};
 use ikid::reference::{inverse_dynamics_rows, inverse_kinematics};
 use numpy::{IntoPyArray, PyArray2, PyArrayMethods};
@@ -14,10 +14,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 }
 
 fn subject(length_scale: f64, mass_scale: f64) -> PyResult<BodyModel> {
-    if !(length_scale > 0.0 && length_scale.is_finite() && mass_scale > 0.0 && mass_scale.is_finite()) {
-        return Err(input(format!("length_scale and mass_scale must be positive, got {length_scale} and {mass_scale}")));
-    }
-    Ok(BodyModel::scaled(length_scale, mass_scale))
+    BodyModel::try_scaled(length_scale, mass_scale).py_err()
 }
 
 /// Wrist angles `(n, 3)` (rad) of marker frames `(n, 18)` (m) by per-frame least-squares

@@ -11,6 +11,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("SIMULATOR", ikid_sim::SIMULATOR)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(noise_uniform, m)?)?;
     m.add_function(wrap_pyfunction!(noise_gaussian, m)?)?;
@@ -47,9 +48,6 @@ fn simulate<'py>(
     substeps: usize,
     output_every: usize,
 ) -> PyResult<Bound<'py, PyDict>> {
-    if !(length_scale > 0.0 && length_scale.is_finite() && mass_scale > 0.0 && mass_scale.is_finite()) {
-        return Err(input(format!("length_scale and mass_scale must be positive, got {length_scale} and {mass_scale}")));
-    }
     let protocol = match protocol {
         "thesis" => Protocol::thesis(),
         "random" => {
@@ -60,7 +58,7 @@ fn simulate<'py>(
         }
         other => return Err(input(format!("unknown protocol {other:?} (known: \"thesis\", \"random\")"))),
     };
-    let config = SimConfig { body: BodyModel::scaled(length_scale, mass_scale), shoulder_flexion, dt, substeps, output_every, ..Default::default() };
+    let config = SimConfig { body: BodyModel::try_scaled(length_scale, mass_scale).py_err()?, shoulder_flexion, dt, substeps, output_every, ..Default::default() };
     let trial = py.detach(|| run(&config, &protocol)).map_err(sim_err)?;
     let d = PyDict::new(py);
     d.set_item("time", PyArray1::from_slice(py, &trial.time))?;

@@ -14,6 +14,9 @@ pub mod world;
 
 pub use trial::{SimConfig, Trial, simulate};
 
+/// Names this simulator and the physics engine behind it, for data provenance.
+pub const SIMULATOR: &str = concat!("ikid-sim ", env!("CARGO_PKG_VERSION"), " on rapier3d-f64 0.35.2");
+
 /// What can go wrong setting up a simulation; messages name the parameter.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]

@@ -236,6 +236,16 @@ impl Default for BodyModel {
 }
 
 impl BodyModel {
+    /// [`scaled`](Self::scaled) with the factors checked (positive and finite).
+    pub fn try_scaled(length_factor: f64, mass_factor: f64) -> crate::Result<Self> {
+        for (what, v) in [("length_scale", length_factor), ("mass_scale", mass_factor)] {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(crate::Error::BadArgument { what, detail: format!("is {v}, expected a positive factor") });
+            }
+        }
+        Ok(Self::scaled(length_factor, mass_factor))
+    }
+
     /// A subject scaled from the default: lengths and marker offsets by `length_factor`,
     /// masses by `mass_factor`, inertias by `mass_factor · length_factor²`.
     pub fn scaled(length_factor: f64, mass_factor: f64) -> Self {

@@ -107,6 +107,15 @@ pub enum Error {
         /// Segment name.
         segment: &'static str,
     },
+    /// The network's prediction is not finite: the input lies far outside anything the
+    /// model was trained on (e.g. millimetres given to a metre model).
+    #[error("frame {frame}: the prediction is not finite ({value}); the input is far outside the model's training range (units?)")]
+    NonFiniteOutput {
+        /// Index of the frame within the call.
+        frame: usize,
+        /// The first non-finite output.
+        value: f32,
+    },
     /// An array argument has a length that is not a whole number of rows, or an output buffer is too small.
     #[error("{what}: {detail}")]
     BadArgument {
@@ -123,6 +132,7 @@ impl Error {
         match self {
             Error::NonFiniteInput { field, value, .. } => Error::NonFiniteInput { frame, field, value },
             Error::DegenerateSegment { segment, .. } => Error::DegenerateSegment { frame, segment },
+            Error::NonFiniteOutput { value, .. } => Error::NonFiniteOutput { frame, value },
             other => other,
         }
     }

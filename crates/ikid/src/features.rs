@@ -154,7 +154,10 @@ impl FeatureSet {
     pub fn compute_rows(self, frames: &[f32], out: &mut [f32]) -> Result<()> {
         let (fl, nf) = (self.frame_len(), self.feature_len());
         if !frames.len().is_multiple_of(fl) {
-            return Err(Error::FrameLength { feature_set: self.name(), found: frames.len() % fl, expected: fl });
+            return Err(Error::BadArgument {
+                what: "frames",
+                detail: format!("{} values is not a whole number of {fl}-value frames", frames.len()),
+            });
         }
         let n = frames.len() / fl;
         if out.len() != n * nf {

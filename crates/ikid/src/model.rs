@@ -249,7 +249,7 @@ impl Model {
             return Err(Error::UnexpectedTensor { name: extra.to_string() });
         }
         let mlp = Mlp::new(input, layers, output)?;
-        Ok(Self::assemble(card, set, mlp))
+        Self::assemble(card, set, mlp)
     }
 
     /// Builds a model from a card and a network (e.g. random weights for benchmarks),
@@ -259,9 +259,13 @@ impl Model {
         Self::from_bytes(&to_bytes(&card, &mlp)?)
     }
 
-    fn assemble(card: ModelCard, feature_set: FeatureSet, mlp: Mlp) -> Self {
+    fn assemble(card: ModelCard, feature_set: FeatureSet, mlp: Mlp) -> Result<Self> {
         let packed = PackedMlp::new(&mlp);
-        Model { inner: Arc::new(Inner { card, feature_set, mlp, packed }) }
+        // Finite tensors can still overflow once the scaling is folded in.
+        if let Some((layer, value)) = packed.first_non_finite() {
+            return Err(Error::NonFiniteWeight { name: format!("layers.{layer}.weight (scaling folded in)"), index: 0, value });
+        }
+        Ok(Model { inner: Arc::new(Inner { card, feature_set, mlp, packed }) })
     }
 
     /// The model as the bytes of a `.safetensors` file.
@@ -387,6 +391,10 @@ impl Model {
                     scope.spawn(move || run(t * rows_per_thread, chunk));
                 }
             });
+        }
+        if let Some(i) = out.iter().position(|v| !v.is_finite()) {
+            // Output row r is the prediction for frame r + window - 1.
+            return Err(Error::NonFiniteOutput { frame: i / no + w - 1, value: out[i] });
         }
         Ok(rows)
     }

@@ -9,7 +9,9 @@ use crate::net::Scratch;
 ///
 /// All buffers are allocated in [`Model::stream`]; [`push`](Stream::push) never allocates
 /// (proved by `tests/allocations.rs`). A frame that is refused (wrong length, NaN,
-/// degenerate markers) leaves the window exactly as it was.
+/// degenerate markers) leaves the window exactly as it was. A non-finite prediction (input
+/// far outside the training range) is an error too, never an output; that frame stays in
+/// the window.
 #[derive(Debug, Clone)]
 pub struct Stream {
     model: Model,
@@ -70,17 +72,33 @@ impl Stream {
         self.input[..tail].copy_from_slice(&self.ring[split..]);
         self.input[tail..].copy_from_slice(&self.ring[..split]);
         self.model.packed().forward(&self.input, &mut self.scratch, &mut self.output);
+        if let Some(&value) = self.output.iter().find(|v| !v.is_finite()) {
+            return Err(Error::NonFiniteOutput { frame: 0, value });
+        }
         Ok(Some(&self.output))
     }
 
     /// Pushes `frames` (whole frames back to back, e.g. a packet from the acquisition
     /// system) and writes one output row into `out` for each frame that completes a window.
-    /// Returns the number of rows written. Stops at the first refused frame with its error
-    /// (numbered within `frames`); the frames before it stay pushed. Does not allocate.
+    /// Returns the number of rows written. A block holding a missing (non-finite) value is
+    /// refused whole, before anything is pushed. A later failure (degenerate markers, a
+    /// non-finite prediction) stops at that frame with its error (numbered within `frames`);
+    /// the frames before it stay pushed. Does not allocate on success.
     pub fn push_many(&mut self, frames: &[f32], out: &mut [f32]) -> Result<usize> {
         let (fl, no) = (self.model.frame_len(), self.model.n_outputs());
         if !frames.len().is_multiple_of(fl) {
-            return Err(Error::FrameLength { feature_set: self.model.feature_set().name(), found: frames.len() % fl, expected: fl });
+            return Err(Error::BadArgument {
+                what: "frames",
+                detail: format!("{} values is not a whole number of {fl}-value frames", frames.len()),
+            });
+        }
+        // Refuse a block with a missing value before pushing any of it.
+        if let Some(i) = frames.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFiniteInput {
+                frame: i / fl,
+                field: self.model.feature_set().frame_names()[i % fl].clone(),
+                value: frames[i],
+            });
         }
         let n = frames.len() / fl;
         let max_rows = self.rows_for(n);

@@ -270,3 +270,33 @@ fn push_many_equals_pushing_one_by_one() {
     let err = m.stream().push_many(&bad, &mut [0.0; 12]).unwrap_err();
     assert!(err.to_string().starts_with("frame 2: value USP.z"), "{err}");
 }
+
+#[test]
+fn non_finite_predictions_are_errors_never_outputs() {
+    // One linear layer summing its 90 inputs: 90 × 1e37 overflows f32.
+    use ikid::net::{Activation, Affine, Dense, Mlp};
+    use ikid::{ModelCard, OutputSpec};
+    let layer = Dense { weight: nalgebra::DMatrix::from_element(3, 90, 1.0), bias: nalgebra::DVector::zeros(3), activation: Activation::Identity };
+    let mlp = Mlp::new(Affine::identity(90), vec![layer], Affine::identity(3)).unwrap();
+    let outputs = (0..3).map(|i| OutputSpec { name: format!("o{i}"), unit: "rad".into() }).collect();
+    let card = ModelCard::new("sum", "ik", FeatureSet::Markers, 5, 1000.0, outputs, &[Activation::Identity]);
+    let m = Model::from_parts(card, mlp).unwrap();
+    let frames = vec![1.0e37f32; 10 * 18];
+    let err = m.predict(&frames, &mut [0.0; 18]).unwrap_err();
+    assert!(matches!(err, Error::NonFiniteOutput { frame: 4, .. }), "{err}");
+    let mut s = m.stream();
+    let mut last = None;
+    for f in frames.chunks_exact(18) {
+        last = Some(s.push(f).map(|o| o.is_some()));
+    }
+    assert!(matches!(last, Some(Err(Error::NonFiniteOutput { .. }))));
+}
+
+#[test]
+fn scaling_that_overflows_once_folded_is_refused() {
+    let (mut t, card) = parts(&model());
+    t.iter_mut().find(|(n, _, _)| n == "input.scale").unwrap().2[0] = 1.0e30;
+    t.iter_mut().find(|(n, _, _)| n == "layers.0.weight").unwrap().2.iter_mut().for_each(|w| *w = 1.0e10);
+    let err = load_err(&build(&t, &card));
+    assert!(matches!(&err, Error::NonFiniteWeight { name, .. } if name.contains("folded")), "{err}");
+}

@@ -6,8 +6,8 @@
 //! them sequentially and keeps a block's partial sums in eight AVX registers (one set of
 //! eight vectors for `B = 64`; four interleaved input streams of one vector for `B = 8`),
 //! enough independent FMA chains to hide their latency. Padded outputs have zero weights
-//! and bias. Measured on the development machine (90→300→300→3, `examples/probe`-style
-//! loop): B = 16 ~8–10 µs, B = 32 ~7.5–8.5 µs, B = 64 ~6–8 µs per push.
+//! and bias. Measured on the development machine (90→300→300→3, a timed
+//! push loop): B = 16 ~8–10 µs, B = 32 ~7.5–8.5 µs, B = 64 ~6–8 µs per push.
 //!
 //! After a ReLU about half of a layer's inputs are exactly zero. Their weight rows
 //! contribute nothing, so a layer fed by a ReLU first lists its nonzero inputs and streams
@@ -126,6 +126,12 @@ impl PackedMlp {
     /// Network output width.
     pub fn n_outputs(&self) -> usize {
         self.n_out
+    }
+
+    /// The first layer whose packed (scaling-folded) weights or biases hold a non-finite
+    /// value, with that value.
+    pub fn first_non_finite(&self) -> Option<(usize, f32)> {
+        self.layers.iter().enumerate().find_map(|(k, l)| l.weights.iter().chain(&l.bias).find(|v| !v.is_finite()).map(|&v| (k, v)))
     }
 
     /// Work space sized for this network.

@@ -1,5 +1,5 @@
 //! Multilayer perceptrons: the plain nalgebra form (the oracle) and the packed fast form,
-//! one sample at a time (`kernel`) or four (`batch`).
+//! one sample at a time (`kernel`) or six (`batch`).
 
 mod batch;
 mod kernel;

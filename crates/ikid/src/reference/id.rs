@@ -34,6 +34,9 @@ pub fn inverse_dynamics(body: &BodyModel, shoulder_flexion: f64, state: &JointSt
             detail: format!("{kind}.{} is {}", COORDINATES[i % N_COORDINATES].name, values.clone().nth(i).unwrap()),
         });
     }
+    if !shoulder_flexion.is_finite() {
+        return Err(Error::BadArgument { what: "shoulder_flexion", detail: format!("is {shoulder_flexion}") });
+    }
     let forearm = body.forearm_pose(shoulder_flexion).rotation.to_rotation_matrix();
     let links = [VIRTUAL_LINK, VIRTUAL_LINK, body.hand];
 
@@ -66,6 +69,12 @@ pub fn inverse_dynamics(body: &BodyModel, shoulder_flexion: f64, state: &JointSt
         moment += inertia * a + w.cross(&(inertia * w)) + c.cross(&(link.mass * (a_com - g)));
         tau[i] = axes[i].dot(&moment);
     }
+    if let Some(i) = tau.iter().position(|t| !t.is_finite()) {
+        return Err(Error::BadArgument {
+            what: "joint state",
+            detail: format!("gives a non-finite {} torque (velocities or accelerations too large?)", COORDINATES[i].name),
+        });
+    }
     Ok(tau)
 }
 
@@ -78,6 +87,9 @@ pub fn inverse_dynamics_rows(body: &BodyModel, shoulder_flexion: f64, q: &[f64],
             what: "joint states",
             detail: format!("q, qd, qdd and out have {}, {}, {} and {} values; expected equal whole rows of 3", q.len(), qd.len(), qdd.len(), out.len()),
         });
+    }
+    if !shoulder_flexion.is_finite() {
+        return Err(Error::BadArgument { what: "shoulder_flexion", detail: format!("is {shoulder_flexion}") });
     }
     for i in 0..n {
         let row = |v: &[f64]| [v[3 * i], v[3 * i + 1], v[3 * i + 2]];
