@@ -180,23 +180,40 @@ pub unsafe extern "C" fn ikid_predict(
 ) -> ikid_status {
     guard(|| {
         let m = &unsafe { non_null(model, "model") }?.model;
-        if frame_len != m.frame_len() {
-            return Err(Failure::new(
-                ikid_status::Input,
-                format!("frame_len is {frame_len}, the model's feature set {:?} takes {}", m.feature_set().name(), m.frame_len()),
-            ));
-        }
-        let total = n_frames
-            .checked_mul(frame_len)
-            .ok_or_else(|| Failure::new(ikid_status::InvalidArgument, "n_frames × frame_len overflows"))?;
-        let frames = unsafe { slice(frames, total, "frames") }?;
         let rows = unsafe { non_null_mut(rows, "rows") }?;
-        let need = m.n_predictions(n_frames) * m.n_outputs(); // ≤ n_frames × frame_len-sized input: no overflow
-        if out_len < need {
-            return Err(Failure::new(ikid_status::InvalidArgument, format!("out has room for {out_len} floats, {need} needed")));
-        }
-        let out = unsafe { slice_mut(out, need, "out") }?;
+        let (frames, out) = unsafe { recording_args(m, frames, n_frames, frame_len, out, out_len, m.n_predictions(n_frames)) }?;
         *rows = m.predict(frames, out)?;
         Ok(())
     })
+}
+
+/// Checks and converts the arguments shared by `ikid_predict` and `ikid_stream_push_many`:
+/// `n_frames` frames of `frame_len` floats at `frames`, and room at `out` (`out_len` floats)
+/// for `rows` predictions of `m`.
+///
+/// # Safety
+/// As the callers': `frames` readable for `n_frames × frame_len` floats, `out` writable for
+/// `out_len` floats.
+pub(crate) unsafe fn recording_args<'a>(
+    m: &Model,
+    frames: *const f32,
+    n_frames: usize,
+    frame_len: usize,
+    out: *mut f32,
+    out_len: usize,
+    rows: usize,
+) -> Result<(&'a [f32], &'a mut [f32]), Failure> {
+    if frame_len != m.frame_len() {
+        return Err(Failure::new(
+            ikid_status::Input,
+            format!("frame_len is {frame_len}, the model's feature set {:?} takes {}", m.feature_set().name(), m.frame_len()),
+        ));
+    }
+    let overflow = || Failure::new(ikid_status::InvalidArgument, "n_frames × frame_len overflows");
+    let frames = unsafe { slice(frames, n_frames.checked_mul(frame_len).ok_or_else(overflow)?, "frames") }?;
+    let need = rows.checked_mul(m.n_outputs()).ok_or_else(overflow)?;
+    if out_len < need {
+        return Err(Failure::new(ikid_status::InvalidArgument, format!("out has room for {out_len} floats, {need} needed")));
+    }
+    Ok((frames, unsafe { slice_mut(out, need, "out") }?))
 }

@@ -1,7 +1,7 @@
 //! Stream handles: frame-by-frame inference, one thread at a time per stream.
 
 use crate::boundary::{Failure, guard, ikid_status, non_null, non_null_mut, slice, slice_mut};
-use crate::model::ikid_model;
+use crate::model::{ikid_model, recording_args};
 use ikid_core::Stream;
 
 /// A causal frame-by-frame stream over a model (opaque). Use from one thread at a time.
@@ -82,19 +82,9 @@ pub unsafe extern "C" fn ikid_stream_push_many(
 ) -> ikid_status {
     guard(|| {
         let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
-        if frame_len != s.model().frame_len() {
-            return Err(Failure::new(ikid_status::Input, format!("frame_len is {frame_len}, the model takes {}", s.model().frame_len())));
-        }
-        let total = n_frames
-            .checked_mul(frame_len)
-            .ok_or_else(|| Failure::new(ikid_status::InvalidArgument, "n_frames × frame_len overflows"))?;
-        let frames = unsafe { slice(frames, total, "frames") }?;
         let rows = unsafe { non_null_mut(rows, "rows") }?;
-        let need = s.rows_for(n_frames) * s.model().n_outputs();
-        if out_len < need {
-            return Err(Failure::new(ikid_status::InvalidArgument, format!("out has room for {out_len} floats, {need} needed")));
-        }
-        let out = unsafe { slice_mut(out, need, "out") }?;
+        let n_rows = s.rows_for(n_frames);
+        let (frames, out) = unsafe { recording_args(s.model(), frames, n_frames, frame_len, out, out_len, n_rows) }?;
         *rows = s.push_many(frames, out)?;
         Ok(())
     })
