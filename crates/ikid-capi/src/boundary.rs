@@ -82,6 +82,20 @@ pub(crate) fn guard(body: impl FnOnce() -> Result<(), Failure>) -> ikid_status {
     }
 }
 
+/// Frees a handle made by `Box::into_raw` (NULL is ignored), behind the panic boundary.
+///
+/// # Safety
+/// `handle` must be NULL or a pointer from `Box::into_raw` not yet freed.
+pub(crate) unsafe fn free_handle<T>(handle: *mut T) {
+    if !handle.is_null() {
+        let _ = guard(|| {
+            // SAFETY: a handle from Box::into_raw, freed once (caller's contract).
+            drop(unsafe { Box::from_raw(handle) });
+            Ok(())
+        });
+    }
+}
+
 /// `ptr` as a reference, or a NullParameter failure naming `what`.
 ///
 /// # Safety

@@ -1,6 +1,6 @@
 //! Model handles: load (path or bytes), describe, predict whole recordings, free.
 
-use crate::boundary::{Failure, guard, ikid_status, non_null, non_null_mut, slice, slice_mut};
+use crate::boundary::{Failure, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut};
 use ikid_core::Model;
 use std::ffi::{CStr, CString, c_char};
 
@@ -81,13 +81,8 @@ pub unsafe extern "C" fn ikid_model_load_bytes(data: *const u8, len: usize, out:
 /// `model` must be NULL or a handle from `ikid_model_load*` not yet freed.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn ikid_model_free(model: *mut ikid_model) {
-    if !model.is_null() {
-        // SAFETY: a handle from Box::into_raw, freed once (caller's contract).
-        let _ = guard(|| {
-            drop(unsafe { Box::from_raw(model) });
-            Ok(())
-        });
-    }
+    // SAFETY: NULL or a live handle (caller's contract).
+    unsafe { free_handle(model) }
 }
 
 /// Writes the model's sizes into `*out`.

@@ -1,6 +1,6 @@
 //! Stream handles: frame-by-frame inference, one thread at a time per stream.
 
-use crate::boundary::{Failure, guard, ikid_status, non_null, non_null_mut, slice, slice_mut};
+use crate::boundary::{Failure, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut};
 use crate::model::{ikid_model, recording_args};
 use ikid_core::Stream;
 
@@ -108,11 +108,6 @@ pub unsafe extern "C" fn ikid_stream_reset(stream: *mut ikid_stream) -> ikid_sta
 /// `stream` must be NULL or a handle from `ikid_stream_new` not yet freed.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn ikid_stream_free(stream: *mut ikid_stream) {
-    if !stream.is_null() {
-        let _ = guard(|| {
-            // SAFETY: a handle from Box::into_raw, freed once (caller's contract).
-            drop(unsafe { Box::from_raw(stream) });
-            Ok(())
-        });
-    }
+    // SAFETY: NULL or a live handle (caller's contract).
+    unsafe { free_handle(stream) }
 }
