@@ -92,15 +92,21 @@ def simulate(
     dt: float = 0.001,
     output_every: int = 1,
     substeps: int = 1,
+    octants: list[str] | None = None,
 ) -> Trial:
     """Simulate one trial. ``protocol``: ``"thesis"`` (42 single-DoF sigmoid movements) or
     ``"random"`` (smooth multi-DoF reaching for ``duration`` s, seeded). ``shoulder_flexion``
-    in radians; the subject is the default one scaled by ``length_scale`` / ``mass_scale``."""
-    raw = _native.simulate(protocol, seed, duration, shoulder_flexion, length_scale, mass_scale, dt, substeps, output_every)
+    in radians; the subject is the default one scaled by ``length_scale`` / ``mass_scale``.
+    ``octants`` restricts the random protocol's targets to joint-sign octants given as sign
+    strings of (s_p, e_f, ad_ab), e.g. ``["+-+"]`` (hold-out movement types)."""
+    raw = _native.simulate(
+        protocol, seed, duration, shoulder_flexion, length_scale, mass_scale, dt, substeps, output_every, octants
+    )
     meta = {
         "simulator": _native.SIMULATOR,
         "protocol": raw.pop("protocol"),
         "seed": seed if protocol == "random" else None,
+        "octants": octants,
         # The random protocol runs at least `duration`: record what was simulated.
         "duration_s": float(len(raw["time"]) * dt),
         "shoulder_flexion_rad": shoulder_flexion,

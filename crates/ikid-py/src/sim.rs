@@ -4,7 +4,7 @@ use crate::conv::with_f64_rows;
 use crate::errors::{IntoPy, input};
 use ikid::body::{BodyModel, MARKER_FRAME_LEN};
 use ikid::noise;
-use ikid_sim::protocol::Protocol;
+use ikid_sim::protocol::{Octants, Protocol};
 use ikid_sim::{SimConfig, simulate as run};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
@@ -34,7 +34,7 @@ fn rows<'py, const W: usize>(py: Python<'py>, v: &[[f64; W]]) -> PyResult<Bound<
 /// Simulates one trial; returns a dict of arrays (`time`, `q`, `qd`, `qdd`, `tau`,
 /// `markers`, `q_ref`). Angles in rad, torques in N·m, markers in m. Releases the GIL.
 #[pyfunction]
-#[pyo3(signature = (protocol="random", seed=0, duration=10.0, shoulder_flexion=0.0, length_scale=1.0, mass_scale=1.0, dt=0.001, substeps=1, output_every=1))]
+#[pyo3(signature = (protocol="random", seed=0, duration=10.0, shoulder_flexion=0.0, length_scale=1.0, mass_scale=1.0, dt=0.001, substeps=1, output_every=1, octants=None))]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
@@ -47,6 +47,7 @@ fn simulate<'py>(
     dt: f64,
     substeps: usize,
     output_every: usize,
+    octants: Option<Vec<String>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let protocol = match protocol {
         "thesis" => Protocol::thesis(),
@@ -54,10 +55,17 @@ fn simulate<'py>(
             if !(duration > 0.0 && duration <= 36_000.0) {
                 return Err(input(format!("duration is {duration} s, expected 0 < duration ≤ 36000")));
             }
-            Protocol::random(seed, duration)
+            let allowed = match &octants {
+                Some(signs) => Octants::parse(signs).map_err(|e| input(format!("octants: {e}")))?,
+                None => Octants::ALL,
+            };
+            Protocol::random_in(seed, duration, allowed)
         }
         other => return Err(input(format!("unknown protocol {other:?} (known: \"thesis\", \"random\")"))),
     };
+    if octants.is_some() && protocol.name != "random" {
+        return Err(input("octants apply to the \"random\" protocol only"));
+    }
     let config = SimConfig { body: BodyModel::try_scaled(length_scale, mass_scale).py_err()?, shoulder_flexion, dt, substeps, output_every, ..Default::default() };
     let trial = py.detach(|| run(&config, &protocol)).map_err(sim_err)?;
     let d = PyDict::new(py);

@@ -25,6 +25,50 @@ pub struct Movement {
     pub to: [f64; N_COORDINATES],
 }
 
+/// A set of joint-sign octants: octant `k` has bit `i` set when coordinate `i` is negative
+/// (coordinate order s_p, e_f, ad_ab; zero counts as positive). Written as sign strings,
+/// e.g. `"+-+"` = supinated, extended, adducted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Octants(pub u8);
+
+impl Octants {
+    /// Every octant.
+    pub const ALL: Octants = Octants(0xFF);
+
+    /// The octant index of a joint position.
+    pub fn of(q: &[f64; N_COORDINATES]) -> usize {
+        (0..N_COORDINATES).filter(|&i| q[i] < 0.0).map(|i| 1 << i).sum()
+    }
+
+    /// Whether octant `k` is in the set (the neutral pose is always allowed).
+    pub fn contains(self, k: usize) -> bool {
+        self.0 & (1 << k) != 0
+    }
+
+    /// True when no octant is allowed.
+    pub fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// Parses sign strings such as `["+-+", "---"]`.
+    pub fn parse<S: AsRef<str>>(signs: &[S]) -> Result<Octants, String> {
+        let mut mask = 0u8;
+        for s in signs {
+            let s = s.as_ref();
+            let chars: Vec<char> = s.chars().collect();
+            if chars.len() != N_COORDINATES || chars.iter().any(|c| *c != '+' && *c != '-') {
+                return Err(format!("octant {s:?} must be {N_COORDINATES} signs ('+' or '-') for s_p, e_f, ad_ab, e.g. \"+-+\""));
+            }
+            let k: usize = chars.iter().enumerate().filter(|(_, c)| **c == '-').map(|(i, _)| 1 << i).sum();
+            mask |= 1 << k;
+        }
+        if mask == 0 {
+            return Err("no octant given".into());
+        }
+        Ok(Octants(mask))
+    }
+}
+
 /// A named sequence of movements (back to back, starting at t = 0 from neutral).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Protocol {
@@ -71,6 +115,15 @@ impl Protocol {
     /// random target with probability 0.8 (holds it otherwise), returns to neutral 15 % of
     /// the time, and is followed by a hold of 0–0.4 s a third of the time.
     pub fn random(seed: u64, seconds: f64) -> Self {
+        Self::random_in(seed, seconds, Octants::ALL)
+    }
+
+    /// [`random`](Self::random) whose targets lie only in the allowed joint-sign octants
+    /// (returns to neutral stay allowed). Holding out octants in training and testing on
+    /// them measures generalisation to movement types a network never saw. With
+    /// [`Octants::ALL`] it is exactly `random` (same draws, same trajectory).
+    pub fn random_in(seed: u64, seconds: f64, allowed: Octants) -> Self {
+        assert!(!allowed.is_empty(), "at least one octant must be allowed");
         let mut rng = SplitMix::new(seed);
         let mut steps = Vec::new();
         let (mut t, mut at) = (0.0, [0.0; N_COORDINATES]);
@@ -79,10 +132,22 @@ impl Protocol {
             let to: [f64; N_COORDINATES] = if rng.uniform(0.0, 1.0) < 0.15 {
                 [0.0; N_COORDINATES]
             } else {
-                std::array::from_fn(|i| {
-                    let (lo, hi) = COORDINATES[i].range;
-                    if rng.uniform(0.0, 1.0) < 0.8 { rng.uniform(RANGE_USE * lo, RANGE_USE * hi) } else { at[i] }
-                })
+                // Rejection sampling; with every octant allowed the first draw is kept, so
+                // `random` is unchanged. A held coordinate keeps its sign, so a draw can
+                // fail forever only if no allowed octant shares it: then all move.
+                let mut draw = 0;
+                loop {
+                    let keep_all = draw >= 64;
+                    let to: [f64; N_COORDINATES] = std::array::from_fn(|i| {
+                        let (lo, hi) = COORDINATES[i].range;
+                        let moves = rng.uniform(0.0, 1.0) < 0.8 || keep_all;
+                        if moves { rng.uniform(RANGE_USE * lo, RANGE_USE * hi) } else { at[i] }
+                    });
+                    draw += 1;
+                    if allowed.contains(Octants::of(&to)) {
+                        break to;
+                    }
+                }
             };
             steps.push((to, duration));
             t += duration;
@@ -155,6 +220,22 @@ mod tests {
                 assert!(((c.qd[i] - a.qd[i]) / (2.0 * h) - b.qdd[i]).abs() < 1e-3, "qdd at {t}");
             }
         }
+    }
+
+    #[test]
+    fn octant_restricted_targets_stay_in_their_octants() {
+        assert_eq!(Protocol::random_in(5, 20.0, Octants::ALL), Protocol::random(5, 20.0));
+        let held_out = Octants::parse(&["+-+"]).unwrap();
+        let rest = Octants(!held_out.0);
+        for (allowed, seed) in [(held_out, 1), (rest, 2)] {
+            let p = Protocol::random_in(seed, 30.0, allowed);
+            let targets: Vec<_> = p.movements.iter().map(|m| m.to).filter(|to| *to != [0.0; 3]).collect();
+            assert!(targets.len() > 10);
+            assert!(targets.iter().all(|to| allowed.contains(Octants::of(to))), "{allowed:?}");
+        }
+        assert!(Octants::parse(&["+-"]).is_err());
+        assert!(Octants::parse(&["+x+"]).is_err());
+        assert_eq!(Octants::parse(&["+++", "---"]).unwrap(), Octants(1 | 1 << 7));
     }
 
     #[test]

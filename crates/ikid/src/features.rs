@@ -22,15 +22,19 @@ pub enum FeatureSet {
     /// origin (3). Unchanged by any rigid motion of the whole arm, so a model trained on it
     /// does not depend on the shoulder pose (12 per frame).
     Relative,
+    /// [`Relative`](Self::Relative) plus the lab's up direction in the forearm's technical
+    /// frame (3): what gravity does to the wrist, for networks that give torques (15 per frame).
+    RelativeGravity,
     /// Joint state for inverse dynamics: q, q̇, q̈ in coordinate order (9 per frame).
     JointState,
 }
 
 /// Every feature set, in the order they are listed to users.
-pub const FEATURE_SETS: [FeatureSet; 4] = [
+pub const FEATURE_SETS: [FeatureSet; 5] = [
     FeatureSet::Markers,
     FeatureSet::Basis,
     FeatureSet::Relative,
+    FeatureSet::RelativeGravity,
     FeatureSet::JointState,
 ];
 
@@ -41,6 +45,7 @@ impl FeatureSet {
             FeatureSet::Markers => "markers",
             FeatureSet::Basis => "basis",
             FeatureSet::Relative => "relative",
+            FeatureSet::RelativeGravity => "relative_gravity",
             FeatureSet::JointState => "joint_state",
         }
     }
@@ -56,7 +61,7 @@ impl FeatureSet {
     /// Values in one raw input frame.
     pub fn frame_len(self) -> usize {
         match self {
-            FeatureSet::Markers | FeatureSet::Basis | FeatureSet::Relative => MARKER_FRAME_LEN,
+            FeatureSet::Markers | FeatureSet::Basis | FeatureSet::Relative | FeatureSet::RelativeGravity => MARKER_FRAME_LEN,
             FeatureSet::JointState => 3 * N_COORDINATES,
         }
     }
@@ -67,6 +72,7 @@ impl FeatureSet {
             FeatureSet::Markers => MARKER_FRAME_LEN,
             FeatureSet::Basis => 24,
             FeatureSet::Relative => 12,
+            FeatureSet::RelativeGravity => 15,
             FeatureSet::JointState => 3 * N_COORDINATES,
         }
     }
@@ -92,6 +98,7 @@ impl FeatureSet {
                 .flat_map(|r| (0..3).map(move |c| format!("rel.r{r}{c}")))
                 .chain(xyz("rel.t"))
                 .collect(),
+            FeatureSet::RelativeGravity => FeatureSet::Relative.feature_names().into_iter().chain(xyz("up")).collect(),
         }
     }
 
@@ -133,7 +140,7 @@ impl FeatureSet {
                     }
                 }
             }
-            FeatureSet::Relative => {
+            FeatureSet::Relative | FeatureSet::RelativeGravity => {
                 let (o_f, b_f) = technical_frame(frame, Segment::Forearm, frame_index)?;
                 let (o_h, b_h) = technical_frame(frame, Segment::Hand, frame_index)?;
                 let rel = b_f.transpose() * b_h;
@@ -144,6 +151,10 @@ impl FeatureSet {
                     }
                 }
                 write3(&mut out[9..12], &t);
+                if self == FeatureSet::RelativeGravity {
+                    let up = -Vector3::from(body::GRAVITY).normalize();
+                    write3(&mut out[12..15], &(b_f.transpose() * up));
+                }
             }
         }
         Ok(())
@@ -259,6 +270,25 @@ mod tests {
         // ...but does change with the wrist angles.
         FeatureSet::Relative.compute(&frame_for([0.0, 0.0, 0.0], 0.0), &mut b, 0).unwrap();
         assert!(a.iter().zip(&b).any(|(x, y)| (x - y).abs() > 0.05));
+    }
+
+    #[test]
+    fn relative_gravity_adds_the_up_direction_in_the_forearm_frame() {
+        let q = [0.4, -0.3, 0.2];
+        let features = |shoulder: f64| {
+            let mut out = vec![0.0f32; 15];
+            FeatureSet::RelativeGravity.compute(&frame_for(q, shoulder), &mut out, 0).unwrap();
+            out
+        };
+        let (a, b) = (features(0.0), features(45f64.to_radians()));
+        let mut rel = vec![0.0f32; 12];
+        FeatureSet::Relative.compute(&frame_for(q, 0.0), &mut rel, 0).unwrap();
+        assert_eq!(&a[..12], &rel[..]);
+        let (up_a, up_b) = (Vector3::new(a[12], a[13], a[14]), Vector3::new(b[12], b[13], b[14]));
+        assert!((up_a.norm() - 1.0).abs() < 1e-6 && (up_b.norm() - 1.0).abs() < 1e-6);
+        // Shoulder flexion turns the forearm by 45° relative to gravity.
+        let angle = up_a.cast::<f64>().angle(&up_b.cast::<f64>());
+        assert!((angle - 45f64.to_radians()).abs() < 1e-5, "{angle}");
     }
 
     #[test]
