@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo data test test-rust test-python test-c lint bench clean capi c header check-header install
+.PHONY: all venv wheel demo data models report test test-rust test-python test-c lint bench clean capi c header check-header install
 
 all: wheel
 
@@ -38,12 +38,22 @@ wheel: $(VENV)/.created
 	$(PIP) install --quiet "$$(ls $(WHEELS)/ikid-*.whl)[train,test]"
 
 demo: wheel
-	$(PY) -m training.demo
+	$(PY) -m ikid.demo
 
 # Simulated datasets (gitignored): the thesis-sized set (3 shoulder poses x 42 movements)
 # and 18 random multi-DoF trials of 60 s (3 poses x 3 subject sizes x 2), in parallel.
 data: wheel
 	$(VENV)/bin/ikid dataset -o data
+
+# Retrain the shipped models from scratch (<= 15 min on 2 cores) into python/ikid/models/;
+# rebuild the wheel afterwards to ship them.
+models: wheel
+	$(PY) -m training.models
+
+# The evaluation report (docs/report.md + PNG plots) of the shipped models, beside the
+# classical reference and the thesis' numbers.
+report: wheel
+	$(PY) -m training.report
 
 test: test-rust wheel c test-python check-header lint
 	@echo "make test: all suites passed"

@@ -9,7 +9,7 @@ import ikid
 
 def test_feature_set_info_sizes():
     sizes = {name: (ikid.feature_set_info(name)["frame_len"], ikid.feature_set_info(name)["feature_len"]) for name in ikid.FEATURE_SETS}
-    assert sizes == {"markers": (18, 18), "basis": (18, 24), "relative": (18, 12), "relative_gravity": (18, 15), "joint_state": (9, 9)}
+    assert sizes == {"markers": (18, 18), "basis": (18, 24), "relative": (18, 12), "relative_gravity": (18, 15), "angles": (18, 3), "angles_gravity": (18, 6), "joint_state": (9, 9)}
     with pytest.raises(ikid.InputError, match="unknown feature set"):
         ikid.feature_set_info("pixels")
 

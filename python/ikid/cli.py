@@ -5,6 +5,7 @@ Examples::
     ikid simulate --protocol thesis --shoulder-deg 45 -o data/thesis_s45
     ikid simulate --protocol random --seed 3 --duration 60 --noise uniform:0.01 -o data/r3
     ikid dataset -o data            # thesis-sized set + the richer random set, in parallel
+    ikid demo                       # a fresh trial through the shipped models, errors + latency
 """
 
 from __future__ import annotations
@@ -119,6 +120,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--jobs", type=int, default=None, help="threads (default: all cores)")
     p.set_defaults(func=cmd_dataset)
 
+    p = sub.add_parser("demo", help="stream a fresh simulated trial through the shipped models", add_help=False)
+    p.set_defaults(func=None)
+
+    if argv is None:
+        argv = sys.argv[1:]
+    if argv[:1] == ["demo"]:  # its own options (see `ikid demo --help`)
+        from ikid.demo import main as demo
+
+        demo(argv[1:])
+        return 0
     args = parser.parse_args(argv)
     try:
         return args.func(args)

@@ -5,9 +5,10 @@
 //! [`MARKER_FRAME_LEN`] values, or a joint state); its *features* are what the network sees
 //! for that time step. Arithmetic is f64 inside, f32 at the edges.
 
-use crate::body::{self, MARKER_FRAME_LEN, MARKERS, N_COORDINATES, Segment};
+use crate::body::{self, COORDINATES, MARKER_FRAME_LEN, MARKERS, N_COORDINATES, Segment};
 use crate::error::{Error, Result};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Rotation3, Vector3};
+use std::sync::OnceLock;
 
 /// A named way of turning one frame into network inputs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -25,16 +26,26 @@ pub enum FeatureSet {
     /// [`Relative`](Self::Relative) plus the lab's up direction in the forearm's technical
     /// frame (3): what gravity does to the wrist, for networks that give torques (15 per frame).
     RelativeGravity,
+    /// The wrist angles of this frame alone (3): the hand's technical frame in the
+    /// forearm's, turned into the anatomical frames by the body model's marker placement
+    /// (a constant rotation per segment, the same for every subject size) and decomposed as
+    /// the joint chain does. Exact on clean markers; a window of them lets a network filter.
+    Angles,
+    /// [`Angles`](Self::Angles) plus the lab's up direction in the forearm's technical frame
+    /// (3): a joint state's worth of information for torque networks (6 per frame).
+    AnglesGravity,
     /// Joint state for inverse dynamics: q, q̇, q̈ in coordinate order (9 per frame).
     JointState,
 }
 
 /// Every feature set, in the order they are listed to users.
-pub const FEATURE_SETS: [FeatureSet; 5] = [
+pub const FEATURE_SETS: [FeatureSet; 7] = [
     FeatureSet::Markers,
     FeatureSet::Basis,
     FeatureSet::Relative,
     FeatureSet::RelativeGravity,
+    FeatureSet::Angles,
+    FeatureSet::AnglesGravity,
     FeatureSet::JointState,
 ];
 
@@ -46,6 +57,8 @@ impl FeatureSet {
             FeatureSet::Basis => "basis",
             FeatureSet::Relative => "relative",
             FeatureSet::RelativeGravity => "relative_gravity",
+            FeatureSet::Angles => "angles",
+            FeatureSet::AnglesGravity => "angles_gravity",
             FeatureSet::JointState => "joint_state",
         }
     }
@@ -61,7 +74,12 @@ impl FeatureSet {
     /// Values in one raw input frame.
     pub fn frame_len(self) -> usize {
         match self {
-            FeatureSet::Markers | FeatureSet::Basis | FeatureSet::Relative | FeatureSet::RelativeGravity => MARKER_FRAME_LEN,
+            FeatureSet::Markers
+            | FeatureSet::Basis
+            | FeatureSet::Relative
+            | FeatureSet::RelativeGravity
+            | FeatureSet::Angles
+            | FeatureSet::AnglesGravity => MARKER_FRAME_LEN,
             FeatureSet::JointState => 3 * N_COORDINATES,
         }
     }
@@ -73,6 +91,8 @@ impl FeatureSet {
             FeatureSet::Basis => 24,
             FeatureSet::Relative => 12,
             FeatureSet::RelativeGravity => 15,
+            FeatureSet::Angles => N_COORDINATES,
+            FeatureSet::AnglesGravity => N_COORDINATES + 3,
             FeatureSet::JointState => 3 * N_COORDINATES,
         }
     }
@@ -99,6 +119,8 @@ impl FeatureSet {
                 .chain(xyz("rel.t"))
                 .collect(),
             FeatureSet::RelativeGravity => FeatureSet::Relative.feature_names().into_iter().chain(xyz("up")).collect(),
+            FeatureSet::Angles => COORDINATES.iter().map(|c| format!("angle.{}", c.name)).collect(),
+            FeatureSet::AnglesGravity => FeatureSet::Angles.feature_names().into_iter().chain(xyz("up")).collect(),
         }
     }
 
@@ -152,8 +174,19 @@ impl FeatureSet {
                 }
                 write3(&mut out[9..12], &t);
                 if self == FeatureSet::RelativeGravity {
-                    let up = -Vector3::from(body::GRAVITY).normalize();
-                    write3(&mut out[12..15], &(b_f.transpose() * up));
+                    write3(&mut out[12..15], &(b_f.transpose() * up()));
+                }
+            }
+            FeatureSet::Angles | FeatureSet::AnglesGravity => {
+                let (_, b_f) = technical_frame(frame, Segment::Forearm, frame_index)?;
+                let (_, b_h) = technical_frame(frame, Segment::Hand, frame_index)?;
+                let (t_f, t_h) = technical_in_anatomical();
+                let wrist = Rotation3::from_matrix_unchecked(t_f * b_f.transpose() * b_h * t_h.transpose());
+                for (o, a) in out.iter_mut().zip(body::wrist_angles(&wrist)) {
+                    *o = a as f32;
+                }
+                if self == FeatureSet::AnglesGravity {
+                    write3(&mut out[3..6], &(b_f.transpose() * up()));
                 }
             }
         }
@@ -202,6 +235,25 @@ pub fn technical_frame(frame: &[f32], segment: Segment, frame_index: usize) -> R
     let e3 = e1.cross(&(m2 - m0)).try_normalize(1e-8).ok_or_else(degenerate)?;
     let e2 = e3.cross(&e1);
     Ok((origin, Matrix3::from_columns(&[e1, e2, e3])))
+}
+
+/// Each segment's technical frame expressed in its anatomical frame, from the default body
+/// at neutral (`B = A·T`). Marker placement scales with the subject, so `T` does not.
+fn technical_in_anatomical() -> &'static (Matrix3<f64>, Matrix3<f64>) {
+    static FRAMES: OnceLock<(Matrix3<f64>, Matrix3<f64>)> = OnceLock::new();
+    FRAMES.get_or_init(|| {
+        let body = body::BodyModel::default();
+        let pose = body.forearm_pose(0.0);
+        let frame: Vec<f32> = body.marker_frame(&[0.0; N_COORDINATES], &pose).iter().map(|&v| v as f32).collect();
+        let anatomical = pose.rotation.to_rotation_matrix().into_inner();
+        let technical = |segment| technical_frame(&frame, segment, 0).expect("the body model's markers span each segment").1;
+        (anatomical.transpose() * technical(Segment::Forearm), anatomical.transpose() * technical(Segment::Hand))
+    })
+}
+
+/// The lab's up direction (against gravity).
+fn up() -> Vector3<f64> {
+    -Vector3::from(body::GRAVITY).normalize()
 }
 
 fn write3(dst: &mut [f32], v: &Vector3<f64>) {
@@ -284,11 +336,28 @@ mod tests {
         let mut rel = vec![0.0f32; 12];
         FeatureSet::Relative.compute(&frame_for(q, 0.0), &mut rel, 0).unwrap();
         assert_eq!(&a[..12], &rel[..]);
+        let mut ag = [0.0f32; 6];
+        FeatureSet::AnglesGravity.compute(&frame_for(q, 0.0), &mut ag, 0).unwrap();
+        assert_eq!(&ag[3..], &a[12..]);
         let (up_a, up_b) = (Vector3::new(a[12], a[13], a[14]), Vector3::new(b[12], b[13], b[14]));
         assert!((up_a.norm() - 1.0).abs() < 1e-6 && (up_b.norm() - 1.0).abs() < 1e-6);
         // Shoulder flexion turns the forearm by 45° relative to gravity.
         let angle = up_a.cast::<f64>().angle(&up_b.cast::<f64>());
         assert!((angle - 45f64.to_radians()).abs() < 1e-5, "{angle}");
+    }
+
+    #[test]
+    fn angles_are_exact_on_clean_markers_for_any_size_and_pose() {
+        for (q, shoulder, scale) in [([0.5, 0.2, -0.1], 0.3, 1.0), ([-1.2, 1.1, 0.4], -0.35, 0.85), ([1.3, -1.0, -0.3], 0.8, 1.2)] {
+            let body = BodyModel::scaled(scale, 1.0);
+            let frame: Vec<f32> = body.marker_frame(&q, &body.forearm_pose(shoulder)).iter().map(|&v| v as f32).collect();
+            let mut out = [0.0f32; 3];
+            FeatureSet::Angles.compute(&frame, &mut out, 0).unwrap();
+            for k in 0..3 {
+                // f32 marker coordinates limit it to ~1e-5 rad.
+                assert!((out[k] as f64 - q[k]).abs() < 5e-5, "{out:?} vs {q:?} (scale {scale})");
+            }
+        }
     }
 
     #[test]

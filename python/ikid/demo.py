@@ -1,0 +1,109 @@
+"""`make demo` / `ikid demo`: the main job end to end on the shipped models.
+
+Simulates a fresh trial (a seed and a shoulder pose no shipped model trained on) on the
+rapier wrist model, adds marker noise, streams it frame by frame through the shipped IK
+(markers → angles) and chain (markers → torques) models, and prints the errors against the
+simulator's ground truth, the classical reference on the same frames, and the per-frame
+latency. Writes a plot if matplotlib is installed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+import ikid
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="ikid demo", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seed", type=int, default=424242, help="trial seed (training used 1000-3999)")
+    parser.add_argument("--seconds", type=float, default=20.0)
+    parser.add_argument("--shoulder-deg", type=float, default=30.0, help="shoulder flexion (training: 0, 45, -20)")
+    parser.add_argument("--noise", type=float, default=0.01, help="uniform marker noise, fraction of each coordinate's range")
+    parser.add_argument("--plot", type=Path, default=Path("out/demo/demo.png"))
+    args = parser.parse_args(argv)
+
+    ik, chain = ikid.load("wrist-ik"), ikid.load("wrist-chain")
+    print(f"1. simulating {args.seconds:.0f} s of random wrist movement (seed {args.seed}, shoulder {args.shoulder_deg:.0f}°) "
+          f"with {100 * args.noise:g} % marker noise")
+    t0 = time.perf_counter()
+    trial = ikid.simulate("random", seed=args.seed, duration=args.seconds, shoulder_flexion=math.radians(args.shoulder_deg))
+    trial = trial.with_noise("uniform", seed=args.seed, fraction=args.noise) if args.noise > 0 else trial
+    print(f"   {len(trial.time)} frames at {trial.rate_hz:.0f} Hz in {time.perf_counter() - t0:.1f} s")
+
+    print(f"2. streaming frame by frame through {ik.name} ({ik.feature_set} × {ik.window}) and {chain.name} "
+          f"({chain.feature_set} × {chain.window})")
+    frames = np.ascontiguousarray(trial.markers, np.float32)
+    s_ik, s_chain = ik.stream(), chain.stream()
+    angles = np.full((len(frames), 3), np.nan)
+    torques = np.full((len(frames), 3), np.nan)
+    step_ns = np.zeros(len(frames))
+    for i, frame in enumerate(frames):
+        t = time.perf_counter_ns()
+        a = s_ik.push(frame)
+        tau = s_chain.push(frame)
+        step_ns[i] = time.perf_counter_ns() - t
+        if a is not None:
+            angles[i] = a
+        if tau is not None:
+            torques[i] = tau
+    ok = slice(max(ik.window, chain.window), None)  # both windows full
+
+    print("3. errors against the simulator's ground truth (same frames)")
+    ref = ikid.reference_ik(trial.markers)
+    names = ikid.coordinate_names()
+    ang_err = np.degrees(angles[ok] - trial.q[ok])
+    ref_err = np.degrees(ref[ok] - trial.q[ok])
+    tau_err = torques[ok] - trial.tau[ok]
+    span = trial.tau[ok].max(0) - trial.tau[ok].min(0)
+    print(f"   {'':12s} {'angle RMSE':>11s} {'reference IK':>13s} {'torque RMSE':>12s} {'% of range':>11s}")
+    for k, name in enumerate(names):
+        print(f"   {name:12s} {rms(ang_err[:, k]):9.3f} °  {rms(ref_err[:, k]):9.3f} °  {rms(tau_err[:, k]):8.4f} N·m  "
+              f"{100 * rms(tau_err[:, k]) / span[k]:8.2f} %")
+    print(f"   angle MSE {np.mean(np.radians(ang_err) ** 2):.2e} rad² (reference IK per frame {np.mean(np.radians(ref_err) ** 2):.2e}); "
+          f"torque MSE {np.mean(tau_err**2):.2e} N·m² (thesis chain: 0.1727)")
+    lat = step_ns[ok] / 1e3
+    print(f"4. one frame → angles + torques from Python: p50 {np.median(lat):.1f} µs, p99 {np.percentile(lat, 99):.1f} µs "
+          f"(budget 2000 µs)")
+    plot(args.plot, trial, angles, torques, ok)
+
+
+def rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(x**2)))
+
+
+def plot(path: Path, trial: ikid.Trial, angles: np.ndarray, torques: np.ndarray, ok: slice) -> None:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("   (no matplotlib: plot skipped; pip install matplotlib)")
+        return
+    t = trial.time
+    fig, axes = plt.subplots(3, 2, figsize=(11, 6), sharex=True)
+    for k, name in enumerate(ikid.coordinate_names()):
+        axes[k, 0].plot(t, np.degrees(trial.q[:, k]), "k", lw=1, label="true")
+        axes[k, 0].plot(t[ok], np.degrees(angles[ok, k]), "r", lw=0.7, label="wrist-ik")
+        axes[k, 0].set_ylabel(f"{name} °")
+        axes[k, 1].plot(t, trial.tau[:, k], "k", lw=1, label="true")
+        axes[k, 1].plot(t[ok], torques[ok, k], "b", lw=0.7, label="wrist-chain")
+        axes[k, 1].set_ylabel("N·m")
+    axes[0, 0].legend(fontsize=8)
+    axes[0, 1].legend(fontsize=8)
+    axes[2, 0].set_xlabel("time, s")
+    axes[2, 1].set_xlabel("time, s")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    print(f"5. plot: {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,187 @@
+"""Datasets for training and evaluation: recordings, splits, noise, windows.
+
+A *recording* is one simulated (or loaded) trial with ground truth per frame. Features are
+computed by the Rust core (``ikid.compute_features``) exactly as at inference; noise comes
+from the core's seeded noise models. A *window* is ``window`` consecutive frames' features,
+concatenated oldest first, labelled with the newest frame's target (causal, no look-ahead).
+
+Splits, all per recording so that no window straddles two parts:
+
+- ``thesis``: the first 80 % of every recording trains, the next 10 % validates, the last
+  10 % tests, unshuffled (the thesis' protocol).
+- held-out sets (movement types, a shoulder pose, subject sizes) are whole recordings that
+  training never sees; see :func:`recording_set`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import ikid
+
+#: What each task predicts and from which frames.
+TASKS = {
+    "ik": {"inputs": "markers", "target": "q"},
+    "id": {"inputs": "joint_state", "target": "tau"},
+    "chain": {"inputs": "markers", "target": "tau"},
+}
+
+SPLIT_FRACTIONS = {"train": (0.0, 0.8), "val": (0.8, 0.9), "test": (0.9, 1.0)}
+
+
+@dataclass
+class Recording:
+    """One trial: markers (m) and ground truth (rad, rad/s, rad/s², N·m), one row per frame."""
+
+    name: str
+    markers: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    tau: np.ndarray
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.q)
+
+    @staticmethod
+    def from_trial(name: str, trial: ikid.Trial) -> Recording:
+        return Recording(name, trial.markers, trial.q, trial.qd, trial.qdd, trial.tau, dict(trial.metadata))
+
+    def part(self, split: str) -> Recording:
+        """The frames of one part of the thesis split (``train``, ``val``, ``test``, ``all``)."""
+        if split == "all":
+            return self
+        lo, hi = SPLIT_FRACTIONS[split]
+        a, b = int(round(lo * len(self))), int(round(hi * len(self)))
+        return Recording(f"{self.name}[{split}]", *(x[a:b] for x in self.arrays()), meta=self.meta)
+
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        return self.markers, self.q, self.qd, self.qdd, self.tau
+
+    def with_markers(self, markers: np.ndarray, **note: Any) -> Recording:
+        return Recording(self.name, markers, self.q, self.qd, self.qdd, self.tau, {**self.meta, **note})
+
+
+# --- building recordings ---------------------------------------------------------------------
+
+
+def simulate_one(spec: dict[str, Any]) -> Recording:
+    """Simulates ``spec`` (keyword arguments of :func:`ikid.simulate` plus ``name``)."""
+    spec = dict(spec)
+    name = spec.pop("name")
+    if "shoulder_deg" in spec:
+        spec["shoulder_flexion"] = math.radians(spec.pop("shoulder_deg"))
+    return Recording.from_trial(name, ikid.simulate(**spec))
+
+
+def simulate_all(specs: Sequence[dict[str, Any]], threads: int | None = None) -> list[Recording]:
+    """Simulates every spec, in parallel threads (the simulator releases the GIL)."""
+    threads = threads or min(len(specs), os.cpu_count() or 1)
+    with ThreadPoolExecutor(max_workers=max(threads, 1)) as pool:
+        return list(pool.map(simulate_one, specs))
+
+
+def recording_set(
+    kind: str,
+    *,
+    seeds: Iterable[int],
+    shoulders_deg: Sequence[float],
+    length_scales: Sequence[float],
+    duration: float = 60.0,
+    octants: list[str] | None = None,
+    mass_follows_length: bool = True,
+) -> list[dict[str, Any]]:
+    """Specs for every (seed, shoulder, size) combination of protocol ``kind``.
+
+    With ``mass_follows_length`` a subject ``s`` times longer is ``s³`` times heavier
+    (geometric similarity), so torques stay predictable from markers alone.
+    """
+    seeds = list(seeds)
+    specs = []
+    k = 0
+    for shoulder in shoulders_deg:
+        for scale in length_scales:
+            for seed in seeds if kind == "random" else [0]:
+                spec: dict[str, Any] = {
+                    "name": f"{kind}_s{shoulder:+.0f}_x{scale:.2f}" + (f"_seed{seed + k}" if kind == "random" else ""),
+                    "protocol": kind,
+                    "shoulder_deg": shoulder,
+                    "length_scale": scale,
+                    "mass_scale": scale**3 if mass_follows_length else 1.0,
+                }
+                if kind == "random":
+                    # A distinct seed per combination: no two recordings share a trajectory.
+                    spec.update(seed=seed + k, duration=duration)
+                    if octants:
+                        spec["octants"] = octants
+                specs.append(spec)
+            k += 1000
+    return specs
+
+
+def load_recordings(folder: str | os.PathLike[str]) -> list[Recording]:
+    """Every ``*.npz`` trial in ``folder`` (written by ``Trial.save`` / ``ikid dataset``)."""
+    paths = sorted(Path(folder).glob("*.npz"))
+    if not paths:
+        raise FileNotFoundError(f"no .npz trials in {folder}")
+    return [Recording.from_trial(p.stem, ikid.Trial.load(p)) for p in paths]
+
+
+# --- noise -------------------------------------------------------------------------------------
+
+
+def add_noise(rec: Recording, kind: str, level: float, seed: int) -> Recording:
+    """``rec`` with marker noise from the core: ``uniform`` (±level of each column's range, the
+    thesis' definition) or ``gaussian`` (σ = level metres). Level 0 returns ``rec``."""
+    if level == 0:
+        return rec
+    if kind == "uniform":
+        markers = ikid._native.noise_uniform(rec.markers, level, seed)
+    elif kind == "gaussian":
+        markers = ikid._native.noise_gaussian(rec.markers, level, seed)
+    else:
+        raise ValueError(f"unknown noise kind {kind!r} (uniform, gaussian)")
+    return rec.with_markers(markers, noise={"kind": kind, "level": level, "seed": seed})
+
+
+# --- windows -----------------------------------------------------------------------------------
+
+
+def features(rec: Recording, task: str, feature_set: str) -> np.ndarray:
+    """Per-frame features ``(n, F)`` float32, computed by the core."""
+    if TASKS[task]["inputs"] == "joint_state":
+        frames = np.concatenate([rec.q, rec.qd, rec.qdd], axis=1)
+    else:
+        frames = rec.markers
+    return ikid.compute_features(frames, feature_set)
+
+
+def target(rec: Recording, task: str) -> np.ndarray:
+    return getattr(rec, TASKS[task]["target"])
+
+
+def window_index(n: int, window: int, stride: int = 1, offset: int = 0) -> np.ndarray:
+    """Indices ``(m, window)`` of the windows of an ``n``-frame recording, newest last."""
+    newest = np.arange(window - 1 + offset, n, stride)
+    return newest[:, None] - np.arange(window - 1, -1, -1)[None, :]
+
+
+def windows(rec: Recording, task: str, feature_set: str, window: int, stride: int = 1, offset: int = 0):
+    """``(x, y)``: flattened feature windows ``(m, window·F)`` and newest-frame targets ``(m, k)``."""
+    f = features(rec, task, feature_set)
+    idx = window_index(len(f), window, stride, offset)
+    return f[idx].reshape(len(idx), -1), target(rec, task)[idx[:, -1]].astype(np.float32)
+
+
+def stack_windows(recs: Sequence[Recording], task: str, feature_set: str, window: int, stride: int = 1, offset: int = 0):
+    parts = [windows(r, task, feature_set, window, stride, offset) for r in recs]
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])

@@ -1,0 +1,37 @@
+"""`make models`: retrain the shipped default models from scratch and install them into the
+package (``python/ikid/models/*.safetensors``). ONNX copies and run logs go to ``out/models``.
+
+Budget: the three configs' ``max_minutes`` (6 + 4 + 2) plus simulation and scoring stay under
+15 minutes on 2 CPU cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import time
+from pathlib import Path
+
+from training.train import load_config, run
+
+CONFIGS = Path(__file__).with_name("configs")
+SHIPPED = ["wrist-ik", "wrist-chain", "wrist-id"]
+PACKAGE_MODELS = Path(__file__).resolve().parents[1] / "python" / "ikid" / "models"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=Path("out/models"))
+    parser.add_argument("--install", type=Path, default=PACKAGE_MODELS, help="where the shipped .safetensors go")
+    parser.add_argument("--quiet", action="store_true")
+    args = parser.parse_args()
+    start = time.perf_counter()
+    args.install.mkdir(parents=True, exist_ok=True)
+    for name in SHIPPED:
+        _, path = run(load_config(CONFIGS / f"{name}.toml"), args.out, progress=not args.quiet)
+        shutil.copyfile(path, args.install / path.name)
+    print(f"make models: {len(SHIPPED)} models in {(time.perf_counter() - start) / 60:.1f} min -> {args.install}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,249 @@
+"""Train one model from a TOML config: simulate (or load) data, train an MLP with noise
+augmentation and early stopping, export ``.safetensors`` (+ ONNX) with a full model card.
+
+    python -m training.train training/configs/wrist-ik.toml --out out/models
+
+Config tables: ``[model]`` (name, task, feature_set, window, hidden), ``[data]`` (what to
+simulate, or ``folder`` of saved trials), ``[train]`` (seed, batch, lr, budget, early stopping,
+augmentation). See ``training/configs/`` for the shipped models' configs. Every run writes
+its config, a per-epoch log (JSON lines) and its result under ``<out>/runs/<name>/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import hashlib
+import json
+import math
+import time
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm import tqdm
+
+import ikid
+from training import data as D
+from training.export import Affine, ModelSpec, export, export_onnx
+
+TRAIN_DEFAULTS: dict[str, Any] = {
+    "seed": 0,
+    "batch": 512,
+    "lr": 1e-3,
+    "max_minutes": 5.0,
+    "max_epochs": 1000,
+    "samples_per_epoch": 200_000,
+    "patience": 25,  # epochs without a relative improvement of min_delta
+    "min_delta": 1e-3,
+    "lr_patience": 8,  # epochs without improvement before the learning rate halves
+    "noise_kind": "uniform",
+    "noise_levels": [0.0],  # each recording gets a level drawn from these, fresh every epoch
+    "threads": 2,
+}
+
+
+def load_config(path: str | Path) -> dict[str, Any]:
+    with open(path, "rb") as f:
+        cfg = tomllib.load(f)
+    for table in ("model", "data"):
+        if table not in cfg:
+            raise ValueError(f"{path}: missing [{table}] table")
+    cfg["train"] = {**TRAIN_DEFAULTS, **cfg.get("train", {})}
+    unknown = set(cfg["train"]) - set(TRAIN_DEFAULTS)
+    if unknown:
+        raise ValueError(f"{path}: unknown [train] keys {sorted(unknown)} (known: {sorted(TRAIN_DEFAULTS)})")
+    task = cfg["model"].get("task")
+    if task not in D.TASKS:
+        raise ValueError(f"{path}: [model] task {task!r} is not one of {list(D.TASKS)}")
+    return cfg
+
+
+def build_recordings(data_cfg: dict[str, Any]) -> list[D.Recording]:
+    """The training recordings named by a ``[data]`` table."""
+    if "folder" in data_cfg:
+        return D.load_recordings(data_cfg["folder"])
+    common = {k: data_cfg[k] for k in ("shoulders_deg", "length_scales")}
+    specs = D.recording_set(
+        "random", seeds=data_cfg.get("seeds", [1000]), duration=data_cfg.get("duration", 60.0),
+        octants=data_cfg.get("octants"), mass_follows_length=data_cfg.get("mass_follows_length", True), **common,
+    )
+    if data_cfg.get("include_thesis", False):
+        specs += D.recording_set("thesis", seeds=[0], mass_follows_length=data_cfg.get("mass_follows_length", True), **common)
+    return D.simulate_all(specs)
+
+
+def data_hash(recs: list[D.Recording]) -> str:
+    h = hashlib.sha256()
+    for r in recs:
+        for a in r.arrays():
+            h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()[:16]
+
+
+def mlp(n_in: int, hidden: list[int], n_out: int) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for width in hidden:
+        layers += [nn.Linear(n_in, width), nn.ReLU()]
+        n_in = width
+    return nn.Sequential(*layers, nn.Linear(n_in, n_out))
+
+
+@dataclass
+class Trained:
+    net: nn.Sequential
+    input_scaling: Affine
+    output_scaling: Affine  # network units -> SI
+    log: list[dict[str, Any]]
+    seconds: float
+    best_val: float
+
+
+def _noisy(recs: list[D.Recording], tcfg: dict[str, Any], rng: np.random.Generator) -> list[D.Recording]:
+    levels = tcfg["noise_levels"]
+    return [D.add_noise(r, tcfg["noise_kind"], float(rng.choice(levels)), int(rng.integers(2**62))) for r in recs]
+
+
+def train(cfg: dict[str, Any], recs: list[D.Recording], log_path: Path | None = None, progress: bool = True) -> Trained:
+    """Trains the ``[model]`` of ``cfg`` on the train parts of ``recs``; early stopping on the val parts."""
+    m, t = cfg["model"], cfg["train"]
+    task, fs, window = m["task"], m["feature_set"], int(m.get("window", 5))
+    torch.manual_seed(t["seed"])
+    torch.set_num_threads(t["threads"])
+    rng = np.random.default_rng(t["seed"])
+    train_parts = [r.part("train") for r in recs]
+    val_parts = [r.part("val") for r in recs]
+
+    # Scaling from the clean training windows (min-max to [-1, 1], stored in the model file).
+    x0, y0 = D.stack_windows(train_parts, task, fs, window, stride=7)
+    inp, out_fwd = Affine.minmax(x0.min(0), x0.max(0)), Affine.minmax(y0.min(0), y0.max(0))
+    del x0, y0
+    # A fixed validation set with the same noise mixture (seeded), so early stopping compares like with like.
+    xv, yv = D.stack_windows(_noisy(val_parts, t, np.random.default_rng(t["seed"] + 1)), task, fs, window, stride=5)
+    xv_t = torch.as_tensor(xv * inp.scale + inp.shift)
+    yv_t = torch.as_tensor(yv * out_fwd.scale + out_fwd.shift)
+
+    net = mlp(xv.shape[1], list(m["hidden"]), yv.shape[1])
+    opt = torch.optim.Adam(net.parameters(), lr=t["lr"])
+    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=t["lr_patience"])
+    n_frames = sum(len(r) for r in train_parts)
+    stride = max(1, n_frames // t["samples_per_epoch"])
+
+    best, best_state, since_best, log = math.inf, copy.deepcopy(net.state_dict()), 0, []
+    start = time.perf_counter()
+    budget = 60.0 * t["max_minutes"]
+    bar = tqdm(total=int(budget), unit="s", desc=f"{m['name']}", disable=not progress, bar_format="{l_bar}{bar}| {n:.0f}/{total} s {postfix}")
+    for epoch in range(t["max_epochs"]):
+        # Fresh noise and a fresh subsample of windows every epoch.
+        x, y = D.stack_windows(_noisy(train_parts, t, rng), task, fs, window, stride=stride, offset=int(rng.integers(stride)))
+        xs = torch.as_tensor(x * inp.scale + inp.shift)
+        ys = torch.as_tensor(y * out_fwd.scale + out_fwd.shift)
+        net.train()
+        perm = torch.randperm(len(xs))
+        total = 0.0
+        for i in range(0, len(xs), t["batch"]):
+            b = perm[i : i + t["batch"]]
+            loss = nn.functional.mse_loss(net(xs[b]), ys[b])
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            total += loss.item() * len(b)
+        net.eval()
+        with torch.no_grad():
+            val = nn.functional.mse_loss(net(xv_t), yv_t).item()
+        sched.step(val)
+        elapsed = time.perf_counter() - start
+        entry = {"epoch": epoch, "train_loss": total / len(xs), "val_loss": val, "lr": opt.param_groups[0]["lr"], "seconds": elapsed}
+        log.append(entry)
+        if log_path:
+            with open(log_path, "a") as f:
+                f.write(json.dumps(entry) + "\n")
+        if val < best * (1 - t["min_delta"]):
+            best, best_state, since_best = val, copy.deepcopy(net.state_dict()), 0
+        else:
+            since_best += 1
+        bar.set_postfix_str(f"epoch {epoch} val {val:.2e} best {best:.2e} lr {entry['lr']:.1e}")
+        bar.update(min(int(elapsed) - bar.n, int(budget) - bar.n))
+        if since_best >= t["patience"] or elapsed > budget:
+            break
+    bar.close()
+    net.load_state_dict(best_state)
+    return Trained(net.eval(), inp, out_fwd.inverse(), log, time.perf_counter() - start, best)
+
+
+def spec_for(cfg: dict[str, Any], recs: list[D.Recording], trained: Trained, metrics: dict[str, Any] | None = None) -> ModelSpec:
+    m = cfg["model"]
+    return ModelSpec(
+        name=m["name"],
+        task=m["task"],
+        feature_set=m["feature_set"],
+        window=int(m.get("window", 5)),
+        frame_rate_hz=float(recs[0].meta.get("rate_hz", 1000.0)),
+        output_names=ikid.coordinate_names(),
+        scaling={"input": "minmax(-1,1) on clean training windows", "output": "minmax(-1,1) on training targets"},
+        provenance={
+            "simulator": ikid.SIMULATOR,
+            "data": cfg["data"],
+            "recordings": len(recs),
+            "frames": int(sum(len(r) for r in recs)),
+            "data_sha256_16": data_hash(recs),
+            "split": "per recording: first 80 % train, next 10 % validation, last 10 % test",
+            "train": cfg["train"],
+            "hidden": list(m["hidden"]),
+            "epochs": len(trained.log),
+            "train_seconds": round(trained.seconds, 1),
+            "best_val_loss_scaled": trained.best_val,
+            "torch": torch.__version__,
+            "ikid": ikid.__version__,
+        },
+        metrics=metrics or {},
+    )
+
+
+def run(cfg: dict[str, Any], out: Path, progress: bool = True, onnx: bool = True) -> tuple[ikid.Model, Path]:
+    """Train and export one config; returns the loaded model and its path."""
+    from training.evaluate import card_metrics  # evaluation needs only ikid, not torch
+
+    name = cfg["model"]["name"]
+    run_dir = out / "runs" / name
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "config.json").write_text(json.dumps(cfg, indent=2))
+    log_path = run_dir / "log.jsonl"
+    log_path.unlink(missing_ok=True)
+    t0 = time.perf_counter()
+    recs = build_recordings(cfg["data"])
+    print(f"{name}: {len(recs)} recordings, {sum(len(r) for r in recs)} frames ({time.perf_counter() - t0:.1f} s to build)", flush=True)
+    trained = train(cfg, recs, log_path, progress)
+    path = out / f"{name}.safetensors"
+    model = export(trained.net, path, spec_for(cfg, recs, trained), trained.input_scaling, trained.output_scaling)
+    metrics = card_metrics(model, recs)
+    model = export(trained.net, path, spec_for(cfg, recs, trained, metrics), trained.input_scaling, trained.output_scaling)
+    if onnx:
+        export_onnx(trained.net, out / f"{name}.onnx", model.layer_widths[0], trained.input_scaling, trained.output_scaling)
+    result = {"model": str(path), "epochs": len(trained.log), "seconds": trained.seconds, "metrics": metrics}
+    (run_dir / "result.json").write_text(json.dumps(result, indent=2))
+    print(f"{name}: {len(trained.log)} epochs in {trained.seconds:.0f} s -> {path}; test metrics {json.dumps(metrics)}", flush=True)
+    return model, path
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("config", type=Path, nargs="+", help="TOML config(s), trained one after the other")
+    parser.add_argument("--out", type=Path, default=Path("out/models"))
+    parser.add_argument("--minutes", type=float, help="override [train] max_minutes")
+    parser.add_argument("--no-onnx", action="store_true")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    args = parser.parse_args()
+    for path in args.config:
+        cfg = load_config(path)
+        if args.minutes is not None:
+            cfg["train"]["max_minutes"] = args.minutes
+        run(cfg, args.out, progress=not args.quiet, onnx=not args.no_onnx)
+
+
+if __name__ == "__main__":
+    main()
