@@ -122,8 +122,7 @@ def test_shipped_model_matches_torch(name):
     with torch.no_grad():
         z = torch.as_tensor(x) * torch.as_tensor(t["input.scale"]) + torch.as_tensor(t["input.shift"])
         want = (net(z) * torch.as_tensor(t["output.scale"]) + torch.as_tensor(t["output.shift"])).numpy()
-    frames = np.hstack([rec.q, rec.qd, rec.qdd]) if model.feature_set == "joint_state" else rec.markers
-    got = model.predict(frames)
+    got = model.predict(rec.frames(model.feature_set))
     scale = np.abs(want).max(axis=0)
     assert np.all(np.abs(got - want).max(axis=0) <= 1e-5 * scale)
 

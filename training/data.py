@@ -27,12 +27,8 @@ import numpy as np
 
 import ikid
 
-#: What each task predicts and from which frames.
-TASKS = {
-    "ik": {"inputs": "markers", "target": "q"},
-    "id": {"inputs": "joint_state", "target": "tau"},
-    "chain": {"inputs": "markers", "target": "tau"},
-}
+#: What each task predicts (the recording's array); its inputs follow from the feature set.
+TASKS = {"ik": "q", "id": "tau", "chain": "tau"}
 
 SPLIT_FRACTIONS = {"train": (0.0, 0.8), "val": (0.8, 0.9), "test": (0.9, 1.0)}
 
@@ -63,6 +59,12 @@ class Recording:
         lo, hi = SPLIT_FRACTIONS[split]
         a, b = int(round(lo * len(self))), int(round(hi * len(self)))
         return Recording(f"{self.name}[{split}]", *(x[a:b] for x in self.arrays()), meta=self.meta)
+
+    def frames(self, feature_set: str) -> np.ndarray:
+        """The raw frames a model on ``feature_set`` reads: joint states (q, q̇, q̈) or markers."""
+        if feature_set == "joint_state":
+            return np.concatenate([self.q, self.qd, self.qdd], axis=1)
+        return self.markers
 
     def arrays(self) -> tuple[np.ndarray, ...]:
         return self.markers, self.q, self.qd, self.qdd, self.tau
@@ -158,15 +160,11 @@ def add_noise(rec: Recording, kind: str, level: float, seed: int) -> Recording:
 
 def features(rec: Recording, task: str, feature_set: str) -> np.ndarray:
     """Per-frame features ``(n, F)`` float32, computed by the core."""
-    if TASKS[task]["inputs"] == "joint_state":
-        frames = np.concatenate([rec.q, rec.qd, rec.qdd], axis=1)
-    else:
-        frames = rec.markers
-    return ikid.compute_features(frames, feature_set)
+    return ikid.compute_features(rec.frames(feature_set), feature_set)
 
 
 def target(rec: Recording, task: str) -> np.ndarray:
-    return getattr(rec, TASKS[task]["target"])
+    return getattr(rec, TASKS[task])
 
 
 def window_index(n: int, window: int, stride: int = 1, offset: int = 0) -> np.ndarray:

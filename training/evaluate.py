@@ -21,19 +21,13 @@ NOISE_LEVELS = {"clean": 0.0, "1%": 0.01, "5%": 0.05}
 EVAL_SEED = 7_000_000  # evaluation noise seeds, never used in training
 
 
-def model_inputs(model: ikid.Model, rec: D.Recording) -> np.ndarray:
-    if model.feature_set == "joint_state":
-        return np.concatenate([rec.q, rec.qd, rec.qdd], axis=1)
-    return rec.markers
-
-
 def truth(model: ikid.Model, rec: D.Recording) -> np.ndarray:
     return D.target(rec, model.task)[model.window - 1 :]
 
 
 def predict(model: ikid.Model, rec: D.Recording) -> np.ndarray:
     """Predictions for every frame with a full window (row ``i`` is frame ``i + window - 1``)."""
-    return model.predict(model_inputs(model, rec)).astype(np.float64)
+    return model.predict(rec.frames(model.feature_set)).astype(np.float64)
 
 
 def errors(model: ikid.Model, recs: Sequence[D.Recording], split: str) -> tuple[np.ndarray, np.ndarray]:

@@ -24,7 +24,7 @@ import numpy as np  # noqa: E402
 
 import ikid  # noqa: E402
 from training import data as D  # noqa: E402
-from training.evaluate import EVAL_SEED, NOISE_LEVELS, THESIS, errors, noisy, summary  # noqa: E402
+from training.evaluate import EVAL_SEED, NOISE_LEVELS, THESIS, errors, noisy, predict, summary  # noqa: E402
 from training.train import build_recordings, data_hash  # noqa: E402
 
 DT = 1e-3
@@ -186,7 +186,7 @@ def noise_sweep(rep: Report, model: ikid.Model, recs: list[D.Recording]) -> None
 
 
 def traces(rep: Report, model: ikid.Model, rec: D.Recording, name: str, task_target: str, unit_label: str, scale: float = 1.0) -> None:
-    pred = model.predict(rec.markers if model.feature_set != "joint_state" else np.hstack([rec.q, rec.qd, rec.qdd]))
+    pred = predict(model, rec)
     true = getattr(rec, task_target)[model.window - 1 :]
     t = np.arange(len(true)) * DT + (model.window - 1) * DT
     fig, axes = plt.subplots(3, 2, figsize=(10, 6), gridspec_kw={"width_ratios": [3, 1]})
@@ -234,8 +234,7 @@ def latency(rep: Report, models: list[ikid.Model]) -> None:
     rows = []
     rec = D.simulate_one({"name": "lat", "protocol": "random", "seed": 9900, "duration": 3.0})
     for m in models:
-        frames = np.hstack([rec.q, rec.qd, rec.qdd]) if m.feature_set == "joint_state" else rec.markers
-        frames = np.ascontiguousarray(frames, np.float32)
+        frames = np.ascontiguousarray(rec.frames(m.feature_set), np.float32)
         s = m.stream()
         ts = []
         for f in frames:
