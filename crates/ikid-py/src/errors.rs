@@ -29,6 +29,7 @@ pub fn to_py(err: Error) -> PyErr {
         | Error::NonFiniteInput { .. }
         | Error::NonFiniteOutput { .. }
         | Error::DegenerateSegment { .. }
+        | Error::MissingMarkers { .. }
         | Error::BadArgument { .. } => {
             InputError::new_err(msg)
         }

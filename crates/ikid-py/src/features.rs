@@ -4,7 +4,7 @@ use crate::conv::with_floats;
 use crate::errors::{IntoPy, input};
 use ikid::FeatureSet;
 use ikid::features::FEATURE_SETS;
-use numpy::{IntoPyArray, PyArray2, PyArrayMethods};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -12,6 +12,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FEATURE_SETS", FEATURE_SETS.map(FeatureSet::name).to_vec())?;
     m.add_function(wrap_pyfunction!(feature_set_info, m)?)?;
     m.add_function(wrap_pyfunction!(compute_features, m)?)?;
+    m.add_function(wrap_pyfunction!(fill_gaps, m)?)?;
     Ok(())
 }
 
@@ -39,6 +40,23 @@ fn compute_features<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>, feature_se
         let mut out = vec![0f32; shape[0] * set.feature_len()];
         py.detach(|| set.compute_rows(values, &mut out)).py_err()?;
         out.into_pyarray(py).reshape([shape[0], set.feature_len()])
+    })
+}
+
+/// Filled frames `(n, 18)` and the mask of markers filled per frame `(n,)`.
+type FilledFrames<'py> = (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray1<u8>>);
+
+/// Runs a fresh gap filler (what a `"fill"` stream does) over a recording `(n, 18)`: the
+/// filled frames (float32) and per frame the bit mask of markers filled (uint8, bit `i` =
+/// marker `i`). Raises on the first frame it cannot fill.
+#[pyfunction]
+fn fill_gaps<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<FilledFrames<'py>> {
+    with_floats(frames, "frames", 2, |values, shape| {
+        if shape[1] != ikid::body::MARKER_FRAME_LEN {
+            return Err(input(format!("frames: {} columns, marker frames have {}", shape[1], ikid::body::MARKER_FRAME_LEN)));
+        }
+        let (filled, masks) = py.detach(|| ikid::model::fill_gaps(values)).py_err()?;
+        Ok((filled.into_pyarray(py).reshape([shape[0], shape[1]])?, masks.into_pyarray(py)))
     })
 }
 

@@ -118,9 +118,22 @@ impl Model {
         })
     }
 
-    /// A new frame-by-frame stream over this model.
-    fn stream(&self) -> Stream {
-        Stream { inner: self.inner.stream() }
+    /// What a stream does with a missing marker by default: `"refuse"` or `"fill"` (the card's).
+    #[getter]
+    fn missing_markers(&self) -> &'static str {
+        self.inner.missing_markers().name()
+    }
+
+    /// A new frame-by-frame stream over this model; `missing_markers` (`"refuse"` or
+    /// `"fill"`) overrides the card's policy.
+    #[pyo3(signature = (missing_markers = None))]
+    fn stream(&self, missing_markers: Option<&str>) -> PyResult<Stream> {
+        let mut inner = self.inner.stream();
+        if let Some(name) = missing_markers {
+            let policy = ikid::MissingMarkers::from_name(name).map_err(|e| input(e.to_string()))?;
+            inner.set_missing_markers(policy).py_err()?;
+        }
+        Ok(Stream { inner })
     }
 
     /// Writes the model file (atomically: never a partial file).
@@ -195,11 +208,28 @@ impl Stream {
         self.inner.filled()
     }
 
+    /// The missing-marker policy this stream applies: `"refuse"` or `"fill"`.
+    #[getter]
+    fn missing_markers(&self) -> &'static str {
+        self.inner.missing_markers().name()
+    }
+
+    /// Names of the markers filled in the last accepted frame (empty when it was complete):
+    /// the flag on an output that rests on filled positions.
+    #[getter]
+    fn filled_markers(&self) -> Vec<&'static str> {
+        marker_names(self.inner.filled_markers())
+    }
+
     /// The model this stream runs.
     #[getter]
     fn model(&self) -> Model {
         Model { inner: self.inner.model().clone() }
     }
+}
+
+fn marker_names(mask: u8) -> Vec<&'static str> {
+    ikid::body::MARKERS.iter().enumerate().filter(|(i, _)| mask & (1 << i) != 0).map(|(_, m)| m.name).collect()
 }
 
 /// Builds (and validates) a model from a card and torch-layout arrays; used by the exporter

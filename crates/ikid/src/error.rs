@@ -99,6 +99,16 @@ pub enum Error {
         /// The value found.
         value: f32,
     },
+    /// Markers are missing and the stream's policy could not fill them (see [`crate::gaps`]).
+    #[error("frame {frame}: missing marker(s) {markers} not filled: {reason}; no output computed")]
+    MissingMarkers {
+        /// Index of the frame within the call.
+        frame: usize,
+        /// Comma-separated names of the missing markers.
+        markers: String,
+        /// Why they could not be filled.
+        reason: &'static str,
+    },
     /// A segment's three markers are (nearly) collinear or coincident, so no frame can be fitted.
     #[error("frame {frame}: the {segment} markers are collinear or coincident; cannot build a segment frame")]
     DegenerateSegment {
@@ -132,6 +142,7 @@ impl Error {
         match self {
             Error::NonFiniteInput { field, value, .. } => Error::NonFiniteInput { frame, field, value },
             Error::DegenerateSegment { segment, .. } => Error::DegenerateSegment { frame, segment },
+            Error::MissingMarkers { markers, reason, .. } => Error::MissingMarkers { frame, markers, reason },
             Error::NonFiniteOutput { value, .. } => Error::NonFiniteOutput { frame, value },
             other => other,
         }

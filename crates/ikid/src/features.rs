@@ -244,7 +244,8 @@ fn technical_in_anatomical() -> &'static (Matrix3<f64>, Matrix3<f64>) {
     FRAMES.get_or_init(|| {
         let body = body::BodyModel::default();
         let pose = body.forearm_pose(0.0);
-        let frame: Vec<f32> = body.marker_frame(&[0.0; N_COORDINATES], &pose).iter().map(|&v| v as f32).collect();
+        // An array, not a Vec: the first push of a stream runs this and must not allocate.
+        let frame = body.marker_frame(&[0.0; N_COORDINATES], &pose).map(|v| v as f32);
         let anatomical = pose.rotation.to_rotation_matrix().into_inner();
         let technical = |segment| technical_frame(&frame, segment, 0).expect("the body model's markers span each segment").1;
         (anatomical.transpose() * technical(Segment::Forearm), anatomical.transpose() * technical(Segment::Hand))

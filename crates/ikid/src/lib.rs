@@ -24,6 +24,7 @@
 pub mod body;
 pub mod error;
 pub mod features;
+pub mod gaps;
 pub mod model;
 pub mod net;
 pub mod noise;
@@ -34,6 +35,7 @@ pub mod testing;
 
 pub use error::{Error, Result};
 pub use features::FeatureSet;
+pub use gaps::{GapFiller, MissingMarkers};
 pub use model::{Model, ModelCard, OutputSpec};
 pub use stream::Stream;
 

@@ -9,7 +9,9 @@
 //! [`CARD_KEY`]. The loader checks everything and names what is wrong.
 
 use crate::error::{Error, Result};
+use crate::body::MARKER_FRAME_LEN;
 use crate::features::FeatureSet;
+use crate::gaps::{GapFiller, MissingMarkers};
 use crate::net::{Activation, Affine, BATCH, Dense, Mlp, PackedMlp};
 use crate::stream::Stream;
 use nalgebra::{DMatrix, DVector};
@@ -64,6 +66,10 @@ pub struct ModelCard {
     pub frame_rate_hz: f64,
     /// Outputs, in order.
     pub outputs: Vec<OutputSpec>,
+    /// What a stream does with a missing marker: a [`MissingMarkers`] name (`"refuse"` or
+    /// `"fill"`); `"refuse"` when absent. A model trained on filled frames says `"fill"`.
+    #[serde(default = "refuse")]
+    pub missing_markers: String,
     /// Activation after each dense layer: `"relu"` or `"identity"`.
     pub activations: Vec<String>,
     /// How the scaling tensors were fitted (informational), e.g. `{"input": "minmax(-1,1)"}`.
@@ -91,6 +97,7 @@ impl ModelCard {
             predicted_frame: "newest".into(),
             frame_rate_hz,
             outputs,
+            missing_markers: MissingMarkers::Refuse.name().into(),
             activations: activations.iter().map(|a| a.name().into()).collect(),
             scaling: BTreeMap::new(),
             provenance: Default::default(),
@@ -159,6 +166,11 @@ impl ModelCard {
         if !(self.frame_rate_hz.is_finite() && self.frame_rate_hz > 0.0) {
             return bad(format!("field \"frame_rate_hz\" is {}, expected a positive number", self.frame_rate_hz));
         }
+        let policy = MissingMarkers::from_name(&self.missing_markers)
+            .map_err(|_| Error::ModelCard(format!("field \"missing_markers\" is {:?}, expected one of {:?}", self.missing_markers, MissingMarkers::ALL.map(|p| p.name()))))?;
+        if policy == MissingMarkers::Fill && set.frame_len() != MARKER_FRAME_LEN {
+            return bad(format!("field \"missing_markers\" is \"fill\" but feature set {:?} does not take marker frames", self.feature_set));
+        }
         if self.outputs.is_empty() {
             return bad("field \"outputs\" is empty".into());
         }
@@ -167,6 +179,10 @@ impl ModelCard {
         }
         self.parsed_activations().map(|_| ())
     }
+}
+
+fn refuse() -> String {
+    MissingMarkers::Refuse.name().into()
 }
 
 fn parse_activation(name: &str) -> Result<Activation, ()> {
@@ -320,6 +336,11 @@ impl Model {
         self.inner.card.outputs.len()
     }
 
+    /// What a stream of this model does with a missing marker (the card's `missing_markers`).
+    pub fn missing_markers(&self) -> MissingMarkers {
+        MissingMarkers::from_name(&self.inner.card.missing_markers).expect("validated with the card")
+    }
+
     /// A new stream over this model (allocates its buffers once, here).
     pub fn stream(&self) -> Stream {
         Stream::new(self.clone())
@@ -333,7 +354,9 @@ impl Model {
 
     /// Predicts a whole recording. `frames` holds `n` frames back to back; `out` receives
     /// [`n_predictions(n)`](Self::n_predictions) rows of [`n_outputs`](Self::n_outputs).
-    /// Gives exactly the values a [`Stream`] fed the same frames gives. Runs on up to
+    /// Gives exactly the values a fresh [`Stream`] fed the same frames gives, missing markers
+    /// included (filled in one causal pass first when the model's policy is
+    /// [`MissingMarkers::Fill`]). Runs on up to
     /// [`std::thread::available_parallelism`] threads. Returns the number of rows.
     pub fn predict(&self, frames: &[f32], out: &mut [f32]) -> Result<usize> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -358,6 +381,13 @@ impl Model {
                 detail: format!("has {} values, expected {rows} rows × {no} = {}", out.len(), rows * no),
             });
         }
+        let filled;
+        let frames = if self.missing_markers() == MissingMarkers::Fill && frames.iter().any(|v| !v.is_finite()) {
+            filled = fill_gaps(frames)?.0;
+            &filled[..]
+        } else {
+            frames
+        };
         let mut features = vec![0f32; frames.len() / fl * nf];
         set.compute_rows(frames, &mut features)?;
         // Below a few hundred rows a thread costs more than it saves.
@@ -398,6 +428,22 @@ impl Model {
         }
         Ok(rows)
     }
+}
+
+/// Runs a fresh [`GapFiller`] over a whole recording of marker frames: the frames with each
+/// fillable missing marker filled, and per frame the bit mask of markers filled. Stops at
+/// the first frame that cannot be filled, with its error.
+pub fn fill_gaps(frames: &[f32]) -> Result<(Vec<f32>, Vec<u8>)> {
+    if !frames.len().is_multiple_of(MARKER_FRAME_LEN) {
+        return Err(Error::BadArgument {
+            what: "frames",
+            detail: format!("{} values is not a whole number of {MARKER_FRAME_LEN}-value marker frames", frames.len()),
+        });
+    }
+    let mut filled = frames.to_vec();
+    let mut filler = GapFiller::new();
+    let masks = filled.chunks_exact_mut(MARKER_FRAME_LEN).enumerate().map(|(i, f)| filler.fill(f, i)).collect::<Result<_>>()?;
+    Ok((filled, masks))
 }
 
 fn read_f32(name: &str, t: &TensorView<'_>, expected: &[Option<usize>]) -> Result<(Vec<usize>, Vec<f32>)> {

@@ -1,6 +1,8 @@
 //! Frame-by-frame inference over a fixed ring window, without heap allocation per frame.
 
+use crate::body::MARKER_FRAME_LEN;
 use crate::error::{Error, Result};
+use crate::gaps::{GapFiller, MissingMarkers};
 use crate::model::Model;
 use crate::net::Scratch;
 
@@ -12,6 +14,11 @@ use crate::net::Scratch;
 /// degenerate markers) leaves the window exactly as it was. A non-finite prediction (input
 /// far outside the training range) is an error too, never an output; that frame stays in
 /// the window.
+///
+/// A missing marker (non-finite value) is handled by the stream's [`MissingMarkers`] policy,
+/// the model card's unless [`set_missing_markers`](Stream::set_missing_markers) says
+/// otherwise: refused, or filled by the stream's [`GapFiller`] and flagged in
+/// [`filled_markers`](Stream::filled_markers).
 #[derive(Debug, Clone)]
 pub struct Stream {
     model: Model,
@@ -25,6 +32,11 @@ pub struct Stream {
     input: Vec<f32>,
     scratch: Scratch,
     output: Vec<f32>,
+    policy: MissingMarkers,
+    filler: GapFiller,
+    /// The pushed frame with its missing marker filled (Fill policy only).
+    frame_buf: [f32; MARKER_FRAME_LEN],
+    filled_mask: u8,
 }
 
 impl Stream {
@@ -39,6 +51,10 @@ impl Stream {
             input: vec![0.0; w * nf],
             scratch: model.packed().scratch(),
             output: vec![0.0; model.n_outputs()],
+            policy: model.missing_markers(),
+            filler: GapFiller::new(),
+            frame_buf: [0.0; MARKER_FRAME_LEN],
+            filled_mask: 0,
             model,
         }
     }
@@ -53,11 +69,54 @@ impl Stream {
         self.filled
     }
 
+    /// The policy for missing markers this stream applies.
+    pub fn missing_markers(&self) -> MissingMarkers {
+        self.policy
+    }
+
+    /// Overrides the model card's missing-marker policy (e.g. to refuse frames a `"fill"`
+    /// model would fill). [`MissingMarkers::Fill`] needs a model that takes marker frames.
+    /// What the gap filler has learned is kept.
+    pub fn set_missing_markers(&mut self, policy: MissingMarkers) -> Result<()> {
+        if policy == MissingMarkers::Fill && self.model.frame_len() != MARKER_FRAME_LEN {
+            return Err(Error::BadArgument {
+                what: "missing-marker policy",
+                detail: format!("\"fill\" needs marker frames; feature set {:?} takes joint states", self.model.feature_set().name()),
+            });
+        }
+        self.policy = policy;
+        Ok(())
+    }
+
+    /// Markers filled in the last accepted frame (bit `i` = [`crate::body::MARKERS`]`[i]`; 0
+    /// when it was complete). The output for that frame rests on the filled positions.
+    pub fn filled_markers(&self) -> u8 {
+        self.filled_mask
+    }
+
+    /// The gap filler (what it has learned of this subject's markers and joint centre).
+    pub fn gap_filler(&self) -> &GapFiller {
+        &self.filler
+    }
+
     /// Pushes one frame ([`Model::frame_len`] values). Returns `None` until the window is
     /// full, then the prediction for this frame ([`Model::n_outputs`] values).
     pub fn push(&mut self, frame: &[f32]) -> Result<Option<&[f32]>> {
         let set = self.model.feature_set();
-        set.compute(frame, &mut self.incoming, 0)?;
+        if self.policy == MissingMarkers::Fill {
+            if frame.len() != MARKER_FRAME_LEN {
+                return Err(Error::FrameLength { feature_set: set.name(), found: frame.len(), expected: MARKER_FRAME_LEN });
+            }
+            // The filler learns only from frames it accepts, and refuses before changing
+            // anything, so a refused frame leaves it and the window as they were.
+            self.frame_buf.copy_from_slice(frame);
+            let mask = self.filler.fill(&mut self.frame_buf, 0)?;
+            set.compute(&self.frame_buf, &mut self.incoming, 0)?;
+            self.filled_mask = mask;
+        } else {
+            set.compute(frame, &mut self.incoming, 0)?;
+            self.filled_mask = 0;
+        }
         let nf = self.incoming.len();
         let w = self.model.window();
         self.ring[self.head * nf..(self.head + 1) * nf].copy_from_slice(&self.incoming);
@@ -80,8 +139,10 @@ impl Stream {
 
     /// Pushes `frames` (whole frames back to back, e.g. a packet from the acquisition
     /// system) and writes one output row into `out` for each frame that completes a window.
-    /// Returns the number of rows written. A block holding a missing (non-finite) value is
-    /// refused whole, before anything is pushed. A later failure (degenerate markers, a
+    /// Returns the number of rows written. Under [`MissingMarkers::Refuse`] a block holding a
+    /// missing (non-finite) value is refused whole, before anything is pushed; under
+    /// [`MissingMarkers::Fill`] each frame is filled as by [`push`](Self::push) (flags of
+    /// single frames: push them one at a time). A later failure (degenerate markers, a
     /// non-finite prediction) stops at that frame with its error (numbered within `frames`);
     /// the frames before it stay pushed. Does not allocate on success.
     pub fn push_many(&mut self, frames: &[f32], out: &mut [f32]) -> Result<usize> {
@@ -93,7 +154,7 @@ impl Stream {
             });
         }
         // Refuse a block with a missing value before pushing any of it.
-        if let Some(i) = frames.iter().position(|v| !v.is_finite()) {
+        if let Some(i) = frames.iter().position(|v| !v.is_finite()).filter(|_| self.policy == MissingMarkers::Refuse) {
             return Err(Error::NonFiniteInput {
                 frame: i / fl,
                 field: self.model.feature_set().frame_names()[i % fl].clone(),
@@ -132,7 +193,8 @@ impl Stream {
         &self.output
     }
 
-    /// Forgets every frame held (e.g. after a gap in the recording).
+    /// Forgets every frame held (e.g. after a gap in the recording). The gap filler keeps
+    /// what it learned of the subject; a new subject needs a new stream.
     pub fn reset(&mut self) {
         self.head = 0;
         self.filled = 0;

@@ -32,8 +32,12 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
+/// The counter is global: tests that read it take turns.
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 #[test]
 fn push_never_allocates() {
+    let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let cases: [(FeatureSet, &[usize]); 5] = [
         (FeatureSet::Markers, &[300, 300]),
         (FeatureSet::Basis, &[240, 240]),
@@ -59,4 +63,27 @@ fn push_never_allocates() {
         assert_eq!(after - before, 0, "{set:?} {hidden:?}: {} allocations in 200 pushes", after - before);
         assert_eq!(produced, 200 - 2 * 4, "{set:?}: predictions once each window (re)filled");
     }
+}
+
+#[test]
+fn filling_a_missing_marker_never_allocates() {
+    let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let model = random_model(FeatureSet::Angles, 5, &[64, 64], 3, 5);
+    let mut frames = random_frames(FeatureSet::Angles, 300, 6);
+    let mut stream = model.stream();
+    stream.set_missing_markers(ikid::MissingMarkers::Fill).expect("marker model");
+    // Every third frame after the filler has calibrated loses one marker, in turn.
+    for (i, frame) in frames.chunks_exact_mut(18).enumerate().skip(100).step_by(3) {
+        let gone = i % 6;
+        frame[3 * gone..3 * gone + 3].fill(f32::NAN);
+    }
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let mut filled = 0;
+    for frame in frames.chunks_exact(18) {
+        stream.push(frame).expect("one missing marker is filled");
+        filled += usize::from(stream.filled_markers() != 0);
+    }
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    assert_eq!(after - before, 0, "{} allocations in 300 pushes with fills", after - before);
+    assert_eq!(filled, 200 / 3 + 1);
 }

@@ -1,0 +1,92 @@
+//! The missing-marker policy end to end: the model card's field, the stream, batch prediction.
+
+use ikid::testing::{random_frames, random_model};
+use ikid::{Error, FeatureSet, MissingMarkers, Model};
+
+fn with_policy(model: &Model, policy: &str) -> ikid::Result<Model> {
+    let mut card = model.card().clone();
+    card.missing_markers = policy.into();
+    Model::from_parts(card, model.mlp().clone())
+}
+
+/// 400 frames; from frame 100 on, every fourth frame loses one marker (in turn).
+fn occluded_frames() -> (Vec<f32>, Vec<usize>) {
+    let mut frames = random_frames(FeatureSet::Angles, 400, 11);
+    let mut hit = vec![];
+    for (i, frame) in frames.chunks_exact_mut(18).enumerate().skip(100).step_by(4) {
+        frame[3 * (i % 6)..3 * (i % 6) + 3].fill(f32::NAN);
+        hit.push(i);
+    }
+    (frames, hit)
+}
+
+#[test]
+fn the_card_says_the_policy_and_the_loader_checks_it() {
+    let base = random_model(FeatureSet::Angles, 5, &[16], 3, 1);
+    assert_eq!(base.missing_markers(), MissingMarkers::Refuse, "absent field = refuse");
+    let fill = with_policy(&base, "fill").unwrap();
+    let reloaded = Model::from_bytes(&fill.to_bytes()).unwrap();
+    assert_eq!(reloaded.missing_markers(), MissingMarkers::Fill);
+    assert_eq!(reloaded.stream().missing_markers(), MissingMarkers::Fill);
+
+    let err = with_policy(&base, "guess").unwrap_err().to_string();
+    assert!(err.contains("missing_markers") && err.contains("guess") && err.contains("fill"), "{err}");
+    let id = random_model(FeatureSet::JointState, 5, &[16], 3, 1);
+    let err = with_policy(&id, "fill").unwrap_err().to_string();
+    assert!(err.contains("missing_markers") && err.contains("joint_state"), "{err}");
+    let err = id.stream().set_missing_markers(MissingMarkers::Fill).unwrap_err().to_string();
+    assert!(err.contains("joint_state"), "{err}");
+}
+
+#[test]
+fn a_fill_stream_fills_flags_and_equals_batch_prediction() {
+    let model = with_policy(&random_model(FeatureSet::Angles, 5, &[32, 32], 3, 2), "fill").unwrap();
+    let (frames, hit) = occluded_frames();
+    let mut stream = model.stream();
+    let mut streamed = vec![];
+    for (i, frame) in frames.chunks_exact(18).enumerate() {
+        if let Some(out) = stream.push(frame).unwrap_or_else(|e| panic!("frame {i}: {e}")) {
+            streamed.extend_from_slice(out);
+        }
+        let expect_mask = if hit.contains(&i) { 1u8 << (i % 6) } else { 0 };
+        assert_eq!(stream.filled_markers(), expect_mask, "frame {i}");
+    }
+    let mut batch = vec![0f32; model.n_predictions(400) * 3];
+    model.predict(&frames, &mut batch).unwrap();
+    assert_eq!(streamed, batch, "stream and batch must agree bit for bit");
+    // push_many fills too, and agrees.
+    let mut many = vec![0f32; batch.len()];
+    let rows = model.stream().push_many(&frames, &mut many).unwrap();
+    assert_eq!((rows, &many), (396, &batch));
+}
+
+#[test]
+fn refuse_policy_refuses_and_unfillable_frames_leave_the_stream_as_it_was() {
+    let fill = with_policy(&random_model(FeatureSet::Angles, 5, &[32], 3, 3), "fill").unwrap();
+    let (frames, _) = occluded_frames();
+    let first_gap = &frames[100 * 18..101 * 18];
+
+    let mut refusing = fill.stream();
+    refusing.set_missing_markers(MissingMarkers::Refuse).unwrap();
+    for frame in frames[..100 * 18].chunks_exact(18) {
+        refusing.push(frame).unwrap();
+    }
+    assert!(matches!(refusing.push(first_gap), Err(Error::NonFiniteInput { .. })));
+
+    let mut stream = fill.stream();
+    for frame in frames[..100 * 18].chunks_exact(18) {
+        stream.push(frame).unwrap();
+    }
+    let mut two_gone = frames[100 * 18..101 * 18].to_vec();
+    two_gone[..6].fill(f32::NAN); // RSP and USP
+    let err = stream.push(&two_gone).unwrap_err().to_string();
+    assert!(err.contains("RSP, USP") && err.contains("only one"), "{err}");
+    // The refused frame changed nothing: the next frames give what a stream that never saw it gives.
+    let mut clean = fill.stream();
+    for frame in frames[..100 * 18].chunks_exact(18) {
+        clean.push(frame).unwrap();
+    }
+    for frame in frames[100 * 18..120 * 18].chunks_exact(18) {
+        assert_eq!(stream.push(frame).unwrap().map(<[f32]>::to_vec), clean.push(frame).unwrap().map(<[f32]>::to_vec));
+    }
+}
