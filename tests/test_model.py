@@ -74,6 +74,41 @@ def test_nan_is_an_error_naming_the_marker_never_a_silent_output(model, frames):
     np.testing.assert_array_equal(stream.push(frames[6]), ref.push(frames[6]))
 
 
+def test_a_fill_stream_fills_one_missing_marker_and_flags_it(model):
+    trial = ikid.simulate(seed=21, duration=4.0)
+    frames = trial.markers.astype(np.float32)
+    gone = frames.copy()
+    gone[3000:3100, 15:18] = np.nan  # MCB hidden for 0.1 s after 3 s of motion
+    with pytest.raises(ikid.InputError, match="MCB"):
+        model.stream().push_many(gone)  # the card says "refuse"
+    stream = model.stream(missing_markers="fill")
+    assert stream.missing_markers == "fill" and model.missing_markers == "refuse"
+    out = stream.push_many(gone[:3000])
+    assert stream.filled_markers == []
+    row = stream.push(gone[3000])
+    assert stream.filled_markers == ["MCB"]
+    # Clean markers: the filled frame gives (nearly) what the complete frame gives.
+    ref = model.stream()
+    ref.push_many(frames[:3000])
+    np.testing.assert_allclose(row, ref.push(frames[3000]), atol=1e-3 * np.abs(out).max())
+    filled, mask = ikid.fill_gaps(gone)
+    assert mask[3000:3100].tolist() == [32] * 100 and not mask[:3000].any() and not mask[3100:].any()
+    assert np.abs(filled - frames).max() < 1e-4
+    # What cannot be filled (two markers of a segment) raises, or with "keep" stays missing.
+    two = gone.copy()
+    two[3200, 9:15] = np.nan
+    with pytest.raises(ikid.InputError, match=r"frame 3200: missing marker\(s\) MC2, MC5 not filled: only one"):
+        ikid.fill_gaps(two)
+    kept, mask = ikid.fill_gaps(two, unfillable="keep")
+    assert np.isnan(kept[3200, 9:15]).all() and mask[3200] == 0 and mask[3050] == 32
+    with pytest.raises(ikid.InputError, match="guess"):
+        model.stream(missing_markers="guess")
+    with pytest.raises(ikid.InputError, match="raise.*keep"):
+        ikid.fill_gaps(two, unfillable="skip")
+    with pytest.raises(ikid.InputError, match="joint_state"):
+        make_model("joint_state").stream(missing_markers="fill")
+
+
 def test_reset_and_filled(model, frames):
     stream = model.stream()
     for f in frames[:3]:

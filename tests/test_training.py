@@ -80,6 +80,46 @@ noise_levels = [0.0, 0.01]
     np.testing.assert_allclose(got, model.predict(rec.markers), rtol=1e-5, atol=1e-6)
 
 
+def test_occlusion_bursts_hide_one_marker_at_a_time_after_the_warmup():
+    rec = D.simulate_one({"name": "o", "protocol": "random", "seed": 13, "duration": 8.0})
+    occluded = D.add_occlusion(rec, 2.0, 0.02, 0.3, seed=3)
+    missing = np.isnan(occluded.markers).reshape(len(rec), 6, 3).any(axis=2)
+    assert missing[:3000].sum() == 0, "no burst in the first 3 s (the filler calibrates there)"
+    assert missing.sum(axis=1).max() == 1, "never two markers at once"
+    assert 0.05 < missing.any(axis=1).mean() < 0.8
+    filled, mask = ikid.fill_gaps(occluded.markers)
+    assert np.array_equal(mask != 0, missing.any(axis=1))
+    assert np.abs(filled - rec.markers).max() < 1e-4  # clean: back within 0.1 mm
+
+
+def test_an_occlusion_config_trains_a_fill_model(tmp_path):
+    cfg_path = tmp_path / "occ.toml"
+    cfg_path.write_text("""
+[model]
+name = "occ-ik"
+task = "ik"
+feature_set = "angles"
+window = 5
+hidden = [16]
+missing_markers = "fill"
+[data]
+seeds = [14]
+duration = 8.0
+shoulders_deg = [0.0]
+length_scales = [1.0]
+[train]
+max_minutes = 0.05
+samples_per_epoch = 2000
+noise_levels = [0.0, 0.01]
+occlusion_bursts_per_s = 2.0
+""")
+    model, _ = run(load_config(cfg_path), tmp_path, progress=False, onnx=False)
+    assert model.missing_markers == "fill" and model.card["missing_markers"] == "fill"
+    assert model.card["provenance"]["train"]["occlusion_bursts_per_s"] == 2.0
+    rec = D.add_occlusion(D.simulate_one({"name": "t", "protocol": "random", "seed": 15, "duration": 5.0}), 2.0, 0.02, 0.3, seed=4)
+    assert np.isfinite(model.predict(rec.markers)).all()
+
+
 def test_bad_configs_are_refused_by_name(tmp_path):
     p = tmp_path / "bad.toml"
     p.write_text('[model]\nname="x"\ntask="ik"\n[data]\n[train]\nlearning_rate=1\n')
@@ -87,6 +127,12 @@ def test_bad_configs_are_refused_by_name(tmp_path):
         load_config(p)
     p.write_text('[model]\nname="x"\ntask="fk"\n[data]\n')
     with pytest.raises(ValueError, match="task 'fk'"):
+        load_config(p)
+    p.write_text('[model]\nname="x"\ntask="ik"\nmissing_markers="guess"\n[data]\n')
+    with pytest.raises(ValueError, match="missing_markers 'guess'"):
+        load_config(p)
+    p.write_text('[model]\nname="x"\ntask="ik"\n[data]\n[train]\nocclusion_bursts_per_s=1.0\n')
+    with pytest.raises(ValueError, match="needs \\[model\\] missing_markers = 'fill'"):
         load_config(p)
 
 
@@ -139,6 +185,34 @@ def test_shipped_ik_meets_its_targets_on_a_fresh_trial(level, bound):
     recs = noisy([fresh(), fresh(shoulder=-30.0, scale=1.15)], level)
     err, _ = errors(ik, recs, "all")
     assert np.mean(err**2) <= bound
+
+
+@pytest.mark.parametrize("level", [0.0, 0.01, 0.05])
+def test_shipped_ik_with_one_marker_missing_stays_within_2x(level):
+    # Each marker in turn is missing for the second half of fresh trials; the shipped model's
+    # stream fills it (card policy "fill") and flags it. Error ≤ 2x the complete-marker error
+    # on the same frames.
+    ik = ikid.load("wrist-ik")
+    assert ik.missing_markers == "fill"
+    recs = noisy([fresh(), fresh(shoulder=-30.0, scale=1.15)], level)
+
+    def second_half_mse(rs: list[D.Recording]) -> float:
+        # Row i of the errors is frame i + window - 1.
+        return float(np.mean(np.concatenate([errors(ik, [r], "all")[0][len(r) // 2 - ik.window + 1 :] for r in rs]) ** 2))
+
+    base = second_half_mse(recs)
+    for k, name in enumerate(ikid.marker_names()):
+        gone = []
+        for r in recs:
+            m = r.markers.copy()
+            m[len(m) // 2 :, 3 * k : 3 * k + 3] = np.nan
+            gone.append(r.with_markers(m))
+        mse = second_half_mse(gone)
+        assert mse <= 2 * base, f"{name} missing at {level:.0%}: {mse:.3g} vs {base:.3g}"
+    stream = ik.stream()
+    stream.push_many(recs[0].markers[: len(recs[0]) // 2])
+    stream.push(gone[0].markers[len(gone[0]) // 2])
+    assert stream.filled_markers == [ikid.marker_names()[-1]]
 
 
 def test_shipped_torque_models_meet_their_targets_on_a_fresh_trial():

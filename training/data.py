@@ -155,12 +155,38 @@ def add_noise(rec: Recording, kind: str, level: float, seed: int) -> Recording:
     return rec.with_markers(markers, noise={"kind": kind, "level": level, "seed": seed})
 
 
+def add_occlusion(rec: Recording, bursts_per_s: float, min_s: float, max_s: float, seed: int, warmup_s: float = 3.0) -> Recording:
+    """``rec`` with bursts in which one marker (drawn per burst) is missing (NaN), never two at
+    once, none in the first ``warmup_s`` (the gap filler learns the joint centre there)."""
+    rate = float(rec.meta.get("rate_hz", 1000.0))
+    rng = np.random.default_rng(seed)
+    markers = np.array(rec.markers, dtype=np.float64)
+    n, start = len(markers), int(warmup_s * rate)
+    gap_mean = rate / bursts_per_s if bursts_per_s > 0 else np.inf
+    f = start + int(rng.exponential(gap_mean))
+    while f < n:
+        length = max(1, int(round(rng.uniform(min_s, max_s) * rate)))
+        k = int(rng.integers(len(ikid.MARKERS)))
+        markers[f : f + length, 3 * k : 3 * k + 3] = np.nan
+        f += length + 1 + int(rng.exponential(gap_mean))
+    # Bursts the gap filler cannot fill yet (joint centre not located) are put back: a stream
+    # would refuse those frames, so they teach nothing.
+    _, filled = ikid.fill_gaps(markers, unfillable="keep")
+    unfillable = np.isnan(markers).any(axis=1) & (filled == 0)
+    markers[unfillable] = rec.markers[unfillable]
+    return rec.with_markers(markers, occlusion={"bursts_per_s": bursts_per_s, "s": [min_s, max_s], "seed": seed})
+
+
 # --- windows -----------------------------------------------------------------------------------
 
 
 def features(rec: Recording, task: str, feature_set: str) -> np.ndarray:
-    """Per-frame features ``(n, F)`` float32, computed by the core."""
-    return ikid.compute_features(rec.frames(feature_set), feature_set)
+    """Per-frame features ``(n, F)`` float32, computed by the core; missing markers are
+    first filled by the core's gap filler, as a ``"fill"`` stream does."""
+    frames = rec.frames(feature_set)
+    if feature_set != "joint_state" and np.isnan(frames).any():
+        frames = ikid.fill_gaps(frames)[0]
+    return ikid.compute_features(frames, feature_set)
 
 
 def target(rec: Recording, task: str) -> np.ndarray:

@@ -66,6 +66,7 @@ class ModelSpec:
     feature_set: str
     window: int = 5
     frame_rate_hz: float = 1000.0
+    missing_markers: str = "refuse"  # or "fill": streams fill one missing marker (ikid.fill_gaps)
     output_names: Sequence[str] = field(default_factory=ikid.coordinate_names)
     output_units: Sequence[str] | None = None
     scaling: Mapping[str, str] = field(default_factory=dict)
@@ -109,6 +110,7 @@ def card_for(spec: ModelSpec, activations: Sequence[str]) -> dict[str, Any]:
         "predicted_frame": "newest",
         "frame_rate_hz": spec.frame_rate_hz,
         "outputs": [{"name": n, "unit": u} for n, u in zip(spec.output_names, units, strict=True)],
+        "missing_markers": spec.missing_markers,
         "activations": list(activations),
         "scaling": dict(spec.scaling),
         "provenance": dict(spec.provenance),

@@ -43,6 +43,10 @@ TRAIN_DEFAULTS: dict[str, Any] = {
     "lr_patience": 8,  # epochs without improvement before the learning rate halves
     "noise_kind": "uniform",
     "noise_levels": [0.0],  # each recording gets a level drawn from these, fresh every epoch
+    # Occlusion: bursts (per second of recording) in which one marker is missing, filled by the
+    # core's gap filler exactly as a "fill" stream does; needs [model] missing_markers = "fill".
+    "occlusion_bursts_per_s": 0.0,
+    "occlusion_s": [0.02, 0.5],
     "threads": 2,
 }
 
@@ -60,6 +64,11 @@ def load_config(path: str | Path) -> dict[str, Any]:
     task = cfg["model"].get("task")
     if task not in D.TASKS:
         raise ValueError(f"{path}: [model] task {task!r} is not one of {list(D.TASKS)}")
+    policy = cfg["model"].setdefault("missing_markers", "refuse")
+    if policy not in ("refuse", "fill"):
+        raise ValueError(f"{path}: [model] missing_markers {policy!r} is not 'refuse' or 'fill'")
+    if cfg["train"]["occlusion_bursts_per_s"] > 0 and policy != "fill":
+        raise ValueError(f"{path}: [train] occlusion_bursts_per_s needs [model] missing_markers = 'fill' (occluded frames are filled)")
     return cfg
 
 
@@ -104,8 +113,13 @@ class Trained:
 
 
 def _noisy(recs: list[D.Recording], tcfg: dict[str, Any], rng: np.random.Generator) -> list[D.Recording]:
+    """Fresh noise (a level drawn per recording) and, if configured, occlusion bursts."""
     levels = tcfg["noise_levels"]
-    return [D.add_noise(r, tcfg["noise_kind"], float(rng.choice(levels)), int(rng.integers(2**62))) for r in recs]
+    out = [D.add_noise(r, tcfg["noise_kind"], float(rng.choice(levels)), int(rng.integers(2**62))) for r in recs]
+    if tcfg["occlusion_bursts_per_s"] > 0:
+        lo, hi = tcfg["occlusion_s"]
+        out = [D.add_occlusion(r, tcfg["occlusion_bursts_per_s"], lo, hi, int(rng.integers(2**62))) for r in out]
+    return out
 
 
 def train(cfg: dict[str, Any], recs: list[D.Recording], log_path: Path | None = None, progress: bool = True) -> Trained:
@@ -183,6 +197,7 @@ def spec_for(cfg: dict[str, Any], recs: list[D.Recording], trained: Trained, met
         feature_set=m["feature_set"],
         window=int(m.get("window", 5)),
         frame_rate_hz=float(recs[0].meta.get("rate_hz", 1000.0)),
+        missing_markers=m["missing_markers"],
         output_names=ikid.coordinate_names(),
         scaling={"input": "minmax(-1,1) on clean training windows", "output": "minmax(-1,1) on training targets"},
         provenance={

@@ -48,14 +48,21 @@ type FilledFrames<'py> = (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray1<u8>>);
 
 /// Runs a fresh gap filler (what a `"fill"` stream does) over a recording `(n, 18)`: the
 /// filled frames (float32) and per frame the bit mask of markers filled (uint8, bit `i` =
-/// marker `i`). Raises on the first frame it cannot fill.
+/// marker `i`). A frame it cannot fill raises (`unfillable="raise"`) or stays missing with
+/// mask 0 (`unfillable="keep"`).
 #[pyfunction]
-fn fill_gaps<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<FilledFrames<'py>> {
+#[pyo3(signature = (frames, unfillable = "raise"))]
+fn fill_gaps<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>, unfillable: &str) -> PyResult<FilledFrames<'py>> {
+    let keep = match unfillable {
+        "raise" => false,
+        "keep" => true,
+        other => return Err(input(format!("unfillable: {other:?} is not \"raise\" or \"keep\""))),
+    };
     with_floats(frames, "frames", 2, |values, shape| {
         if shape[1] != ikid::body::MARKER_FRAME_LEN {
             return Err(input(format!("frames: {} columns, marker frames have {}", shape[1], ikid::body::MARKER_FRAME_LEN)));
         }
-        let (filled, masks) = py.detach(|| ikid::model::fill_gaps(values)).py_err()?;
+        let (filled, masks) = py.detach(|| ikid::model::fill_gaps(values, keep)).py_err()?;
         Ok((filled.into_pyarray(py).reshape([shape[0], shape[1]])?, masks.into_pyarray(py)))
     })
 }

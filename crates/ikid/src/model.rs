@@ -383,7 +383,7 @@ impl Model {
         }
         let filled;
         let frames = if self.missing_markers() == MissingMarkers::Fill && frames.iter().any(|v| !v.is_finite()) {
-            filled = fill_gaps(frames)?.0;
+            filled = fill_gaps(frames, false)?.0;
             &filled[..]
         } else {
             frames
@@ -431,9 +431,10 @@ impl Model {
 }
 
 /// Runs a fresh [`GapFiller`] over a whole recording of marker frames: the frames with each
-/// fillable missing marker filled, and per frame the bit mask of markers filled. Stops at
-/// the first frame that cannot be filled, with its error.
-pub fn fill_gaps(frames: &[f32]) -> Result<(Vec<f32>, Vec<u8>)> {
+/// fillable missing marker filled, and per frame the bit mask of markers filled. A frame that
+/// cannot be filled stops the run with its error, or with `keep_unfillable` stays as it was
+/// (still missing, mask 0).
+pub fn fill_gaps(frames: &[f32], keep_unfillable: bool) -> Result<(Vec<f32>, Vec<u8>)> {
     if !frames.len().is_multiple_of(MARKER_FRAME_LEN) {
         return Err(Error::BadArgument {
             what: "frames",
@@ -442,7 +443,14 @@ pub fn fill_gaps(frames: &[f32]) -> Result<(Vec<f32>, Vec<u8>)> {
     }
     let mut filled = frames.to_vec();
     let mut filler = GapFiller::new();
-    let masks = filled.chunks_exact_mut(MARKER_FRAME_LEN).enumerate().map(|(i, f)| filler.fill(f, i)).collect::<Result<_>>()?;
+    let masks = filled
+        .chunks_exact_mut(MARKER_FRAME_LEN)
+        .enumerate()
+        .map(|(i, f)| match filler.fill(f, i) {
+            Err(Error::MissingMarkers { .. }) if keep_unfillable => Ok(0),
+            other => other,
+        })
+        .collect::<Result<_>>()?;
     Ok((filled, masks))
 }
 
