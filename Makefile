@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo data models report test test-rust test-python test-c lint bench clean capi c header check-header install
+.PHONY: all venv wheel demo data models report test test-rust test-python test-c lint bench bench-peers fuzz clean capi c header check-header install
 
 all: wheel
 
@@ -55,7 +55,7 @@ models: wheel
 report: wheel
 	$(PY) -m training.report
 
-test: test-rust wheel c test-python check-header lint
+test: test-rust wheel c test-python check-header lint fuzz
 	@echo "make test: all suites passed"
 
 test-rust:
@@ -102,11 +102,33 @@ install: capi
 lint:
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 
+# cargo-fuzz on the model loader for FUZZ_SECONDS (bounded; part of `make test`). Starts from
+# the committed seeds (valid small models) and keeps its corpus in fuzz/corpus (ignored).
+# cargo-fuzz needs the nightly toolchain (sanitizer flags); it is built once into .tools.
+FUZZ_SECONDS ?= 60
+CARGO_FUZZ := .tools/bin/cargo-fuzz
+$(CARGO_FUZZ):
+	$(CARGO) install cargo-fuzz --locked --root .tools
+
+fuzz: $(CARGO_FUZZ)
+	mkdir -p fuzz/corpus/model_file
+	cd fuzz && PATH="$(abspath .tools/bin):$$PATH" cargo +nightly fuzz run model_file corpus/model_file seeds/model_file \
+		-- -max_total_time=$(FUZZ_SECONDS) -max_len=8192 -timeout=5 -rss_limit_mb=2048 -print_final_stats=1 > corpus/last-run.log 2>&1 \
+		|| (tail -40 corpus/last-run.log; exit 1)
+	grep -E "^(Done|stat::number_of_executed_units|stat::peak_rss_mb)" fuzz/corpus/last-run.log
+	@test ! -d fuzz/artifacts/model_file || test -z "$$(ls -A fuzz/artifacts/model_file)" || (echo "fuzz: crash inputs in fuzz/artifacts/model_file"; exit 1)
+
 # Criterion benches, per-push latency distribution and the Python overhead, written to
 # docs/performance.md.
 bench: wheel c
 	$(CARGO) bench -p ikid --bench inference
 	$(PY) benches/report.py
+	$(CARGO) run --release -q -p ikid --example soak -- --pushes 10000000
+
+# ikid beside onnxruntime, torch (eager, TorchScript) and NumPy on the same networks, one run:
+# a section of docs/performance.md.
+bench-peers: wheel c
+	$(PY) benches/peers.py
 
 clean:
 	$(CARGO) clean

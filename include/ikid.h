@@ -150,6 +150,37 @@ enum ikid_status ikid_stream_push(struct ikid_stream *stream,
                                   size_t out_len,
                                   bool *ready);
 
+// `ikid_stream_push` for a frame stamped with its acquisition time `time_s` (seconds, any
+// origin): after a gap of more than 1.5 frame periods of the model's rate the window
+// restarts (outputs resume once it has refilled); time that does not increase is refused.
+//
+// # Safety
+// As `ikid_stream_push`.
+enum ikid_status ikid_stream_push_at(struct ikid_stream *stream,
+                                     double time_s,
+                                     const float *frame,
+                                     size_t frame_len,
+                                     float *out,
+                                     size_t out_len,
+                                     bool *ready);
+
+// Sets what the stream does with a missing (NaN) marker: `"refuse"` (an error, no output)
+// or `"fill"` (filled from the other markers and flagged, see
+// `ikid_stream_filled_markers`). Streams start with the model card's policy.
+//
+// # Safety
+// `stream` must be a live handle used by no other thread meanwhile; `policy` a
+// NUL-terminated string.
+enum ikid_status ikid_stream_set_missing_markers(struct ikid_stream *stream, const char *policy);
+
+// `*mask` receives the markers filled in the last accepted frame (bit `i` = marker `i` in
+// frame order; 0 when the frame was complete): the flag on an output that rests on filled
+// positions.
+//
+// # Safety
+// `stream` must be a live handle; `mask` must point to writable storage.
+enum ikid_status ikid_stream_filled_markers(const struct ikid_stream *stream, uint32_t *mask);
+
 // Pushes `n_frames` frames (`n_frames × frame_len` floats, e.g. a packet from the
 // acquisition system) and writes one row of `n_outputs` into `out` for each frame that
 // completes a window; `*rows` receives the row count. On failure (a refused frame)

@@ -54,13 +54,11 @@ def make_model(feature_set: str = "markers", window: int = 5, hidden=(32, 32), s
 
 
 def marker_frames(n: int, seed: int = 0) -> np.ndarray:
-    """Plausible marker frames: a fixed layout (metres) moved by small random motions."""
+    """Plausible marker frames: the body model's markers moved by a smooth random wrist motion
+    (rigid segments, as real markers are; the stream checks that)."""
     rng = np.random.default_rng(seed)
-    base = np.array(
-        [[0, 0.01, 0.03], [-0.01, 0.01, -0.025], [-0.025, 0.18, 0], [-0.01, -0.08, 0.025], [-0.01, -0.075, -0.025], [-0.02, -0.03, 0]]
-    )
-    frames = base[None] + 0.005 * np.cumsum(rng.normal(size=(n, 6, 3)), axis=0)
-    return frames.reshape(n, 18).astype(np.float32)
+    q = 0.4 * np.sin(np.linspace(0, 3, n)[:, None] * rng.uniform(1, 3, 3) + rng.uniform(0, 6, 3))
+    return ikid.forward_markers(q, 0.3).astype(np.float32)
 
 
 @pytest.fixture

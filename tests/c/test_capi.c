@@ -8,6 +8,7 @@
 
 #include <math.h>
 #include <pthread.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -183,9 +184,28 @@ int main(int argc, char **argv) {
     }
     CHECK(thread_mismatches == 0, "%d threads: %d mismatches", THREADS, thread_mismatches);
 
+    /* Missing-marker policy, flags and timed pushes. */
+    ikid_stream *timed = NULL;
+    CHECK(ikid_stream_new(model, &timed) == IKID_STATUS_OK, "timed stream");
+    CHECK(ikid_stream_set_missing_markers(timed, "guess") == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "guess"), "bad policy: %s", ikid_last_error());
+    CHECK(ikid_stream_set_missing_markers(timed, NULL) == IKID_STATUS_NULL_PARAMETER, "NULL policy");
+    CHECK(ikid_stream_set_missing_markers(timed, "fill") == IKID_STATUS_OK, "fill policy");
+    uint32_t mask = 99;
+    int timed_bad = 0;
+    for (size_t i = 0; i < n_frames; i++) {
+        /* 3 frames dropped after frame 9: the window restarts, outputs resume 5 frames later. */
+        double t = (double)(i < 10 ? i : i + 3) * 1e-3;
+        if (ikid_stream_push_at(timed, t, frames + i * 18, 18, out, 3, &ready) != IKID_STATUS_OK) timed_bad++;
+        if ((i >= 4 && i < 10) || i >= 14 ? !ready : ready) timed_bad++;
+    }
+    CHECK(timed_bad == 0 && ikid_stream_filled_markers(timed, &mask) == IKID_STATUS_OK && mask == 0, "timed pushes: %d bad", timed_bad);
+    CHECK(ikid_stream_push_at(timed, 0.0, frames, 18, out, 3, &ready) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "does not follow"), "time backwards");
+    ikid_stream_free(timed);
+
     /* The stream outlives its model handle; freeing NULL is a no-op. */
     ikid_model_free(model);
-    CHECK(ikid_stream_push(stream, frames, 18, out, 3, &ready) == IKID_STATUS_OK, "stream after model free");
+    /* (the last frame again: the stream refuses markers that jump, e.g. back to frame 0) */
+    CHECK(ikid_stream_push(stream, frames + (n_frames - 1) * 18, 18, out, 3, &ready) == IKID_STATUS_OK, "stream after model free");
     ikid_stream_free(stream);
     ikid_stream_free(NULL);
     ikid_model_free(NULL);

@@ -42,9 +42,12 @@ impl From<Error> for Failure {
     fn from(e: Error) -> Self {
         let status = match &e {
             Error::Io { .. } => ikid_status::Io,
-            Error::FrameLength { .. } | Error::NonFiniteInput { .. } | Error::NonFiniteOutput { .. } | Error::DegenerateSegment { .. } => {
-                ikid_status::Input
-            }
+            Error::FrameLength { .. }
+            | Error::NonFiniteInput { .. }
+            | Error::NonFiniteOutput { .. }
+            | Error::DegenerateSegment { .. }
+            | Error::MissingMarkers { .. }
+            | Error::OutlierMarker { .. } => ikid_status::Input,
             Error::BadArgument { .. } => ikid_status::InvalidArgument,
             _ => ikid_status::ModelFile,
         };

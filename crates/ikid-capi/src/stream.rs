@@ -41,22 +41,91 @@ pub unsafe extern "C" fn ikid_stream_push(
     out_len: usize,
     ready: *mut bool,
 ) -> ikid_status {
+    guard(|| unsafe { push_one(stream, None, frame, frame_len, out, out_len, ready) })
+}
+
+/// `ikid_stream_push` for a frame stamped with its acquisition time `time_s` (seconds, any
+/// origin): after a gap of more than 1.5 frame periods of the model's rate the window
+/// restarts (outputs resume once it has refilled); time that does not increase is refused.
+///
+/// # Safety
+/// As `ikid_stream_push`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_push_at(
+    stream: *mut ikid_stream,
+    time_s: f64,
+    frame: *const f32,
+    frame_len: usize,
+    out: *mut f32,
+    out_len: usize,
+    ready: *mut bool,
+) -> ikid_status {
+    guard(|| unsafe { push_one(stream, Some(time_s), frame, frame_len, out, out_len, ready) })
+}
+
+/// # Safety
+/// As `ikid_stream_push`.
+unsafe fn push_one(
+    stream: *mut ikid_stream,
+    time_s: Option<f64>,
+    frame: *const f32,
+    frame_len: usize,
+    out: *mut f32,
+    out_len: usize,
+    ready: *mut bool,
+) -> Result<(), Failure> {
+    let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
+    let frame = unsafe { slice(frame, frame_len, "frame") }?;
+    let ready = unsafe { non_null_mut(ready, "ready") }?;
+    let n_out = s.model().n_outputs();
+    if out_len < n_out {
+        return Err(Failure::new(ikid_status::InvalidArgument, format!("out has room for {out_len} floats, the model gives {n_out}")));
+    }
+    let out = unsafe { slice_mut(out, n_out, "out") }?;
+    let pushed = match time_s {
+        None => s.push(frame)?,
+        Some(t) => s.push_at(t, frame)?,
+    };
+    match pushed {
+        Some(prediction) => {
+            out.copy_from_slice(prediction);
+            *ready = true;
+        }
+        None => *ready = false,
+    }
+    Ok(())
+}
+
+/// Sets what the stream does with a missing (NaN) marker: `"refuse"` (an error, no output)
+/// or `"fill"` (filled from the other markers and flagged, see
+/// `ikid_stream_filled_markers`). Streams start with the model card's policy.
+///
+/// # Safety
+/// `stream` must be a live handle used by no other thread meanwhile; `policy` a
+/// NUL-terminated string.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_set_missing_markers(stream: *mut ikid_stream, policy: *const std::ffi::c_char) -> ikid_status {
     guard(|| {
         let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
-        let frame = unsafe { slice(frame, frame_len, "frame") }?;
-        let ready = unsafe { non_null_mut(ready, "ready") }?;
-        let n_out = s.model().n_outputs();
-        if out_len < n_out {
-            return Err(Failure::new(ikid_status::InvalidArgument, format!("out has room for {out_len} floats, the model gives {n_out}")));
-        }
-        let out = unsafe { slice_mut(out, n_out, "out") }?;
-        match s.push(frame)? {
-            Some(prediction) => {
-                out.copy_from_slice(prediction);
-                *ready = true;
-            }
-            None => *ready = false,
-        }
+        let policy = unsafe { non_null(policy, "policy") }?;
+        // SAFETY: non-null and NUL-terminated (caller's contract).
+        let name = unsafe { std::ffi::CStr::from_ptr(policy) }.to_str().map_err(|_| Failure::new(ikid_status::InvalidArgument, "policy is not UTF-8"))?;
+        s.set_missing_markers(ikid_core::MissingMarkers::from_name(name)?)?;
+        Ok(())
+    })
+}
+
+/// `*mask` receives the markers filled in the last accepted frame (bit `i` = marker `i` in
+/// frame order; 0 when the frame was complete): the flag on an output that rests on filled
+/// positions.
+///
+/// # Safety
+/// `stream` must be a live handle; `mask` must point to writable storage.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_filled_markers(stream: *const ikid_stream, mask: *mut u32) -> ikid_status {
+    guard(|| {
+        let s = &unsafe { non_null(stream, "stream") }?.stream;
+        *unsafe { non_null_mut(mask, "mask") }? = u32::from(s.filled_markers());
         Ok(())
     })
 }

@@ -30,6 +30,7 @@ pub fn to_py(err: Error) -> PyErr {
         | Error::NonFiniteOutput { .. }
         | Error::DegenerateSegment { .. }
         | Error::MissingMarkers { .. }
+        | Error::OutlierMarker { .. }
         | Error::BadArgument { .. } => {
             InputError::new_err(msg)
         }

@@ -100,8 +100,10 @@ impl Model {
     }
 
     /// Predictions for a whole recording `(n, frame_len)`: `(n - window + 1, n_outputs)`,
-    /// row `i` for frame `i + window - 1`. Releases the GIL.
-    fn predict<'py>(&self, py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    /// row `i` for frame `i + window - 1`. Runs on `threads` threads (default: all cores;
+    /// every count gives bit-identical results). Releases the GIL.
+    #[pyo3(signature = (frames, threads = None))]
+    fn predict<'py>(&self, py: Python<'py>, frames: &Bound<'py, PyAny>, threads: Option<usize>) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let (fl, no) = (self.inner.frame_len(), self.inner.n_outputs());
         with_floats(frames, "frames", 2, |values, shape| {
             if shape[1] != fl {
@@ -113,7 +115,11 @@ impl Model {
             }
             let rows = self.inner.n_predictions(shape[0]);
             let mut out = vec![0f32; rows * no];
-            py.detach(|| self.inner.predict(values, &mut out)).py_err()?;
+            py.detach(|| match threads {
+                None => self.inner.predict(values, &mut out),
+                Some(t) => self.inner.predict_with_threads(values, &mut out, t.max(1)),
+            })
+            .py_err()?;
             out.into_pyarray(py).reshape([rows, no])
         })
     }
@@ -170,15 +176,28 @@ pub struct Stream {
 impl Stream {
     /// Pushes one frame; returns `None` until the window is full, then the prediction for
     /// this frame (float32 array of `n_outputs`). A refused frame leaves the window as it was.
-    /// Holds the GIL (a push takes microseconds); `push_many` releases it.
-    fn push<'py>(&mut self, py: Python<'py>, frame: &Bound<'py, PyAny>) -> PyResult<Option<Bound<'py, PyArray1<f32>>>> {
+    /// With `time` (seconds), a gap of more than 1.5 frame periods restarts the window and
+    /// time that does not increase is refused. Holds the GIL (a push takes microseconds);
+    /// `push_many` releases it.
+    #[pyo3(signature = (frame, time = None))]
+    fn push<'py>(&mut self, py: Python<'py>, frame: &Bound<'py, PyAny>, time: Option<f64>) -> PyResult<Option<Bound<'py, PyArray1<f32>>>> {
         let stream = &mut self.inner;
         with_frame(frame, |values| {
             // The GIL stays held: releasing and re-taking it costs more than the few
             // microseconds of work (measured: +0.3–0.8 µs per push on the thesis net).
-            let out = stream.push(values).map(|o| o.is_some()).py_err()?;
-            Ok(out.then(|| PyArray1::from_slice(py, stream.output())))
+            let out = match time {
+                None => stream.push(values),
+                Some(t) => stream.push_at(t, values),
+            };
+            let produced = out.map(|o| o.is_some()).py_err()?;
+            Ok(produced.then(|| PyArray1::from_slice(py, stream.output())))
         })
+    }
+
+    /// Times `push(..., time=)` restarted the window after a gap in time.
+    #[getter]
+    fn gap_restarts(&self) -> u64 {
+        self.inner.gap_restarts()
     }
 
     /// Pushes a block of frames `(n, frame_len)`; returns the predictions of the frames that

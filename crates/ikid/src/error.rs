@@ -109,6 +109,17 @@ pub enum Error {
         /// Why they could not be filled.
         reason: &'static str,
     },
+    /// A marker is far from where its segment's other markers put it (it jumped, or two
+    /// labels swapped), and the stream's policy could not replace it.
+    #[error("frame {frame}: marker(s) {markers} inconsistent with the rigid segment ({detail}); no output computed")]
+    OutlierMarker {
+        /// Index of the frame within the call.
+        frame: usize,
+        /// Comma-separated names of the suspect markers.
+        markers: String,
+        /// The distance that gave it away.
+        detail: String,
+    },
     /// A segment's three markers are (nearly) collinear or coincident, so no frame can be fitted.
     #[error("frame {frame}: the {segment} markers are collinear or coincident; cannot build a segment frame")]
     DegenerateSegment {
@@ -143,6 +154,7 @@ impl Error {
             Error::NonFiniteInput { field, value, .. } => Error::NonFiniteInput { frame, field, value },
             Error::DegenerateSegment { segment, .. } => Error::DegenerateSegment { frame, segment },
             Error::MissingMarkers { markers, reason, .. } => Error::MissingMarkers { frame, markers, reason },
+            Error::OutlierMarker { markers, detail, .. } => Error::OutlierMarker { frame, markers, detail },
             Error::NonFiniteOutput { value, .. } => Error::NonFiniteOutput { frame, value },
             other => other,
         }

@@ -94,12 +94,27 @@ pub struct GapFiller {
     centre_is_current: bool,
     /// The last accepted frame (complete or filled): the prior for the next fill.
     last: Option<[f32; MARKER_FRAME_LEN]>,
-    /// Per segment: mean squared frame-to-frame displacement of its marker centroid (m²),
-    /// over consecutive complete frames.
+    /// Per segment: sum of squared frame-to-frame displacements of its marker centroid
+    /// (m²), and of its markers (mean over the three), over consecutive complete frames.
     motion_sum: [f64; 2],
+    marker_motion_sum: [f64; 2],
     motion_frames: u64,
     last_complete_origin: Option<[Vector3<f64>; 2]>,
+    /// Per marker pair within a segment ([`PAIRS`]): running mean and sum of squared
+    /// deviations (Welford) of their distance, over complete frames.
+    pair_mean: [f64; 6],
+    pair_m2: [f64; 6],
 }
+
+/// Marker pairs within each segment (indices into [`MARKERS`]): their distances are fixed
+/// by the rigid body, so a marker that jumps or swaps labels changes them.
+pub const PAIRS: [(usize, usize); 6] = [(0, 1), (0, 2), (1, 2), (3, 4), (3, 5), (4, 5)];
+/// A pair distance this many standard deviations (of the complete frames seen) from its
+/// mean, or a marker moving this many times its segment's RMS frame-to-frame displacement,
+/// marks an outlier...
+pub const OUTLIER_SIGMAS: f64 = 8.0;
+/// ...by at least this much (metres): noise-free recordings have σ ≈ 0.
+pub const OUTLIER_FLOOR: f64 = 0.005;
 
 impl Default for GapFiller {
     fn default() -> Self {
@@ -119,8 +134,11 @@ impl GapFiller {
             centre_is_current: true,
             last: None,
             motion_sum: [0.0; 2],
+            marker_motion_sum: [0.0; 2],
             motion_frames: 0,
             last_complete_origin: None,
+            pair_mean: [0.0; 6],
+            pair_m2: [0.0; 6],
         }
     }
 
@@ -152,10 +170,124 @@ impl GapFiller {
         }
         let missing = missing_mask(frame);
         if missing == 0 {
-            self.learn(frame, frame_index)?;
-            self.last = Some(frame.try_into().expect("length checked"));
-            return Ok(0);
+            let outliers = self.outliers(frame);
+            if outliers == 0 {
+                // A degenerate frame teaches nothing; whether it is usable is the feature
+                // set's call (raw markers need no segment frames).
+                if self.learn(frame, frame_index).is_ok() {
+                    self.last = Some(frame.try_into().expect("length checked"));
+                }
+                return Ok(0);
+            }
+            // A marker that jumped (or swapped labels) is dropped and filled like a missing one.
+            let original: [f32; MARKER_FRAME_LEN] = frame.try_into().expect("length checked");
+            for i in (0..N_MARKERS).filter(|i| outliers & (1 << i) != 0) {
+                frame[3 * i..3 * i + 3].fill(f32::NAN);
+            }
+            return self.fill_missing(frame, outliers, frame_index).inspect_err(|_| frame.copy_from_slice(&original)).map_err(|e| match e {
+                Error::MissingMarkers { .. } => self.outlier_error(&original, outliers, frame_index),
+                other => other,
+            });
         }
+        self.fill_missing(frame, missing, frame_index)
+    }
+
+    /// Checks a frame without changing it (what a stream that refuses missing markers
+    /// does): learns from it if it is complete and consistent; an error names a marker that
+    /// jumped. Missing markers are left for the caller to refuse.
+    pub fn check(&mut self, frame: &[f32], frame_index: usize) -> Result<()> {
+        if frame.len() != MARKER_FRAME_LEN || missing_mask(frame) != 0 {
+            return Ok(());
+        }
+        match self.outliers(frame) {
+            0 => {
+                if self.learn(frame, frame_index).is_ok() {
+                    self.last = Some(frame.try_into().expect("length checked"));
+                }
+                Ok(())
+            }
+            outliers => Err(self.outlier_error(frame, outliers, frame_index)),
+        }
+    }
+
+    /// Markers that jumped (bit mask), once the filler has calibrated (0 before): a marker
+    /// whose distances to the other two of its segment break the rigid body, or one that
+    /// moved from the previous frame far more than its segment ever does between frames (two
+    /// labels swapping keeps the distances but not the positions).
+    pub fn outliers(&self, frame: &[f32]) -> u8 {
+        if self.complete_frames < MIN_CALIBRATION_FRAMES {
+            return 0;
+        }
+        let mut mask = 0u8;
+        for (s, pairs) in PAIRS.chunks_exact(3).enumerate() {
+            let dev = |p: usize| {
+                let k = 3 * s + p;
+                let (a, b) = pairs[p];
+                let d = ((marker(frame, a) - marker(frame, b)).norm() - self.pair_mean[k]).abs();
+                (d, d > self.pair_threshold(k))
+            };
+            let devs = [dev(0), dev(1), dev(2)];
+            let first = 3 * s;
+            mask |= match [devs[0].1, devs[1].1, devs[2].1] {
+                [false, false, false] => 0,
+                // Two pairs broken: the marker they share moved.
+                [true, true, false] => 1 << first,
+                [true, false, true] => 1 << (first + 1),
+                [false, true, true] => 1 << (first + 2),
+                // All three: the marker shared by the two largest deviations.
+                [true, true, true] => {
+                    let smallest = (0..3).min_by(|&a, &b| devs[a].0.total_cmp(&devs[b].0)).expect("three pairs");
+                    1 << (first + 2 - smallest)
+                }
+                // One pair only: either of its markers.
+                [true, false, false] => 0b011 << first,
+                [false, true, false] => 0b101 << first,
+                [false, false, true] => 0b110 << first,
+            };
+            if let (Some(last), true) = (&self.last, self.motion_frames > 0) {
+                let rms = (self.marker_motion_sum[s] / self.motion_frames as f64).sqrt();
+                let limit = (OUTLIER_SIGMAS * rms).max(OUTLIER_FLOOR);
+                for i in first..first + 3 {
+                    if (marker(frame, i) - marker(last, i)).norm() > limit {
+                        mask |= 1 << i;
+                    }
+                }
+            }
+        }
+        mask
+    }
+
+    /// Forgets the previous frame (after a gap in time, it is no guide to the next one);
+    /// what was learned of the subject stays.
+    pub fn forget_last_frame(&mut self) {
+        self.last = None;
+        self.last_complete_origin = None;
+    }
+
+    fn pair_threshold(&self, k: usize) -> f64 {
+        let sd = (self.pair_m2[k] / self.complete_frames as f64).sqrt();
+        (OUTLIER_SIGMAS * sd).max(OUTLIER_FLOOR)
+    }
+
+    fn outlier_error(&self, frame: &[f32], outliers: u8, frame_index: usize) -> Error {
+        let i = outliers.trailing_zeros() as usize;
+        let k = PAIRS.iter().position(|&(a, b)| a == i || b == i).expect("every marker is in a pair");
+        let (a, b) = PAIRS[k];
+        let d = (marker(frame, a) - marker(frame, b)).norm();
+        Error::OutlierMarker {
+            frame: frame_index,
+            markers: mask_names(outliers),
+            detail: format!(
+                "{}–{} is {:.1} mm apart, {:.1} mm on average",
+                MARKERS[a].name,
+                MARKERS[b].name,
+                1e3 * d,
+                1e3 * self.pair_mean[k]
+            ),
+        }
+    }
+
+    fn fill_missing(&mut self, frame: &mut [f32], missing: u8, frame_index: usize) -> Result<u8> {
         let unfillable = |reason: &'static str| Error::MissingMarkers { frame: frame_index, markers: mask_names(missing), reason };
         let per_segment = SEGMENTS.map(|s| (missing >> first_marker(s)) & 0b111);
         let (occluded, whole) = match per_segment {
@@ -221,12 +353,23 @@ impl GapFiller {
                 self.local_sum[k] += r.transpose() * (marker(frame, k) - o);
             }
         }
-        if let Some([p_f, p_h]) = self.last_complete_origin.filter(|_| self.last.is_some()) {
+        if let (Some([p_f, p_h]), Some(last)) = (self.last_complete_origin, &self.last) {
             self.motion_sum[0] += (o_f - p_f).norm_squared();
             self.motion_sum[1] += (o_h - p_h).norm_squared();
+            for (s, segment) in SEGMENTS.into_iter().enumerate() {
+                let first = first_marker(segment);
+                self.marker_motion_sum[s] += (first..first + 3).map(|i| (marker(frame, i) - marker(last, i)).norm_squared()).sum::<f64>() / 3.0;
+            }
             self.motion_frames += 1;
         }
         self.last_complete_origin = Some([o_f, o_h]);
+        let n = (self.complete_frames + 1) as f64;
+        for (k, &(a, b)) in PAIRS.iter().enumerate() {
+            let d = (marker(frame, a) - marker(frame, b)).norm();
+            let delta = d - self.pair_mean[k];
+            self.pair_mean[k] += delta / n;
+            self.pair_m2[k] += delta * (d - self.pair_mean[k]);
+        }
         let cross = -(r_f.transpose() * r_h);
         let mut mtm = Matrix6::identity();
         mtm.fixed_view_mut::<3, 3>(0, 3).copy_from(&cross);
@@ -416,6 +559,45 @@ mod tests {
         }
         assert_eq!(filler.complete_frames(), 500);
         assert!(!filler.is_calibrated());
+    }
+
+    #[test]
+    fn a_jumping_marker_is_replaced_and_a_label_swap_refused() {
+        let body = BodyModel::default();
+        let (mut filler, frames) = calibrated(&body, 0.2);
+        // MC5 jumps 2 cm for one frame: dropped, filled back near the truth, flagged.
+        let truth = frames[300];
+        let mut f = truth;
+        f[13] += 0.02;
+        assert_eq!(filler.fill(&mut f, 0).unwrap(), 1 << 4);
+        assert!((0..18).all(|k| (f[k] - truth[k]).abs() < 5e-4), "{f:?}");
+        // MC2 and MC5 swap labels: distances hold, positions jump; nothing to fill from.
+        let mut f = frames[301];
+        for k in 0..3 {
+            f.swap(9 + k, 12 + k);
+        }
+        let before = f;
+        let err = filler.fill(&mut f, 7).unwrap_err().to_string();
+        assert!(err.contains("frame 7") && err.contains("MC2, MC5") && err.contains("rigid segment"), "{err}");
+        assert_eq!(f.map(f32::to_bits), before.map(f32::to_bits), "unchanged on error");
+        assert!(matches!(filler.check(&f, 7), Err(Error::OutlierMarker { .. })));
+        // The stream goes on with the true labels.
+        assert_eq!(filler.fill(&mut frames[301].clone(), 8).unwrap(), 0);
+    }
+
+    #[test]
+    fn noise_is_not_mistaken_for_a_jump() {
+        // ±5 mm uniform noise on every coordinate (the thesis' 5 % on the hand): never flagged.
+        let body = BodyModel::default();
+        let mut rng = crate::rng::SplitMix::new(3);
+        let pose = body.forearm_pose(0.0);
+        let mut filler = GapFiller::new();
+        for i in 0..5000 {
+            let t = i as f64 * 0.001;
+            let q = [0.8 * (5.3 * t).sin(), 0.6 * (3.7 * t + 1.0).sin(), 0.3 * (7.1 * t + 0.5).sin()];
+            let mut f = body.marker_frame(&q, &pose).map(|v| (v + rng.uniform(-0.005, 0.005)) as f32);
+            assert_eq!(filler.fill(&mut f, i).unwrap(), 0, "frame {i} flagged");
+        }
     }
 
     #[test]

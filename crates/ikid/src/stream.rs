@@ -37,6 +37,9 @@ pub struct Stream {
     /// The pushed frame with its missing marker filled (Fill policy only).
     frame_buf: [f32; MARKER_FRAME_LEN],
     filled_mask: u8,
+    /// Time of the last frame accepted by [`push_at`](Stream::push_at), seconds.
+    last_time: Option<f64>,
+    gap_restarts: u64,
 }
 
 impl Stream {
@@ -55,6 +58,8 @@ impl Stream {
             filler: GapFiller::new(),
             frame_buf: [0.0; MARKER_FRAME_LEN],
             filled_mask: 0,
+            last_time: None,
+            gap_restarts: 0,
             model,
         }
     }
@@ -114,6 +119,10 @@ impl Stream {
             set.compute(&self.frame_buf, &mut self.incoming, 0)?;
             self.filled_mask = mask;
         } else {
+            if set.frame_len() == MARKER_FRAME_LEN {
+                // Refuse a marker that jumped (the filler watches complete frames either way).
+                self.filler.check(frame, 0)?;
+            }
             set.compute(frame, &mut self.incoming, 0)?;
             self.filled_mask = 0;
         }
@@ -135,6 +144,35 @@ impl Stream {
             return Err(Error::NonFiniteOutput { frame: 0, value });
         }
         Ok(Some(&self.output))
+    }
+
+    /// [`push`](Self::push) for a frame stamped with its acquisition time (seconds, any
+    /// origin). Frames are expected one period of the model's rate apart; after a gap of
+    /// more than 1.5 periods (dropped frames) the window restarts, as after
+    /// [`reset`](Self::reset), so no output mixes frames further apart than the network was
+    /// trained on: outputs resume once the window has refilled. Time that does not
+    /// increase is refused.
+    pub fn push_at(&mut self, time_s: f64, frame: &[f32]) -> Result<Option<&[f32]>> {
+        if !time_s.is_finite() {
+            return Err(Error::BadArgument { what: "time", detail: format!("is {time_s}, expected a finite number of seconds") });
+        }
+        if let Some(last) = self.last_time {
+            if time_s <= last {
+                return Err(Error::BadArgument { what: "time", detail: format!("{time_s} s does not follow the previous frame's {last} s") });
+            }
+            if (time_s - last) * self.model.card().frame_rate_hz > 1.5 {
+                self.reset();
+                self.gap_restarts += 1;
+            }
+        }
+        let produced = self.push(frame)?.is_some();
+        self.last_time = Some(time_s);
+        Ok(produced.then_some(&self.output[..]))
+    }
+
+    /// Times [`push_at`](Self::push_at) restarted the window after a gap.
+    pub fn gap_restarts(&self) -> u64 {
+        self.gap_restarts
     }
 
     /// Pushes `frames` (whole frames back to back, e.g. a packet from the acquisition
@@ -196,6 +234,8 @@ impl Stream {
     /// Forgets every frame held (e.g. after a gap in the recording). The gap filler keeps
     /// what it learned of the subject; a new subject needs a new stream.
     pub fn reset(&mut self) {
+        self.filler.forget_last_frame();
+        self.last_time = None;
         self.head = 0;
         self.filled = 0;
     }

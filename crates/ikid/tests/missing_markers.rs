@@ -90,3 +90,22 @@ fn refuse_policy_refuses_and_unfillable_frames_leave_the_stream_as_it_was() {
         assert_eq!(stream.push(frame).unwrap().map(<[f32]>::to_vec), clean.push(frame).unwrap().map(<[f32]>::to_vec));
     }
 }
+
+#[test]
+fn a_gap_in_time_restarts_the_window_and_backwards_time_is_refused() {
+    let model = random_model(FeatureSet::Angles, 5, &[16], 3, 4); // 1000 Hz
+    let frames = random_frames(FeatureSet::Angles, 20, 12);
+    let mut stream = model.stream();
+    let mut outputs = vec![];
+    for (i, frame) in frames.chunks_exact(18).enumerate() {
+        // Frames 0-9 at 1 ms, then 3 frames dropped (frame 10 arrives at 13 ms).
+        let t = if i < 10 { i as f64 * 1e-3 } else { (i + 3) as f64 * 1e-3 };
+        outputs.push(stream.push_at(t, frame).unwrap().is_some());
+    }
+    let expect: Vec<bool> = (0..20).map(|i| (4..10).contains(&i) || i >= 14).collect();
+    assert_eq!(outputs, expect, "no output until the window refills after the gap");
+    assert_eq!(stream.gap_restarts(), 1);
+    let err = stream.push_at(0.019, &frames[..18]).unwrap_err().to_string();
+    assert!(err.contains("time") && err.contains("does not follow"), "{err}");
+    assert!(stream.push_at(f64::NAN, &frames[..18]).is_err());
+}
