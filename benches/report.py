@@ -96,6 +96,26 @@ def _timed(fn) -> float:
     return time.perf_counter() - t
 
 
+def soak(pushes: int = 10_000_000) -> list[str]:
+    """The 10^7-push soak (crates/ikid/examples/soak.rs): allocations, memory, latency drift."""
+    out = subprocess.run(["cargo", "run", "--release", "-q", "-p", "ikid", "--example", "soak", "--", "--pushes", str(pushes)],
+                         cwd=ROOT, check=True, capture_output=True, text=True).stdout
+    r = json.loads(out.strip().splitlines()[-1])
+    f, la = r["first_million_us"], r["last_million_us"]
+    return [
+        "## Soak (`cargo run --release -p ikid --example soak`)",
+        "",
+        f"{r['pushes']:,} pushes through one stream (150-128-128-3 on `angles` × 50, gap filling on; {r['filled_frames']:,} frames had a "
+        f"marker missing and filled): **{r['allocations']} heap allocations**, resident memory {r['rss_kib_before']:,} → "
+        f"{r['rss_kib_after']:,} KiB.",
+        "",
+        "| pushes | p50 | p99 | p99/p50 | max |",
+        "|---|---|---|---|---|",
+        f"| first 10⁶ | {f[0]:.2f} µs | {f[1]:.2f} µs | {f[1] / f[0]:.2f} | {f[2]:.0f} µs |",
+        f"| last 10⁶ | {la[0]:.2f} µs | {la[1]:.2f} µs | {la[1] / la[0]:.2f} | {la[2]:.0f} µs |",
+    ]
+
+
 def criterion_ns(*parts: str) -> float | None:
     path = CRITERION.joinpath(*parts, "new", "estimates.json")
     if not path.exists():
@@ -181,6 +201,8 @@ def main() -> None:
         "",
         "Zero heap allocations per push: proved by `crates/ikid/tests/allocations.rs` (counting allocator).",
         "",
+        *soak(),
+        "",
         "## Simulator (`cargo run --release -p ikid-sim --example sim_speed`, one core)",
         "",
         "```",
@@ -189,7 +211,10 @@ def main() -> None:
         "```",
     ]
     out = ROOT / "docs" / "performance.md"
-    out.write_text("\n".join(lines) + "\n")
+    # Keep the section `make bench-peers` writes.
+    old = out.read_text() if out.exists() else ""
+    peers = old[old.index("<!-- peers:start -->"):] if "<!-- peers:start -->" in old else ""
+    out.write_text("\n".join(lines) + "\n" + ("\n" + peers if peers else ""))
     print("\n".join(lines))
 
 
