@@ -15,6 +15,7 @@ __all__ = [
     "MARKERS",
     "FEATURE_SETS",
     "feature_set_info",
+    "fill_gaps",
     "compute_features",
     "Model",
     "Stream",
