@@ -12,9 +12,11 @@
 //!
 //! When one marker of a segment is missing and the other segment is whole, the whole segment
 //! gives the joint centre in the lab; the two visible markers plus that centre fix the
-//! occluded segment's pose (a rigid fit), which places the missing marker. The marker's
-//! previous position joins the fit as a prior, weighted by how still the segment has been
-//! ([`PRIOR_WEIGHT`]): it holds the one rotation the other points fix poorly. Anything
+//! occluded segment's pose (a weighted rigid fit: the centre by the two segments' marker
+//! noise), which places the missing marker — and the two visible ones, so the segment is
+//! exactly rigid. The marker's previous position joins the fit as a prior, weighted by how
+//! still the segment has been ([`PRIOR_WEIGHT`]): it holds the one rotation the other points
+//! fix poorly. Anything
 //! else (two markers of a segment, one on each segment, or before the filler has seen enough
 //! wrist motion to locate the joint centre) is refused with an error that says which and why.
 //!
@@ -67,15 +69,19 @@ pub const MIN_MOTION: f64 = 0.005;
 
 /// Weight (relative to a visible marker's 1) of the missing marker's previous position in
 /// the fit, for a segment that does not move; it falls as `1 / (1 + (v / STILL_SPEED)²)`
-/// with `v` the segment's RMS frame-to-frame displacement. Chosen by measurement (held-out
-/// trials, the shipped wrist-ik, each marker missing in turn at 0/1/5 % noise): 10 with
-/// 3 µm keeps every ratio to the no-missing error ≤ 1.9; without the prior, losing FAP (18
-/// cm from the wrist, its roll then rests on the joint centre 1 cm from the RSP–USP axis)
-/// costs 4× (1 %) to 9× (5 %).
-pub const PRIOR_WEIGHT: f64 = 10.0;
+/// with `v` the segment's RMS frame-to-frame displacement, so a moving hand (~0.1 mm per
+/// frame) gives it ~0.01. Chosen by measurement (held-out trials, the shipped wrist-ik, each
+/// marker missing in turn at 0/1/5 % noise; docs/report.md): without the prior, losing FAP
+/// (18 cm from the wrist, its roll then rests on the joint centre 1 cm from the RSP–USP
+/// axis) costs 4× (1 %) to 9× (5 %) the complete-marker error; with 10 and 3 µm, 1.0–2.1×;
+/// with 1000 and 0.3 µm, 1.0×.
+pub const PRIOR_WEIGHT: f64 = 1000.0;
 /// Frame-to-frame displacement (metres per frame) below which a segment counts as still:
-/// 3 µm, i.e. 3 mm/s at 1000 Hz.
-pub const STILL_SPEED: f64 = 3e-6;
+/// 0.3 µm, i.e. 0.3 mm/s at 1000 Hz.
+pub const STILL_SPEED: f64 = 3e-7;
+/// Marker noise variance (m²) below which the joint centre's and the markers' weights stop
+/// growing: (0.1 mm)².
+pub const NOISE_FLOOR: f64 = 1e-8;
 
 const SEGMENTS: [Segment; 2] = [Segment::Forearm, Segment::Hand];
 
@@ -330,6 +336,11 @@ impl GapFiller {
         let seg = occluded as usize;
         let motion = if self.motion_frames > 0 { self.motion_sum[seg] / self.motion_frames as f64 } else { 0.0 };
         weight[3] *= PRIOR_WEIGHT / (1.0 + motion / (STILL_SPEED * STILL_SPEED));
+        // The joint centre, by inverse variance: it comes from the whole segment, the visible
+        // markers from the occluded one (marker noise estimated from each segment's pair
+        // distances; the centre's doubled for its lever).
+        let var = |s: usize| (3 * s..3 * s + 3).map(|k| self.pair_m2[k] / n).sum::<f64>() / 3.0;
+        weight[2] = (var(seg) + NOISE_FLOOR) / (2.0 * var(1 - seg) + NOISE_FLOOR);
         let (rot, t) = rigid_fit(&local, &lab, &weight).ok_or_else(|| unfillable("the visible markers and the joint centre are collinear"))?;
         let filled = rot * missing_local + t;
         if !filled.iter().all(|v| v.is_finite()) {
@@ -338,6 +349,16 @@ impl GapFiller {
         let i = 3 * (first + missing_k);
         for (dst, v) in frame[i..i + 3].iter_mut().zip(filled.iter()) {
             *dst = *v as f32;
+        }
+        // The visible markers of the occluded segment become their fitted positions too: the
+        // fit averages their noise with the joint centre's and the prior's (measured: at 5 %
+        // noise a hand marker missing costs 2.2× the complete-marker error unprojected, 1.8×
+        // projected).
+        for k in (0..3).filter(|&k| k != missing_k) {
+            let p = rot * (self.local_sum[first + k] / n) + t;
+            for (dst, v) in frame[3 * (first + k)..3 * (first + k) + 3].iter_mut().zip(p.iter()) {
+                *dst = *v as f32;
+            }
         }
         self.last = Some(frame.try_into().expect("length checked"));
         Ok(missing)
