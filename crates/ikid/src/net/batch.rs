@@ -1,4 +1,5 @@
-//! [`BATCH`] samples at once: each weight row read from cache feeds six windows.
+//! [`BATCH`] samples at once: each weight row read from cache feeds six windows, and each
+//! weight sub-block read from L2 serves four such groups from L1.
 //!
 //! A single frame is bound by streaming the weights (see `kernel.rs`); a whole recording
 //! need not be. Here each 64-output block is walked as four 16-output sub-blocks, and for
@@ -15,8 +16,13 @@
 
 use super::kernel::{BLOCK, PackedLayer, PackedMlp, SMALL_BLOCK, Scratch, active_inputs, forward_portable};
 
-/// Samples per batched forward pass.
-pub const BATCH: usize = 6;
+/// Samples per batched forward pass: [`GROUPS`] register-blocked groups of [`GROUP`], so a
+/// weight sub-block read from L2 for the first group is reused from L1 by the others.
+pub const BATCH: usize = GROUP * GROUPS;
+/// Samples sharing one pass over a weight row (six samples × two vectors = twelve accumulators).
+pub const GROUP: usize = 6;
+/// Groups per weight sub-block.
+pub const GROUPS: usize = 4;
 
 /// Work space for [`PackedMlp::forward_batch`]: one [`Scratch`] per sample.
 #[derive(Debug, Clone)]
@@ -91,7 +97,7 @@ fn forward_batch_avx2_fma(net: &PackedMlp, xs: [&[f32]; BATCH], scratch: &mut Ba
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
 mod avx2_batch {
-    use super::{BATCH, BLOCK, PackedLayer};
+    use super::{BATCH, BLOCK, GROUP, GROUPS, PackedLayer};
     use std::arch::x86_64::*;
 
     /// Outputs per sub-block: two vectors, times six samples = twelve accumulators.
@@ -106,32 +112,35 @@ mod avx2_batch {
             for sub in 0..BLOCK / SUB {
                 let o = blk * BLOCK + sub * SUB;
                 let bias = &layer.bias[o..o + SUB];
-                // SAFETY: `bias` holds 16 floats.
-                let b = unsafe { [_mm256_loadu_ps(bias.as_ptr()), _mm256_loadu_ps(bias.as_ptr().add(8))] };
-                let mut acc = [b; BATCH];
                 // Raw pointers in the hot loop: the bounds are established once, here.
                 assert!(w.len() >= n_in * BLOCK && xs.iter().all(|x| x.len() == n_in));
                 let wp = w[sub * SUB..].as_ptr();
-                let xp = xs.map(<[f32]>::as_ptr);
-                for j in 0..n_in {
-                    // SAFETY: j < n_in, so row j's 16 floats at j·BLOCK + sub·SUB lie inside
-                    // `w` (length n_in·BLOCK) and xs[s][j] inside each input (length n_in).
-                    unsafe {
-                        let r = wp.add(j * BLOCK);
-                        let (w0, w1) = (_mm256_loadu_ps(r), _mm256_loadu_ps(r.add(8)));
-                        for s in 0..BATCH {
-                            let x = _mm256_broadcast_ss(&*xp[s].add(j));
-                            acc[s][0] = _mm256_fmadd_ps(w0, x, acc[s][0]);
-                            acc[s][1] = _mm256_fmadd_ps(w1, x, acc[s][1]);
+                // This sub-block's weights (n_in rows × 64 bytes) stay in L1 across the groups.
+                for g in 0..GROUPS {
+                    // SAFETY: `bias` holds 16 floats.
+                    let b = unsafe { [_mm256_loadu_ps(bias.as_ptr()), _mm256_loadu_ps(bias.as_ptr().add(8))] };
+                    let mut acc = [b; GROUP];
+                    let xp: [*const f32; GROUP] = std::array::from_fn(|s| xs[g * GROUP + s].as_ptr());
+                    for j in 0..n_in {
+                        // SAFETY: j < n_in, so row j's 16 floats at j·BLOCK + sub·SUB lie inside
+                        // `w` (length n_in·BLOCK) and xs[s][j] inside each input (length n_in).
+                        unsafe {
+                            let r = wp.add(j * BLOCK);
+                            let (w0, w1) = (_mm256_loadu_ps(r), _mm256_loadu_ps(r.add(8)));
+                            for s in 0..GROUP {
+                                let x = _mm256_broadcast_ss(&*xp[s].add(j));
+                                acc[s][0] = _mm256_fmadd_ps(w0, x, acc[s][0]);
+                                acc[s][1] = _mm256_fmadd_ps(w1, x, acc[s][1]);
+                            }
                         }
                     }
-                }
-                for (y, acc_s) in ys.iter_mut().zip(&acc) {
-                    let dst = &mut y[o..o + SUB];
-                    for (v, &a) in acc_s.iter().enumerate() {
-                        let val = if layer.relu { _mm256_max_ps(a, zero) } else { a };
-                        // SAFETY: `dst` holds 16 floats.
-                        unsafe { _mm256_storeu_ps(dst.as_mut_ptr().add(8 * v), val) };
+                    for (y, acc_s) in ys[g * GROUP..(g + 1) * GROUP].iter_mut().zip(&acc) {
+                        let dst = &mut y[o..o + SUB];
+                        for (v, &a) in acc_s.iter().enumerate() {
+                            let val = if layer.relu { _mm256_max_ps(a, zero) } else { a };
+                            // SAFETY: `dst` holds 16 floats.
+                            unsafe { _mm256_storeu_ps(dst.as_mut_ptr().add(8 * v), val) };
+                        }
                     }
                 }
             }
