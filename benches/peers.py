@@ -33,8 +33,8 @@ from torch import nn
 import ikid
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benches.report import c_abi, frames_for, machine  # noqa: E402
-from training.export import Affine, ModelSpec, export, export_onnx  # noqa: E402
+from benches.report import frames_for, machine  # noqa: E402
+from training.export import Affine, ModelSpec, export, export_onnx, load_torch  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "target" / "bench-peers"
@@ -46,24 +46,6 @@ START, END = "<!-- peers:start -->", "<!-- peers:end -->"
 def thesis_nets() -> list[tuple[str, str, list[int]]]:
     return [("ik_markers_90-300-300-3", "markers", [300, 300]), ("ik_basis_120-240-240-3", "basis", [240, 240]),
             ("id_45-330-60-165-3", "joint_state", [330, 60, 165])]
-
-
-def torch_from_model(model: ikid.Model) -> tuple[nn.Sequential, Affine, Affine]:
-    """The torch network and scalings inside an ikid file, read back with the safetensors library."""
-    from safetensors import safe_open
-
-    path = OUT / f"{model.name}.safetensors"
-    model.save(path)
-    with safe_open(str(path), framework="numpy") as f:
-        t = {k: f.get_tensor(k) for k in f.keys()}
-    layers: list[nn.Module] = []
-    for k, act in enumerate(model.card["activations"]):
-        w, b = t[f"layers.{k}.weight"], t[f"layers.{k}.bias"]
-        lin = nn.Linear(w.shape[1], w.shape[0])
-        lin.weight.data, lin.bias.data = torch.as_tensor(w), torch.as_tensor(b)
-        layers += [lin, nn.ReLU()] if act == "relu" else [lin]
-    return (nn.Sequential(*layers).eval(), Affine(t["input.scale"], t["input.shift"]),
-            Affine(t["output.scale"], t["output.shift"]))
 
 
 def networks() -> list[tuple[str, ikid.Model, nn.Sequential, Path]]:
@@ -84,7 +66,9 @@ def networks() -> list[tuple[str, ikid.Model, nn.Sequential, Path]]:
         nets.append((label, model, net, Affine.identity(n_in), Affine.identity(3)))
     for name in ikid.available_models():
         model = ikid.load(name)
-        net, inp, out = torch_from_model(model)
+        path = OUT / f"{name}.safetensors"
+        model.save(path)
+        net, inp, out = load_torch(path)
         nets.append((name, model, net, inp, out))
     result = []
     for label, model, net, inp, out in nets:

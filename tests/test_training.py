@@ -17,6 +17,7 @@ from torch import nn  # noqa: E402
 
 from training import data as D  # noqa: E402
 from training.evaluate import errors, noisy  # noqa: E402
+from training.export import load_torch  # noqa: E402
 from training.train import load_config, run  # noqa: E402
 
 SHIPPED = ["wrist-chain", "wrist-id", "wrist-ik"]
@@ -144,31 +145,17 @@ def test_the_package_ships_the_default_models():
     assert ikid.available_models() == SHIPPED
 
 
-def torch_net_from_file(path) -> tuple[nn.Sequential, dict[str, np.ndarray]]:
-    """Rebuilds the torch network from the file with the safetensors library (not ikid)."""
-    with safe_open(str(path), framework="numpy") as f:
-        t = {k: f.get_tensor(k) for k in f.keys()}
-        card = json.loads(f.metadata()["ikid"])
-    layers: list[nn.Module] = []
-    for k, act in enumerate(card["activations"]):
-        w, b = t[f"layers.{k}.weight"], t[f"layers.{k}.bias"]
-        lin = nn.Linear(w.shape[1], w.shape[0])
-        lin.weight.data, lin.bias.data = torch.as_tensor(w), torch.as_tensor(b)
-        layers += [lin, nn.ReLU()] if act == "relu" else [lin]
-    return nn.Sequential(*layers).eval(), t
-
-
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_model_matches_torch(name):
     model = ikid.load(name)
-    net, t = torch_net_from_file(ikid._SHIPPED / f"{name}.safetensors")
+    net, inp, out = load_torch(ikid._SHIPPED / f"{name}.safetensors")  # safetensors library, not ikid
     rec = D.simulate_one({"name": "p", "protocol": "random", "seed": 9600, "duration": 1.0, "shoulder_deg": 10.0})
     rec = noisy([rec], 0.01)[0]
     task = model.task
     x, _ = D.windows(rec, task, model.feature_set, model.window)
     with torch.no_grad():
-        z = torch.as_tensor(x) * torch.as_tensor(t["input.scale"]) + torch.as_tensor(t["input.shift"])
-        want = (net(z) * torch.as_tensor(t["output.scale"]) + torch.as_tensor(t["output.shift"])).numpy()
+        z = torch.as_tensor(x) * torch.as_tensor(inp.scale) + torch.as_tensor(inp.shift)
+        want = (net(z) * torch.as_tensor(out.scale) + torch.as_tensor(out.shift)).numpy()
     got = model.predict(rec.frames(model.feature_set))
     scale = np.abs(want).max(axis=0)
     assert np.all(np.abs(got - want).max(axis=0) <= 1e-5 * scale)

@@ -174,3 +174,21 @@ def export_onnx(
         dynamic_axes={"window": {0: "batch"}, "output": {0: "batch"}},
         dynamo=False,
     )
+
+
+def load_torch(path: str | Path) -> tuple[nn.Sequential, Affine, Affine]:
+    """The torch network and its input/output scaling in an ikid model file, read with the
+    ``safetensors`` library (not ikid): the inverse of :func:`export`, so parity tests and
+    peer benchmarks compare ikid against an independent reading of the same file."""
+    from safetensors import safe_open
+
+    with safe_open(str(path), framework="numpy") as f:
+        t = {k: f.get_tensor(k) for k in f.keys()}
+        card = json.loads(f.metadata()["ikid"])
+    layers: list[nn.Module] = []
+    for k, act in enumerate(card["activations"]):
+        w, b = t[f"layers.{k}.weight"], t[f"layers.{k}.bias"]
+        lin = nn.Linear(w.shape[1], w.shape[0])
+        lin.weight.data, lin.bias.data = torch.as_tensor(w), torch.as_tensor(b)
+        layers += [lin, nn.ReLU()] if act == "relu" else [lin]
+    return nn.Sequential(*layers).eval(), Affine(t["input.scale"], t["input.shift"]), Affine(t["output.scale"], t["output.shift"])

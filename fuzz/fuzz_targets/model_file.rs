@@ -6,16 +6,7 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let Ok(model) = ikid::Model::from_bytes(data) else { return };
-    let frames = ikid::testing::random_frames(model.feature_set(), 8, 1);
-    let mut out = vec![0f32; model.n_predictions(8) * model.n_outputs()];
-    if model.predict(&frames, &mut out).is_ok() {
-        assert!(out.iter().all(|v| v.is_finite()));
-    }
-    let mut stream = model.stream();
-    for frame in frames.chunks_exact(model.frame_len()) {
-        if let Ok(Some(o)) = stream.push(frame) {
-            assert!(o.iter().all(|v| v.is_finite()));
-        }
+    if let Ok(model) = ikid::Model::from_bytes(data) {
+        ikid::testing::exercise(&model);
     }
 });

@@ -447,11 +447,12 @@ pub fn fill_gaps(frames: &[f32], keep_unfillable: bool) -> Result<(Vec<f32>, Vec
         .chunks_exact_mut(MARKER_FRAME_LEN)
         .enumerate()
         .map(|(i, f)| {
-            let outliers = filler.outliers(f);
             match filler.fill(f, i) {
                 Err(Error::MissingMarkers { .. }) if keep_unfillable => Ok(0),
-                // Markers that jumped and could not be replaced become missing, never kept.
+                // Markers that jumped and could not be replaced become missing, never kept (a
+                // refused frame leaves the filler as it was, so it names the same markers).
                 Err(Error::OutlierMarker { .. }) if keep_unfillable => {
+                    let outliers = filler.outliers(f);
                     for m in (0..6).filter(|m| outliers & (1 << m) != 0) {
                         f[3 * m..3 * m + 3].fill(f32::NAN);
                     }

@@ -52,3 +52,20 @@ pub fn random_frames(set: FeatureSet, n: usize, seed: u64) -> Vec<f32> {
     }
     out
 }
+
+/// Runs a model that loaded (from any bytes) the way a user would, batch and stream, and
+/// panics if it ever gives a non-finite output instead of an error: the property the
+/// loader's proptest and fuzz target check.
+pub fn exercise(model: &Model) {
+    let frames = random_frames(model.feature_set(), 12, 3);
+    let mut out = vec![0f32; model.n_predictions(12) * model.n_outputs()];
+    if model.predict(&frames, &mut out).is_ok() {
+        assert!(out.iter().all(|v| v.is_finite()), "predict gave a non-finite output");
+    }
+    let mut stream = model.stream();
+    for frame in frames.chunks_exact(model.frame_len()) {
+        if let Ok(Some(o)) = stream.push(frame) {
+            assert!(o.iter().all(|v| v.is_finite()), "push gave a non-finite output");
+        }
+    }
+}

@@ -5,7 +5,7 @@
 //! Case counts are proptest's (`PROPTEST_CASES` overrides; the note of issue 7 quotes them).
 
 use ikid::model::CARD_KEY;
-use ikid::testing::{random_frames, random_model};
+use ikid::testing::{exercise, random_frames, random_model};
 use ikid::{FeatureSet, GapFiller, MissingMarkers, Model};
 use proptest::prelude::*;
 use std::sync::OnceLock;
@@ -13,21 +13,6 @@ use std::sync::OnceLock;
 fn valid_file() -> &'static [u8] {
     static BYTES: OnceLock<Vec<u8>> = OnceLock::new();
     BYTES.get_or_init(|| random_model(FeatureSet::Angles, 4, &[8], 3, 1).to_bytes())
-}
-
-/// A model that loaded must also run: predictions finite or an error, never a panic.
-fn exercise(model: &Model) {
-    let frames = random_frames(model.feature_set(), 12, 3);
-    let mut out = vec![0f32; model.n_predictions(12) * model.n_outputs()];
-    if model.predict(&frames, &mut out).is_ok() {
-        assert!(out.iter().all(|v| v.is_finite()));
-    }
-    let mut stream = model.stream();
-    for frame in frames.chunks_exact(model.frame_len()) {
-        if let Ok(Some(o)) = stream.push(frame) {
-            assert!(o.iter().all(|v| v.is_finite()));
-        }
-    }
 }
 
 fn any_f32() -> impl Strategy<Value = f32> {
