@@ -6,6 +6,8 @@ issue 7 quotes them)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from conftest import make_model
@@ -87,3 +89,57 @@ def test_fill_stream_on_a_real_trial_with_random_damage(damage):
     stream = MODEL.stream(missing_markers="fill")
     for frame in frames:
         finite_or_ikid_error(lambda: stream.push(frame))
+
+
+# --- file readers (TRC, MOT/STO, marker maps; C3D is in test_io.py: each case is a process) ---
+
+READER_CASES = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+_SIM = ikid.simulate(seed=32, duration=0.05)
+_MARKERS = _SIM.markers.copy()
+_MARKERS[10:20, 3:6] = np.nan
+
+
+def _valid_files(tmp: Path) -> dict[str, bytes]:
+    from ikid import io
+
+    return {
+        ".trc": io.write_trc(tmp / "v.trc", _SIM.time, _MARKERS, _SIM.rate_hz).read_bytes(),
+        ".mot": io.write_mot(tmp / "v.mot", _SIM.time, _SIM.q).read_bytes(),
+        ".sto": io.write_sto(tmp / "v.sto", _SIM.time, _SIM.tau).read_bytes(),
+        ".toml": ("[markers]\n" + "\n".join(f'{m} = "L{m}"' for m in ikid.marker_names()) + "\n").encode(),
+    }
+
+
+def _read(path: Path):
+    from ikid import io
+
+    if path.suffix == ".trc":
+        data = io.read_trc(path)
+        assert data.positions.shape == (len(data.time), len(data.labels), 3) and np.all(np.diff(data.time) > 0)
+        return data.frames() if data.labels == tuple(ikid.marker_names()) else None
+    if path.suffix == ".toml":
+        return io.MarkerMap.load(path)
+    table = io.read_storage(path)
+    assert np.all(np.isfinite(table.values)) and np.all(np.diff(table.time) > 0)
+    return io.read_mot(path) if path.suffix == ".mot" else io.read_sto(path)
+
+
+@pytest.fixture(scope="module")
+def valid_files(tmp_path_factory):
+    return _valid_files(tmp_path_factory.mktemp("valid"))
+
+
+@READER_CASES
+@given(st.sampled_from([".trc", ".mot", ".sto", ".toml"]), st.lists(st.tuples(st.floats(0, 1), st.integers(0, 255)), max_size=8),
+       st.floats(0, 1), st.binary(max_size=64))
+def test_file_readers_on_corrupted_truncated_and_random_files(valid_files, tmp_path, kind, flips, keep, junk):
+    data = bytearray(valid_files[kind])
+    for at, value in flips:
+        data[int(at * (len(data) - 1))] = value
+    data = bytes(data[: int(keep * len(data))]) + (junk if keep < 0.5 else b"")
+    path = tmp_path / f"case{kind}"
+    path.write_bytes(data)
+    try:
+        _read(path)
+    except ikid.IkidError as e:
+        assert str(e)  # names the file and what is wrong

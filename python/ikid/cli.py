@@ -2,6 +2,10 @@
 
 Examples::
 
+    ikid ik trial.c3d -o trial.mot --map lab.toml          # markers -> wrist angles (OpenSim .mot)
+    ikid run trial.trc -o out/trial                          # -> out/trial.mot + out/trial.sto (torques)
+    ikid ik sessions/ -o results/ --map lab.toml --resample  # a folder, in parallel, with a summary
+    ikid map-template trial.c3d > lab.toml                   # start a marker map from a file's labels
     ikid simulate --protocol thesis --shoulder-deg 45 -o data/thesis_s45
     ikid simulate --protocol random --seed 3 --duration 60 --noise uniform:0.01 -o data/r3
     ikid dataset -o data            # thesis-sized set + the richer random set, in parallel
@@ -95,6 +99,108 @@ def cmd_dataset(args: argparse.Namespace) -> int:
     return 0
 
 
+def _inputs(paths: list[str]) -> list[Path]:
+    """Marker files named, or found (by suffix) in named folders."""
+    from ikid.io import MARKER_READERS
+
+    found: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found += sorted(f for f in p.iterdir() if f.suffix.lower() in MARKER_READERS and f.is_file())
+        elif p.exists():
+            found.append(p)
+        else:
+            raise SystemExit(f"ikid: error: {p}: no such file or folder")
+    if not found:
+        raise SystemExit(f"ikid: error: no marker files ({', '.join(MARKER_READERS)}) in {', '.join(paths)}")
+    return found
+
+
+def _process_one(job: tuple[str, dict]) -> dict:
+    """One marker file -> .mot (and .sto): read, map, check the rate, run, write. In a worker."""
+    from ikid.io import MarkerMap, read_markers, write_mot, write_sto
+    from ikid.pipeline import run_model
+
+    path, opt = job
+    t0 = time.perf_counter()
+    row: dict = {"file": path}
+    try:
+        data = read_markers(path)
+        mapping = MarkerMap.load(opt["map"]) if opt["map"] else None
+        frames = data.frames(mapping)
+        runs = {}
+        for kind, name in (("angles", opt["ik_model"]), ("torques", opt.get("torque_model"))):
+            if name:
+                runs[kind] = run_model(ikid.load(name), frames, data.time, rate_hz=data.rate_hz, resample_to_model=opt["resample"],
+                                       missing_markers=opt["missing_markers"], source=path, progress=opt["progress"])
+        written = []
+        for kind, r in runs.items():
+            if len(r.time) == 0:
+                raise ikid.InputError(f"{path}: no frame gave {kind}: {r.summary()}")
+        if "angles" in runs:
+            written.append(str(write_mot(opt["outputs"][0], runs["angles"].time, runs["angles"].values)))
+        if "torques" in runs:
+            written.append(str(write_sto(opt["outputs"][1], runs["torques"].time, runs["torques"].values)))
+        first = next(iter(runs.values()))
+        row.update(ok=True, frames=len(data), rate_hz=data.rate_hz, summary=first.summary(), written=written)
+    except (ikid.IkidError, OSError) as e:
+        row.update(ok=False, error=str(e))
+    row["seconds"] = round(time.perf_counter() - t0, 3)
+    return row
+
+
+def cmd_process(args: argparse.Namespace) -> int:
+    """`ik` and `run`: marker files -> .mot (+ .sto), one file or many in parallel."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    inputs = _inputs(args.inputs)
+    out = Path(args.output)
+    many = len(inputs) > 1 or any(Path(p).is_dir() for p in args.inputs)
+    torque_model = getattr(args, "torque_model", None)
+    stems = [p.stem for p in inputs]
+    clash = sorted({s for s in stems if stems.count(s) > 1})
+    if many and clash:
+        raise SystemExit(f"ikid: error: several inputs are named {', '.join(clash)}; their outputs would overwrite each other")
+    jobs = []
+    for path in inputs:
+        if many:
+            out.mkdir(parents=True, exist_ok=True)
+            stem = out / path.stem
+        else:
+            stem = out.with_suffix("") if out.suffix.lower() in (".mot", ".sto") else out
+            stem.parent.mkdir(parents=True, exist_ok=True)
+        mot = out if (not many and out.suffix.lower() == ".mot") else stem.with_name(stem.name + ".mot")
+        opt = {"map": args.map, "ik_model": args.model, "torque_model": torque_model, "resample": args.resample,
+               "missing_markers": args.missing_markers, "progress": not many,
+               "outputs": (mot, stem.with_name(stem.name + ".sto"))}
+        jobs.append((str(path), opt))
+    if len(jobs) == 1:
+        rows = [_process_one(jobs[0])]
+    else:
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            rows = list(pool.map(_process_one, jobs))
+    for row in rows:
+        if row["ok"]:
+            print(f"{row['file']}: {row['summary']} ({row['seconds']:.2f} s) -> {', '.join(row['written'])}")
+        else:
+            print(f"ikid: error: {row['error']}", file=sys.stderr)
+    if many:
+        ok = sum(r["ok"] for r in rows)
+        print(f"{ok}/{len(rows)} files processed, {len(rows) - ok} failed")
+    return 0 if all(r["ok"] for r in rows) else 2
+
+
+def cmd_map_template(args: argparse.Namespace) -> int:
+    from ikid.io import MarkerMap, read_markers
+
+    text = MarkerMap.identity().to_toml()
+    if args.input:
+        labels = read_markers(args.input).labels
+        text = f"# labels in {args.input}: {', '.join(labels)}\n" + text
+    print(text, end="")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="ikid", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"ikid {ikid.__version__}")
@@ -119,6 +225,33 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration", type=float, default=60.0, help="seconds per random trial")
     p.add_argument("--jobs", type=int, default=None, help="threads (default: all cores)")
     p.set_defaults(func=cmd_dataset)
+
+    def processing_options(p: argparse.ArgumentParser, model_help: str) -> None:
+        p.add_argument("inputs", nargs="+", metavar="IN", help="marker files (.c3d, .trc) or folders of them")
+        p.add_argument("-o", "--output", required=True, help="output file (one input) or folder (several)")
+        p.add_argument("--model", default="wrist-ik", help=model_help)
+        p.add_argument("--map", metavar="TOML", help="marker map: which label is which ikid marker (see map-template)")
+        p.add_argument("--resample", action="store_true",
+                       help="resample markers to the model's rate (cubic Hermite; output rows at the model's rate)")
+        p.add_argument("--missing-markers", choices=["fill", "refuse"], default=None, help="override the model's policy")
+        p.add_argument("--jobs", type=int, default=None, help="parallel files (default: all cores)")
+
+    p = sub.add_parser("ik", help="markers (.c3d/.trc) -> wrist angles (.mot, degrees)",
+                       description="Markers -> wrist angles.\n\n  ikid ik trial.c3d -o trial.mot --map lab.toml\n"
+                                   "  ikid ik sessions/ -o results/ --resample", formatter_class=argparse.RawDescriptionHelpFormatter)
+    processing_options(p, "angle model, shipped name or file (default wrist-ik)")
+    p.set_defaults(func=cmd_process)
+
+    p = sub.add_parser("run", help="markers -> wrist angles (.mot) and torques (.sto)",
+                       description="Markers -> angles and torques.\n\n  ikid run trial.c3d -o out/trial   # out/trial.mot, out/trial.sto",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    processing_options(p, "angle model (default wrist-ik)")
+    p.add_argument("--torque-model", default="wrist-chain", help="markers -> torques model (default wrist-chain)")
+    p.set_defaults(func=cmd_process)
+
+    p = sub.add_parser("map-template", help="print a marker map (TOML) to fill in, listing a file's labels")
+    p.add_argument("input", nargs="?", help="a .c3d/.trc whose labels to list")
+    p.set_defaults(func=cmd_map_template)
 
     p = sub.add_parser("demo", help="stream a fresh simulated trial through the shipped models", add_help=False)
     p.set_defaults(func=None)

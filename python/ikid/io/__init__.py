@@ -1,6 +1,51 @@
-"""File formats at ikid's boundaries (one module per format). Units convert here only:
-TRC markers in millimetres, MOT angles in degrees; everything in memory is SI."""
+"""File formats at ikid's boundaries, one module per format. Units convert here only (TRC
+and C3D in their stated length unit, MOT in degrees); everything in memory is SI.
 
-from ikid.io.opensim import write_mot, write_sto, write_trc
+    data = ikid.io.read_markers("trial.c3d")          # any labels, metres, NaN = not seen
+    frames = data.frames(ikid.io.MarkerMap.load("lab.toml"))   # ikid's (n, 18)
+"""
 
-__all__ = ["write_mot", "write_sto", "write_trc"]
+from __future__ import annotations
+
+import os
+
+from ikid.io.c3d import read_c3d, write_c3d
+from ikid.io.mapping import MarkerMap
+from ikid.io.markers import FileFormatError, MarkerData
+from ikid.io.resample import resample
+from ikid.io.storage import Storage, read_mot, read_storage, read_sto, write_mot, write_storage, write_sto
+from ikid.io.trc import read_trc, write_trc
+
+#: Marker file readers by suffix.
+MARKER_READERS = {".trc": read_trc, ".c3d": read_c3d}
+
+
+def read_markers(path: str | os.PathLike[str]) -> MarkerData:
+    """Read a marker file by its suffix (``.trc`` or ``.c3d``)."""
+    from pathlib import Path
+
+    reader = MARKER_READERS.get(Path(path).suffix.lower())
+    if reader is None:
+        raise FileFormatError(f"{path}: unknown marker file type (known: {', '.join(MARKER_READERS)})")
+    return reader(path)
+
+
+__all__ = [
+    "MARKER_READERS",
+    "FileFormatError",
+    "MarkerData",
+    "MarkerMap",
+    "Storage",
+    "read_c3d",
+    "read_markers",
+    "read_mot",
+    "read_storage",
+    "read_sto",
+    "read_trc",
+    "resample",
+    "write_c3d",
+    "write_mot",
+    "write_storage",
+    "write_sto",
+    "write_trc",
+]

@@ -1,0 +1,113 @@
+"""Marker trajectories as read from a lab's file, before they become ikid frames.
+
+:class:`MarkerData` holds any labels in metres (NaN = missing); :meth:`MarkerData.frames`
+turns it into ikid's ``(n, 18)`` frames through a :class:`~ikid.io.mapping.MarkerMap`,
+checking what a network cannot: a label that is not there, a marker that is never seen,
+coordinates that cannot be in the units the file claims.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from itertools import combinations
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ikid import _native
+
+if TYPE_CHECKING:
+    from ikid.io.mapping import MarkerMap
+
+#: Length units a marker file may state, and their size in metres.
+UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+
+#: Plausible median distance between two wrist markers, metres. ikid's closest pair (the
+#: styloids) is ~5 cm and the farthest (elbow-side forearm to knuckles) ~30 cm; a file in
+#: the wrong units is off by 10x-1000x and lands far outside.
+PLAUSIBLE_MARKER_DISTANCE_M = (0.01, 1.0)
+
+
+class FileFormatError(_native.InputError):
+    """A file that cannot be read as what it claims to be; the message names the file and
+    what is wrong (and the line, for text formats)."""
+
+
+def unit_scale(units: str, source: str) -> float:
+    """Metres per file unit, or a :class:`FileFormatError` listing the known units."""
+    key = units.strip().lower()
+    aliases = {"millimeters": "mm", "millimetres": "mm", "meters": "m", "metres": "m", "centimeters": "cm"}
+    key = aliases.get(key, key)
+    if key not in UNITS:
+        raise FileFormatError(f"{source}: unknown length unit {units!r} (known: {', '.join(UNITS)})")
+    return UNITS[key]
+
+
+def ikid_marker_names() -> list[str]:
+    return [m[0] for m in _native.MARKERS]
+
+
+@dataclass(frozen=True)
+class MarkerData:
+    """Marker trajectories: ``positions[i, j]`` is marker ``labels[j]`` at ``time[i]``, metres;
+    NaN where the marker was not seen."""
+
+    labels: tuple[str, ...]
+    time: np.ndarray
+    positions: np.ndarray
+    rate_hz: float
+    source: str = ""
+    #: Units the file stated (before conversion to metres).
+    file_units: str = "m"
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = len(self.time)
+        if self.positions.shape != (n, len(self.labels), 3):
+            raise FileFormatError(
+                f"{self.source or 'markers'}: positions {self.positions.shape} do not match {n} frames x {len(self.labels)} labels x 3"
+            )
+        if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise FileFormatError(f"{self.source or 'markers'}: frame rate {self.rate_hz} Hz is not a positive number")
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+    def marker(self, label: str) -> np.ndarray:
+        """``(n, 3)`` trajectory of one label."""
+        try:
+            return self.positions[:, self.labels.index(label)]
+        except ValueError:
+            raise _native.InputError(f"{self.source}: no marker {label!r}; the file has {', '.join(self.labels)}") from None
+
+    def frames(self, mapping: MarkerMap | None = None) -> np.ndarray:
+        """ikid's ``(n, 18)`` frames (metres, float64, NaN = missing). ``mapping`` says which
+        label is which ikid marker (default: the labels are ikid's own names)."""
+        from ikid.io.mapping import MarkerMap
+
+        mapping = mapping or MarkerMap.identity()
+        frames = np.concatenate([self.marker(label) for label in mapping.labels_in_ikid_order(self)], axis=1)
+        source = self.source or "markers"
+        for j, name in enumerate(ikid_marker_names()):
+            seen = np.isfinite(frames[:, 3 * j : 3 * j + 3]).all(axis=1)
+            if not seen.any():
+                raise _native.InputError(
+                    f"{source}: marker {name} (label {mapping.label_of(name)!r}) is missing in every frame; ikid needs each marker in at least some frames"
+                )
+        complete = np.isfinite(frames).all(axis=1)
+        if complete.any():
+            xyz = frames[complete].reshape(-1, 6, 3)
+            d = np.median([np.linalg.norm(xyz[:, a] - xyz[:, b], axis=1).mean() for a, b in combinations(range(6), 2)])
+            lo, hi = PLAUSIBLE_MARKER_DISTANCE_M
+            if not lo <= d <= hi:
+                raise _native.InputError(
+                    f"{source}: the wrist markers are {d:.4g} m apart (median over pairs), outside {lo}-{hi} m; "
+                    f"the file says its units are {self.file_units!r} — are they?"
+                )
+        return frames
+
+
+def suffix(path: str | os.PathLike[str]) -> str:
+    return Path(path).suffix.lower()

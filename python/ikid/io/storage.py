@@ -1,0 +1,156 @@
+"""OpenSim storage files: coordinates ``.mot`` (degrees) and generalized forces ``.sto``
+(N·m). A header of ``key=value`` lines up to ``endheader``, a line of column names starting
+with ``time``, then one row per frame. Column names come from the body model
+(``ikid.coordinate_names``; torques as OpenSim's inverse dynamics names them,
+``<coordinate>_moment``). A non-finite value is refused, never written."""
+
+from __future__ import annotations
+
+import io
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ikid import _native
+from ikid.io._atomic import write_text_atomic
+from ikid.io.markers import FileFormatError
+
+
+def coordinate_names() -> list[str]:
+    return [c[0] for c in _native.COORDINATES]
+
+
+def moment_names() -> list[str]:
+    return [f"{c}_moment" for c in coordinate_names()]
+
+
+@dataclass(frozen=True)
+class Storage:
+    """The table of a ``.mot``/``.sto`` file, values as written (degrees if ``in_degrees``)."""
+
+    time: np.ndarray
+    columns: tuple[str, ...]
+    values: np.ndarray
+    in_degrees: bool
+    source: str = ""
+    header: dict[str, str] = field(default_factory=dict)
+
+    def column(self, name: str) -> np.ndarray:
+        try:
+            return self.values[:, self.columns.index(name)]
+        except ValueError:
+            raise _native.InputError(f"{self.source}: no column {name!r}; it has {', '.join(self.columns)}") from None
+
+    def select(self, names: list[str]) -> np.ndarray:
+        """``(n, len(names))`` of the named columns; the error lists every absent one."""
+        absent = [n for n in names if n not in self.columns]
+        if absent:
+            raise _native.InputError(f"{self.source}: no column(s) {', '.join(absent)}; it has {', '.join(self.columns)}")
+        return np.column_stack([self.column(n) for n in names]) if names else np.empty((len(self.time), 0))
+
+
+def read_storage(path: str | os.PathLike[str]) -> Storage:
+    """Read any ``.mot``/``.sto`` file (OpenSim 3 and 4 headers)."""
+    path = Path(path)
+    src = str(path)
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except UnicodeDecodeError:
+        raise FileFormatError(f"{src}: not a text file (.mot/.sto are text)") from None
+    try:
+        end = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader")
+    except StopIteration:
+        raise FileFormatError(f"{src}: no 'endheader' line: not an OpenSim storage file") from None
+    header = {}
+    for line in lines[:end]:
+        key, sep, value = line.partition("=")
+        if sep:
+            header[key.strip()] = value.strip()
+    in_degrees = header.get("inDegrees", "no").lower() == "yes"
+    body = [(i + 1, line) for i, line in enumerate(lines[end + 1 :], start=end + 1) if line.strip()]
+    if not body:
+        raise FileFormatError(f"{src}: no column names after 'endheader'")
+    col_lineno, col_line = body[0]
+    columns = tuple(c.strip() for c in (col_line.split("\t") if "\t" in col_line else col_line.split()))
+    if not columns or columns[0].lower() != "time":
+        raise FileFormatError(f"{src}:{col_lineno}: the first column must be 'time', got {columns[:1]}")
+    if len(set(columns)) != len(columns):
+        raise FileFormatError(f"{src}:{col_lineno}: repeated column names")
+    rows = np.empty((len(body) - 1, len(columns)))
+    for k, (lineno, line) in enumerate(body[1:]):
+        parts = line.split()
+        if len(parts) != len(columns):
+            raise FileFormatError(f"{src}:{lineno}: {len(parts)} values, expected {len(columns)} (one per column)")
+        try:
+            rows[k] = [float(p) for p in parts]
+        except ValueError:
+            raise FileFormatError(f"{src}:{lineno}: not all numbers: {line.strip()[:60]!r}") from None
+    if "nRows" in header:
+        try:
+            expected = int(header["nRows"])
+        except ValueError:
+            raise FileFormatError(f"{src}: nRows={header['nRows']!r} is not a number") from None
+        if expected != len(rows):
+            raise FileFormatError(f"{src}: header says nRows={expected}, the file has {len(rows)} rows (truncated?)")
+    if not np.all(np.isfinite(rows)):
+        k = int(np.argwhere(~np.isfinite(rows))[0][0])
+        raise FileFormatError(f"{src}:{body[k + 1][0]}: non-finite value")
+    time = rows[:, 0]
+    if np.any(np.diff(time) <= 0):
+        raise FileFormatError(f"{src}: time must increase from row to row")
+    return Storage(time, columns[1:], rows[:, 1:], in_degrees, src, header)
+
+
+def read_mot(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
+    """``(time, q)``: the wrist angles ``(n, 3)`` in radians, columns found by name."""
+    table = read_storage(path)
+    q = table.select(coordinate_names())
+    return table.time, np.radians(q) if table.in_degrees else q
+
+
+def read_sto(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
+    """``(time, tau)``: the wrist torques ``(n, 3)`` in N·m (``<coordinate>_moment`` columns)."""
+    table = read_storage(path)
+    return table.time, table.select(moment_names())
+
+
+def _check_rows(name: str, time, values, cols: int) -> tuple[np.ndarray, np.ndarray]:
+    time = np.asarray(time, np.float64)
+    values = np.asarray(values, np.float64)
+    if time.ndim != 1 or values.shape != (len(time), cols):
+        raise _native.InputError(f"{name}: expected time (n,) and values (n, {cols}), got {time.shape} and {values.shape}")
+    if not np.all(np.isfinite(time)) or np.any(np.diff(time) <= 0):
+        raise _native.InputError(f"{name}: time must be finite and strictly increasing")
+    return time, values
+
+
+def write_storage(path: str | os.PathLike[str], time, values, columns: list[str], in_degrees: bool) -> Path:
+    """Any table -> OpenSim storage text (atomically). Refuses non-finite values."""
+    time, values = _check_rows(Path(path).name, time, values, len(columns))
+    if not np.all(np.isfinite(values)):
+        row, col = np.argwhere(~np.isfinite(values))[0]
+        raise _native.InputError(f"{Path(path).name}: value {columns[col]} at row {row} is {values[row, col]}; not written")
+    header = [
+        Path(path).name,
+        "version=1",
+        f"nRows={len(time)}",
+        f"nColumns={len(columns) + 1}",
+        f"inDegrees={'yes' if in_degrees else 'no'}",
+        "endheader",
+        "time\t" + "\t".join(columns),
+    ]
+    buf = io.StringIO()
+    np.savetxt(buf, np.column_stack([time, values]), fmt=["%.6f"] + ["%.10g"] * values.shape[1], delimiter="\t")
+    return write_text_atomic(path, "\n".join(header) + "\n" + buf.getvalue())
+
+
+def write_mot(path: str | os.PathLike[str], time, q) -> Path:
+    """Wrist angles ``(n, 3)`` in radians -> ``.mot`` in degrees (``inDegrees=yes``)."""
+    return write_storage(path, time, np.degrees(np.asarray(q, np.float64)), coordinate_names(), in_degrees=True)
+
+
+def write_sto(path: str | os.PathLike[str], time, tau) -> Path:
+    """Joint torques ``(n, 3)`` in N·m -> ``.sto`` with OpenSim's ``<coordinate>_moment`` columns."""
+    return write_storage(path, time, tau, moment_names(), in_degrees=False)

@@ -1,0 +1,128 @@
+"""A model over a whole recording from a lab: markers in, one output row per frame that has
+one, and an account of every frame that has none.
+
+This is what the ``ikid ik`` / ``ikid run`` commands do, as a function. Frames go through
+a :class:`ikid.Stream` with their timestamps, exactly as they would live: the model's
+missing-marker policy applies, a gap in time restarts the window, and a frame the stream
+refuses (a marker it cannot fill, a jumping marker) yields no row — it is counted, by
+reason, in :attr:`Run.refused`, never written as a guess.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ikid import _native
+from ikid.io.resample import resample
+
+#: Relative difference between a file's frame rate and the model's that still counts as equal.
+RATE_TOLERANCE = 1e-3
+
+
+@dataclass
+class Run:
+    """Outputs for the frames that have one, in input order."""
+
+    time: np.ndarray
+    #: Index of each output's frame in the (possibly resampled) input.
+    frame: np.ndarray
+    values: np.ndarray
+    #: True where the stream filled a missing marker of that frame.
+    filled: np.ndarray
+    n_frames: int
+    #: Frames without an output, by reason (the window filling up is ``"window filling"``).
+    refused: Counter = field(default_factory=Counter)
+    rate_hz: float = 0.0
+    resampled_from_hz: float | None = None
+    #: Times a gap in the timestamps restarted the window.
+    gap_restarts: int = 0
+
+    def summary(self) -> str:
+        parts = [f"{len(self.time)}/{self.n_frames} frames with output"]
+        if self.filled.any():
+            parts.append(f"{int(self.filled.sum())} with a filled marker")
+        parts += [f"{n} {reason}" for reason, n in self.refused.most_common()]
+        if self.gap_restarts:
+            parts.append(f"{self.gap_restarts} window restarts after time gaps")
+        if self.resampled_from_hz:
+            parts.append(f"resampled {self.resampled_from_hz:g} -> {self.rate_hz:g} Hz")
+        return ", ".join(parts)
+
+
+def _reason(message: str) -> str:
+    """A short, countable reason from a stream's error message."""
+    message = re.sub(r"^frame \d+: ", "", message)
+    m = re.match(r"missing marker\(s\) (\S+) not filled", message)
+    if m:
+        return f"missing {m.group(1)} (not fillable)"
+    m = re.match(r"marker\(s\) (\S+) inconsistent", message)
+    if m:
+        return f"{m.group(1)} jumped"
+    if "(missing or non-finite)" in message:
+        return "missing marker (model refuses gaps)"
+    return message.split(";")[0]
+
+
+def check_rate(model: _native.Model, rate_hz: float, source: str, allow_resample: bool) -> bool:
+    """True if ``rate_hz`` must be resampled to the model's rate; an error if it differs and
+    resampling was not asked for."""
+    if abs(rate_hz - model.frame_rate_hz) <= RATE_TOLERANCE * model.frame_rate_hz:
+        return False
+    if not allow_resample:
+        raise _native.InputError(
+            f"{source} is sampled at {rate_hz:g} Hz but model {model.name!r} was trained at {model.frame_rate_hz:g} Hz; "
+            f"resample it (--resample, or ikid.io.resample: cubic Hermite to {model.frame_rate_hz:g} Hz) — a windowed "
+            "model run at another rate would be silently mis-timed"
+        )
+    return True
+
+
+def run_model(model: _native.Model, frames, time, *, rate_hz: float | None = None, resample_to_model: bool = False,
+              missing_markers: str | None = None, source: str = "frames", progress: bool = False) -> Run:
+    """Run ``model`` over ``frames`` ``(n, frame_len)`` at ``time`` ``(n,)`` seconds."""
+    frames = np.asarray(frames, np.float64)
+    time = np.asarray(time, np.float64)
+    if frames.ndim != 2 or time.shape != (len(frames),):
+        raise _native.InputError(f"{source}: expected frames (n, {model.frame_len}) and time (n,), got {frames.shape} and {time.shape}")
+    if rate_hz is None:
+        rate_hz = 1.0 / float(np.median(np.diff(time))) if len(time) > 1 else model.frame_rate_hz
+    resampled_from = None
+    if check_rate(model, rate_hz, source, resample_to_model):
+        time, frames = resample(time, frames, model.frame_rate_hz)
+        resampled_from, rate_hz = rate_hz, model.frame_rate_hz
+    stream = model.stream(missing_markers=missing_markers)
+    rows, index, filled = [], [], []
+    refused: Counter = Counter()
+    bar = _progress(len(frames), source) if progress else None
+    for i, (t, frame) in enumerate(zip(time, frames)):
+        if bar is not None and i % 1000 == 999:
+            bar.update(1000)
+        try:
+            out = stream.push(frame, time=float(t))
+        except _native.InputError as e:
+            refused[_reason(str(e))] += 1
+            continue
+        if out is None:
+            refused["window filling"] += 1
+            continue
+        rows.append(out)
+        index.append(i)
+        filled.append(bool(stream.filled_markers))
+    if bar is not None:
+        bar.close()
+    values = np.array(rows, np.float64).reshape(-1, model.n_outputs)
+    idx = np.array(index, np.int64)
+    return Run(time[idx], idx, values, np.array(filled, bool), len(frames), refused, rate_hz, resampled_from, stream.gap_restarts)
+
+
+def _progress(total: int, label: str):
+    """A tqdm bar on stderr when it is a terminal (tqdm decides), else nothing."""
+    try:
+        from tqdm import tqdm  # type: ignore[import-untyped]
+    except ImportError:  # pragma: no cover - tqdm is a dependency of the wheel
+        return None
+    return tqdm(total=total, desc=label, unit="frame", unit_scale=True, leave=False, disable=None)

@@ -1,0 +1,277 @@
+"""Lab files in and out: TRC, C3D, MOT/STO, marker maps, resampling, and the `ikid ik` /
+`ikid run` commands on them — round trips on files the tests write, and every kind of bad
+file answered by a clear error with nothing partial written."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import ikid
+from ikid import io
+from ikid.cli import main as cli
+from ikid.pipeline import run_model
+
+LAB_LABELS = ("R_RSTY", "R_USTY", "R_FA", "R_MCP2", "R_MCP5", "R_MCB3")
+LAB_MAP = "[markers]\n" + "\n".join(f'{m} = "{lab}"' for m, lab in zip(ikid.marker_names(), LAB_LABELS)) + "\n"
+
+
+@pytest.fixture(scope="module")
+def trial():
+    """A fresh simulated trial (seed unused in training), 1 % noise, with a lab's extra marker."""
+    return ikid.simulate("random", seed=7001, duration=3.0, shoulder_flexion=0.3).with_noise("uniform", 11, fraction=0.01)
+
+
+def lab_data(trial, labels=LAB_LABELS, extra=True) -> io.MarkerData:
+    """The trial as a lab's file would hold it: its own labels, plus a marker ikid does not use."""
+    pos = trial.markers.reshape(-1, 6, 3)
+    names = tuple(labels)
+    if extra:
+        pos = np.concatenate([pos, pos[:, :1] + 0.1], axis=1)
+        names += ("C7",)
+    return io.MarkerData(names, trial.time, pos, trial.rate_hz)
+
+
+# --- round trips ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("units", ["mm", "m", "cm"])
+def test_trc_round_trip_keeps_positions_and_gaps(trial, tmp_path, units):
+    markers = trial.markers.copy()
+    markers[100:130, 3:6] = np.nan  # USP unseen for 30 frames
+    path = io.write_trc(tmp_path / "t.trc", trial.time, markers, trial.rate_hz, units=units)
+    data = io.read_trc(path)
+    assert data.labels == tuple(ikid.marker_names()) and data.rate_hz == trial.rate_hz and data.file_units == units
+    got = data.frames()
+    assert np.array_equal(np.isnan(got), np.isnan(markers))
+    assert np.nanmax(np.abs(got - markers)) < 1e-6 * {"mm": 1, "cm": 10, "m": 1000}[units]
+    np.testing.assert_allclose(data.time, trial.time, atol=1e-6)
+
+
+def test_c3d_round_trip_keeps_labels_positions_and_gaps(trial, tmp_path):
+    data = lab_data(trial)
+    pos = data.positions.copy()
+    pos[200:260, 4] = np.nan
+    data = io.MarkerData(data.labels, data.time, pos, data.rate_hz)
+    back = io.read_c3d(io.write_c3d(tmp_path / "t.c3d", data))
+    assert back.labels == data.labels and back.rate_hz == data.rate_hz and back.file_units == "mm"
+    assert np.array_equal(np.isnan(back.positions), np.isnan(pos))
+    assert np.nanmax(np.abs(back.positions - pos)) < 1e-7  # float32 millimetres
+    np.testing.assert_allclose(back.time, trial.time, atol=1e-9)
+
+
+def test_mot_and_sto_round_trip(trial, tmp_path):
+    t, q = io.read_mot(io.write_mot(tmp_path / "q.mot", trial.time, trial.q))
+    np.testing.assert_allclose(q, trial.q, atol=1e-9)
+    np.testing.assert_allclose(t, trial.time, atol=1e-6)
+    t, tau = io.read_sto(io.write_sto(tmp_path / "tau.sto", trial.time, trial.tau))
+    np.testing.assert_allclose(tau, trial.tau, rtol=1e-9, atol=1e-12)
+    table = io.read_storage(tmp_path / "q.mot")
+    assert table.in_degrees and table.columns == tuple(ikid.coordinate_names())
+
+
+def test_storage_reads_radians_files_and_names_missing_columns(tmp_path):
+    path = io.write_storage(tmp_path / "r.mot", [0.0, 0.01], np.zeros((2, 3)), ["ra_wr_s_p", "ra_wr_e_f", "elbow_flex"], in_degrees=False)
+    with pytest.raises(ikid.InputError, match=r"no column\(s\) ra_wr_ad_ab; it has ra_wr_s_p, ra_wr_e_f, elbow_flex"):
+        io.read_mot(path)
+
+
+# --- marker maps ------------------------------------------------------------------------------
+
+
+def test_marker_map_selects_a_labs_labels_in_ikid_order(trial, tmp_path):
+    (tmp_path / "lab.toml").write_text(LAB_MAP)
+    frames = lab_data(trial).frames(io.MarkerMap.load(tmp_path / "lab.toml"))
+    assert np.array_equal(frames, trial.markers)
+
+
+def test_missing_label_lists_the_labels_the_file_has(trial, tmp_path):
+    (tmp_path / "lab.toml").write_text(LAB_MAP.replace("R_MCP5", "R_MCP5_typo"))
+    with pytest.raises(ikid.InputError, match=r"label\(s\) R_MCP5_typo \(MC5\) not found; the file has R_RSTY, .*R_MCP5, R_MCB3, C7"):
+        lab_data(trial).frames(io.MarkerMap.load(tmp_path / "lab.toml"))
+    with pytest.raises(ikid.InputError, match="give a marker map"):
+        lab_data(trial).frames()
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[markers]\nRSP = 'a'\n", r"does not name USP, FAP, MC2, MC5, MCB"),
+        (LAB_MAP + "ELB = 'x'\n", r"unknown ikid marker\(s\) ELB"),
+        (LAB_MAP.replace("R_USTY", "R_RSTY"), r"label 'R_RSTY' is given to both RSP and USP"),
+        ("markers = 3", r"expected a \[markers\] table"),
+        ("[markers\n", r"not valid TOML"),
+    ],
+)
+def test_bad_marker_maps_say_what_is_wrong(tmp_path, text, message):
+    (tmp_path / "m.toml").write_text(text)
+    with pytest.raises(io.FileFormatError, match=message):
+        io.MarkerMap.load(tmp_path / "m.toml")
+
+
+# --- resampling -------------------------------------------------------------------------------
+
+
+def test_resample_is_exact_for_quadratic_motion_and_keeps_gaps_local():
+    t = np.sort(np.random.default_rng(0).uniform(0, 1, 80))
+    x = np.column_stack([3 * t**2 - t + 0.5, -t])
+    new_t, new_x = io.resample(t, x, 1000.0)
+    assert new_t[0] == t[0] and new_t[-1] <= t[-1] and np.allclose(np.diff(new_t), 1e-3)
+    inner = (new_t > t[1]) & (new_t < t[-2])  # np.gradient is one-sided (first order) at the ends
+    np.testing.assert_allclose(new_x[inner], np.column_stack([3 * new_t**2 - new_t + 0.5, -new_t])[inner], atol=1e-9)
+    x[40] = np.nan
+    _, gappy = io.resample(t, x, 1000.0)
+    missing = np.isnan(gappy[:, 0])
+    assert missing.any() and np.all((new_t[missing] > t[37]) & (new_t[missing] < t[43]))
+
+
+def test_a_100_hz_file_is_refused_unless_resampled_then_runs_at_the_models_rate(trial, tmp_path):
+    slow = slice(None, None, 10)
+    path = io.write_trc(tmp_path / "slow.trc", trial.time[slow], trial.markers[slow], 100.0)
+    data = io.read_trc(path)
+    model = ikid.load("wrist-ik")
+    with pytest.raises(ikid.InputError, match=r"sampled at 100 Hz but model 'wrist-ik' was trained at 1000 Hz; resample it \(--resample"):
+        run_model(model, data.frames(), data.time, rate_hz=data.rate_hz)
+    run = run_model(model, data.frames(), data.time, rate_hz=data.rate_hz, resample_to_model=True)
+    assert run.resampled_from_hz == 100.0 and run.rate_hz == 1000.0
+    truth = trial.q[np.round(run.time * 1000).astype(int)]
+    assert np.mean((run.values - truth) ** 2) < 3e-4  # the 1 %-noise bound of the 1000 Hz model
+
+
+# --- the commands -----------------------------------------------------------------------------
+
+
+def test_ik_command_on_c3d_and_trc_equals_the_python_api(trial, tmp_path):
+    """Simulated trial -> C3D and TRC (a lab's labels) -> `ikid ik` -> MOT = Model.predict."""
+    (tmp_path / "lab.toml").write_text(LAB_MAP)
+    data = lab_data(trial)
+    io.write_c3d(tmp_path / "trial.c3d", data)
+    io.write_trc(tmp_path / "trial.trc", data.time, data.positions.reshape(len(data), -1), data.rate_hz, labels=data.labels)
+    model = ikid.load("wrist-ik")
+    want = model.predict(trial.markers)  # rows for frames window-1 ... n-1
+    for src in ("trial.c3d", "trial.trc"):
+        out = tmp_path / f"{src}.mot"
+        assert cli(["ik", str(tmp_path / src), "-o", str(out), "--map", str(tmp_path / "lab.toml")]) == 0
+        t, q = io.read_mot(out)
+        assert len(q) == len(want)
+        np.testing.assert_allclose(t, trial.time[model.window - 1 :], atol=1e-6)
+        # Same frames as read back from the file: equal to the printed precision.
+        frames = io.read_markers(tmp_path / src).frames(io.MarkerMap.load(tmp_path / "lab.toml"))
+        np.testing.assert_allclose(q, model.predict(frames), atol=1e-8)
+        # And the original frames: within the file's rounding (float32 or 1e-6 mm).
+        np.testing.assert_allclose(q, want, atol=2e-5)
+
+
+def test_run_command_writes_angles_and_torques_for_a_folder(trial, tmp_path, capsys):
+    (tmp_path / "in").mkdir()
+    (tmp_path / "lab.toml").write_text(LAB_MAP)
+    for k in range(2):
+        io.write_c3d(tmp_path / "in" / f"trial{k}.c3d", lab_data(trial))
+    assert cli(["run", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--map", str(tmp_path / "lab.toml"), "--jobs", "2"]) == 0
+    assert "2/2 files processed, 0 failed" in capsys.readouterr().out
+    for k in range(2):
+        _, q = io.read_mot(tmp_path / "out" / f"trial{k}.mot")
+        t, tau = io.read_sto(tmp_path / "out" / f"trial{k}.sto")
+        np.testing.assert_allclose(tau, ikid.load("wrist-chain").predict(io.read_c3d(tmp_path / "in" / f"trial{k}.c3d").frames(
+            io.MarkerMap.load(tmp_path / "lab.toml"))), atol=1e-8)
+        assert np.mean((tau - trial.tau[np.round(t * 1000).astype(int)]) ** 2) < 1e-2  # N·m²
+
+
+def test_map_template_lists_the_files_labels(trial, tmp_path, capsys):
+    io.write_c3d(tmp_path / "t.c3d", lab_data(trial))
+    assert cli(["map-template", str(tmp_path / "t.c3d")]) == 0
+    text = capsys.readouterr().out
+    assert "R_RSTY, R_USTY, R_FA, R_MCP2, R_MCP5, R_MCB3, C7" in text
+    (tmp_path / "m.toml").write_text(text)
+    assert io.MarkerMap.load(tmp_path / "m.toml") == io.MarkerMap(io.MarkerMap.identity().labels, str(tmp_path / "m.toml"))
+
+
+# --- bad files: a clear error each, nothing written -------------------------------------------
+
+
+def _bad_trc_in_metres_labelled_mm(trial, tmp_path):
+    path = io.write_trc(tmp_path / "bad.trc", trial.time, trial.markers / 1000.0, trial.rate_hz)  # values in m, says mm
+    return path, r"wrist markers are .* m apart .*units are 'mm' — are they\?"
+
+
+def _bad_unknown_unit(trial, tmp_path):
+    path = io.write_trc(tmp_path / "bad.trc", trial.time, trial.markers, trial.rate_hz)
+    path.write_text(path.read_text().replace("\tmm\t", "\tinches\t", 1))
+    return path, r"unknown length unit 'inches' \(known: mm, cm, m\)"
+
+
+def _bad_all_nan_marker(trial, tmp_path):
+    m = trial.markers.copy()
+    m[:, 9:12] = np.nan
+    return io.write_trc(tmp_path / "bad.trc", trial.time, m, trial.rate_hz), r"marker MC2 \(label 'MC2'\) is missing in every frame"
+
+
+def _bad_truncated_trc(trial, tmp_path):
+    path = io.write_trc(tmp_path / "bad.trc", trial.time, trial.markers, trial.rate_hz)
+    text = path.read_text()
+    path.write_text(text[: len(text) // 2])
+    return path, r"header says 3\d\d\d frames, the file has \d+ \(truncated\?\)|is not a number|columns"
+
+
+def _bad_truncated_c3d(trial, tmp_path):
+    path = io.write_c3d(tmp_path / "bad.c3d", lab_data(trial, tuple(ikid.marker_names()), extra=False))
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    return path, r"header says 3\d\d\d frames, the file holds \d+ \(truncated\?\)"
+
+
+def _bad_not_a_c3d(trial, tmp_path):
+    path = tmp_path / "bad.c3d"
+    path.write_bytes(b"\x00" * 100)
+    return path, r"not a readable C3D file"
+
+
+def _bad_rate(trial, tmp_path):
+    return io.write_trc(tmp_path / "bad.trc", trial.time[::4], trial.markers[::4], 250.0), r"sampled at 250 Hz but model 'wrist-ik' was trained at 1000 Hz"
+
+
+@pytest.mark.parametrize(
+    "make_bad",
+    [_bad_trc_in_metres_labelled_mm, _bad_unknown_unit, _bad_all_nan_marker, _bad_truncated_trc, _bad_truncated_c3d, _bad_not_a_c3d, _bad_rate],
+)
+def test_bad_files_get_a_clear_error_and_no_output(trial, tmp_path, capsys, make_bad):
+    path, message = make_bad(trial, tmp_path)
+    out = tmp_path / "out.mot"
+    assert cli(["ik", str(path), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"ikid: error: {path}") and __import__("re").search(message, err), err
+    assert not out.exists() and not list(tmp_path.glob(".out.mot*"))  # nothing partial either
+
+
+def test_corrupted_c3d_files_are_read_or_refused_never_a_crash(tmp_path):
+    """ezc3d 1.7.2 segfaults on some corrupted parameter sections (found by flipping bytes);
+    ikid parses in a child process, so every corrupted file is read whole or refused."""
+    data = lab_data(ikid.simulate("random", seed=7002, duration=0.3))
+    good = io.write_c3d(tmp_path / "good.c3d", data).read_bytes()
+    refused = 0
+    for k, pos in enumerate(range(512, 1100, 13)):
+        bad = bytearray(good)
+        bad[pos] ^= 0xFF
+        path = tmp_path / f"flip{k}.c3d"
+        path.write_bytes(bytes(bad))
+        try:
+            got = io.read_c3d(path)
+        except io.FileFormatError as e:
+            assert str(e).startswith(str(path))
+            refused += 1
+        else:
+            assert got.positions.shape[1:] == (len(got.labels), 3)
+    assert refused > 0
+
+
+def test_a_parser_crash_is_reported_as_a_bad_file(tmp_path, monkeypatch):
+    from ikid.io import c3d
+
+    monkeypatch.setattr(c3d, "_CHILD", "import os, signal; os.kill(os.getpid(), signal.SIGSEGV)")
+    (tmp_path / "x.c3d").write_bytes(b"\x02P" + b"\x00" * 510)
+    with pytest.raises(io.FileFormatError, match=r"x.c3d: not a readable C3D file: the C3D parser crashed \(signal 11\)"):
+        io.read_c3d(tmp_path / "x.c3d")
+    assert subprocess.run([sys.executable, "-c", "import ikid"]).returncode == 0
