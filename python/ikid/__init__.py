@@ -20,6 +20,7 @@ import os
 from pathlib import Path
 
 from ikid._native import (
+    Calibration,
     COORDINATES,
     FEATURE_SETS,
     MARKERS,
@@ -39,6 +40,10 @@ from ikid._native import (
 )
 
 __all__ = [
+    "Calibration",
+    "calibrate",
+    "load_calibration",
+    "save_calibration",
     "COORDINATES",
     "FEATURE_SETS",
     "MARKERS",
@@ -64,6 +69,7 @@ __all__ = [
 ]
 
 from ikid.sim import Trial, simulate  # noqa: E402  (needs _native first)
+from ikid.calibration import calibrate, load_calibration, save_calibration  # noqa: E402
 
 _SHIPPED = Path(__file__).with_name("models")
 

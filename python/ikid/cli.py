@@ -6,6 +6,8 @@ Examples::
     ikid run trial.trc -o out/trial                          # -> out/trial.mot + out/trial.sto (torques)
     ikid ik sessions/ -o results/ --map lab.toml --resample  # a folder, in parallel, with a summary
     ikid map-template trial.c3d > lab.toml                   # start a marker map from a file's labels
+    ikid calibrate --static st.c3d --movement ra_wr_e_f=fe.c3d --movement ra_wr_s_p=ps.c3d -o s01.json
+    ikid ik trial.c3d -o trial.mot --calibration s01.json    # the subject's own marker placement
     ikid simulate --protocol thesis --shoulder-deg 45 -o data/thesis_s45
     ikid simulate --protocol random --seed 3 --duration 60 --noise uniform:0.01 -o data/r3
     ikid dataset -o data            # thesis-sized set + the richer random set, in parallel
@@ -128,11 +130,13 @@ def _process_one(job: tuple[str, dict]) -> dict:
         data = read_markers(path)
         mapping = MarkerMap.load(opt["map"]) if opt["map"] else None
         frames = data.frames(mapping)
+        calibration = ikid.load_calibration(opt["calibration"]) if opt["calibration"] else None
         runs = {}
         for kind, name in (("angles", opt["ik_model"]), ("torques", opt.get("torque_model"))):
             if name:
                 runs[kind] = run_model(ikid.load(name), frames, data.time, rate_hz=data.rate_hz, resample_to_model=opt["resample"],
-                                       missing_markers=opt["missing_markers"], source=path, progress=opt["progress"])
+                                       missing_markers=opt["missing_markers"], calibration=calibration, source=path,
+                                       progress=opt["progress"])
         written = []
         for kind, r in runs.items():
             if len(r.time) == 0:
@@ -171,7 +175,7 @@ def cmd_process(args: argparse.Namespace) -> int:
             stem.parent.mkdir(parents=True, exist_ok=True)
         mot = out if (not many and out.suffix.lower() == ".mot") else stem.with_name(stem.name + ".mot")
         opt = {"map": args.map, "ik_model": args.model, "torque_model": torque_model, "resample": args.resample,
-               "missing_markers": args.missing_markers, "progress": not many,
+               "missing_markers": args.missing_markers, "progress": not many, "calibration": args.calibration,
                "outputs": (mot, stem.with_name(stem.name + ".sto"))}
         jobs.append((str(path), opt))
     if len(jobs) == 1:
@@ -188,6 +192,25 @@ def cmd_process(args: argparse.Namespace) -> int:
         ok = sum(r["ok"] for r in rows)
         print(f"{ok}/{len(rows)} files processed, {len(rows) - ok} failed")
     return 0 if all(r["ok"] for r in rows) else 2
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    """Static + single-coordinate movement files -> a calibration JSON."""
+    from ikid.io import MarkerMap, read_markers
+
+    mapping = MarkerMap.load(args.map) if args.map else None
+    movements = {}
+    for spec in args.movement:
+        coord, sep, path = spec.partition("=")
+        if not sep or coord not in ikid.coordinate_names():
+            raise SystemExit(f"ikid: error: --movement {spec!r}: expected COORDINATE=FILE, COORDINATE one of {', '.join(ikid.coordinate_names())}")
+        movements[coord] = read_markers(path).frames(mapping)
+    cal = ikid.calibrate(read_markers(args.static).frames(mapping), movements)
+    ikid.save_calibration(cal, args.output, static=args.static, movements=dict(s.partition("=")[::2] for s in args.movement))
+    r = cal.report or {}
+    moves = ", ".join(f"{k} {v['range_deg']:.0f}° ({100 * v['single_axis_share']:.1f} % one axis)" for k, v in r.get("movements", {}).items())
+    print(f"{cal!r}; movements: {moves}; axis skew {r.get('axis_skew_deg', 0):.2f}° -> {args.output}")
+    return 0
 
 
 def cmd_map_template(args: argparse.Namespace) -> int:
@@ -234,6 +257,7 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--resample", action="store_true",
                        help="resample markers to the model's rate (cubic Hermite; output rows at the model's rate)")
         p.add_argument("--missing-markers", choices=["fill", "refuse"], default=None, help="override the model's policy")
+        p.add_argument("--calibration", metavar="JSON", help="the subject's marker placement (see `ikid calibrate`)")
         p.add_argument("--jobs", type=int, default=None, help="parallel files (default: all cores)")
 
     p = sub.add_parser("ik", help="markers (.c3d/.trc) -> wrist angles (.mot, degrees)",
@@ -248,6 +272,19 @@ def main(argv: list[str] | None = None) -> int:
     processing_options(p, "angle model (default wrist-ik)")
     p.add_argument("--torque-model", default="wrist-chain", help="markers -> torques model (default wrist-chain)")
     p.set_defaults(func=cmd_process)
+
+    p = sub.add_parser("calibrate", help="measure a subject's marker placement (static + single-coordinate movements)",
+                       description="Static neutral trial + movements of one coordinate each -> calibration JSON.\n\n"
+                                   "  ikid calibrate --static s01_static.c3d --movement ra_wr_e_f=s01_flex.c3d \\\n"
+                                   "      --movement ra_wr_s_p=s01_pron.c3d --map lab.toml -o s01.json\n"
+                                   "  ikid ik s01_task.c3d -o s01_task.mot --map lab.toml --calibration s01.json",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--static", required=True, help="marker file of the neutral pose held still")
+    p.add_argument("--movement", action="append", default=[], metavar="COORD=FILE", required=True,
+                   help="a movement of that coordinate alone (at least two coordinates)")
+    p.add_argument("--map", metavar="TOML", help="marker map (see map-template)")
+    p.add_argument("-o", "--output", required=True, help="calibration JSON to write")
+    p.set_defaults(func=cmd_calibrate)
 
     p = sub.add_parser("map-template", help="print a marker map (TOML) to fill in, listing a file's labels")
     p.add_argument("input", nargs="?", help="a .c3d/.trc whose labels to list")

@@ -82,8 +82,10 @@ def check_rate(model: _native.Model, rate_hz: float, source: str, allow_resample
 
 
 def run_model(model: _native.Model, frames, time, *, rate_hz: float | None = None, resample_to_model: bool = False,
-              missing_markers: str | None = None, source: str = "frames", progress: bool = False) -> Run:
-    """Run ``model`` over ``frames`` ``(n, frame_len)`` at ``time`` ``(n,)`` seconds."""
+              missing_markers: str | None = None, calibration: _native.Calibration | None = None, source: str = "frames",
+              progress: bool = False) -> Run:
+    """Run ``model`` over ``frames`` ``(n, frame_len)`` at ``time`` ``(n,)`` seconds; with a
+    ``calibration`` (see :func:`ikid.calibrate`), for this subject's marker placement."""
     frames = np.asarray(frames, np.float64)
     time = np.asarray(time, np.float64)
     if frames.ndim != 2 or time.shape != (len(frames),):
@@ -94,7 +96,7 @@ def run_model(model: _native.Model, frames, time, *, rate_hz: float | None = Non
     if check_rate(model, rate_hz, source, resample_to_model):
         time, frames = resample(time, frames, model.frame_rate_hz)
         resampled_from, rate_hz = rate_hz, model.frame_rate_hz
-    stream = model.stream(missing_markers=missing_markers)
+    stream = model.stream(missing_markers=missing_markers, calibration=calibration)
     rows, index, filled = [], [], []
     refused: Counter = Counter()
     bar = _progress(len(frames), source) if progress else None

@@ -10,6 +10,7 @@
 //! "already borrowed").
 
 mod body;
+mod calibration;
 mod conv;
 mod errors;
 mod features;
@@ -24,6 +25,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", ikid::VERSION)?;
     errors::register(m)?;
     body::register(m)?;
+    calibration::register(m)?;
     features::register(m)?;
     model::register(m)?;
     reference::register(m)?;

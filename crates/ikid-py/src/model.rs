@@ -1,5 +1,6 @@
 //! `Model` and `Stream`: thin wrappers over the core's, NumPy in and out.
 
+use crate::calibration::Calibration;
 use crate::conv::{with_floats, with_frame};
 use crate::errors::{IntoPy, input};
 use ikid::ModelCard;
@@ -131,13 +132,17 @@ impl Model {
     }
 
     /// A new frame-by-frame stream over this model; `missing_markers` (`"refuse"` or
-    /// `"fill"`) overrides the card's policy.
-    #[pyo3(signature = (missing_markers = None))]
-    fn stream(&self, missing_markers: Option<&str>) -> PyResult<Stream> {
+    /// `"fill"`) overrides the card's policy; `calibration` (a `Calibration`) moves each
+    /// frame's markers to the body model's placement before the network sees them.
+    #[pyo3(signature = (missing_markers = None, calibration = None))]
+    fn stream(&self, missing_markers: Option<&str>, calibration: Option<PyRef<'_, Calibration>>) -> PyResult<Stream> {
         let mut inner = self.inner.stream();
         if let Some(name) = missing_markers {
             let policy = ikid::MissingMarkers::from_name(name).map_err(|e| input(e.to_string()))?;
             inner.set_missing_markers(policy).py_err()?;
+        }
+        if let Some(c) = calibration {
+            inner.set_calibration(Some(c.inner)).py_err()?;
         }
         Ok(Stream { inner })
     }

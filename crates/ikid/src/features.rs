@@ -124,12 +124,9 @@ impl FeatureSet {
         }
     }
 
-    /// Computes one frame's features into `out` (length [`feature_len`](Self::feature_len)).
-    ///
-    /// Refuses frames of the wrong length, non-finite values (a missing marker is NaN) and
-    /// degenerate marker triangles. `frame_index` only labels errors. Does not allocate on
-    /// success.
-    pub fn compute(self, frame: &[f32], out: &mut [f32], frame_index: usize) -> Result<()> {
+    /// Refuses a frame of the wrong length or holding a non-finite value (a missing marker
+    /// is NaN), naming it; what [`compute`](Self::compute) checks first.
+    pub fn check_frame(self, frame: &[f32], frame_index: usize) -> Result<()> {
         if frame.len() != self.frame_len() {
             return Err(Error::FrameLength {
                 feature_set: self.name(),
@@ -137,17 +134,27 @@ impl FeatureSet {
                 expected: self.frame_len(),
             });
         }
-        if out.len() != self.feature_len() {
-            return Err(Error::BadArgument {
-                what: "feature buffer",
-                detail: format!("has {} values, expected {}", out.len(), self.feature_len()),
-            });
-        }
         if let Some(i) = frame.iter().position(|v| !v.is_finite()) {
             return Err(Error::NonFiniteInput {
                 frame: frame_index,
                 field: self.frame_names()[i].clone(),
                 value: frame[i],
+            });
+        }
+        Ok(())
+    }
+
+    /// Computes one frame's features into `out` (length [`feature_len`](Self::feature_len)).
+    ///
+    /// Refuses frames of the wrong length, non-finite values (a missing marker is NaN) and
+    /// degenerate marker triangles. `frame_index` only labels errors. Does not allocate on
+    /// success.
+    pub fn compute(self, frame: &[f32], out: &mut [f32], frame_index: usize) -> Result<()> {
+        self.check_frame(frame, frame_index)?;
+        if out.len() != self.feature_len() {
+            return Err(Error::BadArgument {
+                what: "feature buffer",
+                detail: format!("has {} values, expected {}", out.len(), self.feature_len()),
             });
         }
         match self {
@@ -239,7 +246,7 @@ pub fn technical_frame(frame: &[f32], segment: Segment, frame_index: usize) -> R
 
 /// Each segment's technical frame expressed in its anatomical frame, from the default body
 /// at neutral (`B = A·T`). Marker placement scales with the subject, so `T` does not.
-fn technical_in_anatomical() -> &'static (Matrix3<f64>, Matrix3<f64>) {
+pub(crate) fn technical_in_anatomical() -> &'static (Matrix3<f64>, Matrix3<f64>) {
     static FRAMES: OnceLock<(Matrix3<f64>, Matrix3<f64>)> = OnceLock::new();
     FRAMES.get_or_init(|| {
         let body = body::BodyModel::default();

@@ -22,6 +22,7 @@
 #![deny(missing_docs)]
 
 pub mod body;
+pub mod calibration;
 pub mod error;
 pub mod features;
 pub mod gaps;
@@ -33,6 +34,7 @@ pub mod rng;
 pub mod stream;
 pub mod testing;
 
+pub use calibration::Calibration;
 pub use error::{Error, Result};
 pub use features::FeatureSet;
 pub use gaps::{GapFiller, MissingMarkers};

@@ -1,6 +1,7 @@
 //! Frame-by-frame inference over a fixed ring window, without heap allocation per frame.
 
 use crate::body::MARKER_FRAME_LEN;
+use crate::calibration::Calibration;
 use crate::error::{Error, Result};
 use crate::gaps::{GapFiller, MissingMarkers};
 use crate::model::Model;
@@ -40,6 +41,8 @@ pub struct Stream {
     /// Time of the last frame accepted by [`push_at`](Stream::push_at), seconds.
     last_time: Option<f64>,
     gap_restarts: u64,
+    /// The subject's marker placement, applied to each (filled) frame before its features.
+    calibration: Option<Calibration>,
 }
 
 impl Stream {
@@ -60,6 +63,7 @@ impl Stream {
             filled_mask: 0,
             last_time: None,
             gap_restarts: 0,
+            calibration: None,
             model,
         }
     }
@@ -93,6 +97,25 @@ impl Stream {
         Ok(())
     }
 
+    /// Calibrates the stream to the subject's marker placement (see [`Calibration`]): each
+    /// frame, once filled, has its markers moved to the body model's placement before its
+    /// features are computed. `None` uses the markers as they come. Needs marker frames.
+    pub fn set_calibration(&mut self, calibration: Option<Calibration>) -> Result<()> {
+        if calibration.is_some() && self.model.frame_len() != MARKER_FRAME_LEN {
+            return Err(Error::BadArgument {
+                what: "calibration",
+                detail: format!("needs marker frames; feature set {:?} takes joint states", self.model.feature_set().name()),
+            });
+        }
+        self.calibration = calibration;
+        Ok(())
+    }
+
+    /// The calibration this stream applies, if any.
+    pub fn calibration(&self) -> Option<&Calibration> {
+        self.calibration.as_ref()
+    }
+
     /// Markers filled in the last accepted frame (bit `i` = [`crate::body::MARKERS`]`[i]`; 0
     /// when it was complete). The output for that frame rests on the filled positions.
     pub fn filled_markers(&self) -> u8 {
@@ -116,6 +139,9 @@ impl Stream {
             // anything, so a refused frame leaves it and the window as they were.
             self.frame_buf.copy_from_slice(frame);
             let mask = self.filler.fill(&mut self.frame_buf, 0)?;
+            if let Some(calibration) = &self.calibration {
+                calibration.apply(&mut self.frame_buf, 0)?;
+            }
             set.compute(&self.frame_buf, &mut self.incoming, 0)?;
             self.filled_mask = mask;
         } else {
@@ -123,7 +149,15 @@ impl Stream {
                 // Refuse a marker that jumped (the filler watches complete frames either way).
                 self.filler.check(frame, 0)?;
             }
-            set.compute(frame, &mut self.incoming, 0)?;
+            match &self.calibration {
+                Some(calibration) => {
+                    set.check_frame(frame, 0)?;
+                    self.frame_buf.copy_from_slice(frame);
+                    calibration.apply(&mut self.frame_buf, 0)?;
+                    set.compute(&self.frame_buf, &mut self.incoming, 0)?;
+                }
+                None => set.compute(frame, &mut self.incoming, 0)?,
+            }
             self.filled_mask = 0;
         }
         let nf = self.incoming.len();
