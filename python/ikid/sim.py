@@ -17,6 +17,7 @@ import numpy as np
 
 from ikid import _native
 from ikid.io import write_mot, write_sto, write_trc
+from ikid.io._atomic import atomic_output
 
 #: Noise models by name, each ``fn(markers, seed, **params) -> markers``.
 NOISE = {
@@ -63,10 +64,9 @@ class Trial:
             return stem.with_name(stem.name + ext)
 
         npz = named(".npz")
-        tmp = npz.with_name(f".{npz.name}.partial.npz")
         arrays = {k: getattr(self, k) for k in ("time", "q", "qd", "qdd", "tau", "markers", "q_ref")}
-        np.savez_compressed(tmp, **arrays, metadata=np.array(json.dumps(self.metadata)))
-        os.replace(tmp, npz)
+        with atomic_output(npz, suffix=".npz") as tmp:
+            np.savez_compressed(tmp, **arrays, metadata=np.array(json.dumps(self.metadata)))
         return [
             npz,
             write_trc(named(".trc"), self.time, self.markers, self.rate_hz),

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ikid.io._atomic import atomic_output
 from ikid.io.markers import FileFormatError, MarkerData, unit_scale
 
 #: Wall-clock limit of the child that parses one file, seconds (a corrupt header can make a
@@ -124,7 +125,7 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
 
 
 def write_c3d(path: str | os.PathLike[str], data: MarkerData, units: str = "mm") -> Path:
-    """Write marker trajectories as a ``.c3d`` file (float points; NaN -> residual -1).
+    """Write marker trajectories as a ``.c3d`` file (float points; NaN stays NaN, read back as unseen).
     Written to a temporary name and renamed: a file appears whole or not at all."""
     ezc3d = _ezc3d()
     path = Path(path)
@@ -136,12 +137,6 @@ def write_c3d(path: str | os.PathLike[str], data: MarkerData, units: str = "mm")
     pts = np.ones((4, len(data.labels), len(data)))
     pts[:3] = np.transpose(data.positions / scale, (2, 1, 0))
     c["data"]["points"] = pts
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".c3d", dir=path.parent or ".")
-    os.close(fd)
-    try:
-        c.write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_output(path, suffix=".c3d") as tmp:
+        c.write(str(tmp))
     return path
