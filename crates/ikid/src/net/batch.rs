@@ -14,7 +14,7 @@
 //! leaves a finite sum unchanged. So `Model::predict` gives bit for bit what a `Stream` gives.
 //! Layers of at most [`SMALL_BLOCK`] outputs use the single-sample kernel per sample.
 
-use super::kernel::{BLOCK, PackedLayer, PackedMlp, SMALL_BLOCK, Scratch, active_inputs, forward_portable};
+use super::kernel::{BLOCK, PackedLayer, PackedMlp, Scratch, forward_portable};
 
 /// Samples per batched forward pass: [`GROUPS`] register-blocked groups of [`GROUP`], so a
 /// weight sub-block read from L2 for the first group is reused from L1 by the others.
@@ -82,8 +82,8 @@ fn forward_batch_avx2_fma(net: &PackedMlp, xs: [&[f32]; BATCH], scratch: &mut Ba
             avx2_batch::layer_batch(layer, srcs, &mut dsts);
         } else {
             for s in 0..BATCH {
-                let n = active_inputs(layer, srcs[s], actives[s]);
-                avx2::layer::<SMALL_BLOCK, { SMALL_BLOCK / 8 }, 4>(layer, srcs[s], &actives[s][..n], dsts[s]);
+                let n = avx2::active_inputs(layer, srcs[s], actives[s]);
+                avx2::small_layer(layer, srcs[s], &actives[s][..n], dsts[s]);
             }
         }
         if k == last {
@@ -109,7 +109,8 @@ mod avx2_batch {
         let xs: [&[f32]; BATCH] = xs.map(|x| &x[..n_in]);
         let zero = _mm256_setzero_ps();
         for (blk, w) in layer.weights.chunks_exact(BLOCK * n_in).enumerate() {
-            for sub in 0..BLOCK / SUB {
+            // Sub-blocks wholly past the last output are padding: nothing reads them.
+            for sub in (0..BLOCK / SUB).take_while(|sub| blk * BLOCK + sub * SUB < layer.n_out) {
                 let o = blk * BLOCK + sub * SUB;
                 let bias = &layer.bias[o..o + SUB];
                 // Raw pointers in the hot loop: the bounds are established once, here.
