@@ -388,20 +388,31 @@ impl Model {
         } else {
             frames
         };
-        let mut features = vec![0f32; frames.len() / fl * nf];
-        set.compute_rows(frames, &mut features)?;
+        if rows == 0 {
+            // No window to predict, but a bad frame is still an error.
+            set.compute_rows(frames, &mut vec![0f32; frames.len() / fl * nf])?;
+            return Ok(0);
+        }
         // Below a few hundred rows a thread costs more than it saves.
         const MIN_ROWS_PER_THREAD: usize = 256;
         let threads = threads.clamp(1, rows.div_ceil(MIN_ROWS_PER_THREAD).max(1));
         let rows_per_thread = rows.div_ceil(threads).max(1);
         let net = self.packed();
-        // Windows of consecutive frames are contiguous slices of the feature rows.
-        let window = |i: usize| &features[i * nf..(i + w) * nf];
-        let run = |first_row: usize, chunk: &mut [f32]| {
+        // Each thread computes the features of the frames its rows need (a chunk's windows
+        // overlap the next chunk's by window - 1 frames), so no thread waits for a serial pass.
+        let run = |first_row: usize, chunk: &mut [f32]| -> Result<()> {
+            let n_rows = chunk.len() / no;
+            let span = &frames[first_row * fl..(first_row + n_rows + w - 1) * fl];
+            let mut features = vec![0f32; span.len() / fl * nf];
+            for (i, (frame, row)) in span.chunks_exact(fl).zip(features.chunks_exact_mut(nf)).enumerate() {
+                set.compute(frame, row, first_row + i)?;
+            }
+            // Windows of consecutive frames are contiguous slices of the feature rows.
+            let window = |i: usize| &features[i * nf..(i + w) * nf];
             let mut scratch = net.scratch();
             let mut batch_scratch = net.batch_scratch();
             let mut groups = chunk.chunks_exact_mut(BATCH * no);
-            let mut row = first_row;
+            let mut row = 0;
             for group in &mut groups {
                 let mut rows = group.chunks_exact_mut(no);
                 let outs = std::array::from_fn(|_| rows.next().expect("BATCH rows per group"));
@@ -412,16 +423,19 @@ impl Model {
                 net.forward(window(row), &mut scratch, out);
                 row += 1;
             }
+            Ok(())
         };
-        if threads == 1 {
-            run(0, out);
-        } else {
-            std::thread::scope(|scope| {
-                for (t, chunk) in out.chunks_mut(rows_per_thread * no).enumerate() {
-                    scope.spawn(move || run(t * rows_per_thread, chunk));
-                }
-            });
-        }
+        let mut chunks = out.chunks_mut(rows_per_thread * no);
+        let first = chunks.next().expect("rows > 0");
+        // The calling thread runs the first chunk. A chunk's first error is the whole run's
+        // first (earlier chunks end before it), so the earliest failing chunk's error is the
+        // one a serial pass would report.
+        std::thread::scope(|scope| {
+            let others: Vec<_> = chunks.enumerate().map(|(t, chunk)| scope.spawn(move || run((t + 1) * rows_per_thread, chunk))).collect();
+            let mine = run(0, first);
+            let others = others.into_iter().map(|h| h.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)));
+            std::iter::once(mine).chain(others).collect::<Result<()>>()
+        })?;
         if let Some(i) = out.iter().position(|v| !v.is_finite()) {
             // Output row r is the prediction for frame r + window - 1.
             return Err(Error::NonFiniteOutput { frame: i / no + w - 1, value: out[i] });
