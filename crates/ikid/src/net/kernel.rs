@@ -39,11 +39,21 @@ pub(super) struct PackedLayer {
     pub(super) relu: bool,
     /// Input comes from a ReLU: list the nonzero inputs and skip the rest.
     pub(super) sparse_input: bool,
+    /// The same weights for the batch kernel (`batch.rs`), `[n_panels][n_in][PANEL]`;
+    /// empty for layers of at most [`SMALL_BLOCK`] outputs.
+    pub(super) panels: Vec<f32>,
+    /// `[n_panels * PANEL]`, zero-padded.
+    pub(super) panel_bias: Vec<f32>,
 }
 
 impl PackedLayer {
     pub(super) fn padded_out(&self) -> usize {
         self.bias.len()
+    }
+
+    /// Outputs the batch kernel writes (padding included).
+    pub(super) fn batch_padded_out(&self) -> usize {
+        if self.panels.is_empty() { self.padded_out() } else { self.panel_bias.len() }
     }
 }
 
@@ -110,11 +120,25 @@ impl PackedMlp {
                     }
                 }
                 let sparse_input = k > 0 && mlp.layers[k - 1].activation == Activation::Relu;
-                PackedLayer { n_in, n_out, block, weights, bias, relu: l.activation == Activation::Relu, sparse_input }
+                let mut layer = PackedLayer {
+                    n_in,
+                    n_out,
+                    block,
+                    weights,
+                    bias,
+                    relu: l.activation == Activation::Relu,
+                    sparse_input,
+                    panels: vec![],
+                    panel_bias: vec![],
+                };
+                if block == BLOCK {
+                    (layer.panels, layer.panel_bias) = super::batch::pack_panels(&layer);
+                }
+                layer
             })
             .collect();
         // Scratch holds any layer's input (for the active list) or padded output.
-        let max_width = layers.iter().map(|l| l.padded_out().max(l.n_in)).max().unwrap_or(0);
+        let max_width = layers.iter().map(|l| l.padded_out().max(l.batch_padded_out()).max(l.n_in)).max().unwrap_or(0);
         PackedMlp { n_in: mlp.n_inputs(), n_out: mlp.n_outputs(), layers, max_width, use_fma: fma_available() }
     }
 
@@ -458,7 +482,17 @@ mod tests {
         }
         let mut rng = SplitMix::new(3);
         for n_in in 0..42 {
-            let layer = PackedLayer { n_in, n_out: 1, block: SMALL_BLOCK, weights: vec![], bias: vec![], relu: false, sparse_input: true };
+            let layer = PackedLayer {
+                n_in,
+                n_out: 1,
+                block: SMALL_BLOCK,
+                weights: vec![],
+                bias: vec![],
+                relu: false,
+                sparse_input: true,
+                panels: vec![],
+                panel_bias: vec![],
+            };
             for _ in 0..20 {
                 let x: Vec<f32> = (0..n_in)
                     .map(|_| match rng.uniform(0.0, 5.0) as u32 {
