@@ -10,12 +10,11 @@
 //! run the single-sample kernel per sample: it sums over each sample's own list of nonzero
 //! inputs in four interleaved lanes, an order a batch cannot share.
 //!
-//! Measured on the development machine (2-core AMD EPYC, Zen 3; `Model::predict`, 4096
-//! windows, features included, one thread; µs per sample): 90→300→300→3 from 3.75 with
-//! 16-output slices of the 64-wide blocks (and the per-sample active lists scalar) to ~2.7 (the
-//! same recording, the same machine, interleaved runs);
-//! the inner loop runs at ~6 G FMA/s, about 3/4 of the core's peak. Tried and dropped: four
-//! samples × three vectors (16 live registers: LLVM spills, twice as slow), panels aligned to
+//! Measured on the development machine (2-core AMD EPYC, Zen 3; `Model::predict` on 4096
+//! windows, features included, one thread, interleaved runs): 90→300→300→3 went from 3.75 µs
+//! per sample (16-output slices of the 64-wide blocks, scalar active lists) to ~2.7 µs; the
+//! inner loop runs at ~6 G FMA/s, about 3/4 of the core's peak. Tried and dropped: four
+//! samples × three vectors (16 live registers: LLVM spills, twice as slow); panels aligned to
 //! 64 bytes (no measurable change).
 //!
 //! Every output is summed in the same order as the single-sample kernel (bias, then the
