@@ -19,7 +19,7 @@ use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, PoisonError};
 
 /// Metadata key holding the model card.
 pub const CARD_KEY: &str = "ikid";
@@ -388,46 +388,79 @@ impl Model {
         } else {
             frames
         };
-        let mut features = vec![0f32; frames.len() / fl * nf];
-        set.compute_rows(frames, &mut features)?;
         // Below a few hundred rows a thread costs more than it saves.
         const MIN_ROWS_PER_THREAD: usize = 256;
         let threads = threads.clamp(1, rows.div_ceil(MIN_ROWS_PER_THREAD).max(1));
-        let rows_per_thread = rows.div_ceil(threads).max(1);
+        // Features, then windows, in blocks that threads claim in turn: a thread slowed by
+        // another process takes fewer blocks instead of holding the others up.
+        const FRAMES_PER_BLOCK: usize = 512;
+        const ROWS_PER_BLOCK: usize = 8 * BATCH;
+        let mut features = vec![0f32; frames.len() / fl * nf];
+        let blocks = frames.chunks(FRAMES_PER_BLOCK * fl).zip(features.chunks_mut(FRAMES_PER_BLOCK * nf));
+        for_each_claimed(blocks, threads, || (), |(), b, (frames, features)| {
+            for (i, (frame, row)) in frames.chunks_exact(fl).zip(features.chunks_exact_mut(nf)).enumerate() {
+                set.compute(frame, row, b * FRAMES_PER_BLOCK + i)?;
+            }
+            Ok(())
+        })?;
         let net = self.packed();
         // Windows of consecutive frames are contiguous slices of the feature rows.
         let window = |i: usize| &features[i * nf..(i + w) * nf];
-        let run = |first_row: usize, chunk: &mut [f32]| {
-            let mut scratch = net.scratch();
-            let mut batch_scratch = net.batch_scratch();
+        let scratch = || (net.scratch(), net.batch_scratch());
+        for_each_claimed(out.chunks_mut(ROWS_PER_BLOCK * no), threads, scratch, |(scratch, batch_scratch), b, chunk| {
+            let mut row = b * ROWS_PER_BLOCK;
             let mut groups = chunk.chunks_exact_mut(BATCH * no);
-            let mut row = first_row;
             for group in &mut groups {
                 let mut rows = group.chunks_exact_mut(no);
                 let outs = std::array::from_fn(|_| rows.next().expect("BATCH rows per group"));
-                net.forward_batch(std::array::from_fn(|s| window(row + s)), &mut batch_scratch, outs);
+                net.forward_batch(std::array::from_fn(|s| window(row + s)), batch_scratch, outs);
                 row += BATCH;
             }
             for out in groups.into_remainder().chunks_exact_mut(no) {
-                net.forward(window(row), &mut scratch, out);
+                net.forward(window(row), scratch, out);
                 row += 1;
             }
-        };
-        if threads == 1 {
-            run(0, out);
-        } else {
-            std::thread::scope(|scope| {
-                for (t, chunk) in out.chunks_mut(rows_per_thread * no).enumerate() {
-                    scope.spawn(move || run(t * rows_per_thread, chunk));
-                }
-            });
-        }
+            Ok(())
+        })?;
         if let Some(i) = out.iter().position(|v| !v.is_finite()) {
             // Output row r is the prediction for frame r + window - 1.
             return Err(Error::NonFiniteOutput { frame: i / no + w - 1, value: out[i] });
         }
         Ok(rows)
     }
+}
+
+/// Runs `work` on every item on up to `threads` threads (the calling one included), each
+/// thread claiming the next item in order and keeping its own `state`. Returns the error of the
+/// earliest failing item: every item before it was claimed and run to the end.
+fn for_each_claimed<T: Send, S>(
+    items: impl Iterator<Item = T> + Send,
+    threads: usize,
+    state: impl Fn() -> S + Sync,
+    work: impl Fn(&mut S, usize, T) -> Result<()> + Sync,
+) -> Result<()> {
+    let queue = Mutex::new(items.enumerate());
+    let worker = || -> Option<(usize, Error)> {
+        let mut state = state();
+        loop {
+            // Only `next` runs under the lock, and it does not panic: no poisoning to handle.
+            let (i, item) = queue.lock().unwrap_or_else(PoisonError::into_inner).next()?;
+            if let Err(e) = work(&mut state, i, item) {
+                return Some((i, e));
+            }
+        }
+    };
+    let failed = if threads <= 1 {
+        worker()
+    } else {
+        std::thread::scope(|scope| {
+            let others: Vec<_> = (1..threads).map(|_| scope.spawn(worker)).collect();
+            let mine = worker();
+            let others = others.into_iter().map(|h| h.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)));
+            others.chain([mine]).flatten().min_by_key(|&(i, _)| i)
+        })
+    };
+    failed.map_or(Ok(()), |(_, e)| Err(e))
 }
 
 /// Runs a fresh [`GapFiller`] over a whole recording of marker frames: the frames with each

@@ -250,6 +250,22 @@ fn threaded_predict_is_bit_identical_to_single_threaded() {
 }
 
 #[test]
+fn threaded_predict_reports_the_earliest_bad_frame() {
+    let m = random_model(FeatureSet::Markers, 5, &[16], 3, 2);
+    let mut frames = random_frames(FeatureSet::Markers, 3000, 3);
+    // Bad frames in several feature blocks: whichever thread meets one first, the error
+    // names the earliest, as a serial pass does.
+    for frame in [2900, 1700, 1234] {
+        frames[frame * 18 + 4] = f32::NAN;
+    }
+    let mut out = vec![0f32; m.n_predictions(3000) * 3];
+    for threads in [1, 2, 8] {
+        let err = m.predict_with_threads(&frames, &mut out, threads).unwrap_err();
+        assert!(matches!(err, Error::NonFiniteInput { frame: 1234, .. }), "{threads} threads: {err}");
+    }
+}
+
+#[test]
 fn push_many_equals_pushing_one_by_one() {
     let m = model();
     let frames = random_frames(FeatureSet::Markers, 23, 4);

@@ -12,7 +12,9 @@
 //! After a ReLU about half of a layer's inputs are exactly zero. Their weight rows
 //! contribute nothing, so a layer fed by a ReLU first lists its nonzero inputs and streams
 //! only those rows: the weight traffic (the bound) drops with the sparsity. Skipping a
-//! `w · 0` term cannot change a finite sum, so results equal the dense product.
+//! `w · 0` term cannot change a finite sum, so results equal the dense product. The AVX2
+//! path builds that list eight inputs per step from a compare mask (scalar, it was ~12% of a
+//! batch `Model::predict`).
 //!
 //! The input affine map is folded into the first layer and the output map into the last:
 //! `W (x∘s + t) + b = (W diag s) x + (W t + b)`. Folding is done in f64 and rounds once.
@@ -39,11 +41,21 @@ pub(super) struct PackedLayer {
     pub(super) relu: bool,
     /// Input comes from a ReLU: list the nonzero inputs and skip the rest.
     pub(super) sparse_input: bool,
+    /// The same weights for the batch kernel (`batch.rs`), `[n_panels][n_in][PANEL]`;
+    /// empty for layers of at most [`SMALL_BLOCK`] outputs.
+    pub(super) panels: Vec<f32>,
+    /// `[n_panels * PANEL]`, zero-padded.
+    pub(super) panel_bias: Vec<f32>,
 }
 
 impl PackedLayer {
     pub(super) fn padded_out(&self) -> usize {
         self.bias.len()
+    }
+
+    /// Outputs the batch kernel writes (padding included).
+    pub(super) fn batch_padded_out(&self) -> usize {
+        if self.panels.is_empty() { self.padded_out() } else { self.panel_bias.len() }
     }
 }
 
@@ -110,11 +122,25 @@ impl PackedMlp {
                     }
                 }
                 let sparse_input = k > 0 && mlp.layers[k - 1].activation == Activation::Relu;
-                PackedLayer { n_in, n_out, block, weights, bias, relu: l.activation == Activation::Relu, sparse_input }
+                let mut layer = PackedLayer {
+                    n_in,
+                    n_out,
+                    block,
+                    weights,
+                    bias,
+                    relu: l.activation == Activation::Relu,
+                    sparse_input,
+                    panels: vec![],
+                    panel_bias: vec![],
+                };
+                if block == BLOCK {
+                    (layer.panels, layer.panel_bias) = super::batch::pack_panels(&layer);
+                }
+                layer
             })
             .collect();
         // Scratch holds any layer's input (for the active list) or padded output.
-        let max_width = layers.iter().map(|l| l.padded_out().max(l.n_in)).max().unwrap_or(0);
+        let max_width = layers.iter().map(|l| l.padded_out().max(l.batch_padded_out()).max(l.n_in)).max().unwrap_or(0);
         PackedMlp { n_in: mlp.n_inputs(), n_out: mlp.n_outputs(), layers, max_width, use_fma: fma_available() }
     }
 
@@ -182,38 +208,45 @@ pub(super) fn fma_available() -> bool {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn forward_avx2_fma(net: &PackedMlp, x: &[f32], scratch: &mut Scratch, out: &mut [f32]) {
-    forward_with(net, x, scratch, out, |layer, input, active, y| match layer.block {
-        BLOCK => avx2::layer::<BLOCK, { BLOCK / 8 }, { 64 / BLOCK }>(layer, input, active, y),
-        _ => avx2::layer::<SMALL_BLOCK, { SMALL_BLOCK / 8 }, 4>(layer, input, active, y),
+    forward_with(net, x, scratch, out, |layer, input, active, y| {
+        let n = avx2::active_inputs(layer, input, active);
+        let active = &active[..n];
+        match layer.block {
+            BLOCK => avx2::layer::<BLOCK, { BLOCK / 8 }, { 64 / BLOCK }>(layer, input, active, y),
+            _ => avx2::small_layer(layer, input, active, y),
+        }
     });
 }
 
 /// The portable path (any CPU; also the test of the packing independent of the SIMD code).
 pub(super) fn forward_portable(net: &PackedMlp, x: &[f32], scratch: &mut Scratch, out: &mut [f32]) {
-    forward_with(net, x, scratch, out, |layer, input, active, y| match layer.block {
-        BLOCK => portable_layer::<BLOCK>(layer, input, active, y),
-        _ => portable_layer::<SMALL_BLOCK>(layer, input, active, y),
+    forward_with(net, x, scratch, out, |layer, input, active, y| {
+        let n = active_inputs(layer, input, active);
+        let active = &active[..n];
+        match layer.block {
+            BLOCK => portable_layer::<BLOCK>(layer, input, active, y),
+            _ => portable_layer::<SMALL_BLOCK>(layer, input, active, y),
+        }
     });
 }
 
 /// Runs the layers, ping-ponging between the two scratch buffers. `layer_fn` computes one
-/// layer over the inputs listed in `active`.
+/// layer, listing the inputs it reads in the `active` buffer first.
 #[inline(always)]
 fn forward_with(
     net: &PackedMlp,
     x: &[f32],
     scratch: &mut Scratch,
     out: &mut [f32],
-    mut layer_fn: impl FnMut(&PackedLayer, &[f32], &[u32], &mut [f32]),
+    mut layer_fn: impl FnMut(&PackedLayer, &[f32], &mut [u32], &mut [f32]),
 ) {
     let Scratch { a, b, active } = scratch;
     let (mut src, mut dst): (&mut Vec<f32>, &mut Vec<f32>) = (a, b);
     let last = net.layers.len() - 1;
     for (k, layer) in net.layers.iter().enumerate() {
         let input: &[f32] = if k == 0 { x } else { &src[..layer.n_in] };
-        let n = active_inputs(layer, input, active);
         let y = &mut dst[..layer.padded_out()];
-        layer_fn(layer, input, &active[..n], y);
+        layer_fn(layer, input, active, y);
         if k == last {
             out.copy_from_slice(&y[..layer.n_out]);
         }
@@ -224,11 +257,22 @@ fn forward_with(
 /// Lists the inputs a layer must read into `active` (all, or the nonzero ones after a ReLU).
 #[inline(always)]
 pub(super) fn active_inputs(layer: &PackedLayer, input: &[f32], active: &mut [u32]) -> usize {
+    if !layer.sparse_input {
+        return all_inputs(input.len(), active);
+    }
     // Branch-free compaction.
     let mut n = 0;
     for (j, &v) in input.iter().enumerate() {
         active[n] = j as u32;
-        n += usize::from(!layer.sparse_input || v != 0.0);
+        n += usize::from(v != 0.0);
+    }
+    n
+}
+
+/// Lists every input, `0..n`.
+fn all_inputs(n: usize, active: &mut [u32]) -> usize {
+    for (j, a) in active[..n].iter_mut().enumerate() {
+        *a = j as u32;
     }
     n
 }
@@ -266,8 +310,64 @@ fn portable_layer<const B: usize>(layer: &PackedLayer, x: &[f32], active: &[u32]
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
 pub(super) mod avx2 {
-    use super::PackedLayer;
+    use super::{PackedLayer, SMALL_BLOCK};
     use std::arch::x86_64::*;
+
+    /// For each 8-bit mask, the positions of its set bits, lowest first (then zeros).
+    const POSITIONS: [[u8; 8]; 256] = {
+        let mut t = [[0u8; 8]; 256];
+        let mut m = 0;
+        while m < 256 {
+            let (mut bit, mut n) = (0, 0);
+            while bit < 8 {
+                if m & (1 << bit) != 0 {
+                    t[m][n] = bit as u8;
+                    n += 1;
+                }
+                bit += 1;
+            }
+            m += 1;
+        }
+        t
+    };
+
+    /// [`super::active_inputs`], eight inputs per step: the nonzero lanes' indices are
+    /// looked up from the compare mask and stored at once. Same list, a fraction of the time.
+    #[target_feature(enable = "avx2,fma")]
+    pub(in crate::net) fn active_inputs(layer: &PackedLayer, input: &[f32], active: &mut [u32]) -> usize {
+        if !layer.sparse_input {
+            return super::all_inputs(input.len(), active);
+        }
+        let zero = _mm256_setzero_ps();
+        let mut n = 0;
+        let chunks = input.chunks_exact(8);
+        let tail = chunks.remainder();
+        for (c, x) in chunks.enumerate() {
+            // SAFETY: `x` holds 8 floats.
+            let v = unsafe { _mm256_loadu_ps(x.as_ptr()) };
+            // Unordered-or-not-equal: NaN counts as nonzero, as `v != 0.0` does.
+            let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(v, zero)) as usize;
+            let pos = _mm_cvtsi64_si128(i64::from_le_bytes(POSITIONS[mask]));
+            let idx = _mm256_add_epi32(_mm256_cvtepu8_epi32(pos), _mm256_set1_epi32(8 * c as i32));
+            // n ≤ 8c, so these 8 slots lie within the input's length (≤ active.len()).
+            let dst = &mut active[n..n + 8];
+            // SAFETY: `dst` holds 8 u32.
+            unsafe { _mm256_storeu_si256(dst.as_mut_ptr().cast(), idx) };
+            n += (mask as u32).count_ones() as usize;
+        }
+        let base = input.len() - tail.len();
+        for (j, &v) in tail.iter().enumerate() {
+            active[n] = (base + j) as u32;
+            n += usize::from(v != 0.0);
+        }
+        n
+    }
+
+    /// A layer of [`SMALL_BLOCK`] outputs: four interleaved accumulator vectors.
+    #[target_feature(enable = "avx2,fma")]
+    pub(in crate::net) fn small_layer(small: &PackedLayer, x: &[f32], active: &[u32], y: &mut [f32]) {
+        layer::<SMALL_BLOCK, { SMALL_BLOCK / 8 }, 4>(small, x, active, y)
+    }
 
     /// How many active inputs ahead to prefetch weight rows.
     const PREFETCH_AHEAD: usize = 8;
@@ -372,6 +472,44 @@ mod tests {
             let scale = want.iter().fold(1e-3f32, |m, v| m.max(v.abs()));
             for (g, w) in out.iter().zip(&want) {
                 assert!((g - w).abs() <= 1e-5 * scale, "{widths:?} fma={use_fma}: {g} vs {w}");
+            }
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn simd_active_list_equals_scalar() {
+        if !fma_available() {
+            return;
+        }
+        let mut rng = SplitMix::new(3);
+        for n_in in 0..42 {
+            let layer = PackedLayer {
+                n_in,
+                n_out: 1,
+                block: SMALL_BLOCK,
+                weights: vec![],
+                bias: vec![],
+                relu: false,
+                sparse_input: true,
+                panels: vec![],
+                panel_bias: vec![],
+            };
+            for _ in 0..20 {
+                let x: Vec<f32> = (0..n_in)
+                    .map(|_| match rng.uniform(0.0, 5.0) as u32 {
+                        0 => 0.0,
+                        1 => -0.0,
+                        2 => f32::NAN,
+                        _ => rng.uniform(-1.0, 1.0) as f32,
+                    })
+                    .collect();
+                let (mut want, mut got) = (vec![0u32; n_in], vec![0u32; n_in]);
+                let n = active_inputs(&layer, &x, &mut want);
+                // SAFETY: the CPU has AVX2 and FMA (checked above).
+                #[allow(unsafe_code)]
+                let m = unsafe { avx2::active_inputs(&layer, &x, &mut got) };
+                assert_eq!(&want[..n], &got[..m], "{x:?}");
             }
         }
     }
