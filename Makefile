@@ -48,12 +48,12 @@ data: wheel
 # Retrain the shipped models from scratch (<= 15 min on 2 cores) into python/ikid/models/;
 # rebuild the wheel afterwards to ship them.
 models: wheel
-	$(PY) -m training.models
+	$(PY) -m ikid.training.models
 
 # The evaluation report (docs/report.md + PNG plots) of the shipped models, beside the
 # classical reference and the thesis' numbers.
 report: wheel
-	$(PY) -m training.report
+	$(PY) -m ikid.training.report
 
 test: test-rust wheel c test-python check-header lint fuzz
 	@echo "make test: all suites passed"

@@ -11,7 +11,7 @@ import ikid
 torch = pytest.importorskip("torch", reason="parity needs the training extra (make test installs it)")
 from torch import nn  # noqa: E402
 
-from training.export import Affine, ModelSpec, export, export_onnx  # noqa: E402
+from ikid.training.export import Affine, ModelSpec, export, export_onnx  # noqa: E402
 
 #: Largest |ikid - torch| allowed, relative to the largest |torch output| of each column.
 RTOL = 1e-5

@@ -15,10 +15,10 @@ torch = pytest.importorskip("torch", reason="training needs the training extra (
 from safetensors import safe_open  # noqa: E402
 from torch import nn  # noqa: E402
 
-from training import data as D  # noqa: E402
-from training.evaluate import errors, noisy  # noqa: E402
-from training.export import load_torch  # noqa: E402
-from training.train import load_config, run  # noqa: E402
+from ikid.training import data as D  # noqa: E402
+from ikid.training.evaluate import errors, noisy  # noqa: E402
+from ikid.training.export import load_torch  # noqa: E402
+from ikid.training.train import load_config, run  # noqa: E402
 
 SHIPPED = ["wrist-chain", "wrist-id", "wrist-ik"]
 

@@ -22,6 +22,7 @@ __all__ = [
     "Stream",
     "build_model",
     "forward_markers",
+    "body_model",
     "reference_ik",
     "reference_id",
     "SIMULATOR",
@@ -125,6 +126,12 @@ class Stream:
     @property
     def model(self) -> Model: ...
 
+def body_model(
+    length_scale: float = 1.0,
+    mass_scale: float = 1.0,
+    shoulder_flexion: float = 0.0,
+    marker_shift: _Floats | None = None,
+) -> dict[str, Any]: ...
 def forward_markers(
     q: _Floats,
     shoulder_flexion: float = 0.0,

@@ -2,9 +2,10 @@
 
 use crate::conv::with_f64_rows;
 use crate::errors::{IntoPy, input};
-use ikid::body::{BodyModel, COORDINATES, MARKERS};
+use ikid::body::{BodyModel, COORDINATES, GRAVITY, MARKERS, SegmentParams, VIRTUAL_LINK};
 use numpy::{IntoPyArray, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let coords: Vec<(&str, &str, (f64, f64))> = COORDINATES.iter().map(|c| (c.name, c.positive, c.range)).collect();
@@ -12,7 +13,102 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let markers: Vec<(&str, &str, &str)> = MARKERS.iter().map(|mk| (mk.name, mk.segment.name(), mk.description)).collect();
     m.add("MARKERS", markers)?;
     m.add_function(wrap_pyfunction!(forward_markers, m)?)?;
+    m.add_function(wrap_pyfunction!(body_model, m)?)?;
     Ok(())
+}
+
+/// A subject scaled from the default, each marker moved by `marker_shift` `(6, 3)` (metres,
+/// in its segment's frame); the one place Python reads the body model from.
+fn subject(length_scale: f64, mass_scale: f64, marker_shift: Option<&Bound<'_, PyAny>>) -> PyResult<BodyModel> {
+    let mut body = BodyModel::try_scaled(length_scale, mass_scale).py_err()?;
+    if let Some(shift) = marker_shift {
+        with_f64_rows(shift, "marker_shift", 3, |v, n| {
+            if n != body.marker_offsets.len() || v.iter().any(|x| !x.is_finite()) {
+                return Err(input(format!("marker_shift: expected {} finite rows of 3 (metres), got {n} rows", body.marker_offsets.len())));
+            }
+            for (o, s) in body.marker_offsets.iter_mut().zip(v.chunks_exact(3)) {
+                for k in 0..3 {
+                    o[k] += s[k];
+                }
+            }
+            Ok(())
+        })?;
+    }
+    Ok(body)
+}
+
+fn segment_dict<'py>(py: Python<'py>, s: &SegmentParams) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("length", s.length)?;
+    d.set_item("mass", s.mass)?;
+    d.set_item("com", s.com.to_vec())?;
+    d.set_item("inertia", s.inertia.to_vec())?;
+    Ok(d)
+}
+
+/// Everything a model file for another tool (OpenSim `.osim`, biorbd `.bioMod`) needs, for a
+/// subject scaled by `length_scale`/`mass_scale`, markers moved by `marker_shift`, the forearm
+/// at `shoulder_flexion` (rad). SI units; frames as documented in the core's `body` module.
+///
+/// Keys: `gravity`; `coordinates` (name, positive, axis in the previous link's frame, range);
+/// `segments` (`forearm`, `hand`: length, mass, com, principal inertia about the com along the
+/// segment axes); `virtual_link` (the tiny links between the wrist's joints); `forearm_pose`
+/// (`rotation` 3×3 rows, `translation`: the forearm frame in the lab, origin at the wrist
+/// centre); `markers` (name, segment, description, offset in the segment's frame);
+/// `upper_arm_length`, `shoulder`, `length_scale`, `mass_scale`, `shoulder_flexion`.
+#[pyfunction]
+#[pyo3(signature = (length_scale=1.0, mass_scale=1.0, shoulder_flexion=0.0, marker_shift=None))]
+fn body_model<'py>(
+    py: Python<'py>,
+    length_scale: f64,
+    mass_scale: f64,
+    shoulder_flexion: f64,
+    marker_shift: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    if !shoulder_flexion.is_finite() {
+        return Err(input(format!("shoulder_flexion: is {shoulder_flexion}")));
+    }
+    let body = subject(length_scale, mass_scale, marker_shift)?;
+    let d = PyDict::new(py);
+    d.set_item("gravity", GRAVITY.to_vec())?;
+    let coords = PyList::empty(py);
+    for c in COORDINATES.iter() {
+        let cd = PyDict::new(py);
+        cd.set_item("name", c.name)?;
+        cd.set_item("positive", c.positive)?;
+        cd.set_item("axis", c.axis.to_vec())?;
+        cd.set_item("range", vec![c.range.0, c.range.1])?;
+        coords.append(cd)?;
+    }
+    d.set_item("coordinates", coords)?;
+    let segments = PyDict::new(py);
+    segments.set_item("forearm", segment_dict(py, &body.forearm)?)?;
+    segments.set_item("hand", segment_dict(py, &body.hand)?)?;
+    d.set_item("segments", segments)?;
+    d.set_item("virtual_link", segment_dict(py, &VIRTUAL_LINK)?)?;
+    let pose = body.forearm_pose(shoulder_flexion);
+    let r = pose.rotation.to_rotation_matrix();
+    let rows: Vec<Vec<f64>> = (0..3).map(|i| (0..3).map(|j| r[(i, j)]).collect()).collect();
+    let pd = PyDict::new(py);
+    pd.set_item("rotation", rows)?;
+    pd.set_item("translation", pose.translation.vector.iter().copied().collect::<Vec<f64>>())?;
+    d.set_item("forearm_pose", pd)?;
+    let markers = PyList::empty(py);
+    for (mk, offset) in MARKERS.iter().zip(body.marker_offsets.iter()) {
+        let md = PyDict::new(py);
+        md.set_item("name", mk.name)?;
+        md.set_item("segment", mk.segment.name())?;
+        md.set_item("description", mk.description)?;
+        md.set_item("offset", offset.to_vec())?;
+        markers.append(md)?;
+    }
+    d.set_item("markers", markers)?;
+    d.set_item("upper_arm_length", body.upper_arm_length)?;
+    d.set_item("shoulder", body.shoulder.to_vec())?;
+    d.set_item("length_scale", length_scale)?;
+    d.set_item("mass_scale", mass_scale)?;
+    d.set_item("shoulder_flexion", shoulder_flexion)?;
+    Ok(d)
 }
 
 /// Marker frames `(n, 18)` (metres, lab frame) of the body model at wrist angles `q`
@@ -29,20 +125,7 @@ fn forward_markers<'py>(
     mass_scale: f64,
     marker_shift: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let mut body = BodyModel::try_scaled(length_scale, mass_scale).py_err()?;
-    if let Some(shift) = marker_shift {
-        with_f64_rows(shift, "marker_shift", 3, |v, n| {
-            if n != body.marker_offsets.len() || v.iter().any(|x| !x.is_finite()) {
-                return Err(input(format!("marker_shift: expected {} finite rows of 3 (metres), got {n} rows", body.marker_offsets.len())));
-            }
-            for (o, s) in body.marker_offsets.iter_mut().zip(v.chunks_exact(3)) {
-                for k in 0..3 {
-                    o[k] += s[k];
-                }
-            }
-            Ok(())
-        })?;
-    }
+    let body = subject(length_scale, mass_scale, marker_shift)?;
     with_f64_rows(q, "q", COORDINATES.len(), |values, n| {
         let frames = body.marker_frames(values, shoulder_flexion).py_err()?;
         frames.into_pyarray(py).reshape([n, ikid::body::MARKER_FRAME_LEN])

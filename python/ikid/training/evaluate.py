@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 import ikid
-from training import data as D
+from ikid.training import data as D
 
 #: The thesis' test numbers (MSE, rad² for angles; its chain torque MSE as printed, N·m² by its units).
 THESIS = {"ik_clean": 4.15e-5, "ik_1pct": 7e-4, "ik_5pct": 3.7e-3, "chain_torque_mse": 0.1727}

@@ -1,11 +1,11 @@
 """Train one model from a TOML config: simulate (or load) data, train an MLP with noise
 augmentation and early stopping, export ``.safetensors`` (+ ONNX) with a full model card.
 
-    python -m training.train training/configs/wrist-ik.toml --out out/models
+    python -m ikid.training.train python/ikid/training/configs/wrist-ik.toml --out out/models
 
 Config tables: ``[model]`` (name, task, feature_set, window, hidden), ``[data]`` (what to
 simulate, or ``folder`` of saved trials), ``[train]`` (seed, batch, lr, budget, early stopping,
-augmentation). See ``training/configs/`` for the shipped models' configs. Every run writes
+augmentation). See ``ikid/training/configs/`` for the shipped models' configs. Every run writes
 its config, a per-epoch log (JSON lines) and its result under ``<out>/runs/<name>/``.
 """
 
@@ -28,8 +28,8 @@ from torch import nn
 from tqdm import tqdm
 
 import ikid
-from training import data as D
-from training.export import Affine, ModelSpec, export, export_onnx
+from ikid.training import data as D
+from ikid.training.export import Affine, ModelSpec, export, export_onnx
 
 TRAIN_DEFAULTS: dict[str, Any] = {
     "seed": 0,
@@ -221,7 +221,7 @@ def spec_for(cfg: dict[str, Any], recs: list[D.Recording], trained: Trained, met
 
 def run(cfg: dict[str, Any], out: Path, progress: bool = True, onnx: bool = True) -> tuple[ikid.Model, Path]:
     """Train and export one config; returns the loaded model and its path."""
-    from training.evaluate import card_metrics  # evaluation needs only ikid, not torch
+    from ikid.training.evaluate import card_metrics  # evaluation needs only ikid, not torch
 
     name = cfg["model"]["name"]
     run_dir = out / "runs" / name

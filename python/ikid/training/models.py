@@ -12,11 +12,12 @@ import shutil
 import time
 from pathlib import Path
 
-from training.train import load_config, run
+from ikid.training.train import load_config, run
 
 CONFIGS = Path(__file__).with_name("configs")
 SHIPPED = ["wrist-ik", "wrist-chain", "wrist-id"]
-PACKAGE_MODELS = Path(__file__).resolve().parents[1] / "python" / "ikid" / "models"
+# Run from a source checkout: the shipped models live in the package sources, not in site-packages.
+PACKAGE_MODELS = Path("python/ikid/models")
 
 
 def main() -> None:

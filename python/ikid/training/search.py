@@ -1,6 +1,6 @@
 """Grid or random search over training configs, driven by a TOML file.
 
-    python -m training.search training/configs/search-ik.toml --out out/search
+    python -m ikid.training.search python/ikid/training/configs/search-ik.toml --out out/search
 
 The file names a base config and, under ``[search]``, lists of values for dotted keys of it
 (``"model.window" = [5, 25, 50]``). ``mode = "grid"`` tries every combination, ``mode =
@@ -20,7 +20,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from training.train import load_config, run
+from ikid.training.train import load_config, run
 
 
 def combinations(space: dict[str, list[Any]], mode: str, trials: int, seed: int) -> list[dict[str, Any]]:
