@@ -35,7 +35,7 @@ wheel: $(VENV)/.created
 	rm -f $(WHEELS)/ikid-*.whl
 	$(VENV)/bin/maturin build --release --quiet -o $(WHEELS)
 	$(PIP) install --quiet --force-reinstall --no-deps $(WHEELS)/ikid-*.whl
-	$(PIP) install --quiet "$$(ls $(WHEELS)/ikid-*.whl)[train,test]"
+	$(PIP) install --quiet "$$(ls $(WHEELS)/ikid-*.whl)[train,test,eval]"
 
 demo: wheel
 	$(PY) -m ikid.demo
