@@ -8,6 +8,12 @@ Examples::
     ikid map-template trial.c3d > lab.toml                   # start a marker map from a file's labels
     ikid calibrate --static st.c3d --movement ra_wr_e_f=fe.c3d --movement ra_wr_s_p=ps.c3d -o s01.json
     ikid ik trial.c3d -o trial.mot --calibration s01.json    # the subject's own marker placement
+    ikid id trial.mot -o trial.sto                           # angles -> torques (wrist-id; or --reference)
+    ikid stream --model wrist-ik < frames.csv                # one frame per line in, one result per line out
+    ikid stream --udp 9870 --count 10000                     # frames as UDP datagrams on 127.0.0.1
+    ikid train --data lab/ --map lab.toml --task ik -o models/lab-ik.safetensors
+    ikid report --model models/lab-ik.safetensors --data lab_test/ --map lab.toml
+    ikid bench --model wrist-ik                              # push latency and batch throughput here
     ikid simulate --protocol thesis --shoulder-deg 45 -o data/thesis_s45
     ikid simulate --protocol random --seed 3 --duration 60 --noise uniform:0.01 -o data/r3
     ikid dataset -o data            # thesis-sized set + the richer random set, in parallel
@@ -19,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -224,6 +231,267 @@ def cmd_map_template(args: argparse.Namespace) -> int:
     return 0
 
 
+# --- id: angles -> torques ---------------------------------------------------------------------
+
+
+def cmd_id(args: argparse.Namespace) -> int:
+    """Angles (.mot) -> torques (.sto): the wrist-id network over (q, q̇, q̈), or the exact
+    Newton-Euler reference for a subject (``--reference``). Velocities and accelerations are
+    central differences of the angles (a file is offline: no lag)."""
+    from ikid.io import read_mot, resample, write_sto
+    from ikid.pipeline import check_rate, run_model
+
+    time_s, q = read_mot(args.input)
+    if len(time_s) < 3:
+        raise ikid.InputError(f"{args.input}: {len(time_s)} rows; at least 3 are needed for velocities and accelerations")
+    rate = 1.0 / float(np.median(np.diff(time_s)))
+    if args.reference:
+        qd = np.gradient(q, time_s, axis=0)
+        tau = ikid.reference_id(q, qd, np.gradient(qd, time_s, axis=0), shoulder_flexion=math.radians(args.shoulder_deg),
+                                length_scale=args.length_scale, mass_scale=args.mass_scale)
+        out_time, summary = time_s, f"{len(time_s)} frames, exact Newton-Euler (subject ×{args.length_scale:g} length, ×{args.mass_scale:g} mass)"
+    else:
+        model = ikid.load(args.model)
+        if model.feature_set != "joint_state":
+            raise ikid.InputError(f"model {model.name!r} reads {model.feature_set} frames, not joint states (q, q̇, q̈); use an id model")
+        if check_rate(model, rate, args.input, args.resample):
+            time_s, q = resample(time_s, q, model.frame_rate_hz)
+        qd = np.gradient(q, time_s, axis=0)
+        run = run_model(model, np.concatenate([q, qd, np.gradient(qd, time_s, axis=0)], axis=1), time_s,
+                        rate_hz=model.frame_rate_hz, source=args.input)
+        if len(run.time) == 0:
+            raise ikid.InputError(f"{args.input}: no frame gave torques: {run.summary()}")
+        out_time, tau, summary = run.time, run.values, run.summary()
+    path = write_sto(args.output, out_time, tau)
+    print(f"{args.input}: {summary} -> {path}")
+    return 0
+
+
+# --- stream: live frames in, one line out per frame ----------------------------------------------
+
+
+def _parse_frame(line: str, frame_len: int, with_time: bool) -> tuple[float | None, np.ndarray]:
+    """One text frame: ``frame_len`` numbers (comma, semicolon, tab or space separated), the
+    time first with ``--time``. An empty field or ``nan`` is a missing value."""
+    line = line.strip()
+    fields = [f.strip() for f in line.split(",")] if "," in line else line.replace(";", " ").split()
+    want = frame_len + (1 if with_time else 0)
+    if len(fields) != want:
+        raise ikid.InputError(f"expected {want} values ({'time + ' if with_time else ''}{frame_len} frame values), got {len(fields)}")
+    try:
+        values = np.array([float(f) if f else np.nan for f in fields], np.float64)
+    except ValueError as e:
+        raise ikid.InputError(f"not a number: {e}") from None
+    return (float(values[0]), values[1:]) if with_time else (None, values)
+
+
+def _udp_lines(port: int, count: int | None, idle_s: float):
+    """Datagrams on 127.0.0.1:``port`` as text lines, until ``count`` frames, an ``END``
+    datagram, or ``idle_s`` seconds without one."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", port))
+        sock.settimeout(idle_s)
+        print(f"ikid stream: listening on udp 127.0.0.1:{sock.getsockname()[1]}", file=sys.stderr, flush=True)
+        received = 0
+        while count is None or received < count:
+            try:
+                data = sock.recv(65536)
+            except TimeoutError:
+                print(f"ikid stream: no frame for {idle_s:g} s, stopping", file=sys.stderr)
+                return
+            for line in data.decode("utf-8", "replace").splitlines():
+                if line.strip() == "END":
+                    return
+                if line.strip():
+                    received += 1
+                    yield line
+
+
+def cmd_stream(args: argparse.Namespace) -> int:
+    """Frames (text lines) from stdin or UDP -> one CSV line per frame on stdout:
+    ``frame,status,<outputs>``; status ``ok``, ``filled:<markers>``, ``filling`` (window not
+    full yet) or ``refused:<reason>`` (outputs empty). Nothing is skipped silently."""
+    models = [ikid.load(args.model)] + ([ikid.load(args.torque_model)] if args.torque_model else [])
+    rate = models[0].frame_rate_hz
+    for m in models:
+        if args.rate is not None and abs(args.rate - m.frame_rate_hz) > 1e-3 * m.frame_rate_hz:
+            raise ikid.InputError(
+                f"the source runs at {args.rate:g} Hz but model {m.name!r} was trained at {m.frame_rate_hz:g} Hz; a live stream "
+                "is not resampled (it would add latency): record at the model's rate or train a model at yours (ikid train)")
+        if m.frame_len != models[0].frame_len:
+            raise ikid.InputError(f"models {models[0].name!r} and {m.name!r} read different frames")
+    calibration = ikid.load_calibration(args.calibration) if args.calibration else None
+    streams = [m.stream(missing_markers=args.missing_markers, calibration=calibration) for m in models]
+    names = [n for m in models for n in m.output_names]
+    out = sys.stdout
+    out.write("frame,status," + ",".join(names) + "\n")
+    lines = _udp_lines(args.udp, args.count, args.idle) if args.udp is not None else (
+        line for k, line in enumerate(sys.stdin) if args.count is None or k < args.count)
+    counts: dict[str, int] = {}
+    frame = 0
+    for line in lines:
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        status, values = "ok", ""
+        try:
+            t, x = _parse_frame(line, models[0].frame_len, args.time)
+            results = [s.push(x, time=t) for s in streams]
+            if any(r is None for r in results):
+                status = "filling"
+            else:
+                values = ",".join(f"{v:.7g}" for r in results for v in r)  # type: ignore[union-attr]
+                filled = streams[0].filled_markers
+                if filled:
+                    status = "filled:" + "+".join(filled)
+        except ikid.InputError as e:
+            # The stream numbers frames from its own last reset; the line's frame column is the one to read.
+            reason = re.sub(r"^frame \d+: ", "", str(e))
+            status = "refused:" + reason.replace(",", ";").replace("\n", " ")
+            if args.strict:
+                print(f"ikid: error: frame {frame}: {e}", file=sys.stderr)
+                return 2
+        out.write(f"{frame},{status},{values}\n")
+        if args.flush:
+            out.flush()
+        key = status.split(":")[0]
+        counts[key] = counts.get(key, 0) + 1
+        frame += 1
+    out.flush()
+    print(f"ikid stream: {frame} frames at {rate:g} Hz: " + ", ".join(f"{v} {k}" for k, v in counts.items()), file=sys.stderr)
+    return 0
+
+
+# --- train / report / bench --------------------------------------------------------------------
+
+#: The shipped config each task starts from (architecture, window, augmentation, budget).
+BASE_CONFIG = {"ik": "wrist-ik", "chain": "wrist-chain", "id": "wrist-id"}
+
+
+def _config_path(name: str) -> Path:
+    """A TOML path, or the name of a shipped config (``ikid/training/configs``)."""
+    p = Path(name)
+    if p.suffix == ".toml" or p.exists():
+        if not p.exists():
+            raise ikid.InputError(f"{p}: no such config file")
+        return p
+    shipped = Path(__file__).with_name("training") / "configs" / f"{name}.toml"
+    if not shipped.exists():
+        known = sorted(q.stem for q in shipped.parent.glob("*.toml"))
+        raise ikid.InputError(f"no config {name!r}: give a .toml path or one of {', '.join(known)}")
+    return shipped
+
+
+def _training():
+    try:
+        from ikid.training import train
+    except ImportError as e:
+        raise ikid.InputError(f"ikid train needs the training extra (torch): pip install 'ikid[train]' ({e})") from None
+    return train
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    train = _training()
+    if args.data is None and args.config is None:
+        raise ikid.InputError("give --data DIR (a lab's trials) or --config NAME|FILE (a training config)")
+    cfg = train.load_config(_config_path(args.config or BASE_CONFIG[args.task]))
+    out = Path(args.output)
+    if out.suffix == ".safetensors":
+        cfg["model"]["name"], out_dir = out.stem, out.parent
+    else:
+        out_dir = out
+    if args.data is not None:
+        task = args.task
+        if args.config is not None and cfg["model"]["task"] != task:
+            task = cfg["model"]["task"]
+        cfg["model"]["task"] = task
+        cfg["data"] = {"lab": str(Path(args.data).resolve())}
+        if args.map:
+            cfg["data"]["map"] = str(Path(args.map).resolve())
+        if args.rate is not None:
+            cfg["data"]["rate_hz"] = args.rate
+        if out.suffix != ".safetensors" and args.config is None:
+            cfg["model"]["name"] = f"lab-{task}"
+    if args.minutes is not None:
+        cfg["train"]["max_minutes"] = args.minutes
+    if args.window is not None:
+        cfg["model"]["window"] = args.window
+    if args.hidden is not None:
+        cfg["model"]["hidden"] = [int(w) for w in args.hidden.split(",")]
+    train.run(cfg, out_dir, progress=sys.stderr.isatty(), onnx=not args.no_onnx)
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    if args.data is None:
+        try:
+            from ikid.training import report
+        except ImportError as e:
+            raise ikid.InputError(f"the full report needs the training extra (matplotlib): pip install 'ikid[train]' ({e})") from None
+        report.main(["--out", args.output or "docs"])
+        return 0
+    from ikid.training import data as D
+    from ikid.training.evaluate import evaluate_recordings, markdown
+
+    model = ikid.load(args.model)
+    recs = D.load_lab_recordings(args.data, args.map, model.frame_rate_hz if args.resample else None)
+    rates = {r.meta["rate_hz"] for r in recs}
+    from ikid.pipeline import check_rate
+
+    for rate in rates:
+        check_rate(model, rate, str(args.data), allow_resample=False)
+    levels = {"clean": 0.0} if args.clean_only else None
+    result = evaluate_recordings(model, recs, levels)
+    text = f"# ikid report: `{model.name}` on {args.data}\n\n" + markdown(result)
+    print(text, end="")
+    if args.output:
+        from ikid.io._atomic import write_text_atomic
+
+        out = Path(args.output)
+        write_text_atomic(out, text)
+        write_text_atomic(out.with_suffix(".json"), json.dumps(result, indent=1))
+        print(f"-> {out}, {out.with_suffix('.json')}")
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    """Per-push latency (p50/p99/max) of ``Stream.push`` from Python and ``predict``
+    throughput (1 and 2 threads) of a model on a fresh simulated trial, on this machine."""
+    model = ikid.load(args.model)
+    if model.feature_set == "joint_state":
+        t = simulate("random", seed=424242, duration=args.frames / 1000.0 + 0.1)
+        frames = np.concatenate([t.q, t.qd, t.qdd], axis=1)[: args.frames]
+    else:
+        frames = simulate("random", seed=424242, duration=args.frames / 1000.0 + 0.1).markers[: args.frames]
+    frames = np.ascontiguousarray(frames, np.float32)
+    stream = model.stream()
+    push = stream.push
+    ns = np.empty(len(frames), np.int64)
+    clock = time.perf_counter_ns
+    for i, f in enumerate(frames):
+        t0 = clock()
+        push(f)
+        ns[i] = clock() - t0
+    us = ns[model.window :] / 1e3
+    lines = [f"{model.name}: {model.feature_set} x {model.window}, layers {'-'.join(map(str, model.layer_widths))}, "
+             f"{len(frames)} frames",
+             f"  Stream.push (Python): p50 {np.median(us):.2f} µs, p99 {np.percentile(us, 99):.2f} µs, max {us.max():.1f} µs "
+             f"(budget 2000 µs: {2000 / np.percentile(us, 99):.0f}× headroom at p99)"]
+    for threads in (1, 2):
+        best = min(_timed(lambda: model.predict(frames, threads=threads)) for _ in range(3))
+        lines.append(f"  predict, {threads} thread{'s' if threads > 1 else ''}: {best / len(frames) * 1e6:.3f} µs per frame "
+                     f"({len(frames) / best / 1e6:.2f} M frames/s)")
+    print("\n".join(lines))
+    return 0
+
+
+def _timed(fn) -> float:
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="ikid", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"ikid {ikid.__version__}")
@@ -289,6 +557,80 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("map-template", help="print a marker map (TOML) to fill in, listing a file's labels")
     p.add_argument("input", nargs="?", help="a .c3d/.trc whose labels to list")
     p.set_defaults(func=cmd_map_template)
+
+    p = sub.add_parser("id", help="angles (.mot) -> wrist torques (.sto)",
+                       description="Angles -> torques (velocities, accelerations: central differences).\n\n"
+                                   "  ikid id trial.mot -o trial.sto                 # the wrist-id network\n"
+                                   "  ikid id trial.mot -o trial.sto --reference --length-scale 1.1 --mass-scale 1.33",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("input", metavar="IN", help="angles, OpenSim .mot")
+    p.add_argument("-o", "--output", required=True, help=".sto to write")
+    p.add_argument("--model", default="wrist-id", help="joint-state model (default wrist-id)")
+    p.add_argument("--reference", action="store_true", help="exact Newton-Euler for the subject below instead of the network")
+    p.add_argument("--length-scale", type=float, default=1.0, help="subject size (--reference)")
+    p.add_argument("--mass-scale", type=float, default=1.0, help="subject mass factor (--reference)")
+    p.add_argument("--shoulder-deg", type=float, default=0.0, help="shoulder flexion, degrees (--reference)")
+    p.add_argument("--resample", action="store_true", help="resample the angles to the model's rate")
+    p.set_defaults(func=cmd_id)
+
+    p = sub.add_parser("stream", help="live frames (stdin or UDP on 127.0.0.1) -> one CSV line per frame",
+                       description="Frames in, one result line out per frame (CSV: frame,status,outputs).\n\n"
+                                   "  ikid stream < frames.csv                          # 18 numbers per line (m)\n"
+                                   "  ikid stream --time --torque-model wrist-chain < frames.csv   # time first\n"
+                                   "  ikid stream --udp 9870 --count 100000 --idle 5     # datagrams, 'END' stops",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--model", default="wrist-ik", help="model (default wrist-ik)")
+    p.add_argument("--torque-model", default=None, help="a second model on the same frames (e.g. wrist-chain)")
+    p.add_argument("--udp", type=int, default=None, metavar="PORT", help="read datagrams on 127.0.0.1:PORT (0: any free port)")
+    p.add_argument("--count", type=int, default=None, help="stop after this many frames")
+    p.add_argument("--idle", type=float, default=10.0, help="UDP: stop after this many seconds without a frame")
+    p.add_argument("--time", action="store_true", help="each line starts with the frame's time (s): gaps restart the window")
+    p.add_argument("--rate", type=float, default=None, help="the source's frame rate (Hz); refused if not the model's")
+    p.add_argument("--missing-markers", choices=["fill", "refuse"], default=None, help="override the model's policy")
+    p.add_argument("--calibration", metavar="JSON", help="the subject's marker placement (see `ikid calibrate`)")
+    p.add_argument("--strict", action="store_true", help="stop at the first refused frame (exit 2)")
+    p.add_argument("--flush", action="store_true", help="flush stdout after every line (for pipes read live)")
+    p.set_defaults(func=cmd_stream)
+
+    p = sub.add_parser("train", help="train a model on a lab's trials (or a config); needs ikid[train]",
+                       description="Train a model: a lab's trials (marker files + same-stem .mot angles [+ .sto torques])\n"
+                                   "through the same pipeline as the shipped models (80/10/10 split per trial, noise and\n"
+                                   "occlusion augmentation, early stopping), exported as .safetensors + .onnx.\n\n"
+                                   "  ikid train --data lab/ --map lab.toml --task ik -o models/lab-ik.safetensors\n"
+                                   "  ikid train --data lab/ --task chain --minutes 10 -o models/lab-chain.safetensors\n"
+                                   "  ikid train --config wrist-ik -o out/models    # a shipped config (simulated data)",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", default=None, metavar="DIR", help="a lab's trials: .c3d/.trc with same-stem .mot (and .sto)")
+    p.add_argument("--map", metavar="TOML", help="marker map for the trials (see map-template)")
+    p.add_argument("--task", choices=sorted(BASE_CONFIG), default="ik", help="ik: angles; chain: markers -> torques")
+    p.add_argument("--config", default=None, help="config name or TOML (default: the shipped one for --task)")
+    p.add_argument("--rate", type=float, default=None, help="resample every trial to this rate (Hz) first")
+    p.add_argument("--minutes", type=float, default=None, help="training time budget")
+    p.add_argument("--window", type=int, default=None, help="frames per window (default: the config's)")
+    p.add_argument("--hidden", default=None, help="hidden widths, e.g. 128,128 (default: the config's)")
+    p.add_argument("--no-onnx", action="store_true", help="skip the ONNX copy")
+    p.add_argument("-o", "--output", required=True, help="model file (.safetensors) or output folder")
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("report", help="score a model on a lab's trials (or the full report of the shipped models)",
+                       description="Score a model on trials with known angles (or torques): MSE and RMSE per DoF on the\n"
+                                   "last 10 % of each trial and on all frames, clean and with 1 % / 5 % added noise,\n"
+                                   "beside the classical per-frame solution on the same frames.\n\n"
+                                   "  ikid report --model models/lab-ik.safetensors --data lab_test/ --map lab.toml -o lab.md\n"
+                                   "  ikid report -o docs        # the shipped models' report (needs ikid[train])",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--model", default="wrist-ik")
+    p.add_argument("--data", default=None, metavar="DIR", help="trials: .c3d/.trc with same-stem .mot (and .sto)")
+    p.add_argument("--map", metavar="TOML")
+    p.add_argument("--resample", action="store_true", help="resample the trials to the model's rate")
+    p.add_argument("--clean-only", action="store_true", help="no added noise levels")
+    p.add_argument("-o", "--output", default=None, help="Markdown file (+ .json beside it); for the full report a folder")
+    p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser("bench", help="latency and throughput of a model on this machine")
+    p.add_argument("--model", default="wrist-ik")
+    p.add_argument("--frames", type=int, default=20000)
+    p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("demo", help="stream a fresh simulated trial through the shipped models", add_help=False)
     p.set_defaults(func=None)

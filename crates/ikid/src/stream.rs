@@ -185,7 +185,8 @@ impl Stream {
     /// more than 1.5 periods (dropped frames) the window restarts, as after
     /// [`reset`](Self::reset), so no output mixes frames further apart than the network was
     /// trained on: outputs resume once the window has refilled. Time that does not
-    /// increase is refused.
+    /// increase is refused, and so is a frame less than half a period after the previous one
+    /// (a source at a faster rate than the model's would be silently mis-timed; resample it).
     pub fn push_at(&mut self, time_s: f64, frame: &[f32]) -> Result<Option<&[f32]>> {
         if !time_s.is_finite() {
             return Err(Error::BadArgument { what: "time", detail: format!("is {time_s}, expected a finite number of seconds") });
@@ -194,7 +195,19 @@ impl Stream {
             if time_s <= last {
                 return Err(Error::BadArgument { what: "time", detail: format!("{time_s} s does not follow the previous frame's {last} s") });
             }
-            if (time_s - last) * self.model.card().frame_rate_hz > 1.5 {
+            let rate = self.model.card().frame_rate_hz;
+            if (time_s - last) * rate < 0.5 {
+                return Err(Error::BadArgument {
+                    what: "time",
+                    detail: format!(
+                        "{time_s} s is {:.3} ms after the previous frame, but the model was trained at {rate} Hz ({:.3} ms apart); \
+                         resample the source to {rate} Hz",
+                        (time_s - last) * 1e3,
+                        1e3 / rate
+                    ),
+                });
+            }
+            if (time_s - last) * rate > 1.5 {
                 self.reset();
                 self.gap_restarts += 1;
             }

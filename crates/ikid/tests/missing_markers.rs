@@ -109,3 +109,17 @@ fn a_gap_in_time_restarts_the_window_and_backwards_time_is_refused() {
     assert!(err.contains("time") && err.contains("does not follow"), "{err}");
     assert!(stream.push_at(f64::NAN, &frames[..18]).is_err());
 }
+
+#[test]
+fn frames_from_a_faster_source_are_refused_not_mistimed() {
+    let model = random_model(FeatureSet::Angles, 5, &[16], 3, 4); // 1000 Hz
+    let frames = random_frames(FeatureSet::Angles, 4, 12);
+    let mut stream = model.stream();
+    stream.push_at(0.0, &frames[..18]).unwrap();
+    // A 2.5 kHz source: the next frame 0.4 ms later.
+    let err = stream.push_at(0.0004, &frames[18..36]).unwrap_err().to_string();
+    assert!(err.contains("1000 Hz") && err.contains("resample"), "{err}");
+    // Jitter within half a period is accepted.
+    assert!(stream.push_at(0.0009, &frames[18..36]).is_ok());
+    assert!(stream.push_at(0.0021, &frames[36..54]).is_ok());
+}

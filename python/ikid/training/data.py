@@ -209,3 +209,92 @@ def windows(rec: Recording, task: str, feature_set: str, window: int, stride: in
 def stack_windows(recs: Sequence[Recording], task: str, feature_set: str, window: int, stride: int = 1, offset: int = 0):
     parts = [windows(r, task, feature_set, window, stride, offset) for r in recs]
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+# --- a lab's own files -----------------------------------------------------------------------
+
+#: Shortest stretch of usable frames kept as a recording (shorter ones teach little and
+#: cannot be split 80/10/10 into whole windows).
+MIN_LAB_FRAMES = 200
+
+
+def lab_trials(folder: str | os.PathLike[str]) -> list[Path]:
+    """The marker files (``.c3d``/``.trc``) of a lab folder that have their angles (``.mot``) beside them."""
+    from ikid.io import MARKER_READERS
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ikid.InputError(f"{folder}: not a folder (expected marker files with same-stem .mot angles)")
+    markers = sorted(p for p in folder.iterdir() if p.suffix.lower() in MARKER_READERS and p.is_file())
+    if not markers:
+        raise ikid.InputError(f"{folder}: no marker files ({', '.join(MARKER_READERS)})")
+    without = [p.name for p in markers if not p.with_suffix(".mot").exists()]
+    if without:
+        raise ikid.InputError(
+            f"{folder}: {', '.join(without[:5])}{' ...' if len(without) > 5 else ''} ha{'s' if len(without) == 1 else 've'} "
+            "no same-stem .mot beside it (the angles to learn); every trial needs one"
+        )
+    return markers
+
+
+def _aligned(name: str, what: str, t_markers: np.ndarray, t: np.ndarray, values: np.ndarray, rate_hz: float) -> np.ndarray:
+    """``values`` if sampled at the marker frames' times (to a quarter frame), else an error."""
+    if len(t) != len(t_markers) or np.max(np.abs(t - t_markers)) > 0.25 / rate_hz:
+        raise ikid.InputError(
+            f"{name}: {what} has {len(t)} rows ({t[0]:.4g}-{t[-1]:.4g} s) but the marker file has {len(t_markers)} frames "
+            f"({t_markers[0]:.4g}-{t_markers[-1]:.4g} s at {rate_hz:g} Hz); write them at the marker frames' times"
+        )
+    return values
+
+
+def load_lab_recordings(folder: str | os.PathLike[str], marker_map: str | os.PathLike[str] | None = None,
+                        rate_hz: float | None = None) -> list[Recording]:
+    """A lab's trials as recordings: every marker file in ``folder`` with its same-stem ``.mot``
+    (angles, required) and ``.sto`` (torques, optional: NaN without), labels mapped by
+    ``marker_map`` (TOML, see ``ikid map-template``).
+
+    All trials must share one frame rate, or ``rate_hz`` resamples them all (cubic Hermite,
+    see :mod:`ikid.io.resample`). Missing markers are filled by the core's gap filler exactly
+    as a ``"fill"`` stream does; stretches it cannot fill split a trial into recordings
+    (``stem@first_frame``), shorter ones than :data:`MIN_LAB_FRAMES` are left out.
+    Velocities and accelerations are central differences of the angles (offline labels).
+    """
+    from ikid.io import MarkerMap, read_markers, read_mot, read_sto, resample
+
+    mapping = MarkerMap.load(marker_map) if marker_map else None
+    recs: list[Recording] = []
+    rates: dict[str, float] = {}
+    for path in lab_trials(folder):
+        data = read_markers(path)
+        markers = data.frames(mapping)
+        time = data.time
+        q = _aligned(path.name, path.with_suffix(".mot").name, time, *read_mot(path.with_suffix(".mot")), data.rate_hz)
+        sto = path.with_suffix(".sto")
+        tau = (_aligned(path.name, sto.name, time, *read_sto(sto), data.rate_hz) if sto.exists()
+               else np.full_like(q, np.nan))
+        rate = data.rate_hz
+        if rate_hz is not None and abs(rate - rate_hz) > 1e-3 * rate_hz:
+            table = np.concatenate([markers, q, tau], axis=1)
+            time, table = resample(time, table, rate_hz)
+            markers, q, tau = table[:, :18], table[:, 18:21], table[:, 21:24]
+            rate = rate_hz
+        rates[path.name] = rate
+        filled, _ = ikid.fill_gaps(markers, unfillable="keep")
+        usable = np.isfinite(filled).all(axis=1) & np.isfinite(q).all(axis=1)
+        # Contiguous runs of usable frames.
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], usable.astype(np.int8), [0]])))
+        for start, stop in zip(edges[::2], edges[1::2]):
+            if stop - start < MIN_LAB_FRAMES:
+                continue
+            sl = slice(start, stop)
+            t = time[sl]
+            qd = np.gradient(q[sl], t, axis=0)
+            name = path.stem if (start, stop) == (0, len(time)) else f"{path.stem}@{start}"
+            meta = {"source": str(path), "rate_hz": rate, "first_frame": int(start), "filled_frames": int((~np.isfinite(markers[sl]).all(axis=1)).sum())}
+            recs.append(Recording(name, filled[sl].astype(np.float64), q[sl], qd, np.gradient(qd, t, axis=0), tau[sl], meta))
+    if len({round(r, 6) for r in rates.values()}) > 1:
+        listing = ", ".join(f"{k} {v:g} Hz" for k, v in rates.items())
+        raise ikid.InputError(f"{folder}: trials at different frame rates ({listing}); resample them to one (rate_hz / --rate)")
+    if not recs:
+        raise ikid.InputError(f"{folder}: no stretch of {MIN_LAB_FRAMES}+ frames with every marker present or fillable")
+    return recs

@@ -68,3 +68,56 @@ def card_metrics(model: ikid.Model, recs: Sequence[D.Recording]) -> dict[str, An
     if model.feature_set == "joint_state":
         return {"test": summary(*errors(model, recs, "test"), unit)}
     return {f"test_{name}": summary(*errors(model, noisy(recs, level), "test"), unit) for name, level in NOISE_LEVELS.items()}
+
+
+def evaluate_recordings(model: ikid.Model, recs: Sequence[D.Recording], noise_levels: dict[str, float] | None = None) -> dict[str, Any]:
+    """The report of ``model`` on ``recs`` (e.g. a lab's trials): per added noise level (marker
+    models only), the last 10 % of each recording (``test``) and all frames (``all``); for angle
+    models also the core's per-frame least squares (``ikid.reference_ik``, the body model's
+    marker placement) on the same frames."""
+    levels = {"clean": 0.0} if model.feature_set == "joint_state" else (noise_levels or NOISE_LEVELS)
+    unit = model.output_units[0]
+    out: dict[str, Any] = {"model": model.name, "recordings": len(recs), "frames": int(sum(len(r) for r in recs)),
+                           "rate_hz": model.frame_rate_hz, "levels": {}}
+    for name, level in levels.items():
+        data = noisy(recs, level) if level else list(recs)
+        row: dict[str, Any] = {split: summary(*errors(model, data, split), unit) for split in ("test", "all")}
+        if model.task == "ik":
+            # The classical per-frame solution on the very frames the model scored (same skip).
+            ref = ClassicalIk(model.window)
+            row["classical"] = {split: summary(*errors(ref, data, split), unit) for split in ("test", "all")}  # type: ignore[arg-type]
+        out["levels"][name] = row
+    return out
+
+
+class ClassicalIk:
+    """``ikid.reference_ik`` dressed as a model for :func:`errors` (rows aligned to ``window``)."""
+
+    task = "ik"
+    feature_set = "markers"
+
+    def __init__(self, window: int):
+        self.window = window
+
+    def predict(self, frames: np.ndarray) -> np.ndarray:
+        return ikid.reference_ik(frames)[self.window - 1 :]
+
+
+def markdown(result: dict[str, Any]) -> str:
+    """:func:`evaluate_recordings` as a Markdown table."""
+    deg = "rmse_deg" in next(iter(result["levels"].values()))["all"]
+    per = "RMSE per DoF (°)" if deg else "RMSE per DoF"
+    lines = [
+        f"Model `{result['model']}` on {result['recordings']} recordings ({result['frames']} frames, {result['rate_hz']:g} Hz).",
+        "Noise: uniform ±p of each marker coordinate's range, added here (seeded). MSE in rad² (angles) or N·m² (torques).",
+        "",
+        f"| noise | frames | MSE last 10 % | MSE all | {per}, all | classical MSE last 10 % | classical MSE all |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, row in result["levels"].items():
+        rmse = row["all"]["rmse_deg" if deg else "rmse"]
+        cls = row.get("classical")
+        c = (f"{cls['test']['mse']:.3g} | {cls['all']['mse']:.3g}") if cls else "– | –"
+        lines.append(f"| {name} | {row['all']['frames']} | {row['test']['mse']:.3g} | {row['all']['mse']:.3g} | "
+                     f"{' / '.join(f'{v:.3g}' for v in rmse)} | {c} |")
+    return "\n".join(lines) + "\n"

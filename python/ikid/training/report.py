@@ -321,10 +321,10 @@ def latency(rep: Report, models: list[ikid.Model]) -> None:
     rep.table(["model", "features", "window", "layers", "p50 µs", "p99 µs"], rows)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("docs"))
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     start = time.perf_counter()
     ik, chain, idm = ikid.load("wrist-ik"), ikid.load("wrist-chain"), ikid.load("wrist-id")
     rep = Report(args.out)

@@ -73,7 +73,11 @@ def load_config(path: str | Path) -> dict[str, Any]:
 
 
 def build_recordings(data_cfg: dict[str, Any]) -> list[D.Recording]:
-    """The training recordings named by a ``[data]`` table."""
+    """The training recordings named by a ``[data]`` table: ``lab`` (a folder of a lab's marker
+    files with same-stem .mot/.sto; ``map``, ``rate_hz`` optional), ``folder`` (saved simulated
+    trials), or what to simulate."""
+    if "lab" in data_cfg:
+        return D.load_lab_recordings(data_cfg["lab"], data_cfg.get("map"), data_cfg.get("rate_hz"))
     if "folder" in data_cfg:
         return D.load_recordings(data_cfg["folder"])
     common = {k: data_cfg[k] for k in ("shoulders_deg", "length_scales")}
@@ -84,6 +88,14 @@ def build_recordings(data_cfg: dict[str, Any]) -> list[D.Recording]:
     if data_cfg.get("include_thesis", False):
         specs += D.recording_set("thesis", seeds=[0], mass_follows_length=data_cfg.get("mass_follows_length", True), **common)
     return D.simulate_all(specs)
+
+
+def check_targets(recs: list[D.Recording], task: str) -> None:
+    """Every recording has finite targets for ``task`` (a lab trial without its .sto has no torques)."""
+    missing = [r.name for r in recs if not np.isfinite(D.target(r, task)).all()]
+    if missing:
+        what = "torques (a same-stem .sto)" if D.TASKS[task] == "tau" else "angles"
+        raise ikid.InputError(f"task {task!r} learns {what}, missing in {len(missing)} recording(s): {', '.join(missing[:5])}")
 
 
 def data_hash(recs: list[D.Recording]) -> str:
@@ -201,7 +213,7 @@ def spec_for(cfg: dict[str, Any], recs: list[D.Recording], trained: Trained, met
         output_names=ikid.coordinate_names(),
         scaling={"input": "minmax(-1,1) on clean training windows", "output": "minmax(-1,1) on training targets"},
         provenance={
-            "simulator": ikid.SIMULATOR,
+            "simulator": None if "lab" in cfg["data"] else ikid.SIMULATOR,
             "data": cfg["data"],
             "recordings": len(recs),
             "frames": int(sum(len(r) for r in recs)),
@@ -231,6 +243,7 @@ def run(cfg: dict[str, Any], out: Path, progress: bool = True, onnx: bool = True
     log_path.unlink(missing_ok=True)
     t0 = time.perf_counter()
     recs = build_recordings(cfg["data"])
+    check_targets(recs, cfg["model"]["task"])
     print(f"{name}: {len(recs)} recordings, {sum(len(r) for r in recs)} frames ({time.perf_counter() - t0:.1f} s to build)", flush=True)
     trained = train(cfg, recs, log_path, progress)
     path = out / f"{name}.safetensors"

@@ -1,0 +1,311 @@
+"""The command line beyond files in / files out: `stream` (stdin and UDP), `id`, `train` and
+`report` on a lab's own trials, `bench`; each checked against the Python API on the same frames."""
+
+from __future__ import annotations
+
+import importlib.util
+import io
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ikid
+from ikid.cli import main as cli
+from ikid.io import MarkerMap, read_mot, read_sto, write_mot, write_trc
+
+IKID = shutil.which("ikid", path=str(Path(sys.executable).parent)) or "ikid"
+
+
+@pytest.fixture(scope="module")
+def trial() -> ikid.Trial:
+    """0.3 s of a trial no model trained on, 1 % noise."""
+    return ikid.simulate("random", seed=9901, duration=0.3).with_noise("uniform", 5, fraction=0.01)
+
+
+def csv_lines(frames: np.ndarray, with_time: np.ndarray | None = None) -> str:
+    rows = frames if with_time is None else np.column_stack([with_time, frames])
+    buf = io.StringIO()
+    np.savetxt(buf, rows, delimiter=",", fmt="%.9g")
+    return buf.getvalue().replace("nan", "")
+
+
+def parse_output(text: str, n_out: int) -> tuple[list[str], list[str], np.ndarray]:
+    lines = text.strip().splitlines()
+    header, rows = lines[0].split(","), [line.split(",", 2) for line in lines[1:]]
+    status = [r[1] for r in rows]
+    values = np.array([[float(v) for v in r[2].split(",")] if r[2] else [np.nan] * n_out for r in rows])
+    return header, status, values
+
+
+def stream_reference(model: ikid.Model, frames: np.ndarray) -> np.ndarray:
+    s = model.stream()
+    rows = []
+    for f in frames:
+        out = s.push(f)
+        rows.append(np.full(model.n_outputs, np.nan) if out is None else out)
+    return np.array(rows)
+
+
+# --- stream ------------------------------------------------------------------------------------
+
+
+def test_stream_from_stdin_gives_one_line_per_frame_equal_to_stream_push(trial, monkeypatch, capsys):
+    frames = trial.markers.astype(np.float32).astype(np.float64)
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames)))
+    assert cli(["stream", "--model", "wrist-ik", "--torque-model", "wrist-chain"]) == 0
+    captured = capsys.readouterr()
+    header, status, values = parse_output(captured.out, 6)
+    assert header == ["frame", "status", *ikid.coordinate_names(), *ikid.coordinate_names()]
+    assert len(status) == len(frames)
+    want = np.hstack([stream_reference(ikid.load("wrist-ik"), frames), stream_reference(ikid.load("wrist-chain"), frames)])
+    ik_window, chain_window = ikid.load("wrist-ik").window, ikid.load("wrist-chain").window
+    first = max(ik_window, chain_window) - 1
+    assert status[:first] == ["filling"] * first and set(status[first:]) == {"ok"}
+    np.testing.assert_allclose(values[first:], want[first:], rtol=2e-6, atol=1e-9)
+    assert f"{len(frames)} frames" in captured.err
+
+
+def test_stream_reports_each_bad_line_and_goes_on(trial, monkeypatch, capsys):
+    frames = trial.markers[:60].copy()
+    text = csv_lines(frames).splitlines()
+    text[55] = "1,2,3"  # too short
+    text[56] = ",".join(["x"] * 18)  # not numbers
+    frames_nan = frames.copy()
+    frames_nan[57, 3:6] = np.nan
+    text[57] = csv_lines(frames_nan[57:58]).strip()  # a marker missing early: not fillable yet
+    monkeypatch.setattr(sys, "stdin", io.StringIO("\n".join(text) + "\n"))
+    assert cli(["stream", "--missing-markers", "refuse"]) == 0
+    _, status, values = parse_output(capsys.readouterr().out, 3)
+    assert len(status) == 60
+    assert status[55].startswith("refused:expected 18 values")
+    assert status[56].startswith("refused:not a number")
+    assert status[57].startswith("refused:") and "USP" in status[57]
+    assert np.isnan(values[55:58]).all() and status[59] == "ok"
+
+
+def test_stream_strict_stops_at_the_first_refused_frame(monkeypatch, capsys):
+    monkeypatch.setattr(sys, "stdin", io.StringIO("1,2,3\n"))
+    assert cli(["stream", "--strict"]) == 2
+    assert "frame 0: expected 18 values" in capsys.readouterr().err
+
+
+def test_stream_at_another_rate_is_refused_with_the_reason(trial, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(trial.markers[:5])))
+    assert cli(["stream", "--rate", "250"]) == 2
+    err = capsys.readouterr().err
+    assert "250 Hz" in err and "1000 Hz" in err and "not resampled" in err
+    # Time stamps 0.4 ms apart (a 2.5 kHz source) are refused frame by frame, not mis-timed.
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(trial.markers[:3], with_time=np.arange(3) * 4e-4)))
+    assert cli(["stream", "--time"]) == 0
+    _, status, _ = parse_output(capsys.readouterr().out, 3)
+    assert status[1].startswith("refused:") and "resample the source to 1000 Hz" in status[1]
+    assert status[2] == "filling"  # 0.8 ms after the last accepted frame: within jitter
+
+
+def test_stream_over_udp_on_localhost(trial):
+    """A subprocess listening on a free port; datagrams in, lines out; stops by itself."""
+    frames = trial.markers[:120].astype(np.float32).astype(np.float64)
+    proc = subprocess.Popen([IKID, "stream", "--udp", "0", "--count", str(len(frames)), "--idle", "20"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stderr.readline()  # "ikid stream: listening on udp 127.0.0.1:PORT"
+        assert "listening on udp 127.0.0.1:" in line, line
+        port = int(line.rsplit(":", 1)[1])
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            for row in csv_lines(frames).splitlines():
+                sock.sendto(row.encode(), ("127.0.0.1", port))
+                time.sleep(0.0005)  # a datagram socket drops what its buffer cannot hold
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    _, status, values = parse_output(out, 3)
+    assert len(status) == len(frames)
+    want = stream_reference(ikid.load("wrist-ik"), frames)
+    np.testing.assert_allclose(values[49:], want[49:], rtol=2e-6, atol=1e-9)
+
+
+def test_stream_over_udp_stops_when_idle():
+    proc = subprocess.run([IKID, "stream", "--udp", "0", "--idle", "0.5"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and "no frame for 0.5 s" in proc.stderr
+    assert proc.stdout.strip() == "frame,status,ra_wr_s_p,ra_wr_e_f,ra_wr_ad_ab"
+
+
+# --- id ------------------------------------------------------------------------------------------
+
+
+def test_id_from_a_mot_file_equals_the_api(trial, tmp_path, capsys):
+    write_mot(tmp_path / "t.mot", trial.time, trial.q)
+    assert cli(["id", str(tmp_path / "t.mot"), "-o", str(tmp_path / "ref.sto"), "--reference"]) == 0
+    t, tau = read_sto(tmp_path / "ref.sto")
+    t_file, q = read_mot(tmp_path / "t.mot")  # the angles as the file holds them
+    qd = np.gradient(q, t_file, axis=0)
+    want = ikid.reference_id(q, qd, np.gradient(qd, t_file, axis=0))
+    np.testing.assert_allclose(tau, want, rtol=1e-6, atol=1e-8)
+    # Central differences of exact angles: torques close to the simulator's own.
+    inner = slice(2, -2)
+    assert np.sqrt(((tau[inner] - trial.tau[inner]) ** 2).mean()) < 0.05 * np.abs(trial.tau).max()
+
+    assert cli(["id", str(tmp_path / "t.mot"), "-o", str(tmp_path / "net.sto")]) == 0
+    t, tau = read_sto(tmp_path / "net.sto")
+    model = ikid.load("wrist-id")
+    assert len(t) == len(trial.time) - model.window + 1
+    joint_state = np.concatenate([q, qd, np.gradient(qd, t_file, axis=0)], axis=1)
+    np.testing.assert_allclose(tau, model.predict(joint_state), rtol=1e-5, atol=1e-6)
+
+
+def test_id_refuses_a_file_at_another_rate(trial, tmp_path, capsys):
+    write_mot(tmp_path / "slow.mot", trial.time[::4], trial.q[::4])  # 250 Hz
+    assert cli(["id", str(tmp_path / "slow.mot"), "-o", str(tmp_path / "x.sto")]) == 2
+    assert "250 Hz" in capsys.readouterr().err and not (tmp_path / "x.sto").exists()
+    assert cli(["id", str(tmp_path / "slow.mot"), "-o", str(tmp_path / "x.sto"), "--resample"]) == 0
+
+
+# --- a lab's own trials: train and report --------------------------------------------------------
+
+LAB_LABELS = ["R.RadStyl", "R.UlnStyl", "R.Forearm", "R.MCP2", "R.MCP5", "R.HandBase"]
+
+
+def write_lab_trial(folder: Path, name: str, seed: int, seconds: float, rate_divisor: int = 1, torques: bool = True) -> None:
+    t = ikid.simulate("random", seed=seed, duration=seconds)
+    sl = slice(None, None, rate_divisor)
+    write_trc(folder / f"{name}.trc", t.time[sl], t.markers[sl], 1000.0 / rate_divisor, labels=LAB_LABELS)
+    write_mot(folder / f"{name}.mot", t.time[sl], t.q[sl])
+    if torques:
+        from ikid.io import write_sto
+
+        write_sto(folder / f"{name}.sto", t.time[sl], t.tau[sl])
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory) -> tuple[Path, Path]:
+    root = tmp_path_factory.mktemp("lab")
+    (root / "train").mkdir()
+    (root / "test").mkdir()
+    for k in range(2):
+        write_lab_trial(root / "train", f"s01_t{k}", 9910 + k, 4.0)
+    write_lab_trial(root / "test", "s01_t9", 9919, 2.0)
+    mapping = root / "lab.toml"
+    mapping.write_text(MarkerMap(dict(zip(ikid.marker_names(), LAB_LABELS))).to_toml())
+    return root, mapping
+
+
+def test_lab_recordings_read_markers_angles_and_torques(lab):
+    from ikid.training.data import load_lab_recordings
+
+    root, mapping = lab
+    recs = load_lab_recordings(root / "train", mapping)
+    assert [r.name for r in recs] == ["s01_t0", "s01_t1"]
+    t = ikid.simulate("random", seed=9910, duration=4.0)
+    np.testing.assert_allclose(recs[0].markers, t.markers, atol=1e-6)  # TRC holds mm to 1e-3 mm... and more
+    np.testing.assert_allclose(recs[0].q, t.q, atol=1e-8)
+    np.testing.assert_allclose(recs[0].tau, t.tau, rtol=1e-8, atol=1e-9)
+    assert recs[0].meta["rate_hz"] == 1000.0
+
+
+def test_lab_folder_problems_are_named(lab, tmp_path):
+    from ikid.training.data import load_lab_recordings
+
+    root, mapping = lab
+    # A trial without its angles.
+    shutil.copy(root / "train" / "s01_t0.trc", tmp_path / "lonely.trc")
+    with pytest.raises(ikid.InputError, match=r"lonely\.trc has no same-stem \.mot"):
+        load_lab_recordings(tmp_path, mapping)
+    # Angles that do not line up with the markers.
+    t = ikid.simulate("random", seed=9910, duration=1.0)
+    write_mot(tmp_path / "lonely.mot", t.time[:500], t.q[:500])
+    with pytest.raises(ikid.InputError, match=r"lonely\.mot has 500 rows"):
+        load_lab_recordings(tmp_path, mapping)
+    # Trials at two rates.
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    write_lab_trial(mixed, "a", 9920, 1.0)
+    write_lab_trial(mixed, "b", 9921, 2.0, rate_divisor=4)
+    with pytest.raises(ikid.InputError, match=r"different frame rates \(a\.trc 1000 Hz, b\.trc 250 Hz\)"):
+        load_lab_recordings(mixed, mapping)
+    recs = load_lab_recordings(mixed, mapping, rate_hz=250.0)
+    assert {r.meta["rate_hz"] for r in recs} == {250.0}
+    # Labels the map does not know.
+    with pytest.raises(ikid.InputError, match="R.RadStyl"):
+        load_lab_recordings(root / "train")
+
+
+def test_a_gap_the_filler_cannot_bridge_splits_the_trial(lab, tmp_path):
+    from ikid.training.data import load_lab_recordings
+
+    t = ikid.simulate("random", seed=9930, duration=3.0)
+    markers = t.markers.copy()
+    markers[1000:1400, 0:6] = np.nan  # two forearm markers at once: not fillable
+    write_trc(tmp_path / "g.trc", t.time, markers, 1000.0)
+    write_mot(tmp_path / "g.mot", t.time, t.q)
+    recs = load_lab_recordings(tmp_path)
+    assert [r.name for r in recs] == ["g@0", "g@1400"]
+    assert [len(r) for r in recs] == [1000, len(t.time) - 1400]
+    assert all(np.isfinite(r.markers).all() for r in recs)
+
+
+needs_torch = pytest.mark.skipif(importlib.util.find_spec("torch") is None,
+                                 reason="training needs the training extra (make test installs it)")
+
+
+@needs_torch
+def test_train_and_report_on_a_lab_folder_through_the_cli(lab, tmp_path, capsys):
+    root, mapping = lab
+    out = tmp_path / "lab-ik.safetensors"
+    args = ["train", "--data", str(root / "train"), "--map", str(mapping), "--task", "ik", "--minutes", "0.05",
+            "--window", "5", "--hidden", "16,16", "--no-onnx", "-o", str(out)]
+    assert cli(args) == 0
+    model = ikid.load(out)
+    assert model.name == "lab-ik" and model.window == 5 and model.layer_widths == [15, 16, 16, 3]
+    prov = model.card["provenance"]
+    assert prov["data"]["lab"] == str((root / "train").resolve()) and prov["recordings"] == 2 and prov["simulator"] is None
+    assert model.frame_rate_hz == 1000.0 and "test_clean" in model.card["metrics"]
+    capsys.readouterr()
+
+    report = tmp_path / "lab.md"
+    assert cli(["report", "--model", str(out), "--data", str(root / "test"), "--map", str(mapping), "-o", str(report)]) == 0
+    from ikid.training.data import load_lab_recordings
+
+    rec = load_lab_recordings(root / "test", mapping)[0]
+    text = report.read_text()
+    assert f"| clean | {len(rec) - 4} |" in text and "| 5% |" in text
+    result = json.loads(report.with_suffix(".json").read_text())
+    # The report's numbers are the model's own errors on those frames.
+    err = model.predict(rec.markers) - rec.q[4:]
+    assert result["levels"]["clean"]["all"]["mse"] == pytest.approx(float((err**2).mean()), rel=1e-5)
+    # The classical per-frame solution is exact on these clean markers (same placement).
+    assert result["levels"]["clean"]["classical"]["all"]["mse"] < 1e-10
+
+
+@needs_torch
+def test_train_chain_needs_torques(lab, tmp_path, capsys):
+    root, mapping = lab
+    folder = tmp_path / "no_torques"
+    folder.mkdir()
+    write_lab_trial(folder, "x", 9940, 1.0, torques=False)
+    assert cli(["train", "--data", str(folder), "--map", str(mapping), "--task", "chain", "--minutes", "0.01",
+                "-o", str(tmp_path / "c.safetensors")]) == 2
+    assert "torques (a same-stem .sto)" in capsys.readouterr().err
+    assert not (tmp_path / "c.safetensors").exists()
+
+
+# --- bench ---------------------------------------------------------------------------------------
+
+
+def test_bench_prints_latency_and_throughput(capsys):
+    assert cli(["bench", "--model", "wrist-ik", "--frames", "2000"]) == 0
+    out = capsys.readouterr().out
+    assert "Stream.push (Python): p50" in out and "predict, 2 threads" in out
+
+
+def test_import_ikid_and_the_cli_do_not_import_torch():
+    code = "import sys, ikid, ikid.cli, ikid.training.data, ikid.training.evaluate; print('torch' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={**os.environ}).stdout.strip() == "False"
