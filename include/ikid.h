@@ -173,6 +173,19 @@ enum ikid_status ikid_stream_push_at(struct ikid_stream *stream,
 // NUL-terminated string.
 enum ikid_status ikid_stream_set_missing_markers(struct ikid_stream *stream, const char *policy);
 
+// Calibrates the stream to a subject's marker placement: `forearm` and `hand` each point to
+// the 9 values (row-major) of one 3×3 rotation matrix, as the `"forearm"` and `"hand"`
+// arrays of a calibration file written by `ikid calibrate`; both NULL removes the
+// calibration. Refused (nothing changed) if a matrix is not a rotation or the model does
+// not read marker frames.
+//
+// # Safety
+// `stream` must be a live handle used by no other thread meanwhile; `forearm` and `hand`
+// must each be NULL or point to 9 readable doubles.
+enum ikid_status ikid_stream_set_calibration(struct ikid_stream *stream,
+                                             const double *forearm,
+                                             const double *hand);
+
 // `*mask` receives the markers filled in the last accepted frame (bit `i` = marker `i` in
 // frame order; 0 when the frame was complete): the flag on an output that rests on filled
 // positions.

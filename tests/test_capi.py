@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+import ikid
 from conftest import ROOT, make_model, marker_frames
 
 BIN = ROOT / "target" / "c"
@@ -35,6 +37,14 @@ def fixtures(tmp_path):
     np.savetxt(tmp_path / "expected.csv", expected, fmt="%.9g", delimiter=",")
     corrupt = tmp_path / "corrupt.safetensors"
     corrupt.write_bytes(model_path.read_bytes()[:100])
+    # The same frames through a stream calibrated with 10° about z for both segments (the C
+    # test sets the same matrices).
+    c, s = np.cos(np.radians(10)), np.sin(np.radians(10))
+    rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    stream = model.stream(calibration=ikid.Calibration.from_matrices(rz, rz))
+    as_read = np.loadtxt(tmp_path / "frames.csv", delimiter=",", dtype=np.float32)
+    calibrated = [out for out in (stream.push(f) for f in as_read) if out is not None]
+    np.savetxt(tmp_path / "expected_calibrated.csv", np.array(calibrated), fmt="%.9g", delimiter=",")
     return tmp_path, model, frames, expected
 
 
@@ -44,7 +54,8 @@ def run(cmd: list, **kw) -> subprocess.CompletedProcess:
 
 def test_c_test_program_passes_under_valgrind(fixtures):
     d = fixtures[0]
-    cmd = [built("test_capi"), d / "model.safetensors", d / "frames.csv", d / "expected.csv", d / "corrupt.safetensors"]
+    cmd = [built("test_capi"), d / "model.safetensors", d / "frames.csv", d / "expected.csv", d / "corrupt.safetensors",
+           d / "expected_calibrated.csv"]
     if shutil.which("valgrind"):
         cmd = VALGRIND + cmd
     result = run(cmd)

@@ -78,8 +78,8 @@ static void *stream_all(void *arg) {
 }
 
 int main(int argc, char **argv) {
-    if (argc != 5) { fprintf(stderr, "usage: %s MODEL FRAMES.csv EXPECTED.csv CORRUPT_MODEL\n", argv[0]); return 2; }
-    const char *model_path = argv[1], *corrupt_path = argv[4];
+    if (argc != 6) { fprintf(stderr, "usage: %s MODEL FRAMES.csv EXPECTED.csv CORRUPT_MODEL EXPECTED_CALIBRATED.csv\n", argv[0]); return 2; }
+    const char *model_path = argv[1], *corrupt_path = argv[4], *expected_cal_path = argv[5];
 
     CHECK(strcmp(ikid_version(), "") != 0 && strchr(ikid_version(), '.'), "version %s", ikid_version());
     CHECK(contains(ikid_status_message(IKID_STATUS_INPUT), "frame"), "status message");
@@ -201,6 +201,34 @@ int main(int argc, char **argv) {
     CHECK(timed_bad == 0 && ikid_stream_filled_markers(timed, &mask) == IKID_STATUS_OK && mask == 0, "timed pushes: %d bad", timed_bad);
     CHECK(ikid_stream_push_at(timed, 0.0, frames, 18, out, 3, &ready) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "does not follow"), "time backwards");
     ikid_stream_free(timed);
+
+    /* Calibration: both matrices (row-major, as a calibration file holds them) -> the outputs
+       Python computes with the same calibration; both NULL removes it. */
+    ikid_stream *cal = NULL;
+    size_t n_cal = 0;
+    float *expected_cal = read_csv(expected_cal_path, 3, &n_cal);
+    const double c = 0.984807753012208, s = 0.17364817766693033; /* 10 degrees about z */
+    const double rz[9] = {c, -s, 0, s, c, 0, 0, 0, 1};
+    const double not_rotation[9] = {1, 0, 0, 0, 2, 0, 0, 0, 1};
+    CHECK(ikid_stream_new(model, &cal) == IKID_STATUS_OK && expected_cal && n_cal == n_expected, "calibrated stream fixture");
+    CHECK(ikid_stream_set_calibration(cal, not_rotation, rz) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "forearm matrix is not a rotation"), "not a rotation: %s", ikid_last_error());
+    CHECK(ikid_stream_set_calibration(cal, rz, NULL) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "both"), "one matrix");
+    CHECK(ikid_stream_set_calibration(NULL, rz, rz) == IKID_STATUS_NULL_PARAMETER, "calibration NULL stream");
+    CHECK(ikid_stream_set_calibration(cal, rz, rz) == IKID_STATUS_OK, "set calibration");
+    int cal_mismatches = 0, uncal_mismatches = 0;
+    for (size_t i = 0; i < n_frames; i++) {
+        if (ikid_stream_push(cal, frames + i * 18, 18, out, 3, &ready) != IKID_STATUS_OK) cal_mismatches++;
+        if (i + 1 >= info.window && (!ready || memcmp(out, expected_cal + (i + 1 - info.window) * 3, sizeof out) != 0)) cal_mismatches++;
+    }
+    CHECK(cal_mismatches == 0, "calibrated stream vs Python: %d mismatches", cal_mismatches);
+    CHECK(ikid_stream_set_calibration(cal, NULL, NULL) == IKID_STATUS_OK && ikid_stream_reset(cal) == IKID_STATUS_OK, "remove calibration");
+    for (size_t i = 0; i < n_frames; i++) {
+        if (ikid_stream_push(cal, frames + i * 18, 18, out, 3, &ready) != IKID_STATUS_OK) uncal_mismatches++;
+        if (i + 1 >= info.window && (!ready || memcmp(out, expected + (i + 1 - info.window) * 3, sizeof out) != 0)) uncal_mismatches++;
+    }
+    CHECK(uncal_mismatches == 0, "uncalibrated again: %d mismatches", uncal_mismatches);
+    ikid_stream_free(cal);
+    free(expected_cal);
 
     /* The stream outlives its model handle; freeing NULL is a no-op. */
     ikid_model_free(model);

@@ -3,6 +3,7 @@
 use crate::boundary::{Failure, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut};
 use crate::model::{ikid_model, recording_args};
 use ikid_core::Stream;
+use nalgebra::Matrix3;
 
 /// A causal frame-by-frame stream over a model (opaque). Use from one thread at a time.
 pub struct ikid_stream {
@@ -111,6 +112,33 @@ pub unsafe extern "C" fn ikid_stream_set_missing_markers(stream: *mut ikid_strea
         // SAFETY: non-null and NUL-terminated (caller's contract).
         let name = unsafe { std::ffi::CStr::from_ptr(policy) }.to_str().map_err(|_| Failure::new(ikid_status::InvalidArgument, "policy is not UTF-8"))?;
         s.set_missing_markers(ikid_core::MissingMarkers::from_name(name)?)?;
+        Ok(())
+    })
+}
+
+/// Calibrates the stream to a subject's marker placement: `forearm` and `hand` each point to
+/// the 9 values (row-major) of one 3×3 rotation matrix, as the `"forearm"` and `"hand"`
+/// arrays of a calibration file written by `ikid calibrate`; both NULL removes the
+/// calibration. Refused (nothing changed) if a matrix is not a rotation or the model does
+/// not read marker frames.
+///
+/// # Safety
+/// `stream` must be a live handle used by no other thread meanwhile; `forearm` and `hand`
+/// must each be NULL or point to 9 readable doubles.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_set_calibration(stream: *mut ikid_stream, forearm: *const f64, hand: *const f64) -> ikid_status {
+    guard(|| {
+        let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
+        let calibration = match (forearm.is_null(), hand.is_null()) {
+            (true, true) => None,
+            (false, false) => {
+                let f = unsafe { slice(forearm, 9, "forearm") }?;
+                let h = unsafe { slice(hand, 9, "hand") }?;
+                Some(ikid_core::Calibration::from_matrices(Matrix3::from_row_slice(f), Matrix3::from_row_slice(h))?)
+            }
+            _ => return Err(Failure::new(ikid_status::InvalidArgument, "forearm and hand: give both matrices, or both NULL to remove the calibration")),
+        };
+        s.set_calibration(calibration)?;
         Ok(())
     })
 }
