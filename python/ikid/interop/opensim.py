@@ -8,8 +8,9 @@ The model: ground → ``forearm`` welded at the shoulder pose's forearm frame �
 order and axes, so OpenSim's coordinate values are ikid's angles (radians). Everything is
 read from :func:`ikid.body_model`; written with the standard library only. OpenSim itself (the
 ``opensim`` package, ``pip install 'ikid[eval]'``) is needed only to open the file and by the
-two helpers that run it: :func:`marker_positions` (its forward kinematics) and
-:func:`inverse_kinematics` (its ``InverseKinematicsTool``).
+helpers that run it: :func:`marker_positions` (its forward kinematics),
+:func:`inverse_kinematics` (its ``InverseKinematicsTool``) and :func:`inverse_dynamics` (its
+``InverseDynamicsSolver``).
 
 Why no intermediate bodies: OpenSim's ``SpatialTransform`` composes ``rotation1..3`` as
 rotations about axes carried along by the previous ones (``R = R1·R2·R3``), exactly ikid's
@@ -196,6 +197,37 @@ def marker_positions(model_path: str | os.PathLike[str], q: Any) -> np.ndarray:
     return out
 
 
+def inverse_dynamics(model_path: str | os.PathLike[str], q: Any, qd: Any, qdd: Any) -> np.ndarray:
+    """OpenSim's inverse dynamics: the generalized forces ``(n, n_coordinates)`` (N·m for the
+    wrist's rotations) that give accelerations ``qdd`` at ``q``, ``qd`` (radians, rad/s, rad/s²,
+    the model's coordinate order), with gravity and no other forces."""
+    osim = _opensim()
+    model = osim.Model(str(model_path))
+    state = model.initSystem()
+    coords = model.getCoordinateSet()
+    nc = coords.getSize()
+    arrays = [np.atleast_2d(np.asarray(a, np.float64)) for a in (q, qd, qdd)]
+    for what, a in zip(("q", "qd", "qdd"), arrays):
+        if a.shape != (len(arrays[0]), nc):
+            raise ValueError(f"{what}: expected ({len(arrays[0])}, {nc}) values, got shape {a.shape}")
+    if model.getNumSpeeds() != nc:
+        raise ValueError(f"{model_path}: {model.getNumSpeeds()} mobilities for {nc} coordinates (constraints?); not supported")
+    # Coordinates' values and speeds by name; accelerations in mobility order (the state's u).
+    u_index = [_speed_index(model, state, coords.get(j)) for j in range(nc)]
+    solver = osim.InverseDynamicsSolver(model)
+    udot = osim.Vector(nc, 0.0)
+    out = np.empty((len(arrays[0]), nc))
+    for i, (qi, qdi, qddi) in enumerate(zip(*arrays)):
+        for j in range(nc):
+            coords.get(j).setValue(state, float(qi[j]), False)
+            coords.get(j).setSpeedValue(state, float(qdi[j]))
+            udot.set(u_index[j], float(qddi[j]))
+        model.realizeVelocity(state)
+        tau = solver.solve(state, udot)
+        out[i] = [tau.get(u_index[j]) for j in range(nc)]
+    return out
+
+
 def inverse_kinematics(
     model_path: str | os.PathLike[str],
     marker_file: str | os.PathLike[str],
@@ -280,6 +312,19 @@ def _opensim():
     except ImportError as e:
         raise ImportError(f"running OpenSim needs the opensim package (pip install 'ikid[eval]'): {e}") from None
     return opensim
+
+
+def _speed_index(model: Any, state: Any, coordinate: Any) -> int:
+    """Where a coordinate's speed sits in the state's u: set it alone and look."""
+    u = state.updU()
+    for k in range(u.size()):
+        u.set(k, 0.0)
+    coordinate.setSpeedValue(state, 1.0)
+    hits = [k for k in range(state.getU().size()) if state.getU().get(k) == 1.0]
+    if len(hits) != 1:
+        raise ValueError(f"coordinate {coordinate.getName()}: cannot find its speed in the state")
+    coordinate.setSpeedValue(state, 0.0)
+    return hits[0]
 
 
 def _check_name(what: str, name: str) -> None:
