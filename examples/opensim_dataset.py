@@ -85,10 +85,11 @@ def main(argv: list[str] | None = None) -> int:
         length_scale = float(rng.uniform(0.9, 1.1))
         shoulder_deg = SHOULDERS_DEG[k % len(SHOULDERS_DEG)]
         subject = {"length_scale": length_scale, "mass_scale": length_scale**3, "shoulder_flexion": math.radians(shoulder_deg)}
-        model = ios.write_osim(args.out / f"{name}.osim", markers=lab_markers(length_scale), name=name, **subject)
+        placement = lab_markers(length_scale)
+        model = ios.write_osim(args.out / f"{name}.osim", markers=placement, name=name, **subject)
         q, qd, qdd, sines = motion(t, rng)
         markers = ios.marker_positions(model, q)  # (n, 3 * 7), the model's marker order
-        model_order = [lab for lab, _, _ in lab_markers(length_scale)]
+        model_order = [lab for lab, _, _ in placement]
         cols = np.concatenate([np.arange(3 * model_order.index(lab), 3 * model_order.index(lab) + 3) for lab in FILE_ORDER])
         io.write_trc(args.out / f"{name}.trc", t, markers[:, cols], rate_hz=args.rate, labels=FILE_ORDER)
         io.write_mot(args.out / f"{name}.mot", t, q)

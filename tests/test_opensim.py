@@ -5,7 +5,10 @@ ikid trial gives back ikid's angles. Needs the ``opensim`` package (``ikid[eval]
 
 from __future__ import annotations
 
+import importlib.util
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -178,6 +181,48 @@ def test_ik_names_markers_missing_from_the_file(osim, tmp_path):
     model = ios.write_osim(tmp_path / "s.osim")
     with pytest.raises(ValueError, match="MCB"):
         ios.inverse_kinematics(model, tmp_path / "t.trc", tmp_path / "o.mot")
+
+
+# --- a dataset from another generator (examples/opensim_dataset.py) ----------------------------------
+
+
+def test_opensim_dataset_example_writes_consistent_trials(osim, tmp_path):
+    """The example's files are what they claim: the lab-labelled markers, mapped back to ikid's
+    names, are ikid's markers moved by the lab placement; the torques are ikid's Newton-Euler."""
+    path = Path(__file__).resolve().parents[1] / "examples" / "opensim_dataset.py"
+    spec = importlib.util.spec_from_file_location("opensim_dataset", path)
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    out = tmp_path / "ds"
+    assert example.main(["--out", str(out), "--trials", "2", "--duration", "0.3", "--rate", "500", "--seed", "4"]) == 0
+    manifest = json.loads((out / "dataset.json").read_text())
+    mapping = io.MarkerMap.load(out / "map.toml")
+    for trial in manifest["trials"]:
+        data = io.read_markers(out / f"{trial['name']}.trc")
+        assert data.rate_hz == 500 and len(data.time) == 150 and "R_LEPI" in data.labels
+        frames = data.frames(mapping)
+        t, q = io.read_mot(out / f"{trial['name']}.mot")
+        assert np.allclose(t, data.time)
+        lo, hi = np.array([c["range"] for c in ikid.body_model()["coordinates"]]).T
+        assert np.all((q >= lo) & (q <= hi))
+        body = ikid.body_model(length_scale=trial["length_scale"])
+        placement = np.array([o for *_, o in example.lab_markers(trial["length_scale"])[:6]])
+        shift = placement - np.array([m["offset"] for m in body["markers"]])
+        assert np.all((np.linalg.norm(shift, axis=1) >= 0.005 - 1e-12) & (np.linalg.norm(shift, axis=1) <= 0.020 + 1e-12))
+        ours = ikid.forward_markers(q, trial["shoulder_flexion"], trial["length_scale"], trial["mass_scale"], shift)
+        assert np.abs(frames - ours).max() < 1e-8  # the .trc holds mm to 6 decimals, the .mot degrees to 10 digits
+        # The motion is the manifest's sinusoids; ikid's torques on their analytic derivatives.
+        sines = trial["sines"]
+        w = [2 * np.pi * np.array(s_["freq_hz"]) for s_ in sines]
+        arg = [np.outer(t, w_) + s_["phase"] for w_, s_ in zip(w, sines)]
+        q_exact = np.column_stack([s_["offset"] + np.sin(a) @ s_["amplitude"] for a, s_ in zip(arg, sines)])
+        qd = np.column_stack([np.cos(a) @ (np.array(s_["amplitude"]) * w_) for a, w_, s_ in zip(arg, w, sines)])
+        qdd = np.column_stack([-np.sin(a) @ (np.array(s_["amplitude"]) * w_**2) for a, w_, s_ in zip(arg, w, sines)])
+        assert np.abs(q_exact - q).max() < 1e-9
+        _, tau = io.read_sto(out / f"{trial['name']}.sto")
+        ref = ikid.reference_id(q_exact, qd, qdd, trial["shoulder_flexion"], trial["length_scale"], trial["mass_scale"])
+        assert np.abs(ref).max() > 0.01
+        assert np.abs(tau - ref).max() < 1e-7  # ikid's virtual links; the .sto holds 10 digits
 
 
 # --- bad arguments (no OpenSim needed) -----------------------------------------------------------------
