@@ -60,7 +60,7 @@ METHODS = {
 
 
 def main() -> None:
-    osim = ios._opensim()
+    osim = ios.require_opensim()
     osim.Logger.removeFileSink()  # no opensim.log in the working directory
     osim.Logger.setLevelString("warn")
     model = ikid.load("wrist-ik")

@@ -63,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     if n < 2:
         ap.error(f"--duration {args.duration} s at --rate {args.rate} Hz is fewer than 2 frames")
 
-    osim = ios._opensim()
+    osim = ios.require_opensim()
     osim.Logger.removeFileSink()  # no opensim.log in the working directory
     osim.Logger.setLevelString("warn")
     args.out.mkdir(parents=True, exist_ok=True)

@@ -180,7 +180,7 @@ def marker_positions(model_path: str | os.PathLike[str], q: Any) -> np.ndarray:
     """OpenSim's forward kinematics: every marker of the model in the lab at each row of
     coordinate values ``q`` ``(n, n_coordinates)`` (radians, the model's coordinate order);
     ``(n, 3 * n_markers)`` metres, markers in the model's order."""
-    osim = _opensim()
+    osim = require_opensim()
     model = osim.Model(str(model_path))
     state = model.initSystem()
     coords, markers = model.getCoordinateSet(), model.getMarkerSet()
@@ -202,7 +202,7 @@ def inverse_dynamics(model_path: str | os.PathLike[str], q: Any, qd: Any, qdd: A
     """OpenSim's inverse dynamics: the generalized forces ``(n, n_coordinates)`` (N·m for the
     wrist's rotations) that give accelerations ``qdd`` at ``q``, ``qd`` (radians, rad/s, rad/s²,
     the model's coordinate order), with gravity and no other forces."""
-    osim = _opensim()
+    osim = require_opensim()
     model = osim.Model(str(model_path))
     state = model.initSystem()
     coords = model.getCoordinateSet()
@@ -240,7 +240,7 @@ def inverse_kinematics(
     model marker weighted 1 (the tool's default weight, made explicit), writing ``output``
     (``.mot``). ``accuracy`` is the solver's convergence tolerance (OpenSim's default 1e-5 if
     None). Markers the file lacks are an error naming them."""
-    osim = _opensim()
+    osim = require_opensim()
     from ikid.io import read_storage, read_trc
 
     data = read_trc(marker_file)
@@ -275,6 +275,15 @@ def inverse_kinematics(
     return IKResult(table.time, np.radians(q) if table.in_degrees else q, coords, seconds)
 
 
+def require_opensim() -> Any:
+    """The ``opensim`` module, or an ImportError saying how to install it."""
+    try:
+        import opensim
+    except ImportError as e:
+        raise ImportError(f"running OpenSim needs the opensim package (pip install 'ikid[eval]'): {e}") from None
+    return opensim
+
+
 # --- helpers -------------------------------------------------------------------------------------
 
 
@@ -305,14 +314,6 @@ def _marker_list(markers: Sequence[MarkerSpec], segments: dict[str, Any]) -> lis
             raise ValueError(f"marker {label!r}: offset must be 3 finite numbers (m), got {offset!r}")
         out.append((label, seg, xyz))
     return out
-
-
-def _opensim():
-    try:
-        import opensim
-    except ImportError as e:
-        raise ImportError(f"running OpenSim needs the opensim package (pip install 'ikid[eval]'): {e}") from None
-    return opensim
 
 
 def _speed_index(model: Any, state: Any, coordinate: Any) -> int:
