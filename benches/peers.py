@@ -34,7 +34,7 @@ import ikid
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benches.report import frames_for, machine  # noqa: E402
-from ikid.training.export import Affine, ModelSpec, export, export_onnx, load_torch  # noqa: E402
+from ikid.training.export import Affine, ModelSpec, WindowModel, export, export_onnx, load_torch  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "target" / "bench-peers"
@@ -63,30 +63,19 @@ def networks() -> list[tuple[str, ikid.Model, nn.Sequential, Path]]:
         task = "id" if fs == "joint_state" else "ik"
         model = export(net, OUT / f"{label}.safetensors", ModelSpec(name=label, task=task, feature_set=fs, window=5),
                        Affine.identity(n_in), Affine.identity(3))
-        nets.append((label, model, net, Affine.identity(n_in), Affine.identity(3)))
+        nets.append((label, model, net, WindowModel(net, Affine.identity(n_in), Affine.identity(3))))
     for name in ikid.available_models():
         model = ikid.load(name)
         path = OUT / f"{name}.safetensors"
         model.save(path)
-        net, inp, out = load_torch(path)
-        nets.append((name, model, net, inp, out))
+        reference = load_torch(path)
+        nets.append((name, model, reference.net, reference))
     result = []
-    for label, model, net, inp, out in nets:
+    for label, model, net, whole in nets:
         onnx_path = OUT / f"{label}.onnx"
-        export_onnx(net, onnx_path, model.layer_widths[0], inp, out)
-        folded = nn.Sequential(_Scale(inp), net, _Scale(out)).eval()
-        result.append((label, model, folded, onnx_path))
+        export_onnx(whole, onnx_path)
+        result.append((label, model, whole.eval(), onnx_path))
     return result
-
-
-class _Scale(nn.Module):
-    def __init__(self, a: Affine) -> None:
-        super().__init__()
-        self.scale = nn.Parameter(torch.as_tensor(a.scale), requires_grad=False)
-        self.shift = nn.Parameter(torch.as_tensor(a.shift), requires_grad=False)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return x * self.scale + self.shift
 
 
 def timed_calls(fn, n: int = SINGLE) -> dict[str, float]:
@@ -113,12 +102,12 @@ def _seconds(fn) -> float:
     return time.perf_counter() - t
 
 
-def numpy_forward(net: nn.Sequential):
-    """The network as NumPy float32 matmuls (scaling folded), for the NumPy column."""
-    scale_in, mlp, scale_out = net[0], net[1], net[2]
-    s_in, b_in = scale_in.scale.numpy(), scale_in.shift.numpy()
-    s_out, b_out = scale_out.scale.numpy(), scale_out.shift.numpy()
-    layers = [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy()) for m in mlp if isinstance(m, nn.Linear)]
+def numpy_forward(model: WindowModel):
+    """The model as NumPy float32 matmuls (scaling and output offset included), for the NumPy column."""
+    s_in, b_in = model.in_scale.numpy(), model.in_shift.numpy()
+    s_out, b_out = model.out_scale.numpy(), model.out_shift.numpy()
+    layers = [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy()) for m in model.net if isinstance(m, nn.Linear)]
+    offset, n_out = model.offset_features, model.n_out
 
     def forward(x: np.ndarray) -> np.ndarray:
         h = x * s_in + b_in
@@ -126,7 +115,11 @@ def numpy_forward(net: nn.Sequential):
             h = h @ w + b
             if k + 1 < len(layers):
                 np.maximum(h, 0, out=h)
-        return h * s_out + b_out
+        y = h * s_out + b_out
+        if offset:
+            start = x.shape[1] - offset
+            y += x[:, start : start + n_out]
+        return y
 
     return forward
 

@@ -11,7 +11,7 @@ import ikid
 torch = pytest.importorskip("torch", reason="parity needs the training extra (make test installs it)")
 from torch import nn  # noqa: E402
 
-from ikid.training.export import Affine, ModelSpec, export, export_onnx  # noqa: E402
+from ikid.training.export import Affine, ModelSpec, WindowModel, export, export_onnx  # noqa: E402
 
 #: Largest |ikid - torch| allowed, relative to the largest |torch output| of each column.
 RTOL = 1e-5
@@ -78,7 +78,7 @@ def test_exported_model_matches_torch(tmp_path, feature_set, hidden):
     assert_close(streamed, want)
 
     ort = pytest.importorskip("onnxruntime")
-    export_onnx(net, tmp_path / "m.onnx", n_in, inp, out)
+    export_onnx(WindowModel(net, inp, out), tmp_path / "m.onnx")
     session = ort.InferenceSession(str(tmp_path / "m.onnx"), providers=["CPUExecutionProvider"])
     assert_close(session.run(None, {"window": windows.astype(np.float32)})[0], want)
 

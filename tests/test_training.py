@@ -47,7 +47,8 @@ def test_recording_sets_never_share_a_trajectory():
     assert all(math.isclose(s["mass_scale"], s["length_scale"] ** 3) for s in specs)
 
 
-def test_a_config_trains_and_exports_a_model_with_its_card(tmp_path):
+@pytest.mark.parametrize("offset", [False, True], ids=["plain", "output_offset"])
+def test_a_config_trains_and_exports_a_model_with_its_card(tmp_path, offset):
     cfg_path = tmp_path / "tiny.toml"
     cfg_path.write_text("""
 [model]
@@ -56,6 +57,7 @@ task = "ik"
 feature_set = "angles"
 window = 5
 hidden = [16]
+""" + ('output_offset = "newest_features"\n' if offset else "") + """
 [data]
 seeds = [11]
 duration = 3.0
@@ -69,7 +71,7 @@ noise_levels = [0.0, 0.01]
     model, path = run(load_config(cfg_path), tmp_path, progress=False)
     assert path.exists() and (tmp_path / "tiny-ik.onnx").exists()
     card = model.card
-    assert card["task"] == "ik" and card["window"] == 5
+    assert card["task"] == "ik" and card["window"] == 5 and card.get("output_offset") == ("newest_features" if offset else None)
     assert set(card["metrics"]) == {"test_clean", "test_1%", "test_5%"}
     assert card["provenance"]["data"]["seeds"] == [11] and len(card["provenance"]["data_sha256_16"]) == 16
     log = [json.loads(line) for line in (tmp_path / "runs" / "tiny-ik" / "log.jsonl").read_text().splitlines()]
@@ -80,6 +82,12 @@ noise_levels = [0.0, 0.01]
     x, _ = D.windows(rec, "ik", "angles", 5)
     got = ort.InferenceSession(str(tmp_path / "tiny-ik.onnx")).run(None, {"window": x})[0]
     np.testing.assert_allclose(got, model.predict(rec.markers), rtol=1e-5, atol=1e-6)
+    # And the file read back by the safetensors library gives the same function in torch.
+    with torch.no_grad():
+        np.testing.assert_allclose(load_torch(path)(torch.as_tensor(x)).numpy(), got, rtol=1e-5, atol=1e-6)
+    if offset:  # the newest frame's angles are part of the output: the network is a correction
+        base = x[:, -3:]
+        assert np.abs(got - base).max() < np.abs(got).max()
 
 
 def test_occlusion_bursts_hide_one_marker_at_a_time_after_the_warmup():
@@ -148,14 +156,13 @@ def test_the_package_ships_the_default_models():
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_model_matches_torch(name):
     model = ikid.load(name)
-    net, inp, out = load_torch(ikid._SHIPPED / f"{name}.safetensors")  # safetensors library, not ikid
+    reference = load_torch(ikid._SHIPPED / f"{name}.safetensors")  # safetensors library, not ikid
     rec = D.simulate_one({"name": "p", "protocol": "random", "seed": 9600, "duration": 1.0, "shoulder_deg": 10.0})
     rec = noisy([rec], 0.01)[0]
     task = model.task
     x, _ = D.windows(rec, task, model.feature_set, model.window)
     with torch.no_grad():
-        z = torch.as_tensor(x) * torch.as_tensor(inp.scale) + torch.as_tensor(inp.shift)
-        want = (net(z) * torch.as_tensor(out.scale) + torch.as_tensor(out.shift)).numpy()
+        want = reference(torch.as_tensor(x)).numpy()
     got = model.predict(rec.frames(model.feature_set))
     scale = np.abs(want).max(axis=0)
     assert np.all(np.abs(got - want).max(axis=0) <= 1e-5 * scale)

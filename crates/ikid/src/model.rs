@@ -29,6 +29,8 @@ pub const FORMAT: &str = "ikid-model";
 pub const FORMAT_VERSION: u64 = 1;
 /// Tasks a model card may declare.
 pub const TASKS: [&str; 3] = ["ik", "id", "chain"];
+/// The card's `output_offset` value that adds the newest frame's features to the outputs.
+pub const NEWEST_FEATURES: &str = "newest_features";
 /// Longest window accepted (frames); guards against absurd allocations from tampered cards.
 pub const MAX_WINDOW: usize = 4096;
 
@@ -72,6 +74,12 @@ pub struct ModelCard {
     pub missing_markers: String,
     /// Activation after each dense layer: `"relu"` or `"identity"`.
     pub activations: Vec<String>,
+    /// [`NEWEST_FEATURES`]: output `k` is the network's output plus the newest frame's feature
+    /// of the same quantity (feature `k`, named `<kind>.<output name>`), so the network learns
+    /// a correction to it (e.g. denoising per-frame angles) rather than the whole value.
+    /// Absent: the network's output is the prediction.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub output_offset: Option<String>,
     /// How the scaling tensors were fitted (informational), e.g. `{"input": "minmax(-1,1)"}`.
     #[serde(default)]
     pub scaling: BTreeMap<String, String>,
@@ -99,6 +107,7 @@ impl ModelCard {
             outputs,
             missing_markers: MissingMarkers::Refuse.name().into(),
             activations: activations.iter().map(|a| a.name().into()).collect(),
+            output_offset: None,
             scaling: BTreeMap::new(),
             provenance: Default::default(),
             metrics: Default::default(),
@@ -176,6 +185,21 @@ impl ModelCard {
         }
         if self.activations.is_empty() {
             return bad("field \"activations\" is empty: the model has no layers".into());
+        }
+        if let Some(offset) = &self.output_offset {
+            if offset != NEWEST_FEATURES {
+                return bad(format!("field \"output_offset\" is {offset:?}, expected {NEWEST_FEATURES:?} or no field"));
+            }
+            for (k, out) in self.outputs.iter().enumerate() {
+                let same = names.get(k).and_then(|f| f.split_once('.')).is_some_and(|(_, q)| q == out.name);
+                if !same {
+                    return bad(format!(
+                        "field \"output_offset\" adds feature {k} ({:?}) to output {k} ({:?}): they must be the same quantity",
+                        names.get(k),
+                        out.name
+                    ));
+                }
+            }
         }
         self.parsed_activations().map(|_| ())
     }
@@ -341,6 +365,23 @@ impl Model {
         MissingMarkers::from_name(&self.inner.card.missing_markers).expect("validated with the card")
     }
 
+    /// True if each output adds the newest frame's same-named feature (the card's
+    /// `output_offset`; see [`NEWEST_FEATURES`]).
+    pub fn adds_newest_features(&self) -> bool {
+        self.inner.card.output_offset.is_some()
+    }
+
+    /// Adds the newest frame's features of `window` (whole frames' features, oldest first) to
+    /// `out` when the card asks for it (see [`adds_newest_features`](Self::adds_newest_features)).
+    pub(crate) fn add_offset(&self, window: &[f32], out: &mut [f32]) {
+        if self.adds_newest_features() {
+            let newest = &window[window.len() - self.feature_set().feature_len()..];
+            for (o, f) in out.iter_mut().zip(newest) {
+                *o += f;
+            }
+        }
+    }
+
     /// A new stream over this model (allocates its buffers once, here).
     pub fn stream(&self) -> Stream {
         Stream::new(self.clone())
@@ -414,10 +455,14 @@ impl Model {
                 let mut rows = group.chunks_exact_mut(no);
                 let outs = std::array::from_fn(|_| rows.next().expect("BATCH rows per group"));
                 net.forward_batch(std::array::from_fn(|s| window(row + s)), batch_scratch, outs);
+                for (s, out) in group.chunks_exact_mut(no).enumerate() {
+                    self.add_offset(window(row + s), out);
+                }
                 row += BATCH;
             }
             for out in groups.into_remainder().chunks_exact_mut(no) {
                 net.forward(window(row), scratch, out);
+                self.add_offset(window(row), out);
                 row += 1;
             }
             Ok(())

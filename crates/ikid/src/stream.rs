@@ -174,6 +174,7 @@ impl Stream {
         self.input[..tail].copy_from_slice(&self.ring[split..]);
         self.input[tail..].copy_from_slice(&self.ring[..split]);
         self.model.packed().forward(&self.input, &mut self.scratch, &mut self.output);
+        self.model.add_offset(&self.input, &mut self.output);
         if let Some(&value) = self.output.iter().find(|v| !v.is_finite()) {
             return Err(Error::NonFiniteOutput { frame: 0, value });
         }

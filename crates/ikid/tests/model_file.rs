@@ -316,3 +316,41 @@ fn scaling_that_overflows_once_folded_is_refused() {
     let err = load_err(&build(&t, &card));
     assert!(matches!(&err, Error::NonFiniteWeight { name, .. } if name.contains("folded")), "{err}");
 }
+
+#[test]
+fn output_offset_adds_the_newest_frames_angles_in_stream_and_batch() {
+    let plain = random_model(FeatureSet::Angles, 6, &[16], 3, 21);
+    let mut card = plain.card().clone();
+    card.output_offset = Some(ikid::model::NEWEST_FEATURES.into());
+    let offset = Model::from_parts(card, plain.mlp().clone()).unwrap();
+    assert!(offset.adds_newest_features() && !plain.adds_newest_features());
+    let n = 3000; // > one block of rows, so the batch path and the remainder path both run
+    let frames = random_frames(FeatureSet::Angles, n, 22);
+    let rows = offset.n_predictions(n);
+    let (mut a, mut b) = (vec![0f32; rows * 3], vec![0f32; rows * 3]);
+    plain.predict(&frames, &mut a).unwrap();
+    offset.predict(&frames, &mut b).unwrap();
+    let mut angles = vec![0f32; n * 3];
+    FeatureSet::Angles.compute_rows(&frames, &mut angles).unwrap();
+    for r in 0..rows {
+        for k in 0..3 {
+            let want = a[r * 3 + k] + angles[(r + 5) * 3 + k];
+            assert_eq!(b[r * 3 + k].to_bits(), want.to_bits(), "row {r} output {k}");
+        }
+    }
+    let mut stream = offset.stream();
+    let streamed: Vec<f32> = frames.chunks_exact(18).filter_map(|f| stream.push(f).unwrap().map(<[f32]>::to_vec)).flatten().collect();
+    assert_eq!(streamed.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), b.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+    // It survives a save/load round trip.
+    assert!(Model::from_bytes(&offset.to_bytes()).unwrap().adds_newest_features());
+}
+
+#[test]
+fn output_offset_is_checked_against_the_features() {
+    let (t, mut card) = parts(&model()); // markers: feature 0 is RSP.x, not an angle
+    card["output_offset"] = "newest_features".into();
+    let err = load_err(&build(&t, &card)).to_string();
+    assert!(err.contains("output_offset") && err.contains("RSP.x") && err.contains("same quantity"), "{err}");
+    card["output_offset"] = "oldest".into();
+    assert!(load_err(&build(&t, &card)).to_string().contains("\"oldest\""));
+}

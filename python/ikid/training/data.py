@@ -189,6 +189,11 @@ def features(rec: Recording, task: str, feature_set: str) -> np.ndarray:
     return ikid.compute_features(frames, feature_set)
 
 
+def feature_len(feature_set: str) -> int:
+    """Features per frame of ``feature_set`` (from the core)."""
+    return len(ikid.feature_set_info(feature_set)["feature_names"])
+
+
 def target(rec: Recording, task: str) -> np.ndarray:
     return getattr(rec, TASKS[task])
 

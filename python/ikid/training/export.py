@@ -8,7 +8,11 @@ The network must be a chain of ``nn.Linear`` layers with ``nn.ReLU`` between the
 given separately as per-element affine maps ``x * scale + shift``:
 
     net_input = window_features * input_scale + input_shift
-    prediction = net(net_input) * output_scale + output_shift
+    prediction = net(net_input) * output_scale + output_shift [+ newest frame's features]
+
+The bracket is the card's ``output_offset = "newest_features"`` (``ModelSpec.output_offset``):
+the network learns a correction to the newest frame's own estimate (e.g. per-frame angles).
+:class:`WindowModel` is that whole function in torch (ONNX export, parity, peers).
 """
 
 from __future__ import annotations
@@ -72,6 +76,7 @@ class ModelSpec:
     scaling: Mapping[str, str] = field(default_factory=dict)
     provenance: Mapping[str, Any] = field(default_factory=dict)
     metrics: Mapping[str, Any] = field(default_factory=dict)
+    output_offset: str | None = None  # "newest_features": outputs add the newest frame's features
 
 
 def linear_layers(net: nn.Module) -> list[tuple[nn.Linear, str]]:
@@ -115,6 +120,7 @@ def card_for(spec: ModelSpec, activations: Sequence[str]) -> dict[str, Any]:
         "scaling": dict(spec.scaling),
         "provenance": dict(spec.provenance),
         "metrics": dict(spec.metrics),
+        **({"output_offset": spec.output_offset} if spec.output_offset else {}),
     }
 
 
@@ -141,32 +147,36 @@ def export(
     return ikid.load(Path(path))
 
 
-class _Scaled(nn.Module):
-    """``net`` wrapped with its scaling, so the ONNX graph gives SI outputs from raw features."""
+class WindowModel(nn.Module):
+    """A model file's whole function in torch: raw feature window ``[batch, window × F]`` ->
+    SI outputs, i.e. ``net`` with its scaling and, with ``offset_features = F``, the newest
+    frame's first outputs-many features added (the card's ``output_offset``)."""
 
-    def __init__(self, net: nn.Module, inp: Affine, out: Affine):
+    def __init__(self, net: nn.Module, inp: Affine, out: Affine, offset_features: int = 0):
         super().__init__()
         self.net = net
+        self.offset_features = offset_features
+        self.n_out = linear_layers(net)[-1][0].out_features
         for name, arr in [("in_scale", inp.scale), ("in_shift", inp.shift), ("out_scale", out.scale), ("out_shift", out.shift)]:
             self.register_buffer(name, torch.as_tensor(np.asarray(arr, np.float32)))
 
+    @property
+    def n_inputs(self) -> int:
+        return linear_layers(self.net)[0][0].in_features
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x * self.in_scale + self.in_shift) * self.out_scale + self.out_shift
+        y = self.net(x * self.in_scale + self.in_shift) * self.out_scale + self.out_shift
+        if self.offset_features:
+            start = x.shape[1] - self.offset_features
+            y = y + x[:, start : start + self.n_out]
+        return y
 
 
-def export_onnx(
-    net: nn.Module,
-    path: str | Path,
-    n_inputs: int,
-    input_scaling: Affine | None = None,
-    output_scaling: Affine | None = None,
-) -> None:
-    """Write ``net`` with its scaling as ONNX: input ``window`` ``[batch, n_inputs]`` -> ``output``."""
-    n_out = linear_layers(net)[-1][0].out_features
-    wrapped = _Scaled(net, input_scaling or Affine.identity(n_inputs), output_scaling or Affine.identity(n_out)).eval()
-    example = torch.zeros(1, n_inputs)
+def export_onnx(model: WindowModel, path: str | Path) -> None:
+    """Write ``model`` as ONNX: input ``window`` ``[batch, n_inputs]`` -> ``output`` (SI)."""
+    example = torch.zeros(1, model.n_inputs)
     torch.onnx.export(
-        wrapped,
+        model.eval(),
         (example,),
         str(path),
         input_names=["window"],
@@ -176,8 +186,8 @@ def export_onnx(
     )
 
 
-def load_torch(path: str | Path) -> tuple[nn.Sequential, Affine, Affine]:
-    """The torch network and its input/output scaling in an ikid model file, read with the
+def load_torch(path: str | Path) -> WindowModel:
+    """The model in an ikid model file as a torch :class:`WindowModel`, read with the
     ``safetensors`` library (not ikid): the inverse of :func:`export`, so parity tests and
     peer benchmarks compare ikid against an independent reading of the same file."""
     from safetensors import safe_open
@@ -191,4 +201,8 @@ def load_torch(path: str | Path) -> tuple[nn.Sequential, Affine, Affine]:
         lin = nn.Linear(w.shape[1], w.shape[0])
         lin.weight.data, lin.bias.data = torch.as_tensor(w), torch.as_tensor(b)
         layers += [lin, nn.ReLU()] if act == "relu" else [lin]
-    return nn.Sequential(*layers).eval(), Affine(t["input.scale"], t["input.shift"]), Affine(t["output.scale"], t["output.shift"])
+    if card.get("output_offset") not in (None, "newest_features"):
+        raise ValueError(f"{path}: output_offset {card['output_offset']!r} is not known to this exporter")
+    offset = len(card["feature_names"]) if card.get("output_offset") else 0
+    net = nn.Sequential(*layers).eval()
+    return WindowModel(net, Affine(t["input.scale"], t["input.shift"]), Affine(t["output.scale"], t["output.shift"]), offset).eval()

@@ -29,7 +29,7 @@ from tqdm import tqdm
 
 import ikid
 from ikid.training import data as D
-from ikid.training.export import Affine, ModelSpec, export, export_onnx
+from ikid.training.export import Affine, ModelSpec, WindowModel, export, export_onnx
 
 TRAIN_DEFAULTS: dict[str, Any] = {
     "seed": 0,
@@ -67,6 +67,8 @@ def load_config(path: str | Path) -> dict[str, Any]:
     policy = cfg["model"].setdefault("missing_markers", "refuse")
     if policy not in ("refuse", "fill"):
         raise ValueError(f"{path}: [model] missing_markers {policy!r} is not 'refuse' or 'fill'")
+    if cfg["model"].get("output_offset") not in (None, "newest_features"):
+        raise ValueError(f"{path}: [model] output_offset {cfg['model']['output_offset']!r} is not 'newest_features' (or absent)")
     if cfg["train"]["occlusion_bursts_per_s"] > 0 and policy != "fill":
         raise ValueError(f"{path}: [train] occlusion_bursts_per_s needs [model] missing_markers = 'fill' (occluded frames are filled)")
     return cfg
@@ -134,6 +136,13 @@ def _noisy(recs: list[D.Recording], tcfg: dict[str, Any], rng: np.random.Generat
     return out
 
 
+def newest_features(x: np.ndarray, feature_len: int, n: int) -> np.ndarray:
+    """The newest frame's first ``n`` features of flattened windows ``x`` (what the card's
+    ``output_offset = "newest_features"`` adds to the outputs)."""
+    start = x.shape[1] - feature_len
+    return x[:, start : start + n]
+
+
 def train(cfg: dict[str, Any], recs: list[D.Recording], log_path: Path | None = None, progress: bool = True) -> Trained:
     """Trains the ``[model]`` of ``cfg`` on the train parts of ``recs``; early stopping on the val parts."""
     m, t = cfg["model"], cfg["train"]
@@ -144,12 +153,23 @@ def train(cfg: dict[str, Any], recs: list[D.Recording], log_path: Path | None = 
     train_parts = [r.part("train") for r in recs]
     val_parts = [r.part("val") for r in recs]
 
-    # Scaling from the clean training windows (min-max to [-1, 1], stored in the model file).
+    offset = m.get("output_offset")  # "newest_features": learn a correction to the newest frame's features
+
+    def targets(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return y - newest_features(x, D.feature_len(fs), y.shape[1]) if offset else y
+
+    # Scaling (min-max to [-1, 1], stored in the model file): inputs from the clean training
+    # windows; outputs from the targets, noisy ones for a correction (on clean windows it is ~0).
     x0, y0 = D.stack_windows(train_parts, task, fs, window, stride=7)
-    inp, out_fwd = Affine.minmax(x0.min(0), x0.max(0)), Affine.minmax(y0.min(0), y0.max(0))
-    del x0, y0
+    inp = Affine.minmax(x0.min(0), x0.max(0))
+    if offset:
+        x0, y0 = D.stack_windows(_noisy(train_parts, t, np.random.default_rng(t["seed"] + 2)), task, fs, window, stride=7)
+    r0 = targets(x0, y0)
+    out_fwd = Affine.minmax(r0.min(0), r0.max(0))
+    del x0, y0, r0
     # A fixed validation set with the same noise mixture (seeded), so early stopping compares like with like.
     xv, yv = D.stack_windows(_noisy(val_parts, t, np.random.default_rng(t["seed"] + 1)), task, fs, window, stride=5)
+    yv = targets(xv, yv)
     xv_t = torch.as_tensor(xv * inp.scale + inp.shift)
     yv_t = torch.as_tensor(yv * out_fwd.scale + out_fwd.shift)
 
@@ -166,6 +186,7 @@ def train(cfg: dict[str, Any], recs: list[D.Recording], log_path: Path | None = 
     for epoch in range(t["max_epochs"]):
         # Fresh noise and a fresh subsample of windows every epoch.
         x, y = D.stack_windows(_noisy(train_parts, t, rng), task, fs, window, stride=stride, offset=int(rng.integers(stride)))
+        y = targets(x, y)
         xs = torch.as_tensor(x * inp.scale + inp.shift)
         ys = torch.as_tensor(y * out_fwd.scale + out_fwd.shift)
         net.train()
@@ -210,6 +231,7 @@ def spec_for(cfg: dict[str, Any], recs: list[D.Recording], trained: Trained, met
         window=int(m.get("window", 5)),
         frame_rate_hz=float(recs[0].meta.get("rate_hz", 1000.0)),
         missing_markers=m["missing_markers"],
+        output_offset=m.get("output_offset"),
         output_names=ikid.coordinate_names(),
         scaling={"input": "minmax(-1,1) on clean training windows", "output": "minmax(-1,1) on training targets"},
         provenance={
@@ -251,7 +273,8 @@ def run(cfg: dict[str, Any], out: Path, progress: bool = True, onnx: bool = True
     metrics = card_metrics(model, recs)
     model = export(trained.net, path, spec_for(cfg, recs, trained, metrics), trained.input_scaling, trained.output_scaling)
     if onnx:
-        export_onnx(trained.net, out / f"{name}.onnx", model.layer_widths[0], trained.input_scaling, trained.output_scaling)
+        offset = D.feature_len(cfg["model"]["feature_set"]) if cfg["model"].get("output_offset") else 0
+        export_onnx(WindowModel(trained.net, trained.input_scaling, trained.output_scaling, offset), out / f"{name}.onnx")
     result = {"model": str(path), "epochs": len(trained.log), "seconds": trained.seconds, "metrics": metrics}
     (run_dir / "result.json").write_text(json.dumps(result, indent=2))
     print(f"{name}: {len(trained.log)} epochs in {trained.seconds:.0f} s -> {path}; test metrics {json.dumps(metrics)}", flush=True)
