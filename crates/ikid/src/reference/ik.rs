@@ -1,8 +1,10 @@
 //! Reference inverse kinematics: per frame, least-squares segment poses, then joint angles.
 //!
 //! Exact on clean markers (the fit is exact when the markers are the body model's offsets
-//! moved rigidly); on noisy markers it is the per-frame least-squares answer that OpenSim's
-//! IK converges to for this model.
+//! moved rigidly). On noisy markers it fits each segment to its own markers, forearm included;
+//! OpenSim's IK on the exported model (forearm welded at its known pose) fits only the hand's
+//! rotation about the known wrist centre, a different and less noisy least-squares problem
+//! (measured side by side in docs/opensim.md).
 
 use crate::body::{self, BodyModel, MARKER_FRAME_LEN, MARKERS, N_COORDINATES, Segment};
 use crate::error::{Error, Result};
