@@ -4,6 +4,7 @@ file answered by a clear error with nothing partial written."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -275,3 +276,22 @@ def test_a_parser_crash_is_reported_as_a_bad_file(tmp_path, monkeypatch):
     with pytest.raises(io.FileFormatError, match=r"x.c3d: not a readable C3D file: the C3D parser crashed \(signal 11\)"):
         io.read_c3d(tmp_path / "x.c3d")
     assert subprocess.run([sys.executable, "-c", "import ikid"]).returncode == 0
+
+
+def test_text_outputs_are_utf8_and_get_normal_permissions_whatever_the_locale(tmp_path):
+    """An ASCII locale (C without UTF-8 mode) must not break writing '°' or '²', and outputs
+    are not left private (mkstemp's 0600)."""
+    code = ("import sys; from ikid.io._atomic import write_text_atomic; "
+            "write_text_atomic(sys.argv[1], 'RMSE (\\u00b0), MSE (rad\\u00b2)\\n')")  # ASCII source: the locale is ASCII
+    env = {**os.environ, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
+    result = subprocess.run([sys.executable, "-c", code, str(tmp_path / "r.md")], capture_output=True, text=True, env=env)
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "r.md").read_bytes().decode("utf-8") == "RMSE (°), MSE (rad²)\n"
+    old = os.umask(0o022)
+    try:
+        from ikid.io._atomic import write_text_atomic
+
+        write_text_atomic(tmp_path / "m.txt", "x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "m.txt").stat().st_mode & 0o777 == 0o644

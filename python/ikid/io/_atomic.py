@@ -18,6 +18,8 @@ def atomic_output(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Pa
     os.close(fd)
     try:
         yield Path(tmp)
+        # mkstemp makes the file private (0600); the output gets what open() would give it.
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -25,7 +27,14 @@ def atomic_output(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Pa
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
+    """``text`` as UTF-8 (whatever the locale says), atomically."""
     with atomic_output(path) as tmp:
-        with open(tmp, "w", newline="\n") as f:
+        with open(tmp, "w", encoding="utf-8", newline="\n") as f:
             f.write(text)
     return Path(path)
+
+
+def _umask() -> int:
+    mask = os.umask(0)  # the only way to read it; set straight back
+    os.umask(mask)
+    return mask

@@ -122,7 +122,7 @@ class Report:
     def write(self) -> Path:
         path = self.out / "report.md"
         tmp = path.with_suffix(".md.partial")
-        tmp.write_text("\n".join(self.lines) + "\n")
+        tmp.write_text("\n".join(self.lines) + "\n", encoding="utf-8")
         tmp.replace(path)
         return path
 
