@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo data models report test test-rust test-python test-c lint bench bench-peers fuzz clean capi c header check-header install compare-opensim
+.PHONY: all venv wheel demo data models report test test-rust test-python test-c lint bench bench-peers fuzz clean capi c header check-header install compare-opensim compare-ekf
 
 all: wheel
 
@@ -137,3 +137,9 @@ clean:
 # held-out trials at 0/1/5 % noise: a section of docs/opensim.md and target/opensim_ik.json.
 compare-opensim: wheel
 	$(PY) benches/opensim_ik.py
+
+# ikid beside biorbd's extended Kalman filter (+ its least-squares IK and inverse dynamics) on the
+# same held-out frames, angles, torques and step latency: docs/ekf.md and target/ekf_peer.json
+# (~10 min on 2 cores; the eval extra brings biorbd).
+compare-ekf: wheel
+	$(PY) benches/ekf_peer.py
