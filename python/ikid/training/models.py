@@ -25,13 +25,17 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("out/models"))
     parser.add_argument("--install", type=Path, default=PACKAGE_MODELS, help="where the shipped .safetensors go")
     parser.add_argument("--quiet", action="store_true")
+    parser.add_argument("names", nargs="*", metavar="NAME", help=f"retrain only these (default: all of {', '.join(SHIPPED)})")
     args = parser.parse_args()
+    unknown = sorted(set(args.names) - set(SHIPPED))
+    if unknown:
+        parser.error(f"unknown model(s) {', '.join(unknown)}; the shipped ones are {', '.join(SHIPPED)}")
     start = time.perf_counter()
     args.install.mkdir(parents=True, exist_ok=True)
-    for name in SHIPPED:
+    for name in args.names or SHIPPED:
         _, path = run(load_config(CONFIGS / f"{name}.toml"), args.out, progress=not args.quiet)
         shutil.copyfile(path, args.install / path.name)
-    print(f"make models: {len(SHIPPED)} models in {(time.perf_counter() - start) / 60:.1f} min -> {args.install}")
+    print(f"make models: {len(args.names or SHIPPED)} models in {(time.perf_counter() - start) / 60:.1f} min -> {args.install}")
 
 
 if __name__ == "__main__":
