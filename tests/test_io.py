@@ -5,6 +5,7 @@ file answered by a clear error with nothing partial written."""
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 
@@ -50,6 +51,45 @@ def test_trc_round_trip_keeps_positions_and_gaps(trial, tmp_path, units):
     assert np.array_equal(np.isnan(got), np.isnan(markers))
     assert np.nanmax(np.abs(got - markers)) < 1e-6 * {"mm": 1, "cm": 10, "m": 1000}[units]
     np.testing.assert_allclose(data.time, trial.time, atol=1e-6)
+
+
+@pytest.mark.parametrize("units", ["mm", "m"])
+def test_csv_round_trip_keeps_positions_and_gaps(trial, tmp_path, units):
+    markers = trial.markers.copy()
+    markers[100:130, 3:6] = np.nan
+    path = io.write_csv_markers(tmp_path / "t.csv", trial.time, markers, units=units)
+    data = io.read_markers(path)
+    assert data.labels == tuple(ikid.marker_names()) and data.file_units == units
+    assert data.rate_hz == pytest.approx(trial.rate_hz, rel=1e-6)
+    got = data.frames()
+    assert np.array_equal(np.isnan(got), np.isnan(markers))
+    assert np.nanmax(np.abs(got - markers)) < 1e-9
+    # Columns in another order, '_x' names and no units line (metres) read the same.
+    cols = [f"{m}_{a}" for m in reversed(ikid.marker_names()) for a in "XYZ"]
+    rev = trial.markers.reshape(-1, 6, 3)[:, ::-1].reshape(len(trial.time), -1)
+    io.write_csv(tmp_path / "r.csv", trial.time, rev, cols)
+    np.testing.assert_allclose(io.read_markers(tmp_path / "r.csv").frames(), trial.markers, atol=1e-9)
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("t,RSP.x\n0,1\n", "first column must be 'time'"),
+    ("time,RSP.x,RSP.y\n0,1,2\n0.001,1,2\n", "RSP lack an x, y or z"),
+    ("time,RSP.x,RSP.y,RSP.z,RSP.w\n", "'RSP.w' is not"),
+    ("time,A.x,A.y,A.z\n0,1,2,3\n0.001,1,two,3\n", ":3: 'two' is not a number"),
+    ("time,A.x,A.y,A.z\n0,1,2,3\n0.001,1,2\n", ":3: 3 values, the header names 4"),
+    ("time,A.x,A.y,A.z\n0,1,2,3\n0.001,1,2,3\n0.005,1,2,3\n", "not evenly spaced"),
+    ("# units=inches\ntime,A.x,A.y,A.z\n0,1,2,3\n0.001,1,2,3\n", "inches"),
+])
+def test_bad_csv_files_say_what_is_wrong(tmp_path, text, message):
+    (tmp_path / "bad.csv").write_text(text)
+    with pytest.raises(io.FileFormatError, match=re.escape(message)):
+        io.read_markers(tmp_path / "bad.csv")
+
+
+def test_csv_writer_refuses_non_finite_values_and_writes_nothing(tmp_path):
+    with pytest.raises(io.FileFormatError, match="not written"):
+        io.write_csv(tmp_path / "q.csv", [0.0, 0.001], [[0.1, np.nan, 0.0], [0.1, 0.2, 0.3]], ikid.coordinate_names())
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_c3d_round_trip_keeps_labels_positions_and_gaps(trial, tmp_path):
@@ -151,9 +191,10 @@ def test_ik_command_on_c3d_and_trc_equals_the_python_api(trial, tmp_path):
     data = lab_data(trial)
     io.write_c3d(tmp_path / "trial.c3d", data)
     io.write_trc(tmp_path / "trial.trc", data.time, data.positions.reshape(len(data), -1), data.rate_hz, labels=data.labels)
+    io.write_csv_markers(tmp_path / "trial.csv", data.time, data.positions.reshape(len(data), -1), labels=list(data.labels), units="mm")
     model = ikid.load("wrist-ik")
     want = model.predict(trial.markers)  # rows for frames window-1 ... n-1
-    for src in ("trial.c3d", "trial.trc"):
+    for src in ("trial.c3d", "trial.trc", "trial.csv"):
         out = tmp_path / f"{src}.mot"
         assert cli(["ik", str(tmp_path / src), "-o", str(out), "--map", str(tmp_path / "lab.toml")]) == 0
         t, q = io.read_mot(out)

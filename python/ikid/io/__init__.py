@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 
 from ikid.io.c3d import read_c3d, write_c3d
+from ikid.io.csv import read_csv_markers, write_csv, write_csv_markers
 from ikid.io.mapping import MarkerMap
 from ikid.io.markers import FileFormatError, MarkerData
 from ikid.io.resample import resample
@@ -17,11 +18,11 @@ from ikid.io.storage import Storage, read_mot, read_storage, read_sto, write_mot
 from ikid.io.trc import read_trc, write_trc
 
 #: Marker file readers by suffix.
-MARKER_READERS = {".trc": read_trc, ".c3d": read_c3d}
+MARKER_READERS = {".trc": read_trc, ".c3d": read_c3d, ".csv": read_csv_markers}
 
 
 def read_markers(path: str | os.PathLike[str]) -> MarkerData:
-    """Read a marker file by its suffix (``.trc`` or ``.c3d``)."""
+    """Read a marker file by its suffix (``.trc``, ``.c3d`` or ``.csv``)."""
     from pathlib import Path
 
     reader = MARKER_READERS.get(Path(path).suffix.lower())
@@ -37,6 +38,9 @@ __all__ = [
     "MarkerMap",
     "Storage",
     "read_c3d",
+    "read_csv_markers",
+    "write_csv",
+    "write_csv_markers",
     "read_markers",
     "read_mot",
     "read_storage",
