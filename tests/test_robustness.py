@@ -104,6 +104,7 @@ def _valid_files(tmp: Path) -> dict[str, bytes]:
 
     return {
         ".trc": io.write_trc(tmp / "v.trc", _SIM.time, _MARKERS, _SIM.rate_hz).read_bytes(),
+        ".csv": io.write_csv_markers(tmp / "v.csv", _SIM.time, _MARKERS, units="mm").read_bytes(),
         ".mot": io.write_mot(tmp / "v.mot", _SIM.time, _SIM.q).read_bytes(),
         ".sto": io.write_sto(tmp / "v.sto", _SIM.time, _SIM.tau).read_bytes(),
         ".toml": ("[markers]\n" + "\n".join(f'{m} = "L{m}"' for m in ikid.marker_names()) + "\n").encode(),
@@ -113,8 +114,8 @@ def _valid_files(tmp: Path) -> dict[str, bytes]:
 def _read(path: Path):
     from ikid import io
 
-    if path.suffix == ".trc":
-        data = io.read_trc(path)
+    if path.suffix in (".trc", ".csv"):
+        data = io.read_markers(path)
         assert data.positions.shape == (len(data.time), len(data.labels), 3) and np.all(np.diff(data.time) > 0)
         return data.frames() if data.labels == tuple(ikid.marker_names()) else None
     if path.suffix == ".toml":
@@ -130,7 +131,7 @@ def valid_files(tmp_path_factory):
 
 
 @READER_CASES
-@given(st.sampled_from([".trc", ".mot", ".sto", ".toml"]), st.lists(st.tuples(st.floats(0, 1), st.integers(0, 255)), max_size=8),
+@given(st.sampled_from([".trc", ".csv", ".mot", ".sto", ".toml"]), st.lists(st.tuples(st.floats(0, 1), st.integers(0, 255)), max_size=8),
        st.floats(0, 1), st.binary(max_size=64))
 def test_file_readers_on_corrupted_truncated_and_random_files(valid_files, tmp_path, kind, flips, keep, junk):
     data = bytearray(valid_files[kind])
