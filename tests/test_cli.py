@@ -275,9 +275,9 @@ def test_train_and_report_on_a_lab_folder_through_the_cli(lab, tmp_path, capsys)
     from ikid.training.data import load_lab_recordings
 
     rec = load_lab_recordings(root / "test", mapping)[0]
-    text = report.read_text()
+    text = report.read_text(encoding="utf-8")
     assert f"| clean | {len(rec) - 4} |" in text and "| 5% |" in text
-    result = json.loads(report.with_suffix(".json").read_text())
+    result = json.loads(report.with_suffix(".json").read_text(encoding="utf-8"))
     # The report's numbers are the model's own errors on those frames.
     err = model.predict(rec.markers) - rec.q[4:]
     assert result["levels"]["clean"]["all"]["mse"] == pytest.approx(float((err**2).mean()), rel=1e-5)

@@ -187,19 +187,11 @@ def fresh_pair(level: float) -> tuple[D.Recording, ...]:
     return tuple(noisy([fresh(), fresh(shoulder=-30.0, scale=1.15)], level))
 
 
-# MC5 missing at 5 % noise costs 2.1-2.3x (docs/report.md): with it gone the hand's pose rests on
-# MC2, MCB and the joint centre, and the classical reference on the same filled frames loses
-# 1.5x too. Known shortfall of issue 5's 2x bound, kept visible: strict, so a fix shows up.
-MC5_AT_5PCT = pytest.mark.xfail(strict=True, reason="MC5 missing at 5 % noise: 2.1-2.3x, bound 2x (see docs/report.md)")
-
-
 @pytest.mark.parametrize("level", [0.0, 0.01, 0.05])
 @pytest.mark.parametrize("k", range(6))
-def test_shipped_ik_with_one_marker_missing_stays_within_2x(request, level, k):
+def test_shipped_ik_with_one_marker_missing_stays_within_2x(level, k):
     # Marker k is missing for the second half of fresh trials; the shipped model's stream
     # fills it (card policy "fill"). Error ≤ 2x the complete-marker error on the same frames.
-    if (k, level) == (4, 0.05):
-        request.applymarker(MC5_AT_5PCT)
     ik = ikid.load("wrist-ik")
     assert ik.missing_markers == "fill"
     recs = fresh_pair(level)
