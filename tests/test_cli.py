@@ -286,6 +286,19 @@ def test_train_and_report_on_a_lab_folder_through_the_cli(lab, tmp_path, capsys)
 
 
 @needs_torch
+def test_train_refuses_contradictory_or_bad_options(lab, tmp_path, capsys):
+    root, mapping = lab
+    base = ["train", "--data", str(root / "train"), "--map", str(mapping), "-o", str(tmp_path / "m.safetensors")]
+    assert cli([*base, "--config", "wrist-ik", "--task", "chain"]) == 2
+    assert "--task chain but config 'wrist-ik' trains task 'ik'" in capsys.readouterr().err
+    assert cli([*base, "--hidden", "128;128"]) == 2
+    assert "--hidden '128;128'" in capsys.readouterr().err
+    assert cli([*base, "--config", "nope"]) == 2
+    assert "no config 'nope'" in capsys.readouterr().err
+    assert not (tmp_path / "m.safetensors").exists()
+
+
+@needs_torch
 def test_train_chain_needs_torques(lab, tmp_path, capsys):
     root, mapping = lab
     folder = tmp_path / "no_torques"

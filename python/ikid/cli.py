@@ -395,17 +395,19 @@ def cmd_train(args: argparse.Namespace) -> int:
     train = _training()
     if args.data is None and args.config is None:
         raise ikid.InputError("give --data DIR (a lab's trials) or --config NAME|FILE (a training config)")
-    cfg = train.load_config(_config_path(args.config or BASE_CONFIG[args.task]))
+    try:
+        cfg = train.load_config(_config_path(args.config or BASE_CONFIG[args.task or "ik"]))
+    except ValueError as e:  # a config problem, named by load_config
+        raise ikid.InputError(str(e)) from None
+    if args.task is not None and cfg["model"]["task"] != args.task:
+        raise ikid.InputError(f"--task {args.task} but config {args.config!r} trains task {cfg['model']['task']!r}; drop one of them")
     out = Path(args.output)
     if out.suffix == ".safetensors":
         cfg["model"]["name"], out_dir = out.stem, out.parent
     else:
         out_dir = out
     if args.data is not None:
-        task = args.task
-        if args.config is not None and cfg["model"]["task"] != task:
-            task = cfg["model"]["task"]
-        cfg["model"]["task"] = task
+        task = cfg["model"]["task"]
         cfg["data"] = {"lab": str(Path(args.data).resolve())}
         if args.map:
             cfg["data"]["map"] = str(Path(args.map).resolve())
@@ -418,7 +420,10 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.window is not None:
         cfg["model"]["window"] = args.window
     if args.hidden is not None:
-        cfg["model"]["hidden"] = [int(w) for w in args.hidden.split(",")]
+        try:
+            cfg["model"]["hidden"] = [int(w) for w in args.hidden.split(",")]
+        except ValueError:
+            raise ikid.InputError(f"--hidden {args.hidden!r}: expected widths like 128,128") from None
     train.run(cfg, out_dir, progress=sys.stderr.isatty(), onnx=not args.no_onnx)
     return 0
 
@@ -602,7 +607,8 @@ def main(argv: list[str] | None = None) -> int:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", default=None, metavar="DIR", help="a lab's trials: .c3d/.trc with same-stem .mot (and .sto)")
     p.add_argument("--map", metavar="TOML", help="marker map for the trials (see map-template)")
-    p.add_argument("--task", choices=sorted(BASE_CONFIG), default="ik", help="ik: angles; chain: markers -> torques")
+    p.add_argument("--task", choices=sorted(BASE_CONFIG), default=None,
+                   help="ik: angles (default); chain: markers -> torques; id: joint states -> torques")
     p.add_argument("--config", default=None, help="config name or TOML (default: the shipped one for --task)")
     p.add_argument("--rate", type=float, default=None, help="resample every trial to this rate (Hz) first")
     p.add_argument("--minutes", type=float, default=None, help="training time budget")
