@@ -313,10 +313,12 @@ def cmd_stream(args: argparse.Namespace) -> int:
     """Frames (text lines) from stdin or UDP -> one CSV line per frame on stdout:
     ``frame,status,<outputs>``; status ``ok``, ``filled:<markers>``, ``filling`` (window not
     full yet) or ``refused:<reason>`` (outputs empty). Nothing is skipped silently."""
+    from ikid.pipeline import same_rate
+
     models = [ikid.load(args.model)] + ([ikid.load(args.torque_model)] if args.torque_model else [])
     rate = models[0].frame_rate_hz
     for m in models:
-        if args.rate is not None and abs(args.rate - m.frame_rate_hz) > 1e-3 * m.frame_rate_hz:
+        if args.rate is not None and not same_rate(args.rate, m.frame_rate_hz):
             raise ikid.InputError(
                 f"the source runs at {args.rate:g} Hz but model {m.name!r} was trained at {m.frame_rate_hz:g} Hz; a live stream "
                 "is not resampled (it would add latency): record at the model's rate or train a model at yours (ikid train)")

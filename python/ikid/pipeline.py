@@ -23,6 +23,11 @@ from ikid.io.resample import resample
 RATE_TOLERANCE = 1e-3
 
 
+def same_rate(a_hz: float, b_hz: float) -> bool:
+    """True if two frame rates are equal to :data:`RATE_TOLERANCE` (relative to ``b_hz``)."""
+    return abs(a_hz - b_hz) <= RATE_TOLERANCE * b_hz
+
+
 @dataclass
 class Run:
     """Outputs for the frames that have one, in input order."""
@@ -70,7 +75,7 @@ def _reason(message: str) -> str:
 def check_rate(model: _native.Model, rate_hz: float, source: str, allow_resample: bool) -> bool:
     """True if ``rate_hz`` must be resampled to the model's rate; an error if it differs and
     resampling was not asked for."""
-    if abs(rate_hz - model.frame_rate_hz) <= RATE_TOLERANCE * model.frame_rate_hz:
+    if same_rate(rate_hz, model.frame_rate_hz):
         return False
     if not allow_resample:
         raise _native.InputError(

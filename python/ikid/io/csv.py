@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ikid.io._atomic import write_text_atomic
-from ikid.io.markers import FileFormatError, MarkerData, ikid_marker_names, unit_scale
+from ikid.io.markers import FileFormatError, MarkerData, ikid_marker_names, read_text_lines, unit_scale
 
 _AXIS = re.compile(r"^(?P<label>.+?)[._](?P<axis>[xyzXYZ])$")
 
@@ -32,10 +32,7 @@ def read_csv_markers(path: str | os.PathLike[str]) -> MarkerData:
     """Read a marker ``.csv`` (layout in the module doc); positions in metres."""
     path = Path(path)
     src = str(path)
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except UnicodeDecodeError:
-        raise FileFormatError(f"{src}: not a text file (CSV is comma-separated text)") from None
+    lines = read_text_lines(path, "CSV is comma-separated text")
     units, start = "m", 0
     if lines and lines[0].startswith("#"):
         m = re.search(r"units\s*=\s*(\S+)", lines[0])

@@ -35,6 +35,14 @@ class FileFormatError(_native.InputError):
     what is wrong (and the line, for text formats)."""
 
 
+def read_text_lines(path: Path, what: str) -> list[str]:
+    """The lines of a UTF-8 text file, or a :class:`FileFormatError` saying it is not ``what``."""
+    try:
+        return path.read_text(encoding="utf-8").splitlines()
+    except UnicodeDecodeError:
+        raise FileFormatError(f"{path}: not a text file ({what})") from None
+
+
 def unit_scale(units: str, source: str) -> float:
     """Metres per file unit, or a :class:`FileFormatError` listing the known units."""
     key = units.strip().lower()

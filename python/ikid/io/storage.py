@@ -15,7 +15,7 @@ import numpy as np
 
 from ikid import _native
 from ikid.io._atomic import write_text_atomic
-from ikid.io.markers import FileFormatError
+from ikid.io.markers import FileFormatError, read_text_lines
 
 
 def coordinate_names() -> list[str]:
@@ -55,10 +55,7 @@ def read_storage(path: str | os.PathLike[str]) -> Storage:
     """Read any ``.mot``/``.sto`` file (OpenSim 3 and 4 headers)."""
     path = Path(path)
     src = str(path)
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except UnicodeDecodeError:
-        raise FileFormatError(f"{src}: not a text file (.mot/.sto are text)") from None
+    lines = read_text_lines(path, ".mot/.sto are text")
     try:
         end = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader")
     except StopIteration:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ikid.io._atomic import write_text_atomic
-from ikid.io.markers import FileFormatError, MarkerData, ikid_marker_names, unit_scale
+from ikid.io.markers import FileFormatError, MarkerData, ikid_marker_names, read_text_lines, unit_scale
 
 _HEADER_LINES = 5
 
@@ -21,11 +21,7 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
     """Read a ``.trc`` file; positions in metres whatever its ``Units`` (mm, cm, m)."""
     path = Path(path)
     src = str(path)
-    try:
-        text = path.read_text(encoding="utf-8", errors="strict")
-    except UnicodeDecodeError:
-        raise FileFormatError(f"{src}: not a text file (TRC is tab-separated text)") from None
-    lines = text.splitlines()
+    lines = read_text_lines(path, "TRC is tab-separated text")
     if len(lines) < _HEADER_LINES or not lines[0].startswith("PathFileType"):
         raise FileFormatError(f"{src}:1: not a TRC file (expected a 'PathFileType' line and a 5-line header)")
     keys = lines[1].split("\t")

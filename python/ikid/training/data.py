@@ -265,6 +265,7 @@ def load_lab_recordings(folder: str | os.PathLike[str], marker_map: str | os.Pat
     Velocities and accelerations are central differences of the angles (offline labels).
     """
     from ikid.io import MarkerMap, read_markers, read_mot, read_sto, resample
+    from ikid.pipeline import same_rate
 
     mapping = MarkerMap.load(marker_map) if marker_map else None
     recs: list[Recording] = []
@@ -278,7 +279,7 @@ def load_lab_recordings(folder: str | os.PathLike[str], marker_map: str | os.Pat
         tau = (_aligned(path.name, sto.name, time, *read_sto(sto), data.rate_hz) if sto.exists()
                else np.full_like(q, np.nan))
         rate = data.rate_hz
-        if rate_hz is not None and abs(rate - rate_hz) > 1e-3 * rate_hz:
+        if rate_hz is not None and not same_rate(rate, rate_hz):
             table = np.concatenate([markers, q, tau], axis=1)
             time, table = resample(time, table, rate_hz)
             markers, q, tau = table[:, :18], table[:, 18:21], table[:, 21:24]
@@ -297,7 +298,8 @@ def load_lab_recordings(folder: str | os.PathLike[str], marker_map: str | os.Pat
             name = path.stem if (start, stop) == (0, len(time)) else f"{path.stem}@{start}"
             meta = {"source": str(path), "rate_hz": rate, "first_frame": int(start), "filled_frames": int((~np.isfinite(markers[sl]).all(axis=1)).sum())}
             recs.append(Recording(name, filled[sl].astype(np.float64), q[sl], qd, np.gradient(qd, t, axis=0), tau[sl], meta))
-    if len({round(r, 6) for r in rates.values()}) > 1:
+    first = next(iter(rates.values()))
+    if not all(same_rate(r, first) for r in rates.values()):
         listing = ", ".join(f"{k} {v:g} Hz" for k, v in rates.items())
         raise ikid.InputError(f"{folder}: trials at different frame rates ({listing}); resample them to one (rate_hz / --rate)")
     if not recs:
