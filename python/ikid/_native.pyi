@@ -20,6 +20,8 @@ __all__ = [
     "Calibration",
     "Model",
     "Stream",
+    "Tracker",
+    "DEFAULT_JERK_NOISE",
     "build_model",
     "forward_markers",
     "body_model",
@@ -125,6 +127,28 @@ class Stream:
     def filled_markers(self) -> list[str]: ...
     @property
     def model(self) -> Model: ...
+
+DEFAULT_JERK_NOISE: float
+
+@final
+class Tracker:
+    def __new__(
+        cls,
+        length_scale: float = 1.0,
+        mass_scale: float = 1.0,
+        marker_shift: _Floats | None = None,
+        rate_hz: float = 1000.0,
+        jerk_noise: float = ...,
+        noise_memory_s: float = 10.0,
+        initial_marker_noise: float = 1e-3,
+    ) -> Tracker: ...
+    def push(self, frame: _Floats) -> npt.NDArray[np.float64] | None: ...
+    def run(self, frames: _Floats) -> dict[str, Any]: ...
+    def reset(self) -> None: ...
+    @property
+    def marker_noise(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def settings(self) -> dict[str, float]: ...
 
 def body_model(
     length_scale: float = 1.0,

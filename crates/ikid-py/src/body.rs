@@ -19,7 +19,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 
 /// A subject scaled from the default, each marker moved by `marker_shift` `(6, 3)` (metres,
 /// in its segment's frame); the one place Python reads the body model from.
-fn subject(length_scale: f64, mass_scale: f64, marker_shift: Option<&Bound<'_, PyAny>>) -> PyResult<BodyModel> {
+pub(crate) fn subject(length_scale: f64, mass_scale: f64, marker_shift: Option<&Bound<'_, PyAny>>) -> PyResult<BodyModel> {
     let mut body = BodyModel::try_scaled(length_scale, mass_scale).py_err()?;
     if let Some(shift) = marker_shift {
         with_f64_rows(shift, "marker_shift", 3, |v, n| {

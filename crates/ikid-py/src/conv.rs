@@ -83,6 +83,37 @@ pub fn with_frame<R>(obj: &Bound<'_, PyAny>, f: impl FnOnce(&[f32]) -> PyResult<
     with_floats(obj, "frame", 1, |values, _| f(values))
 }
 
+/// One frame as f64 for the f64 solvers: contiguous 1-D float64 is borrowed, float32 widened
+/// on the stack (no allocation per push either way); anything else goes through conversion.
+pub fn with_frame_f64<R>(obj: &Bound<'_, PyAny>, f: impl FnOnce(&[f64]) -> PyResult<R>) -> PyResult<R> {
+    if let Ok(arr) = obj.cast::<PyArray1<f64>>()
+        && let Ok(ro) = arr.try_readonly()
+        && let Ok(values) = ro.as_slice()
+    {
+        return f(values);
+    }
+    if let Ok(arr) = obj.cast::<PyArray1<f32>>()
+        && let Ok(ro) = arr.try_readonly()
+        && let Ok(values) = ro.as_slice()
+        && values.len() <= MAX_STACK_FRAME
+    {
+        let mut buf = [0f64; MAX_STACK_FRAME];
+        for (b, v) in buf.iter_mut().zip(values) {
+            *b = *v as f64;
+        }
+        return f(&buf[..values.len()]);
+    }
+    let arr = as_float_array(obj, "frame")?;
+    check_rank("frame", arr.shape(), 1)?;
+    let values: Vec<f64> = if let Ok(a) = arr.cast::<PyArrayDyn<f64>>() {
+        a.try_readonly()?.as_array().iter().copied().collect()
+    } else {
+        let a = arr.cast::<PyArrayDyn<f32>>().map_err(|e| input(format!("frame: {e}")))?;
+        a.try_readonly()?.as_array().iter().map(|&v| v as f64).collect()
+    };
+    f(&values)
+}
+
 /// Calls `f` with an `(n, cols)` float array as f64 values (C order) and `n`; for quantities
 /// kept in f64 (angles, markers for the reference solvers and the simulator).
 pub fn with_f64_rows<R>(obj: &Bound<'_, PyAny>, what: &str, cols: usize, f: impl FnOnce(&[f64], usize) -> PyResult<R>) -> PyResult<R> {

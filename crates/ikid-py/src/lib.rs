@@ -17,6 +17,7 @@ mod features;
 mod model;
 mod reference;
 mod sim;
+mod tracker;
 
 use pyo3::prelude::*;
 
@@ -30,5 +31,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     model::register(m)?;
     reference::register(m)?;
     sim::register(m)?;
+    tracker::register(m)?;
     Ok(())
 }

@@ -33,6 +33,7 @@ pub mod reference;
 pub mod rng;
 pub mod stream;
 pub mod testing;
+pub mod tracker;
 
 pub use calibration::Calibration;
 pub use error::{Error, Result};
@@ -40,6 +41,7 @@ pub use features::FeatureSet;
 pub use gaps::{GapFiller, MissingMarkers};
 pub use model::{Model, ModelCard, OutputSpec};
 pub use stream::Stream;
+pub use tracker::{Tracker, TrackerOutput, TrackerSettings};
 
 /// This crate's version.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

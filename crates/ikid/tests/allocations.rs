@@ -87,3 +87,33 @@ fn filling_a_missing_marker_never_allocates() {
     assert_eq!(after - before, 0, "{} allocations in 300 pushes with fills", after - before);
     assert_eq!(filled, 200 / 3 + 1);
 }
+
+#[test]
+fn tracker_push_never_allocates() {
+    let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let body = ikid::body::BodyModel::default();
+    let q: Vec<f64> = (0..400).flat_map(|i| {
+        let t = i as f64 / 1000.0;
+        [0.5 * (3.0 * t).sin(), -0.4 * (2.0 * t).sin(), 0.2 * (5.0 * t).cos()]
+    }).collect();
+    let mut frames = body.marker_frames(&q, 0.2).expect("valid angles");
+    ikid::noise::uniform_range(&mut frames, 0.02, 3).expect("valid noise");
+    // A marker missing now and then, a forearm marker once: the paths that skip corrections.
+    for i in (150..400).step_by(7) {
+        frames[i * 18 + 3 * (3 + i % 3)..i * 18 + 3 * (3 + i % 3) + 3].fill(f64::NAN);
+    }
+    frames[300 * 18] = f64::NAN;
+    let mut tracker = ikid::Tracker::new(body, ikid::TrackerSettings::default()).expect("default settings");
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let mut torques = 0;
+    for (i, frame) in frames.chunks_exact(18).enumerate() {
+        if i == 200 {
+            tracker.reset();
+        }
+        let out = tracker.push(frame).expect("valid frame");
+        torques += usize::from(out.is_some_and(|o| o.tau[1].is_finite()));
+    }
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    assert_eq!(after - before, 0, "{} allocations in 400 tracker pushes", after - before);
+    assert!(torques >= 390, "estimates on all but the frames waiting for a complete one: {torques}");
+}

@@ -26,6 +26,17 @@ pub struct JointState {
 /// Joint torques `(s_p, e_f, ad_ab)` in N·m that produce `state` for the subject `body`
 /// with the forearm at `shoulder_flexion` (radians), under gravity.
 pub fn inverse_dynamics(body: &BodyModel, shoulder_flexion: f64, state: &JointState) -> Result<[f64; N_COORDINATES]> {
+    if !shoulder_flexion.is_finite() {
+        return Err(Error::BadArgument { what: "shoulder_flexion", detail: format!("is {shoulder_flexion}") });
+    }
+    let forearm = body.forearm_pose(shoulder_flexion).rotation.to_rotation_matrix();
+    inverse_dynamics_at(body, &forearm, state)
+}
+
+/// [`inverse_dynamics`] with the forearm's orientation in the lab given directly (e.g. fitted
+/// to its markers): the forearm is still taken to be at rest; only gravity's direction in
+/// the forearm frame depends on it.
+pub fn inverse_dynamics_at(body: &BodyModel, forearm: &Rotation3<f64>, state: &JointState) -> Result<[f64; N_COORDINATES]> {
     let values = state.q.iter().chain(&state.qd).chain(&state.qdd);
     if let Some(i) = values.clone().position(|v| !v.is_finite()) {
         let kind = ["q", "qd", "qdd"][i / N_COORDINATES];
@@ -34,14 +45,10 @@ pub fn inverse_dynamics(body: &BodyModel, shoulder_flexion: f64, state: &JointSt
             detail: format!("{kind}.{} is {}", COORDINATES[i % N_COORDINATES].name, values.clone().nth(i).unwrap()),
         });
     }
-    if !shoulder_flexion.is_finite() {
-        return Err(Error::BadArgument { what: "shoulder_flexion", detail: format!("is {shoulder_flexion}") });
-    }
-    let forearm = body.forearm_pose(shoulder_flexion).rotation.to_rotation_matrix();
     let links = [VIRTUAL_LINK, VIRTUAL_LINK, body.hand];
 
     // Forward: orientation, axis, angular velocity and acceleration of each link (lab frame).
-    let mut rotation = forearm;
+    let mut rotation = *forearm;
     let (mut omega, mut alpha) = (Vector3::zeros(), Vector3::zeros());
     let mut axes = [Vector3::zeros(); N_COORDINATES];
     let mut kin = [(Rotation3::identity(), Vector3::zeros(), Vector3::zeros()); N_COORDINATES];

@@ -1,0 +1,132 @@
+//! `ikid.Tracker`: the core's causal Kalman tracker (angles, velocities, accelerations,
+//! torques per frame). Conversion only.
+
+use crate::body::subject;
+use crate::conv::{with_f64_rows, with_frame_f64};
+use crate::errors::{IntoPy, input};
+use ikid::body::{MARKER_FRAME_LEN, N_COORDINATES};
+use ikid::tracker::{DEFAULT_JERK_NOISE, Tracker as CoreTracker, TrackerOutput, TrackerSettings};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Tracker>()?;
+    m.add("DEFAULT_JERK_NOISE", DEFAULT_JERK_NOISE)?;
+    Ok(())
+}
+
+/// Causal tracking of one subject's wrist, frame by frame: an extended Kalman filter over the
+/// body model that learns each marker coordinate's noise as it goes (see the core's
+/// `tracker` module). Gives angles (rad), velocities (rad/s), accelerations (rad/s²) and
+/// torques (N·m) for every frame once a frame with every marker has started it; a missing
+/// marker (NaN) simply corrects nothing.
+#[pyclass(module = "ikid")]
+pub struct Tracker {
+    inner: CoreTracker,
+}
+
+fn rows(out: &TrackerOutput) -> [[f64; N_COORDINATES]; 4] {
+    [out.state.q, out.state.qd, out.state.qdd, out.tau]
+}
+
+#[pymethods]
+impl Tracker {
+    #[new]
+    #[pyo3(signature = (length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=1000.0, jerk_noise=DEFAULT_JERK_NOISE, noise_memory_s=10.0, initial_marker_noise=1e-3))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        length_scale: f64,
+        mass_scale: f64,
+        marker_shift: Option<&Bound<'_, PyAny>>,
+        rate_hz: f64,
+        jerk_noise: f64,
+        noise_memory_s: f64,
+        initial_marker_noise: f64,
+    ) -> PyResult<Self> {
+        let body = subject(length_scale, mass_scale, marker_shift)?;
+        let settings = TrackerSettings { rate_hz, jerk_noise, noise_memory_s, initial_marker_noise };
+        Ok(Tracker { inner: CoreTracker::new(body, settings).py_err()? })
+    }
+
+    /// One marker frame (18 values, m, lab; NaN = missing) → a `(4, 3)` float64 array, rows
+    /// `q`, `qd`, `qdd`, `tau`; or `None` until a frame with every marker started the filter.
+    /// Holds the GIL (a push takes microseconds).
+    fn push<'py>(&mut self, py: Python<'py>, frame: &Bound<'py, PyAny>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        let tracker = &mut self.inner;
+        with_frame_f64(frame, |values| match tracker.push(values).py_err()? {
+            None => Ok(None),
+            Some(out) => Ok(Some(PyArray2::from_owned_array(py, numpy::ndarray::Array2::from(rows(&out).to_vec())))),
+        })
+    }
+
+    /// Every frame of `frames` `(n, 18)` in order; returns a dict of `(n, 3)` float64 arrays
+    /// `q`, `qd`, `qdd`, `tau`, the `(n,)` uint8 `missing` (bit i: marker i missing), and `start`,
+    /// the first frame with an estimate (rows before it are NaN: the filter waits for a frame
+    /// with every marker). Continues from the tracker's state. Releases the GIL.
+    fn run<'py>(&mut self, py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
+        let tracker = &mut self.inner;
+        let (out, missing, start, n) = with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |values, n| {
+            let mut out = vec![f64::NAN; 4 * n * N_COORDINATES];
+            let mut missing = vec![0u8; n];
+            let mut start = None;
+            py.detach(|| -> ikid::Result<()> {
+                for (i, frame) in values.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+                    let result = tracker.push(frame).map_err(|e| e.renumbered(i))?;
+                    if let Some(o) = result {
+                        start.get_or_insert(i);
+                        for (k, row) in rows(&o).iter().enumerate() {
+                            out[(k * n + i) * N_COORDINATES..(k * n + i + 1) * N_COORDINATES].copy_from_slice(row);
+                        }
+                        missing[i] = o.missing;
+                    } else {
+                        missing[i] = ikid::tracker::missing_markers(frame);
+                    }
+                }
+                Ok(())
+            })
+            .py_err()?;
+            Ok((out, missing, start, n))
+        })?;
+        let Some(start) = start else {
+            return Err(input(format!("frames: none of the {n} frames has every marker, so the tracker never started")));
+        };
+        let d = PyDict::new(py);
+        for (k, name) in ["q", "qd", "qdd", "tau"].iter().enumerate() {
+            let block = out[k * n * N_COORDINATES..(k + 1) * n * N_COORDINATES].to_vec();
+            d.set_item(*name, block.into_pyarray(py).reshape([n, N_COORDINATES])?)?;
+        }
+        d.set_item("missing", missing.into_pyarray(py))?;
+        d.set_item("start", start)?;
+        Ok(d)
+    }
+
+    /// Forget everything seen (state, forearm pose, noise estimates).
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// Current noise estimate of each hand marker coordinate (standard deviation, m; MC2.x
+    /// first), `(9,)` float64.
+    #[getter]
+    fn marker_noise<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.inner.marker_noise())
+    }
+
+    /// The settings in use: `rate_hz`, `jerk_noise`, `noise_memory_s`, `initial_marker_noise`.
+    #[getter]
+    fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let s = self.inner.settings();
+        let d = PyDict::new(py);
+        d.set_item("rate_hz", s.rate_hz)?;
+        d.set_item("jerk_noise", s.jerk_noise)?;
+        d.set_item("noise_memory_s", s.noise_memory_s)?;
+        d.set_item("initial_marker_noise", s.initial_marker_noise)?;
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        let s = self.inner.settings();
+        format!("Tracker(rate_hz={}, jerk_noise={:e})", s.rate_hz, s.jerk_noise)
+    }
+}

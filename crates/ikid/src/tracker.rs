@@ -1,0 +1,433 @@
+//! Causal tracking of the wrist's angles, velocities, accelerations and torques, frame by
+//! frame: an extended Kalman filter over the body model that learns each marker
+//! coordinate's noise as it goes.
+//!
+//! Per frame:
+//! 1. the forearm's pose is fitted to its three markers (Kabsch; the previous pose is kept
+//!    while one is missing: the forearm moves slowly next to the hand);
+//! 2. the state — `(q, q̇, q̈)` of the three wrist coordinates — is predicted with a
+//!    constant-acceleration model whose jerk is white noise of spectral density
+//!    [`TrackerSettings::jerk_noise`];
+//! 3. each hand marker coordinate that is present corrects it, weighted by that coordinate's
+//!    own noise variance (the hand's markers rotate about the wrist centre, the forearm
+//!    frame's origin; the measurement is linearised at the prediction);
+//! 4. the torques follow from the state by Newton–Euler ([`reference::inverse_dynamics_at`],
+//!    gravity's direction from the fitted forearm).
+//!
+//! Why it beats a fixed-noise filter (biorbd's `KalmanReconsMarkers`, measured in
+//! `docs/ekf.md`): marker noise differs between coordinates and between recordings (the thesis'
+//! noise is ±p of each coordinate's range), and no single setting suits clean and noisy
+//! markers. The tracker estimates each coordinate's variance from its third differences
+//! (white noise of variance σ² gives third differences of variance 20σ²; a smooth marker's
+//! are ~1e-7 m at 1 kHz), so clean markers are followed exactly and noisy ones are weighed
+//! by how noisy they are. A missing marker simply corrects nothing.
+//!
+//! Allocation-free: the state is fixed-size, so a push costs a few microseconds and no heap.
+
+use nalgebra::{Isometry3, Matrix3, SMatrix, SVector, Vector3};
+
+use crate::body::{self, BodyModel, COORDINATES, MARKER_FRAME_LEN, MARKERS, N_COORDINATES, Segment};
+use crate::error::{Error, Result};
+use crate::reference::{self, JointState};
+
+/// State size: angle, velocity and acceleration of each coordinate.
+const N_STATE: usize = 3 * N_COORDINATES;
+/// Marker coordinates on the hand (the measurement).
+const N_HAND: usize = 9;
+/// First value of the hand's markers in a frame.
+const HAND_START: usize = 3 * 3;
+/// Variance of white noise's third difference over the noise's own variance: 1 + 9 + 9 + 1.
+const THIRD_DIFFERENCE_GAIN: f64 = 20.0;
+/// Weight of the initial noise guess, in frames: the estimate is the guess for the first few
+/// frames and the data's soon after.
+const PRIOR_FRAMES: f64 = 10.0;
+
+type StateVector = SVector<f64, N_STATE>;
+type StateMatrix = SMatrix<f64, N_STATE, N_STATE>;
+
+/// How the tracker models motion and noise.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackerSettings {
+    /// Frame rate of the markers, Hz.
+    pub rate_hz: f64,
+    /// Spectral density of the joint jerk the motion model allows, rad²/s⁵: larger follows
+    /// faster moves with less lag and passes more noise.
+    pub jerk_noise: f64,
+    /// How far back the noise estimate looks, seconds (exponential forgetting).
+    pub noise_memory_s: f64,
+    /// Standard deviation of marker noise assumed before any has been measured, m.
+    pub initial_marker_noise: f64,
+}
+
+impl Default for TrackerSettings {
+    /// 1 kHz; [`DEFAULT_JERK_NOISE`]; a 10 s noise memory; 1 mm noise assumed at first.
+    fn default() -> Self {
+        TrackerSettings { rate_hz: 1000.0, jerk_noise: DEFAULT_JERK_NOISE, noise_memory_s: 10.0, initial_marker_noise: 1e-3 }
+    }
+}
+
+/// [`TrackerSettings::jerk_noise`]'s default, rad²/s⁵: chosen by `make compare-ekf` on its
+/// validation trials (never the test trials) as the grid point whose worst MSE ratio to the best
+/// biorbd EKF setting over 0/1/5 % noise, angles and torques, is smallest (`docs/ekf.md`).
+pub const DEFAULT_JERK_NOISE: f64 = 3e3;
+
+impl TrackerSettings {
+    fn check(&self) -> Result<()> {
+        for (what, v) in [
+            ("rate_hz", self.rate_hz),
+            ("jerk_noise", self.jerk_noise),
+            ("noise_memory_s", self.noise_memory_s),
+            ("initial_marker_noise", self.initial_marker_noise),
+        ] {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(Error::BadArgument { what, detail: format!("is {v}, expected a positive number") });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One frame's estimate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackerOutput {
+    /// Angles, velocities and accelerations (rad, rad/s, rad/s²), coordinate order.
+    pub state: JointState,
+    /// Joint torques, N·m, coordinate order.
+    pub tau: [f64; N_COORDINATES],
+    /// Bit `i` set: marker `i` ([`MARKERS`] order) was missing in this frame.
+    pub missing: u8,
+}
+
+/// The filter's memory between frames. See the [module docs](self).
+#[derive(Debug, Clone)]
+pub struct Tracker {
+    body: BodyModel,
+    settings: TrackerSettings,
+    transition: StateMatrix,
+    process_noise: StateMatrix,
+    /// `None` until a frame with every marker started the filter.
+    state: Option<(StateVector, StateMatrix)>,
+    forearm: Option<Isometry3<f64>>,
+    /// The last three frames' hand marker coordinates, newest first (NaN where missing).
+    history: [[f64; N_HAND]; 3],
+    history_len: usize,
+    noise_variance: [f64; N_HAND],
+    noise_samples: [f64; N_HAND],
+    frames: usize,
+}
+
+impl Tracker {
+    /// A tracker for the subject `body` (segment parameters and marker placement).
+    pub fn new(body: BodyModel, settings: TrackerSettings) -> Result<Self> {
+        settings.check()?;
+        let dt = 1.0 / settings.rate_hz;
+        let s = settings.jerk_noise;
+        // Per coordinate: x = (q, q̇, q̈), x' = F x, white jerk of density s over one step.
+        let f = Matrix3::new(1.0, dt, dt * dt / 2.0, 0.0, 1.0, dt, 0.0, 0.0, 1.0);
+        let (d2, d3, d4, d5) = (dt * dt, dt.powi(3), dt.powi(4), dt.powi(5));
+        let q = s * Matrix3::new(d5 / 20.0, d4 / 8.0, d3 / 6.0, d4 / 8.0, d3 / 3.0, d2 / 2.0, d3 / 6.0, d2 / 2.0, dt);
+        let mut transition = StateMatrix::zeros();
+        let mut process_noise = StateMatrix::zeros();
+        for c in 0..N_COORDINATES {
+            for i in 0..3 {
+                for j in 0..3 {
+                    transition[(3 * i + c, 3 * j + c)] = f[(i, j)];
+                    process_noise[(3 * i + c, 3 * j + c)] = q[(i, j)];
+                }
+            }
+        }
+        let mut tracker = Tracker {
+            body,
+            settings,
+            transition,
+            process_noise,
+            state: None,
+            forearm: None,
+            history: [[f64::NAN; N_HAND]; 3],
+            history_len: 0,
+            noise_variance: [0.0; N_HAND],
+            noise_samples: [0.0; N_HAND],
+            frames: 0,
+        };
+        tracker.reset();
+        Ok(tracker)
+    }
+
+    /// Forget everything seen: the next frame with every marker starts the filter again.
+    pub fn reset(&mut self) {
+        self.state = None;
+        self.forearm = None;
+        self.history_len = 0;
+        self.noise_variance = [self.settings.initial_marker_noise.powi(2); N_HAND];
+        self.noise_samples = [0.0; N_HAND];
+        self.frames = 0;
+    }
+
+    /// The subject tracked.
+    pub fn body(&self) -> &BodyModel {
+        &self.body
+    }
+
+    /// The settings in use.
+    pub fn settings(&self) -> &TrackerSettings {
+        &self.settings
+    }
+
+    /// Each hand marker coordinate's current noise estimate (standard deviation, m), in frame
+    /// order (`MC2.x` first).
+    pub fn marker_noise(&self) -> [f64; N_HAND] {
+        self.noise_variance.map(f64::sqrt)
+    }
+
+    /// Take one marker frame ([`MARKER_FRAME_LEN`] values, metres, lab frame; NaN = missing)
+    /// and return the estimate for it, or `None` while the filter has not started (it starts on
+    /// the first frame with every marker). Frames must come at [`TrackerSettings::rate_hz`].
+    pub fn push(&mut self, frame: &[f64]) -> Result<Option<TrackerOutput>> {
+        let index = self.frames;
+        if frame.len() != MARKER_FRAME_LEN {
+            return Err(Error::FrameLength { feature_set: "markers", found: frame.len(), expected: MARKER_FRAME_LEN });
+        }
+        if let Some(i) = frame.iter().position(|v| v.is_infinite()) {
+            return Err(Error::NonFiniteInput {
+                frame: index,
+                field: format!("{}.{}", MARKERS[i / 3].name, ["x", "y", "z"][i % 3]),
+                value: frame[i] as f32,
+            });
+        }
+        self.frames += 1;
+        let missing = missing_markers(frame);
+        let forearm_mask = 0b000_111;
+        if missing & forearm_mask == 0 {
+            self.forearm = Some(reference::fit_segment(&self.body, frame, Segment::Forearm, index)?);
+        }
+        let hand: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i]);
+        self.learn_noise(&hand);
+        let Some(forearm) = self.forearm else { return Ok(None) };
+
+        let (mut x, mut p) = match self.state {
+            Some((x, p)) => (self.transition * x, self.transition * p * self.transition.transpose() + self.process_noise),
+            None => {
+                if missing != 0 {
+                    return Ok(None);
+                }
+                let hand_pose = reference::fit_segment(&self.body, frame, Segment::Hand, index)?;
+                let q0 = body::wrist_angles(&(forearm.rotation.inverse() * hand_pose.rotation).to_rotation_matrix());
+                let mut x = StateVector::zeros();
+                x.fixed_rows_mut::<3>(0).copy_from(&Vector3::from(q0));
+                (x, self.initial_covariance())
+            }
+        };
+        self.correct(&forearm, &hand, &mut x, &mut p);
+        if x.iter().any(|v| !v.is_finite()) {
+            self.reset();
+            let value = x.iter().find(|v| !v.is_finite()).copied().unwrap_or(f64::NAN) as f32;
+            return Err(Error::NonFiniteOutput { frame: index, value });
+        }
+        self.state = Some((x, p));
+        let state = JointState {
+            q: [x[0], x[1], x[2]],
+            qd: [x[3], x[4], x[5]],
+            qdd: [x[6], x[7], x[8]],
+        };
+        let tau = reference::inverse_dynamics_at(&self.body, &forearm.rotation.to_rotation_matrix(), &state)?;
+        Ok(Some(TrackerOutput { state, tau, missing }))
+    }
+
+    /// Wide enough for any wrist motion: angles within ~0.1 rad of the first frame's fit,
+    /// velocities to ~30 rad/s, accelerations to ~300 rad/s².
+    fn initial_covariance(&self) -> StateMatrix {
+        let mut p = StateMatrix::zeros();
+        for c in 0..N_COORDINATES {
+            p[(c, c)] = 1e-2;
+            p[(3 + c, 3 + c)] = 1e3;
+            p[(6 + c, 6 + c)] = 1e5;
+        }
+        p
+    }
+
+    /// Update each coordinate's noise variance from its newest third difference (skipped where
+    /// a marker was missing in any of the four frames).
+    fn learn_noise(&mut self, hand: &[f64; N_HAND]) {
+        if self.history_len == 3 {
+            let forget = 1.0 / (self.settings.noise_memory_s * self.settings.rate_hz);
+            for (i, &now) in hand.iter().enumerate() {
+                let [a, b, c] = [self.history[0][i], self.history[1][i], self.history[2][i]];
+                let d3 = now - 3.0 * a + 3.0 * b - c;
+                if d3.is_finite() {
+                    let w = (1.0 / (self.noise_samples[i] + PRIOR_FRAMES)).max(forget);
+                    self.noise_variance[i] += w * (d3 * d3 / THIRD_DIFFERENCE_GAIN - self.noise_variance[i]);
+                    self.noise_samples[i] += 1.0;
+                }
+            }
+        }
+        self.history = [*hand, self.history[0], self.history[1]];
+        self.history_len = (self.history_len + 1).min(3);
+    }
+
+    /// The Kalman correction by the present hand marker coordinates, one scalar at a time (the
+    /// noise is independent between coordinates), linearised at the prediction.
+    fn correct(&self, forearm: &Isometry3<f64>, hand: &[f64; N_HAND], x: &mut StateVector, p: &mut StateMatrix) {
+        let prior_q = Vector3::new(x[0], x[1], x[2]);
+        let rotation = forearm.rotation.to_rotation_matrix() * body::wrist_rotation(&[x[0], x[1], x[2]]);
+        let centre = forearm.translation.vector;
+        // World axes of the three joints at the prediction: a point p of the hand moves by
+        // w_i × (p − centre) per radian of coordinate i.
+        let mut partial = forearm.rotation.to_rotation_matrix();
+        let mut axes = [Vector3::zeros(); N_COORDINATES];
+        for (i, axis) in axes.iter_mut().enumerate() {
+            let local = Vector3::from(COORDINATES[i].axis);
+            *axis = partial * local;
+            partial *= nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(local), x[i]);
+        }
+        for m in 0..3 {
+            let offset = Vector3::from(self.body.marker_offsets[3 + m]);
+            let arm = rotation * offset;
+            let predicted = centre + arm;
+            let jac: [Vector3<f64>; N_COORDINATES] = axes.map(|w| w.cross(&arm));
+            for k in 0..3 {
+                let z = hand[3 * m + k];
+                if z.is_nan() {
+                    continue;
+                }
+                // h_row · (x − prior) accounts for the corrections already made this frame.
+                let h = [jac[0][k], jac[1][k], jac[2][k]];
+                let moved: f64 = (0..3).map(|i| h[i] * (x[i] - prior_q[i])).sum();
+                let innovation = z - predicted[k] - moved;
+                // ph = P hᵀ (h touches only the angles).
+                let ph: StateVector = p.column(0) * h[0] + p.column(1) * h[1] + p.column(2) * h[2];
+                let s = h[0] * ph[0] + h[1] * ph[1] + h[2] * ph[2] + self.noise_variance[3 * m + k];
+                let gain = ph / s;
+                *x += gain * innovation;
+                *p -= gain * ph.transpose();
+            }
+        }
+        // Keep P symmetric against rounding.
+        *p = (*p + p.transpose()) * 0.5;
+    }
+}
+
+/// Bit `i` set: marker `i` of `frame` ([`MARKERS`] order) has a NaN coordinate.
+pub fn missing_markers(frame: &[f64]) -> u8 {
+    frame.chunks_exact(3).enumerate().filter(|(_, xyz)| xyz.iter().any(|v| v.is_nan())).fold(0, |bits, (m, _)| bits | 1 << m)
+}
+
+#[cfg(test)]
+#[allow(clippy::needless_range_loop)] // the checks index truth and estimate side by side
+mod tests {
+    use super::*;
+    use crate::body::BodyModel;
+    use crate::noise::uniform_range;
+
+    fn trajectory(n: usize, rate: f64) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / rate;
+                [0.6 * (1.3 * t).sin(), -0.5 * (0.9 * t + 0.4).sin(), 0.2 * (1.7 * t).cos()]
+            })
+            .collect()
+    }
+
+    fn frames(body: &BodyModel, q: &[[f64; 3]], shoulder: f64) -> Vec<f64> {
+        body.marker_frames(&q.concat(), shoulder).unwrap()
+    }
+
+    #[test]
+    fn clean_markers_are_followed_closely_with_derivatives() {
+        let body = BodyModel::default();
+        let q = trajectory(3000, 1000.0);
+        let f = frames(&body, &q, 0.3);
+        let mut tracker = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut last = None;
+        for frame in f.chunks_exact(MARKER_FRAME_LEN) {
+            last = tracker.push(frame).unwrap();
+        }
+        let out = last.unwrap();
+        let t: f64 = 2.999;
+        let truth_qd = [0.6 * 1.3 * (1.3 * t).cos(), -0.5 * 0.9 * (0.9 * t + 0.4).cos(), -0.2 * 1.7 * (1.7 * t).sin()];
+        for c in 0..3 {
+            assert!((out.state.q[c] - q[2999][c]).abs() < 1e-5, "q {c}: {} vs {}", out.state.q[c], q[2999][c]);
+            assert!((out.state.qd[c] - truth_qd[c]).abs() < 1e-2, "qd {c}: {} vs {}", out.state.qd[c], truth_qd[c]);
+        }
+        assert_eq!(out.missing, 0);
+        // Torques equal Newton–Euler at the true state, up to the state's error.
+        let truth = JointState { q: q[2999], qd: truth_qd, qdd: out.state.qdd };
+        let tau = reference::inverse_dynamics(&body, 0.3, &truth).unwrap();
+        for c in 0..3 {
+            assert!((out.tau[c] - tau[c]).abs() < 1e-4, "tau {c}: {} vs {}", out.tau[c], tau[c]);
+        }
+    }
+
+    #[test]
+    fn noise_is_learned_per_coordinate_and_filtered() {
+        let body = BodyModel::default();
+        let q = trajectory(6000, 1000.0);
+        let clean = frames(&body, &q, 0.0);
+        let mut noisy = clean.clone();
+        uniform_range(&mut noisy, 0.05, 11).unwrap();
+        let mut tracker = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let (mut se_tracker, mut se_frame) = (0.0, 0.0);
+        for (i, frame) in noisy.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+            let out = tracker.push(frame).unwrap().unwrap();
+            if i >= 1000 {
+                let per_frame = reference::inverse_kinematics_frame(&body, frame, i).unwrap();
+                for c in 0..3 {
+                    se_tracker += (out.state.q[c] - q[i][c]).powi(2);
+                    se_frame += (per_frame[c] - q[i][c]).powi(2);
+                }
+            }
+        }
+        // Uniform ±5 % of each coordinate's range: σ = 0.05 · range / √3, different per coordinate.
+        let noise = tracker.marker_noise();
+        for i in 0..N_HAND {
+            let col: Vec<f64> = clean.chunks_exact(MARKER_FRAME_LEN).map(|f| f[HAND_START + i]).collect();
+            let range = col.iter().cloned().fold(f64::MIN, f64::max) - col.iter().cloned().fold(f64::MAX, f64::min);
+            let expected = 0.05 * range / 3f64.sqrt();
+            assert!((noise[i] / expected - 1.0).abs() < 0.1, "coordinate {i}: {} vs {expected}", noise[i]);
+        }
+        assert!(se_tracker * 10.0 < se_frame, "filtered {se_tracker} vs per frame {se_frame}");
+    }
+
+    #[test]
+    fn missing_markers_correct_nothing_and_are_reported() {
+        let body = BodyModel::default();
+        let q = trajectory(2000, 1000.0);
+        let mut f = frames(&body, &q, 0.0);
+        // MC5 (marker 4) missing from frame 1000 to 1199, the forearm's FAP (marker 2) at 1500.
+        for i in 1000..1200 {
+            f[i * MARKER_FRAME_LEN + 12..i * MARKER_FRAME_LEN + 15].fill(f64::NAN);
+        }
+        f[1500 * MARKER_FRAME_LEN + 6] = f64::NAN;
+        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+            let out = tracker.push(frame).unwrap().unwrap();
+            let expect = if (1000..1200).contains(&i) { 1 << 4 } else if i == 1500 { 1 << 2 } else { 0 };
+            assert_eq!(out.missing, expect, "frame {i}");
+            for c in 0..3 {
+                // Two hand markers and the wrist centre still fix the hand: no loss on clean data.
+                let error = (out.state.q[c] - q[i][c]).abs();
+                assert!(i < 200 || error < 1e-5, "frame {i} coordinate {c}: {error}");
+            }
+        }
+    }
+
+    #[test]
+    fn starts_on_the_first_complete_frame_and_rejects_bad_input() {
+        let body = BodyModel::default();
+        let q = trajectory(10, 1000.0);
+        let mut f = frames(&body, &q, 0.0);
+        f[9] = f64::NAN; // MC2.x on frame 0
+        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        assert_eq!(tracker.push(&f[..MARKER_FRAME_LEN]).unwrap(), None);
+        assert!(tracker.push(&f[MARKER_FRAME_LEN..2 * MARKER_FRAME_LEN]).unwrap().is_some());
+        let err = tracker.push(&f[..5]).unwrap_err().to_string();
+        assert!(err.contains("18"), "{err}");
+        let mut bad = f[..MARKER_FRAME_LEN].to_vec();
+        bad[13] = f64::INFINITY;
+        let err = tracker.push(&bad).unwrap_err().to_string();
+        assert!(err.contains("MC5.y"), "{err}");
+        let err = Tracker::new(BodyModel::default(), TrackerSettings { jerk_noise: -1.0, ..Default::default() }).unwrap_err();
+        assert!(err.to_string().contains("jerk_noise"), "{err}");
+        tracker.reset();
+        assert!(tracker.push(&f[..MARKER_FRAME_LEN]).unwrap().is_none());
+    }
+}

@@ -1,0 +1,109 @@
+"""ikid.Tracker: the causal Kalman tracker (angles, velocities, accelerations, torques per frame)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import ikid
+from ikid.training import data as D
+
+
+@pytest.fixture(scope="module")
+def trial() -> D.Recording:
+    # A seed no shipped model trained on, a non-default subject and shoulder pose.
+    return D.simulate_all([{"name": "t", "protocol": "random", "seed": 9701, "duration": 4.0, "shoulder_deg": 30.0,
+                            "length_scale": 1.1, "mass_scale": 1.1**3}])[0]
+
+
+def subject(rec: D.Recording) -> dict[str, float]:
+    return {"length_scale": rec.meta["length_scale"], "mass_scale": rec.meta["mass_scale"]}
+
+
+def test_clean_markers_give_the_true_state_and_torques(trial: D.Recording) -> None:
+    out = ikid.Tracker(**subject(trial)).run(trial.markers)
+    assert out["start"] == 0 and not out["missing"].any()
+    late = slice(500, None)  # after the filter's start-up (velocity and acceleration unknown at first)
+    # The noise estimate starts from a 1 mm guess that fades as 1/frames: a little lag remains
+    # on the fastest moves, ~0.01° RMS.
+    assert np.sqrt(np.mean((out["q"][late] - trial.q[late]) ** 2)) < 2e-4
+    assert np.abs(out["q"][late] - trial.q[late]).max() < 2e-3
+    assert np.sqrt(np.mean((out["qd"][late] - trial.qd[late]) ** 2)) < 0.05 * np.sqrt(np.mean(trial.qd**2))
+    # The torques are Newton–Euler of the tracker's own state, with the fitted forearm's gravity.
+    tau = ikid.reference_id(out["q"], out["qd"], out["qdd"], shoulder_flexion=trial.meta["shoulder_flexion_rad"], **subject(trial))
+    np.testing.assert_allclose(out["tau"], tau, atol=1e-9)
+    assert np.sqrt(np.mean((out["tau"][late] - trial.tau[late]) ** 2)) < 0.02
+
+
+def test_noisy_markers_beat_the_per_frame_solution_and_the_noise_is_learned(trial: D.Recording) -> None:
+    noisy = D.add_noise(trial, "uniform", 0.05, 5)
+    tracker = ikid.Tracker(**subject(trial))
+    out = tracker.run(noisy.markers)
+    per_frame = ikid.reference_ik(noisy.markers, **subject(trial))
+    late = slice(500, None)
+    mse_tracker = np.mean((out["q"][late] - trial.q[late]) ** 2)
+    mse_frame = np.mean((per_frame[late] - trial.q[late]) ** 2)
+    assert mse_tracker < mse_frame / 10, (mse_tracker, mse_frame)
+    # Uniform ±5 % of each coordinate's range: σ = 0.05 · range / √3, a different one per coordinate.
+    expected = 0.05 * np.ptp(trial.markers[:, 9:], axis=0) / np.sqrt(3)
+    np.testing.assert_allclose(tracker.marker_noise, expected, rtol=0.15)
+
+
+def test_push_equals_run_and_accepts_float32_and_lists(trial: D.Recording) -> None:
+    frames = D.add_noise(trial, "uniform", 0.01, 6).markers[:300]
+    batch = ikid.Tracker(**subject(trial)).run(frames)
+    one = ikid.Tracker(**subject(trial))
+    rows = [one.push(f) for f in frames]
+    assert all(r is not None and r.shape == (4, 3) for r in rows)
+    stacked = np.stack(rows)  # type: ignore[arg-type]
+    for k, name in enumerate(("q", "qd", "qdd", "tau")):
+        np.testing.assert_array_equal(stacked[:, k], batch[name])
+    f32 = ikid.Tracker(**subject(trial))
+    a = f32.push(frames[0].astype(np.float32))
+    b = ikid.Tracker(**subject(trial)).push(frames[0].astype(np.float32).astype(np.float64).tolist())
+    np.testing.assert_array_equal(a, b)
+
+
+def test_missing_markers_are_left_out_and_reported(trial: D.Recording) -> None:
+    frames = trial.markers.copy()
+    frames[:2, 12] = np.nan  # MC5 missing on the first two frames: the filter waits for a complete one
+    frames[1000:1300, 12:15] = np.nan  # MC5 gone for 300 ms later on
+    out = ikid.Tracker(**subject(trial)).run(frames)
+    assert out["start"] == 2
+    assert np.isnan(out["q"][:2]).all() and np.isfinite(out["q"][2:]).all()
+    assert (out["missing"][1000:1300] == 1 << 4).all() and out["missing"][:2].tolist() == [1 << 4] * 2
+    assert out["missing"][2:1000].sum() == 0
+    # Two hand markers and the wrist centre still fix the hand: clean markers lose nothing.
+    assert np.abs(out["q"][1000:1300] - trial.q[1000:1300]).max() < 1e-4
+
+
+def test_bad_input_is_refused_with_its_name(trial: D.Recording) -> None:
+    tracker = ikid.Tracker()
+    with pytest.raises(ikid.InputError, match="18"):
+        tracker.push(np.zeros(17))
+    bad = trial.markers[0].copy()
+    bad[13] = np.inf
+    with pytest.raises(ikid.InputError, match="MC5.y"):
+        tracker.push(bad)
+    frames = trial.markers[:10].copy()
+    frames[4, 0] = np.inf
+    with pytest.raises(ikid.InputError, match="frame 4"):
+        ikid.Tracker().run(frames)
+    with pytest.raises(ikid.InputError, match="none of the 3 frames"):
+        ikid.Tracker().run(np.full((3, 18), np.nan))
+    for kw in ({"jerk_noise": 0.0}, {"rate_hz": -1.0}, {"noise_memory_s": np.nan}, {"length_scale": 0.0}):
+        with pytest.raises(ikid.InputError, match=next(iter(kw))):
+            ikid.Tracker(**kw)  # type: ignore[arg-type]
+    with pytest.raises(ikid.InputError, match="frames"):
+        ikid.Tracker().run(np.zeros((4, 5)))
+
+
+def test_reset_forgets_and_settings_are_reported() -> None:
+    t = ikid.Tracker(jerk_noise=500.0)
+    assert t.settings == {"rate_hz": 1000.0, "jerk_noise": 500.0, "noise_memory_s": 10.0, "initial_marker_noise": 1e-3}
+    assert ikid.Tracker().settings["jerk_noise"] == ikid.DEFAULT_JERK_NOISE
+    frame = ikid.forward_markers(np.zeros((1, 3)))[0]
+    assert t.push(frame) is not None
+    t.reset()
+    np.testing.assert_array_equal(t.marker_noise, np.full(9, 1e-3))
+    assert "Tracker(" in repr(t)
