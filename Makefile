@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo data models report test test-rust test-python test-c lint bench bench-peers fuzz clean capi c header check-header install compare-opensim compare-ekf
+.PHONY: all venv wheel demo data models models-track report test test-rust test-python test-c lint bench bench-peers fuzz clean capi c header check-header install compare-opensim compare-ekf
 
 all: wheel
 
@@ -49,6 +49,10 @@ data: wheel
 # rebuild the wheel afterwards to ship them.
 models: wheel
 	$(PY) -m ikid.training.models
+
+# Retrain wrist-track, the Kalman tracker's refiner (~6 min on 2 cores), into python/ikid/models/.
+models-track: wheel
+	$(PY) -m ikid.training.refine
 
 # The evaluation report (docs/report.md + PNG plots) of the shipped models, beside the
 # classical reference and the thesis' numbers.

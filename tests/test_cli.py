@@ -335,7 +335,7 @@ def test_track_writes_the_trackers_angles_and_torques(tmp_path: Path, capsys: py
     # The same frames through the Python API (read back from the file, as the CLI did).
     from ikid.io import read_markers
 
-    expected = ikid.Tracker(length_scale=1.1, mass_scale=1.3).run(read_markers(tmp_path / "t.trc").frames(None))
+    expected = ikid.Tracker(length_scale=1.1, mass_scale=1.3, refiner=ikid.load("wrist-track")).run(read_markers(tmp_path / "t.trc").frames(None))
     assert expected["start"] == 1
     np.testing.assert_allclose(time_mot, t.time[1:], atol=1e-9)
     np.testing.assert_allclose(time_sto, t.time[1:], atol=1e-9)
@@ -346,3 +346,8 @@ def test_track_writes_the_trackers_angles_and_torques(tmp_path: Path, capsys: py
     assert cli(["track", str(tmp_path / "t.trc"), "-o", str(tmp_path / "bad"), "--length-scale", "-1"]) != 0
     assert "length_scale: is -1" in capsys.readouterr().err
     assert not (tmp_path / "bad.mot").exists()
+    # --refiner none: the bare filter.
+    assert cli(["track", str(tmp_path / "t.trc"), "-o", str(tmp_path / "bare"), "--length-scale", "1.1", "--mass-scale", "1.3",
+                "--refiner", "none"]) == 0
+    bare = ikid.Tracker(length_scale=1.1, mass_scale=1.3).run(read_markers(tmp_path / "t.trc").frames(None))
+    np.testing.assert_allclose(read_mot(tmp_path / "bare.mot")[1], bare["q"][1:], atol=1e-8)

@@ -9,9 +9,16 @@ import ikid
 
 def test_feature_set_info_sizes():
     sizes = {name: (ikid.feature_set_info(name)["frame_len"], ikid.feature_set_info(name)["feature_len"]) for name in ikid.FEATURE_SETS}
-    assert sizes == {"markers": (18, 18), "basis": (18, 24), "relative": (18, 12), "relative_gravity": (18, 15), "angles": (18, 3), "angles_gravity": (18, 6), "joint_state": (9, 9)}
+    assert sizes == {"markers": (18, 18), "basis": (18, 24), "relative": (18, 12), "relative_gravity": (18, 15), "angles": (18, 3), "angles_gravity": (18, 6), "joint_state": (9, 9),
+                     "tracker_state": (10, 7)}
     with pytest.raises(ikid.InputError, match="unknown feature set"):
         ikid.feature_set_info("pixels")
+
+
+def test_tracker_state_drops_the_angles():
+    frames = np.arange(30, dtype=np.float32).reshape(3, 10)
+    np.testing.assert_array_equal(ikid.compute_features(frames, "tracker_state"), frames[:, 3:])
+    assert ikid.feature_set_info("tracker_state")["feature_names"][0] == "qd.ra_wr_s_p"
 
 
 def test_markers_are_passed_through():

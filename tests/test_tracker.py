@@ -107,3 +107,25 @@ def test_reset_forgets_and_settings_are_reported() -> None:
     t.reset()
     np.testing.assert_array_equal(t.marker_noise, np.full(9, 1e-3))
     assert "Tracker(" in repr(t)
+
+
+def test_the_shipped_refiner_improves_noisy_and_leaves_clean_alone(trial: D.Recording) -> None:
+    refiner = ikid.load("wrist-track")
+    assert refiner.feature_set == "tracker_state" and refiner.card["task"] == "refine"
+    late = slice(1000, None)
+    for level, bound in ((0.0, 1.0 + 1e-3), (0.05, 0.9)):
+        noisy = D.add_noise(trial, "uniform", level, 8)
+        bare = ikid.Tracker(**subject(trial)).run(noisy.markers)
+        refined = ikid.Tracker(**subject(trial), refiner=refiner).run(noisy.markers)
+        assert refined["refined"][late].all() and not bare["refined"].any()
+        mse = lambda out: np.mean((out["q"][late] - trial.q[late]) ** 2)  # noqa: E731
+        ratio = mse(refined) / mse(bare)
+        # Clean: the gate keeps the refiner out (its corrections vanish with the learned noise).
+        # 5 % noise: better than the filter alone (docs/ekf.md measures by how much on 18 trials).
+        assert ratio < bound if level else abs(ratio - 1) < 0.2, (level, ratio)
+
+
+def test_a_model_that_is_not_a_refiner_is_refused() -> None:
+    with pytest.raises(ikid.InputError, match="refiner: model \"wrist-ik\" cannot refine a tracker: it reads"):
+        ikid.Tracker(refiner=ikid.load("wrist-ik"))
+    assert ikid.Tracker(refiner=ikid.load("wrist-track")).refiner is not None

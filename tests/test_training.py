@@ -150,7 +150,25 @@ def test_bad_configs_are_refused_by_name(tmp_path):
 
 
 def test_the_package_ships_the_default_models():
-    assert ikid.available_models() == SHIPPED
+    # wrist-track (the Kalman tracker's refiner) has its own tests in test_tracker.py.
+    assert ikid.available_models() == sorted([*SHIPPED, "wrist-track"])
+
+
+def test_wrist_track_matches_torch():
+    """The refiner's parity: torch (safetensors read by the safetensors library) on the core's
+    tracker_state windows of a held-out trial = the core's own prediction."""
+    model = ikid.load("wrist-track")
+    reference = load_torch(ikid._SHIPPED / "wrist-track.safetensors")
+    rec = noisy([D.simulate_one({"name": "p", "protocol": "random", "seed": 9601, "duration": 1.5, "shoulder_deg": 10.0})], 0.02)[0]
+    out = ikid.Tracker().run(rec.markers)
+    frames = np.column_stack([out["q"], out["qd"], out["qdd"], np.log10(out["noise"])])
+    features = ikid.compute_features(frames, "tracker_state")
+    idx = D.window_index(len(features), model.window)
+    with torch.no_grad():
+        want = reference(torch.as_tensor(features[idx].reshape(len(idx), -1))).numpy()
+    got = model.predict(frames)
+    scale = np.abs(want).max(axis=0)
+    assert np.all(np.abs(got - want).max(axis=0) <= 1e-5 * scale)
 
 
 @pytest.mark.parametrize("name", SHIPPED)

@@ -22,6 +22,8 @@ __all__ = [
     "Stream",
     "Tracker",
     "DEFAULT_JERK_NOISE",
+    "REFINER_OUTPUTS",
+    "REFINER_GATE_NOISE",
     "build_model",
     "forward_markers",
     "body_model",
@@ -129,6 +131,8 @@ class Stream:
     def model(self) -> Model: ...
 
 DEFAULT_JERK_NOISE: float
+REFINER_OUTPUTS: list[str]
+REFINER_GATE_NOISE: float
 
 @final
 class Tracker:
@@ -141,7 +145,10 @@ class Tracker:
         jerk_noise: float = ...,
         noise_memory_s: float = 10.0,
         initial_marker_noise: float = 1e-3,
+        refiner: Model | None = None,
     ) -> Tracker: ...
+    @property
+    def refiner(self) -> Model | None: ...
     def push(self, frame: _Floats) -> npt.NDArray[np.float64] | None: ...
     def run(self, frames: _Floats) -> dict[str, Any]: ...
     def reset(self) -> None: ...

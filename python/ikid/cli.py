@@ -208,8 +208,9 @@ def cmd_track(args: argparse.Namespace) -> int:
 
     data = read_markers(args.input)
     frames = data.frames(MarkerMap.load(args.map) if args.map else None)
+    refiner = None if args.refiner in ("", "none") else ikid.load(args.refiner)
     tracker = ikid.Tracker(length_scale=args.length_scale, mass_scale=args.mass_scale, rate_hz=data.rate_hz,
-                           jerk_noise=args.jerk_noise)
+                           jerk_noise=args.jerk_noise, refiner=refiner)
     out = tracker.run(frames)
     k = out["start"]
     stem = Path(args.output)
@@ -219,7 +220,8 @@ def cmd_track(args: argparse.Namespace) -> int:
     sto = write_sto(stem.with_name(stem.name + ".sto"), data.time[k:], out["tau"][k:])
     gaps = int(np.count_nonzero(out["missing"][k:]))
     noise_mm = ", ".join(f"{v * 1e3:.2f}" for v in tracker.marker_noise)
-    print(f"{args.input}: {len(frames) - k} frames tracked from frame {k} at {data.rate_hz:g} Hz ({gaps} with a marker missing); "
+    how = f"refined by {refiner.name}" if refiner else "not refined"
+    print(f"{args.input}: {len(frames) - k} frames tracked from frame {k} at {data.rate_hz:g} Hz, {how} ({gaps} with a marker missing); "
           f"hand marker noise learned (mm): {noise_mm} -> {mot}, {sto}")
     return 0
 
@@ -571,9 +573,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--torque-model", default="wrist-chain", help="markers -> torques model (default wrist-chain)")
     p.set_defaults(func=cmd_process)
 
-    p = sub.add_parser("track", help="markers -> angles (.mot) and torques (.sto) with the Kalman tracker (no network)",
+    p = sub.add_parser("track", help="markers -> angles (.mot) and torques (.sto) with the Kalman tracker + its refiner",
                        description="Markers -> wrist angles and torques, causally, with ikid.Tracker: an extended Kalman filter "
-                                   "over the body model that learns each marker coordinate's noise.\n\n"
+                                   "over the body model that learns each marker coordinate's noise, refined by the shipped "
+                                   "wrist-track network.\n\n"
                                    "  ikid track trial.c3d -o out/trial --length-scale 1.1 --mass-scale 1.3   # out/trial.mot, out/trial.sto",
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("input", help="marker file (.c3d, .trc, .csv)")
@@ -581,6 +584,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--map", help="marker map (TOML) from the file's labels to ikid's")
     p.add_argument("--length-scale", type=float, default=1.0, help="subject's segment lengths / the default subject's")
     p.add_argument("--mass-scale", type=float, default=1.0, help="subject's segment masses / the default subject's")
+    p.add_argument("--refiner", default="wrist-track", help="refinement model, shipped name or file; 'none' for the bare filter")
     p.add_argument("--jerk-noise", type=float, default=ikid.DEFAULT_JERK_NOISE,
                    help=f"motion model's jerk density, rad²/s⁵ (default {ikid.DEFAULT_JERK_NOISE:g}, tuned in docs/ekf.md)")
     p.set_defaults(func=cmd_track)

@@ -21,7 +21,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 /// A loaded, validated model. Immutable; share it between threads freely.
 #[pyclass(module = "ikid", frozen)]
 pub struct Model {
-    inner: ikid::Model,
+    pub(crate) inner: ikid::Model,
 }
 
 #[pymethods]

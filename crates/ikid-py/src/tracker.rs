@@ -4,8 +4,9 @@
 use crate::body::subject;
 use crate::conv::{with_f64_rows, with_frame_f64};
 use crate::errors::{IntoPy, input};
+use crate::model::Model;
 use ikid::body::{MARKER_FRAME_LEN, N_COORDINATES};
-use ikid::tracker::{DEFAULT_JERK_NOISE, Tracker as CoreTracker, TrackerOutput, TrackerSettings};
+use ikid::tracker::{DEFAULT_JERK_NOISE, REFINER_GATE_NOISE, Tracker as CoreTracker, TrackerOutput, TrackerSettings, refiner_outputs};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -13,6 +14,8 @@ use pyo3::types::PyDict;
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Tracker>()?;
     m.add("DEFAULT_JERK_NOISE", DEFAULT_JERK_NOISE)?;
+    m.add("REFINER_OUTPUTS", refiner_outputs())?;
+    m.add("REFINER_GATE_NOISE", REFINER_GATE_NOISE)?;
     Ok(())
 }
 
@@ -20,7 +23,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 /// body model that learns each marker coordinate's noise as it goes (see the core's
 /// `tracker` module). Gives angles (rad), velocities (rad/s), accelerations (rad/s²) and
 /// torques (N·m) for every frame once a frame with every marker has started it; a missing
-/// marker (NaN) simply corrects nothing.
+/// marker (NaN) simply corrects nothing. With `refiner` (a `refine` model, e.g.
+/// `ikid.load("wrist-track")`) a network over the tracker's recent states corrects q and q̈.
 #[pyclass(module = "ikid")]
 pub struct Tracker {
     inner: CoreTracker,
@@ -33,7 +37,7 @@ fn rows(out: &TrackerOutput) -> [[f64; N_COORDINATES]; 4] {
 #[pymethods]
 impl Tracker {
     #[new]
-    #[pyo3(signature = (length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=1000.0, jerk_noise=DEFAULT_JERK_NOISE, noise_memory_s=10.0, initial_marker_noise=1e-3))]
+    #[pyo3(signature = (length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=1000.0, jerk_noise=DEFAULT_JERK_NOISE, noise_memory_s=10.0, initial_marker_noise=1e-3, refiner=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         length_scale: f64,
@@ -43,10 +47,19 @@ impl Tracker {
         jerk_noise: f64,
         noise_memory_s: f64,
         initial_marker_noise: f64,
+        refiner: Option<&Bound<'_, Model>>,
     ) -> PyResult<Self> {
         let body = subject(length_scale, mass_scale, marker_shift)?;
         let settings = TrackerSettings { rate_hz, jerk_noise, noise_memory_s, initial_marker_noise };
-        Ok(Tracker { inner: CoreTracker::new(body, settings).py_err()? })
+        let mut inner = CoreTracker::new(body, settings).py_err()?;
+        inner.set_refiner(refiner.map(|m| m.get().inner.clone())).py_err()?;
+        Ok(Tracker { inner })
+    }
+
+    /// The refinement model, or None.
+    #[getter]
+    fn refiner(&self) -> Option<Model> {
+        self.inner.refiner().map(|m| Model { inner: m.clone() })
     }
 
     /// One marker frame (18 values, m, lab; NaN = missing) → a `(4, 3)` float64 array, rows
@@ -61,14 +74,17 @@ impl Tracker {
     }
 
     /// Every frame of `frames` `(n, 18)` in order; returns a dict of `(n, 3)` float64 arrays
-    /// `q`, `qd`, `qdd`, `tau`, the `(n,)` uint8 `missing` (bit i: marker i missing), and `start`,
+    /// `q`, `qd`, `qdd`, `tau`, the `(n,)` uint8 `missing` (bit i: marker i missing), `(n,)`
+    /// `noise` (mean learned hand-marker noise, m; NaN before the start) and `refined` (bool), and `start`,
     /// the first frame with an estimate (rows before it are NaN: the filter waits for a frame
     /// with every marker). Continues from the tracker's state. Releases the GIL.
     fn run<'py>(&mut self, py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
         let tracker = &mut self.inner;
-        let (out, missing, start, n) = with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |values, n| {
+        let (out, missing, noise, refined, start, n) = with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |values, n| {
             let mut out = vec![f64::NAN; 4 * n * N_COORDINATES];
             let mut missing = vec![0u8; n];
+            let mut noise = vec![f64::NAN; n];
+            let mut refined = vec![false; n];
             let mut start = None;
             py.detach(|| -> ikid::Result<()> {
                 for (i, frame) in values.chunks_exact(MARKER_FRAME_LEN).enumerate() {
@@ -79,6 +95,8 @@ impl Tracker {
                             out[(k * n + i) * N_COORDINATES..(k * n + i + 1) * N_COORDINATES].copy_from_slice(row);
                         }
                         missing[i] = o.missing;
+                        noise[i] = o.noise;
+                        refined[i] = o.refined;
                     } else {
                         missing[i] = ikid::tracker::missing_markers(frame);
                     }
@@ -86,7 +104,7 @@ impl Tracker {
                 Ok(())
             })
             .py_err()?;
-            Ok((out, missing, start, n))
+            Ok((out, missing, noise, refined, start, n))
         })?;
         let Some(start) = start else {
             return Err(input(format!("frames: none of the {n} frames has every marker, so the tracker never started")));
@@ -97,6 +115,8 @@ impl Tracker {
             d.set_item(*name, block.into_pyarray(py).reshape([n, N_COORDINATES])?)?;
         }
         d.set_item("missing", missing.into_pyarray(py))?;
+        d.set_item("noise", noise.into_pyarray(py))?;
+        d.set_item("refined", refined.into_pyarray(py))?;
         d.set_item("start", start)?;
         Ok(d)
     }

@@ -3,10 +3,10 @@
 //!
 //! ```text
 //! cargo run --release -p ikid --example latency -- [--pushes N] [--save-dir DIR] [--model FILE]
-//! cargo run --release -p ikid --example latency -- --tracker [--pushes N]
+//! cargo run --release -p ikid --example latency -- --tracker [--refiner FILE] [--pushes N]
 //! ```
 //! `--tracker` times `Tracker::push` (angles, velocities, accelerations and torques) on a
-//! smooth wrist motion with 1 % marker noise instead.
+//! smooth wrist motion with 1 % marker noise instead, with `--refiner` refined by that model.
 //! `--save-dir` also writes the random models there, so another process (the Python
 //! overhead benchmark in `benches/report.py`) can time exactly the same networks.
 //! Prints one JSON object per model.
@@ -20,7 +20,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let value = |flag: &str| args.iter().position(|a| a == flag).and_then(|i| args.get(i + 1)).cloned();
     let pushes: usize = value("--pushes").map(|v| v.parse()).transpose()?.unwrap_or(200_000);
     if args.iter().any(|a| a == "--tracker") {
-        return tracker_latency(pushes);
+        let refiner = value("--refiner").map(Model::load).transpose()?;
+        return tracker_latency(pushes, refiner);
     }
     let models: Vec<(String, Model)> = match value("--model") {
         Some(path) => vec![(path.clone(), Model::load(&path)?)],
@@ -70,7 +71,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-fn tracker_latency(pushes: usize) -> Result<(), Box<dyn std::error::Error>> {
+fn tracker_latency(pushes: usize, refiner: Option<Model>) -> Result<(), Box<dyn std::error::Error>> {
     use ikid::body::{BodyModel, MARKER_FRAME_LEN};
     let body = BodyModel::default();
     let n = pushes + 10_000;
@@ -83,6 +84,8 @@ fn tracker_latency(pushes: usize) -> Result<(), Box<dyn std::error::Error>> {
     let mut frames = body.marker_frames(&q, 0.3)?;
     ikid::noise::uniform_range(&mut frames, 0.01, 7)?;
     let mut tracker = ikid::Tracker::new(body, ikid::TrackerSettings::default())?;
+    let label = if refiner.is_some() { "tracker+refiner" } else { "tracker" };
+    tracker.set_refiner(refiner)?;
     let mut ns = Vec::with_capacity(pushes);
     let mut sink = 0.0;
     for (i, frame) in frames.chunks_exact(MARKER_FRAME_LEN).enumerate() {
@@ -97,7 +100,7 @@ fn tracker_latency(pushes: usize) -> Result<(), Box<dyn std::error::Error>> {
     ns.sort_unstable();
     let q = |p: f64| ns[((ns.len() - 1) as f64 * p) as usize] as f64 / 1000.0;
     println!(
-        "{{\"model\": \"tracker\", \"pushes\": {pushes}, \"p50_us\": {:.3}, \"p90_us\": {:.3}, \"p99_us\": {:.3}, \"p999_us\": {:.3}, \"max_us\": {:.3}, \"checksum\": {sink}}}",
+        "{{\"model\": \"{label}\", \"pushes\": {pushes}, \"p50_us\": {:.3}, \"p90_us\": {:.3}, \"p99_us\": {:.3}, \"p999_us\": {:.3}, \"max_us\": {:.3}, \"checksum\": {sink}}}",
         q(0.5),
         q(0.9),
         q(0.99),

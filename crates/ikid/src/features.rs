@@ -36,10 +36,15 @@ pub enum FeatureSet {
     AnglesGravity,
     /// Joint state for inverse dynamics: q, q̇, q̈ in coordinate order (9 per frame).
     JointState,
+    /// A [`Tracker`](crate::Tracker)'s estimate and how noisy its markers are: frames hold q,
+    /// q̇, q̈ in coordinate order and log10 of the mean hand-marker noise it learned (in
+    /// metres); the features drop q (7 per frame), so a refiner learns from how the wrist
+    /// moves, not where it is (a window of q̇ carries the relative angles).
+    TrackerState,
 }
 
 /// Every feature set, in the order they are listed to users.
-pub const FEATURE_SETS: [FeatureSet; 7] = [
+pub const FEATURE_SETS: [FeatureSet; 8] = [
     FeatureSet::Markers,
     FeatureSet::Basis,
     FeatureSet::Relative,
@@ -47,6 +52,7 @@ pub const FEATURE_SETS: [FeatureSet; 7] = [
     FeatureSet::Angles,
     FeatureSet::AnglesGravity,
     FeatureSet::JointState,
+    FeatureSet::TrackerState,
 ];
 
 impl FeatureSet {
@@ -60,6 +66,7 @@ impl FeatureSet {
             FeatureSet::Angles => "angles",
             FeatureSet::AnglesGravity => "angles_gravity",
             FeatureSet::JointState => "joint_state",
+            FeatureSet::TrackerState => "tracker_state",
         }
     }
 
@@ -81,6 +88,7 @@ impl FeatureSet {
             | FeatureSet::Angles
             | FeatureSet::AnglesGravity => MARKER_FRAME_LEN,
             FeatureSet::JointState => 3 * N_COORDINATES,
+            FeatureSet::TrackerState => 3 * N_COORDINATES + 1,
         }
     }
 
@@ -94,6 +102,7 @@ impl FeatureSet {
             FeatureSet::Angles => N_COORDINATES,
             FeatureSet::AnglesGravity => N_COORDINATES + 3,
             FeatureSet::JointState => 3 * N_COORDINATES,
+            FeatureSet::TrackerState => 2 * N_COORDINATES + 1,
         }
     }
 
@@ -101,6 +110,7 @@ impl FeatureSet {
     pub fn frame_names(self) -> Vec<String> {
         match self {
             FeatureSet::JointState => joint_state_names(),
+            FeatureSet::TrackerState => joint_state_names().into_iter().chain(["noise.log10_m".to_owned()]).collect(),
             _ => MARKERS.iter().flat_map(|m| xyz(m.name)).collect(),
         }
     }
@@ -109,6 +119,7 @@ impl FeatureSet {
     pub fn feature_names(self) -> Vec<String> {
         match self {
             FeatureSet::Markers | FeatureSet::JointState => self.frame_names(),
+            FeatureSet::TrackerState => self.frame_names().split_off(N_COORDINATES),
             FeatureSet::Basis => [Segment::Forearm, Segment::Hand]
                 .iter()
                 .flat_map(|s| ["origin", "e1", "e2", "e3"].map(move |v| format!("{}.{v}", s.name())))
@@ -159,6 +170,7 @@ impl FeatureSet {
         }
         match self {
             FeatureSet::Markers | FeatureSet::JointState => out.copy_from_slice(frame),
+            FeatureSet::TrackerState => out.copy_from_slice(&frame[N_COORDINATES..]),
             FeatureSet::Basis => {
                 for (k, segment) in [Segment::Forearm, Segment::Hand].into_iter().enumerate() {
                     let (origin, axes) = technical_frame(frame, segment, frame_index)?;

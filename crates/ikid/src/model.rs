@@ -28,7 +28,7 @@ pub const FORMAT: &str = "ikid-model";
 /// The model card version this build reads and writes.
 pub const FORMAT_VERSION: u64 = 1;
 /// Tasks a model card may declare.
-pub const TASKS: [&str; 3] = ["ik", "id", "chain"];
+pub const TASKS: [&str; 4] = ["ik", "id", "chain", "refine"];
 /// The card's `output_offset` value that adds the newest frame's features to the outputs.
 pub const NEWEST_FEATURES: &str = "newest_features";
 /// Longest window accepted (frames); guards against absurd allocations from tampered cards.

@@ -35,6 +35,16 @@ pub fn random_model(set: FeatureSet, window: usize, hidden: &[usize], n_outputs:
     Model::from_parts(card, mlp).expect("random model is valid")
 }
 
+/// A [`Tracker`](crate::Tracker) refiner with random weights (outputs
+/// [`refiner_outputs`](crate::tracker::refiner_outputs), small so corrections stay modest).
+pub fn random_refiner(window: usize, hidden: &[usize], seed: u64) -> Model {
+    let base = random_model(FeatureSet::TrackerState, window, hidden, 6, seed);
+    let mut card = base.card().clone();
+    card.task = "refine".into();
+    card.outputs = crate::tracker::refiner_outputs().into_iter().map(|name| OutputSpec { name, unit: "rad/mm".into() }).collect();
+    Model::from_parts(card, base.mlp().clone()).expect("random refiner is valid")
+}
+
 /// `n` plausible frames for `set`, back to back: markers of the default subject at random
 /// wrist angles and shoulder poses, or random joint states.
 pub fn random_frames(set: FeatureSet, n: usize, seed: u64) -> Vec<f32> {
@@ -42,7 +52,7 @@ pub fn random_frames(set: FeatureSet, n: usize, seed: u64) -> Vec<f32> {
     let body = BodyModel::default();
     let mut out = Vec::with_capacity(n * set.frame_len());
     for _ in 0..n {
-        if set == FeatureSet::JointState {
+        if matches!(set, FeatureSet::JointState | FeatureSet::TrackerState) {
             out.extend((0..set.frame_len()).map(|_| rng.uniform(-1.0, 1.0) as f32));
         } else {
             let q = COORDINATES.map(|c| rng.uniform(c.range.0, c.range.1));

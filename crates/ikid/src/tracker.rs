@@ -22,13 +22,24 @@
 //! are ~1e-7 m at 1 kHz), so clean markers are followed exactly and noisy ones are weighed
 //! by how noisy they are. A missing marker simply corrects nothing.
 //!
+//! Optionally a learned *refiner* ([`Tracker::set_refiner`]) corrects the estimate: a network
+//! over a window of the tracker's own states ([`FeatureSet::TrackerState`]: q, q̇, q̈ and the
+//! learned noise level) that gives corrections to q and q̈, gated by that noise
+//! ([`refiner_gate`]) so clean markers are left as the filter has them. It
+//! learns what a white-jerk model cannot know — how wrists actually move — and so the lag
+//! and the noise the filter leaves (trained by `python -m ikid.training.refine`; measured in
+//! `docs/ekf.md`). It is applied after the filter and never fed back into it.
+//!
 //! Allocation-free: the state is fixed-size, so a push costs a few microseconds and no heap.
 
 use nalgebra::{Isometry3, Matrix3, SMatrix, SVector, Vector3};
 
 use crate::body::{self, BodyModel, COORDINATES, MARKER_FRAME_LEN, MARKERS, N_COORDINATES, Segment};
 use crate::error::{Error, Result};
+use crate::features::FeatureSet;
+use crate::model::Model;
 use crate::reference::{self, JointState};
+use crate::stream::Stream;
 
 /// State size: angle, velocity and acceleration of each coordinate.
 const N_STATE: usize = 3 * N_COORDINATES;
@@ -41,6 +52,22 @@ const THIRD_DIFFERENCE_GAIN: f64 = 20.0;
 /// Weight of the initial noise guess, in frames: the estimate is the guess for the first few
 /// frames and the data's soon after.
 const PRIOR_FRAMES: f64 = 10.0;
+/// Smallest noise [`TrackerOutput::noise`] reports, m (before any third difference is seen).
+pub const MIN_REPORTED_NOISE: f64 = 1e-9;
+
+/// The refiner's corrections are scaled by `σ / (σ + REFINER_GATE_NOISE)`, σ the mean learned
+/// hand-marker noise (m): ~1 on noisy markers, → 0 on clean ones, which the filter already
+/// follows exactly (a network's own error floor would only add to it there).
+pub const REFINER_GATE_NOISE: f64 = 1e-4;
+
+/// The gate on the refiner's corrections at mean marker noise `noise` (m).
+pub fn refiner_gate(noise: f64) -> f64 {
+    noise / (noise + REFINER_GATE_NOISE)
+}
+/// The refiner's outputs, in order: corrections to q, then to q̈, per coordinate.
+pub fn refiner_outputs() -> Vec<String> {
+    ["dq", "dqdd"].iter().flat_map(|k| COORDINATES.iter().map(move |c| format!("{k}.{}", c.name))).collect()
+}
 
 type StateVector = SVector<f64, N_STATE>;
 type StateMatrix = SMatrix<f64, N_STATE, N_STATE>;
@@ -60,7 +87,8 @@ pub struct TrackerSettings {
 }
 
 impl Default for TrackerSettings {
-    /// 1 kHz; [`DEFAULT_JERK_NOISE`]; a 10 s noise memory; 1 mm noise assumed at first.
+    /// 1 kHz; [`DEFAULT_JERK_NOISE`]; a 10 s noise memory; 1 mm noise assumed at first (a
+    /// guess too small makes the filter trust its first noisy frames and can throw it off).
     fn default() -> Self {
         TrackerSettings { rate_hz: 1000.0, jerk_noise: DEFAULT_JERK_NOISE, noise_memory_s: 10.0, initial_marker_noise: 1e-3 }
     }
@@ -96,6 +124,11 @@ pub struct TrackerOutput {
     pub tau: [f64; N_COORDINATES],
     /// Bit `i` set: marker `i` ([`MARKERS`] order) was missing in this frame.
     pub missing: u8,
+    /// Whether a refiner corrected this estimate (false without one, and while its window fills).
+    pub refined: bool,
+    /// Mean of the hand markers' noise (standard deviation) measured so far from the data
+    /// alone, m (at least [`MIN_REPORTED_NOISE`]); what the refiner is told and gated by.
+    pub noise: f64,
 }
 
 /// The filter's memory between frames. See the [module docs](self).
@@ -112,8 +145,11 @@ pub struct Tracker {
     history: [[f64; N_HAND]; 3],
     history_len: usize,
     noise_variance: [f64; N_HAND],
+    /// The same estimate from the data alone (no initial guess): what the refiner is told.
+    data_variance: [f64; N_HAND],
     noise_samples: [f64; N_HAND],
     frames: usize,
+    refiner: Option<Stream>,
 }
 
 impl Tracker {
@@ -146,8 +182,10 @@ impl Tracker {
             history: [[f64::NAN; N_HAND]; 3],
             history_len: 0,
             noise_variance: [0.0; N_HAND],
+            data_variance: [0.0; N_HAND],
             noise_samples: [0.0; N_HAND],
             frames: 0,
+            refiner: None,
         };
         tracker.reset();
         Ok(tracker)
@@ -159,8 +197,42 @@ impl Tracker {
         self.forearm = None;
         self.history_len = 0;
         self.noise_variance = [self.settings.initial_marker_noise.powi(2); N_HAND];
+        self.data_variance = [0.0; N_HAND];
         self.noise_samples = [0.0; N_HAND];
         self.frames = 0;
+        if let Some(r) = self.refiner.as_mut() {
+            r.reset();
+        }
+    }
+
+    /// Use `model` to refine every estimate (see the [module docs](self)), or none. The model
+    /// must read [`FeatureSet::TrackerState`] frames at the tracker's rate and give
+    /// [`refiner_outputs`]. Starts fresh: its window fills from the next frame.
+    pub fn set_refiner(&mut self, model: Option<Model>) -> Result<()> {
+        let Some(model) = model else {
+            self.refiner = None;
+            return Ok(());
+        };
+        let name = model.card().name.clone();
+        let bad = |detail: String| Err(Error::BadArgument { what: "refiner", detail: format!("model {name:?} cannot refine a tracker: {detail}") });
+        if model.feature_set() != FeatureSet::TrackerState {
+            return bad(format!("it reads {} frames, not {}", model.feature_set().name(), FeatureSet::TrackerState.name()));
+        }
+        let names: Vec<String> = model.card().outputs.iter().map(|o| o.name.clone()).collect();
+        if names != refiner_outputs() {
+            return bad(format!("its outputs are [{}], expected [{}]", names.join(", "), refiner_outputs().join(", ")));
+        }
+        let rate = model.card().frame_rate_hz;
+        if (rate - self.settings.rate_hz).abs() > 1e-6 * self.settings.rate_hz {
+            return bad(format!("it was trained at {rate} Hz, the tracker runs at {} Hz", self.settings.rate_hz));
+        }
+        self.refiner = Some(model.stream());
+        Ok(())
+    }
+
+    /// The refinement model in use, if any.
+    pub fn refiner(&self) -> Option<&Model> {
+        self.refiner.as_ref().map(|s| s.model())
     }
 
     /// The subject tracked.
@@ -224,13 +296,32 @@ impl Tracker {
             return Err(Error::NonFiniteOutput { frame: index, value });
         }
         self.state = Some((x, p));
-        let state = JointState {
+        let mut state = JointState {
             q: [x[0], x[1], x[2]],
             qd: [x[3], x[4], x[5]],
             qdd: [x[6], x[7], x[8]],
         };
+        // The data's own estimate (floored: none yet in the first frames), so that clean
+        // markers read as clean at once rather than as the fading initial guess.
+        let noise = (self.data_variance.iter().map(|v| v.sqrt()).sum::<f64>() / N_HAND as f64).max(MIN_REPORTED_NOISE);
+        let mut refined = false;
+        if let Some(refiner) = self.refiner.as_mut() {
+            let mut frame = [0f32; N_STATE + 1];
+            for (f, v) in frame.iter_mut().zip(x.iter()) {
+                *f = *v as f32;
+            }
+            frame[N_STATE] = noise.log10() as f32;
+            if let Some(out) = refiner.push(&frame).map_err(|e| e.renumbered(index))? {
+                let per_unit = refiner_gate(noise);
+                for c in 0..N_COORDINATES {
+                    state.q[c] += f64::from(out[c]) * per_unit;
+                    state.qdd[c] += f64::from(out[N_COORDINATES + c]) * per_unit;
+                }
+                refined = true;
+            }
+        }
         let tau = reference::inverse_dynamics_at(&self.body, &forearm.rotation.to_rotation_matrix(), &state)?;
-        Ok(Some(TrackerOutput { state, tau, missing }))
+        Ok(Some(TrackerOutput { state, tau, missing, refined, noise }))
     }
 
     /// Wide enough for any wrist motion: angles within ~0.1 rad of the first frame's fit,
@@ -254,8 +345,11 @@ impl Tracker {
                 let [a, b, c] = [self.history[0][i], self.history[1][i], self.history[2][i]];
                 let d3 = now - 3.0 * a + 3.0 * b - c;
                 if d3.is_finite() {
+                    let sample = d3 * d3 / THIRD_DIFFERENCE_GAIN;
                     let w = (1.0 / (self.noise_samples[i] + PRIOR_FRAMES)).max(forget);
-                    self.noise_variance[i] += w * (d3 * d3 / THIRD_DIFFERENCE_GAIN - self.noise_variance[i]);
+                    self.noise_variance[i] += w * (sample - self.noise_variance[i]);
+                    let w = (1.0 / (self.noise_samples[i] + 1.0)).max(forget);
+                    self.data_variance[i] += w * (sample - self.data_variance[i]);
                     self.noise_samples[i] += 1.0;
                 }
             }
@@ -408,6 +502,56 @@ mod tests {
                 assert!(i < 200 || error < 1e-5, "frame {i} coordinate {c}: {error}");
             }
         }
+    }
+
+    #[test]
+    fn a_refiner_corrects_by_its_outputs_gated_by_the_learned_noise() {
+        use crate::testing::{random_model, random_refiner};
+        let body = BodyModel::default();
+        let q = trajectory(400, 1000.0);
+        let mut f = frames(&body, &q, 0.1);
+        uniform_range(&mut f, 0.02, 5).unwrap();
+        let refiner = random_refiner(8, &[16], 3);
+        let mut bare = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut refined = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        refined.set_refiner(Some(refiner.clone())).unwrap();
+        let mut stream = refiner.stream();
+        for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+            let a = bare.push(frame).unwrap().unwrap();
+            let b = refined.push(frame).unwrap().unwrap();
+            // The refiner's input: the bare filter's state and log10 of its noise.
+            let mut input = [0f32; 10];
+            for k in 0..3 {
+                input[k] = a.state.q[k] as f32;
+                input[3 + k] = a.state.qd[k] as f32;
+                input[6 + k] = a.state.qdd[k] as f32;
+            }
+            input[9] = a.noise.log10() as f32;
+            let out = stream.push(&input).unwrap().map(|o| o.to_vec());
+            assert_eq!(b.refined, out.is_some(), "frame {i}");
+            assert_eq!(b.noise, a.noise);
+            assert_eq!(b.state.qd, a.state.qd, "q̇ is the filter's");
+            let per_unit = refiner_gate(a.noise);
+            for k in 0..3 {
+                let (dq, dqdd) = out.as_ref().map_or((0.0, 0.0), |o| (f64::from(o[k]), f64::from(o[3 + k])));
+                assert_eq!(b.state.q[k], a.state.q[k] + dq * per_unit, "frame {i}");
+                assert_eq!(b.state.qdd[k], a.state.qdd[k] + dqdd * per_unit, "frame {i}");
+            }
+            let tau = reference::inverse_dynamics(&body, 0.1, &b.state).unwrap();
+            for k in 0..3 {
+                assert!((b.tau[k] - tau[k]).abs() < 1e-12, "torques follow the refined state");
+            }
+        }
+        // The wrong kind of model is refused with the reason.
+        let err = refined.set_refiner(Some(random_model(FeatureSet::JointState, 5, &[8], 6, 1))).unwrap_err().to_string();
+        assert!(err.contains("reads joint_state frames"), "{err}");
+        let err = refined.set_refiner(Some(random_model(FeatureSet::TrackerState, 5, &[8], 3, 1))).unwrap_err().to_string();
+        assert!(err.contains("its outputs are"), "{err}");
+        let mut slow = Tracker::new(body, TrackerSettings { rate_hz: 500.0, ..Default::default() }).unwrap();
+        let err = slow.set_refiner(Some(refiner)).unwrap_err().to_string();
+        assert!(err.contains("1000 Hz") && err.contains("500 Hz"), "{err}");
+        refined.set_refiner(None).unwrap();
+        assert!(refined.refiner().is_none());
     }
 
     #[test]

@@ -1,5 +1,5 @@
-//! `Stream::push` must not touch the heap once the stream exists: a counting global
-//! allocator proves it for every thesis network shape and every feature set.
+//! `Stream::push` and `Tracker::push` must not touch the heap once they exist: a counting
+//! global allocator proves it for every thesis network shape and every feature set.
 
 use ikid::FeatureSet;
 use ikid::testing::{random_frames, random_model};
@@ -10,11 +10,32 @@ struct Counting;
 
 static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
 
+thread_local! {
+    /// Only the test thread that measures counts: the harness starting another test's thread
+    /// (which allocates) must not show up in this one's count.
+    static COUNTING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+fn count() {
+    if COUNTING.with(|c| c.get()) {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+    }
+}
+
+/// Allocations made by this thread while `f` runs.
+fn allocations_in(f: impl FnOnce()) -> usize {
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    COUNTING.with(|c| c.set(true));
+    f();
+    COUNTING.with(|c| c.set(false));
+    ALLOCATIONS.load(Ordering::SeqCst) - before
+}
+
 // SAFETY: forwards to the system allocator unchanged; only counts calls.
 #[allow(unsafe_code)]
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        count();
         // SAFETY: same contract as the caller's.
         unsafe { System.alloc(layout) }
     }
@@ -23,7 +44,7 @@ unsafe impl GlobalAlloc for Counting {
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        count();
         // SAFETY: same contract as the caller's.
         unsafe { System.realloc(ptr, layout, new_size) }
     }
@@ -49,18 +70,18 @@ fn push_never_allocates() {
         let model = random_model(set, 5, hidden, 3, 3);
         let frames = random_frames(set, 200, 4);
         let mut stream = model.stream();
-        let before = ALLOCATIONS.load(Ordering::SeqCst);
         let mut produced = 0;
-        for (i, frame) in frames.chunks_exact(set.frame_len()).enumerate() {
-            if i == 100 {
-                stream.reset();
+        let n = allocations_in(|| {
+            for (i, frame) in frames.chunks_exact(set.frame_len()).enumerate() {
+                if i == 100 {
+                    stream.reset();
+                }
+                if let Some(out) = stream.push(frame).expect("valid frame") {
+                    produced += usize::from(out[0].is_finite());
+                }
             }
-            if let Some(out) = stream.push(frame).expect("valid frame") {
-                produced += usize::from(out[0].is_finite());
-            }
-        }
-        let after = ALLOCATIONS.load(Ordering::SeqCst);
-        assert_eq!(after - before, 0, "{set:?} {hidden:?}: {} allocations in 200 pushes", after - before);
+        });
+        assert_eq!(n, 0, "{set:?} {hidden:?}: {n} allocations in 200 pushes");
         assert_eq!(produced, 200 - 2 * 4, "{set:?}: predictions once each window (re)filled");
     }
 }
@@ -77,19 +98,19 @@ fn filling_a_missing_marker_never_allocates() {
         let gone = i % 6;
         frame[3 * gone..3 * gone + 3].fill(f32::NAN);
     }
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
     let mut filled = 0;
-    for frame in frames.chunks_exact(18) {
-        stream.push(frame).expect("one missing marker is filled");
-        filled += usize::from(stream.filled_markers() != 0);
-    }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
-    assert_eq!(after - before, 0, "{} allocations in 300 pushes with fills", after - before);
+    let n = allocations_in(|| {
+        for frame in frames.chunks_exact(18) {
+            stream.push(frame).expect("one missing marker is filled");
+            filled += usize::from(stream.filled_markers() != 0);
+        }
+    });
+    assert_eq!(n, 0, "{n} allocations in 300 pushes with fills");
     assert_eq!(filled, 200 / 3 + 1);
 }
 
 #[test]
-fn tracker_push_never_allocates() {
+fn tracker_push_never_allocates_even_refined() {
     let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let body = ikid::body::BodyModel::default();
     let q: Vec<f64> = (0..400).flat_map(|i| {
@@ -104,16 +125,27 @@ fn tracker_push_never_allocates() {
     }
     frames[300 * 18] = f64::NAN;
     let mut tracker = ikid::Tracker::new(body, ikid::TrackerSettings::default()).expect("default settings");
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    tracker.set_refiner(Some(ikid::testing::random_refiner(16, &[32, 32], 9))).expect("a refiner");
     let mut torques = 0;
-    for (i, frame) in frames.chunks_exact(18).enumerate() {
-        if i == 200 {
-            tracker.reset();
+    let n = allocations_in(|| {
+        for (i, frame) in frames.chunks_exact(18).enumerate() {
+            if i == 200 {
+                tracker.reset();
+            }
+            let out = tracker.push(frame).expect("valid frame");
+            torques += usize::from(out.is_some_and(|o| o.tau[1].is_finite()));
         }
-        let out = tracker.push(frame).expect("valid frame");
-        torques += usize::from(out.is_some_and(|o| o.tau[1].is_finite()));
-    }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
-    assert_eq!(after - before, 0, "{} allocations in 400 tracker pushes", after - before);
+    });
+    assert_eq!(n, 0, "{n} allocations in 400 tracker pushes");
     assert!(torques >= 390, "estimates on all but the frames waiting for a complete one: {torques}");
+    assert!(tracker.refiner().is_some());
+}
+
+#[test]
+fn the_counter_sees_this_threads_allocations() {
+    let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let n = allocations_in(|| {
+        std::hint::black_box(vec![1u8; 16]);
+    });
+    assert_eq!(n, 1, "the counting allocator must see a Vec's allocation");
 }

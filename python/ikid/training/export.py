@@ -31,7 +31,7 @@ import ikid
 from ikid import _native
 
 #: Units of each task's outputs (SI, as everywhere inside ikid).
-TASK_UNITS = {"ik": "rad", "id": "N*m", "chain": "N*m"}
+TASK_UNITS = {"ik": "rad", "id": "N*m", "chain": "N*m", "refine": "rad"}
 
 
 @dataclass
