@@ -60,6 +60,9 @@ pub const MIN_REPORTED_NOISE: f64 = 1e-9;
 /// follows exactly (a network's own error floor would only add to it there).
 pub const REFINER_GATE_NOISE: f64 = 1e-4;
 
+/// Largest refiner correction, in standard deviations of the filter's own estimate.
+pub const REFINER_TRUST: f64 = 3.0;
+
 /// The gate on the refiner's corrections at mean marker noise `noise` (m).
 pub fn refiner_gate(noise: f64) -> f64 {
     noise / (noise + REFINER_GATE_NOISE)
@@ -230,6 +233,15 @@ impl Tracker {
         Ok(())
     }
 
+    /// Standard deviations of the filter's current estimate of q and of q̈ (rad, rad/s²);
+    /// zeros before it starts.
+    pub fn state_std(&self) -> ([f64; N_COORDINATES], [f64; N_COORDINATES]) {
+        match &self.state {
+            None => ([0.0; N_COORDINATES], [0.0; N_COORDINATES]),
+            Some((_, p)) => (std::array::from_fn(|c| p[(c, c)].max(0.0).sqrt()), std::array::from_fn(|c| p[(6 + c, 6 + c)].max(0.0).sqrt())),
+        }
+    }
+
     /// The refinement model in use, if any.
     pub fn refiner(&self) -> Option<&Model> {
         self.refiner.as_ref().map(|s| s.model())
@@ -313,9 +325,15 @@ impl Tracker {
             frame[N_STATE] = noise.log10() as f32;
             if let Some(out) = refiner.push(&frame).map_err(|e| e.renumbered(index))? {
                 let per_unit = refiner_gate(noise);
+                // A correction beyond REFINER_TRUST filter standard deviations is not one the
+                // filter's own uncertainty allows: the network is outside what it learned.
+                let trust = |value: f64, variance: f64| {
+                    let limit = REFINER_TRUST * variance.max(0.0).sqrt();
+                    value.clamp(-limit, limit)
+                };
                 for c in 0..N_COORDINATES {
-                    state.q[c] += f64::from(out[c]) * per_unit;
-                    state.qdd[c] += f64::from(out[N_COORDINATES + c]) * per_unit;
+                    state.q[c] += trust(f64::from(out[c]) * per_unit, p[(c, c)]);
+                    state.qdd[c] += trust(f64::from(out[N_COORDINATES + c]) * per_unit, p[(6 + c, 6 + c)]);
                 }
                 refined = true;
             }
@@ -532,10 +550,12 @@ mod tests {
             assert_eq!(b.noise, a.noise);
             assert_eq!(b.state.qd, a.state.qd, "q̇ is the filter's");
             let per_unit = refiner_gate(a.noise);
+            let (sd_q, sd_qdd) = bare.state_std();
             for k in 0..3 {
                 let (dq, dqdd) = out.as_ref().map_or((0.0, 0.0), |o| (f64::from(o[k]), f64::from(o[3 + k])));
-                assert_eq!(b.state.q[k], a.state.q[k] + dq * per_unit, "frame {i}");
-                assert_eq!(b.state.qdd[k], a.state.qdd[k] + dqdd * per_unit, "frame {i}");
+                let clamp = |v: f64, sd: f64| v.clamp(-REFINER_TRUST * sd, REFINER_TRUST * sd);
+                assert_eq!(b.state.q[k], a.state.q[k] + clamp(dq * per_unit, sd_q[k]), "frame {i}");
+                assert_eq!(b.state.qdd[k], a.state.qdd[k] + clamp(dqdd * per_unit, sd_qdd[k]), "frame {i}");
             }
             let tau = reference::inverse_dynamics(&body, 0.1, &b.state).unwrap();
             for k in 0..3 {
