@@ -541,7 +541,7 @@ def main() -> None:
     data = {(i, c): condition(rec, i, *c) for i, rec in enumerate(recs) for c in conditions}
     jobs = [{"key": key, "meta": r.meta, "markers": r.markers, "ekf": ekf,
              "ls_slice": (last_tenth(len(r)).start, last_tenth(len(r)).stop)} for key, r in data.items()]
-    ik, chain = ikid.load("wrist-ik"), ikid.load("wrist-chain")
+    ik, chain, refiner = ikid.load("wrist-ik"), ikid.load("wrist-chain"), ikid.load("wrist-track")
     scores, ls_check, ls_first = Scores(), 0.0, 0.0
 
     def add(kind: str, cond: tuple[str, bool], rec: D.Recording, method: str, scope: str, e: np.ndarray) -> None:
@@ -583,7 +583,8 @@ def main() -> None:
         "machine": machine(), "ikid_version": ikid.__version__, "biorbd_version": biorbd.__version__,
         "held_out": held, "trials": [r.name for r in recs], "frames": int(sum(len(r) for r in recs)),
         "skip_frames": SKIP, "noise": NOISE, "occlusion": OCCLUSION, "ekf": {"default": EKF_DEFAULT, "tuned": tuning["chosen"]},
-        "tuning": tuning, "tracker_tuning": tracker_tuning, "ls_check_max_abs_rad": ls_check, "ls_check_first_frame_max_abs_rad": ls_first, "scores": scores.result(), "latency": latency,
+        "tuning": tuning, "tracker_tuning": tracker_tuning,
+        "refiner": {"window": refiner.window, "layers": refiner.layer_widths, "seeds": refiner.card["provenance"]["seeds"]}, "ls_check_max_abs_rad": ls_check, "ls_check_first_frame_max_abs_rad": ls_first, "scores": scores.result(), "latency": latency,
         "seconds": time.perf_counter() - started,
     }
     args.json.parent.mkdir(parents=True, exist_ok=True)
@@ -682,10 +683,11 @@ def markdown(res: dict[str, Any]) -> str:
         + (" (the default)." if res["tracker_tuning"]["chosen"] == res["tracker_tuning"]["default"] else
            f" — NOT the package default {res['tracker_tuning']['default']:g}: update it."),
         "- **ikid Tracker + wrist-track** (shipped path, `ikid track`): the same tracker refined by the shipped `wrist-track` network "
-        "(`python -m ikid.training.refine`): a 256-256 MLP over the tracker's last 32 states (q̇, q̈, log noise) that corrects q "
-        "and q̈, gated by the learned noise so clean markers stay as the filter has them; torques by Newton–Euler from the refined "
-        "state. Trained on its own simulated trials (seeds 2000–2001, sizes 0.9/1/1.1, noise 0.2–7 %, half occluded), none of "
-        "them a test or validation trial here.",
+        f"(`make models-track`): an MLP {'-'.join(map(str, res['refiner']['layers']))} over the tracker's last {res['refiner']['window']} "
+        "states (q̇, q̈, log10 of the noise it measured) that corrects q and q̈, gated by that noise so clean markers stay as the "
+        "filter has them; torques by Newton–Euler from the refined state. Trained on its own simulated trials (seeds "
+        f"{min(res['refiner']['seeds'])}–{max(res['refiner']['seeds'])}, sizes 0.9/1/1.1, noise 0.2–7 %, half occluded), none of them a "
+        "test or validation trial here.",
         "",
     ]
     efs = sorted({g[1] for g in EKF_GRID})
