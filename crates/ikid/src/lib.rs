@@ -4,8 +4,10 @@
 //! A small MLP over a short window of marker frames predicts the wrist's three angles (or
 //! torques). This crate is the pure core: the [`body`] model and its conventions, the
 //! [`features`] a network sees, the allocation-free [`net`] kernels, [`model`] files and the
-//! frame-by-frame [`stream`]; and the classical [`reference`] solvers (IK by segment fitting,
-//! ID by Newton–Euler) the networks are measured against.
+//! frame-by-frame [`stream`]; the classical [`reference`](mod@reference) solvers (IK by segment
+//! fitting, ID by Newton–Euler) the networks are measured against; and the [`tracker`], a
+//! Kalman filter over the body model giving angles, velocities, accelerations and torques per
+//! frame, optionally refined by a network.
 //!
 //! ```no_run
 //! let model = ikid::Model::load("wrist-ik.safetensors")?;

@@ -23,12 +23,14 @@
 //! by how noisy they are. A missing marker simply corrects nothing.
 //!
 //! Optionally a learned *refiner* ([`Tracker::set_refiner`]) corrects the estimate: a network
-//! over a window of the tracker's own states ([`FeatureSet::TrackerState`]: q, q̇, q̈ and the
-//! learned noise level) that gives corrections to q and q̈, gated by that noise
-//! ([`refiner_gate`]) so clean markers are left as the filter has them. It
+//! over a window of the tracker's own states ([`FeatureSet::TrackerState`]: q̇, q̈ and the
+//! measured noise level; not q, so it learns how wrists move, not where) that gives
+//! corrections to q and q̈, gated by that noise ([`refiner_gate`]) so clean markers are left
+//! as the filter has them, and capped at [`REFINER_TRUST`] standard deviations of the
+//! filter's own estimate (a larger one means the network is outside what it learned). It
 //! learns what a white-jerk model cannot know — how wrists actually move — and so the lag
-//! and the noise the filter leaves (trained by `python -m ikid.training.refine`; measured in
-//! `docs/ekf.md`). It is applied after the filter and never fed back into it.
+//! and the noise the filter leaves (`make models-track`; measured in `docs/ekf.md`). It is
+//! applied after the filter and never fed back into it.
 //!
 //! Allocation-free: the state is fixed-size, so a push costs a few microseconds and no heap.
 
