@@ -289,7 +289,7 @@ def run_tracker(rec: D.Recording, jerk_noise: float, refiner: ikid.Model | None 
     return out
 
 
-def ikid_estimates(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, jerk_noise: float) -> dict[str, dict[str, np.ndarray]]:
+def ikid_estimates(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, refiner: ikid.Model, jerk_noise: float) -> dict[str, dict[str, np.ndarray]]:
     from ikid.training.report import classical_chain
 
     n = len(rec)
@@ -302,7 +302,7 @@ def ikid_estimates(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, jerk_noi
     chain_tau = np.vstack([pad, classical_chain(rec, net_q[w:])])
     assert len(net_q) == len(net_tau) == len(chain_tau) == n
     tracked = run_tracker(rec, jerk_noise)
-    refined = run_tracker(rec, jerk_noise, ikid.load("wrist-track"))
+    refined = run_tracker(rec, jerk_noise, refiner)
     return {
         "q": {"ref": ref, "ref_mean5": causal_mean(ref, 5), "ref_mean25": causal_mean(ref, 25), "wrist_ik": net_q,
               "tracker": tracked["q"], "tracker_refined": refined["q"], "biorbd_ls_all": least_squares_ik(rec, ref)},
@@ -361,7 +361,7 @@ def rust_latency() -> dict[str, Any]:
                    "runs": rs} for name, rs in runs.items()}
 
 
-def python_latency(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, jerk_noise: float) -> dict[str, Any]:
+def python_latency(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, refiner: ikid.Model, jerk_noise: float) -> dict[str, Any]:
     """One markers → angles + torques step from Python: ikid (wrist-ik and wrist-chain
     ``Stream.push``) and biorbd (EKF ``reconstructFrame`` + ``InverseDynamics``, outputs read
     out as arrays), in alternating rounds of ``LATENCY_FRAMES`` frames, after a warm-up round.
@@ -373,7 +373,6 @@ def python_latency(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, jerk_noi
     rounds: dict[str, list[tuple[float, float, float]]] = {k: [] for k in ("ikid", "ikid_ik", "ikid_chain", "tracker", "tracker_refined", "ekf_id", "ekf", "id")}
     many: list[float] = []
     tracker_many: dict[str, list[float]] = {"tracker": [], "tracker_refined": []}
-    refine_model = ikid.load("wrist-track")
     clock = time.perf_counter_ns
     for r in range(LATENCY_ROUNDS + 1):
         s_ik, s_ch = ik.stream(), chain.stream()
@@ -401,8 +400,8 @@ def python_latency(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, jerk_noi
         many.append((clock() - t0) / len(rest) / 1e3)
         # ikid.Tracker: one push gives angles, velocities, accelerations and torques; bare and
         # with the shipped refiner (warm: the refiner's window is full after ik.window frames).
-        for key, refiner in (("tracker", None), ("tracker_refined", refine_model)):
-            tracker = ikid.Tracker(**subject(rec), jerk_noise=jerk_noise, refiner=refiner)
+        for key, refine_with in (("tracker", None), ("tracker_refined", refiner)):
+            tracker = ikid.Tracker(**subject(rec), jerk_noise=jerk_noise, refiner=refine_with)
             t = np.empty(len(frames64), np.int64)
             for i, f in enumerate(frames64):
                 t0 = clock()
@@ -410,7 +409,7 @@ def python_latency(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, jerk_noi
                 t[i] = clock() - t0
             del out
             ikid_ns[key] = t[ik.window :]
-            tracker = ikid.Tracker(**subject(rec), jerk_noise=jerk_noise, refiner=refiner)
+            tracker = ikid.Tracker(**subject(rec), jerk_noise=jerk_noise, refiner=refine_with)
             tracker.run(frames64[: ik.window])
             t0 = clock()
             tracker.run(frames64[ik.window :])
@@ -488,13 +487,13 @@ def tune_tracker(val: list[D.Recording], ekf_grid: dict[str, dict[str, Any]]) ->
     smallest."""
     best_ekf = {lvl: {k: min(cell["levels"][lvl][k] for cell in ekf_grid.values()) for k in ("angle_mse", "torque_mse")}
                 for lvl in NOISE}
+    noisy = {lvl: [condition(rec, 50 + i, lvl, occluded=False) for i, rec in enumerate(val)] for lvl in NOISE}
     grid: dict[str, dict[str, Any]] = {}
     for s in TRACKER_GRID:
         row = {}
         for lvl in NOISE:
             eq, et = [], []
-            for i, rec in enumerate(val):
-                r = condition(rec, 50 + i, lvl, occluded=False)
+            for rec, r in zip(val, noisy[lvl]):
                 out = run_tracker(r, s)
                 eq.append(out["q"][SKIP:] - rec.q[SKIP:])
                 et.append(out["tau"][SKIP:] - rec.tau[SKIP:])
@@ -553,7 +552,7 @@ def main() -> None:
     for res in pool_map(biorbd_job, jobs, args.workers):
         rec = data[res["key"]]
         cond = res["key"][1]
-        mine = ikid_estimates(rec, ik, chain, jerk)
+        mine = ikid_estimates(rec, ik, chain, refiner, jerk)
         a, ls = res["biorbd_ls"]
         diff = np.abs(ls - mine["q"]["biorbd_ls_all"][a : a + len(ls)]).max(1)
         # biorbd solves a run's first frame within the coordinate ranges (trust region), later ones unbounded.
@@ -576,7 +575,7 @@ def main() -> None:
         f"biorbd IK vs batched least squares: max |Δq| = {ls_check:.2g} rad ({ls_first:.2g} on the runs' first frames)")
 
     lat_rec = D.add_noise(recs[0], "uniform", 0.01, NOISE_SEED + 99)
-    latency = {"python": python_latency(lat_rec, ik, chain, jerk), "rust": rust_latency()}
+    latency = {"python": python_latency(lat_rec, ik, chain, refiner, jerk), "rust": rust_latency()}
     log("latency done")
 
     result = {

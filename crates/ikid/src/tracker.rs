@@ -382,16 +382,16 @@ impl Tracker {
     /// noise is independent between coordinates), linearised at the prediction.
     fn correct(&self, forearm: &Isometry3<f64>, hand: &[f64; N_HAND], x: &mut StateVector, p: &mut StateMatrix) {
         let prior_q = Vector3::new(x[0], x[1], x[2]);
-        let rotation = forearm.rotation.to_rotation_matrix() * body::wrist_rotation(&[x[0], x[1], x[2]]);
         let centre = forearm.translation.vector;
         // World axes of the three joints at the prediction: a point p of the hand moves by
-        // w_i × (p − centre) per radian of coordinate i.
-        let mut partial = forearm.rotation.to_rotation_matrix();
+        // w_i × (p − centre) per radian of coordinate i. The chain's product is the hand's
+        // orientation in the lab (the forearm's times `body::wrist_rotation`).
+        let mut rotation = forearm.rotation.to_rotation_matrix();
         let mut axes = [Vector3::zeros(); N_COORDINATES];
         for (i, axis) in axes.iter_mut().enumerate() {
             let local = Vector3::from(COORDINATES[i].axis);
-            *axis = partial * local;
-            partial *= nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(local), x[i]);
+            *axis = rotation * local;
+            rotation *= nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(local), x[i]);
         }
         for m in 0..3 {
             let offset = Vector3::from(self.body.marker_offsets[3 + m]);

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ikid.io._atomic import write_text_atomic
-from ikid.io.markers import FileFormatError, MarkerData, ikid_marker_names, read_text_lines, unit_scale
+from ikid.io.markers import FileFormatError, MarkerData, ikid_marker_names, is_float, read_text_lines, unit_scale
 
 _AXIS = re.compile(r"^(?P<label>.+?)[._](?P<axis>[xyzXYZ])$")
 
@@ -70,7 +70,7 @@ def read_csv_markers(path: str | os.PathLike[str]) -> MarkerData:
         try:
             rows.append([float(c) if c.strip() else np.nan for c in cells])
         except ValueError:
-            bad = next(c for c in cells if c.strip() and not _is_float(c))
+            bad = next(c for c in cells if c.strip() and not is_float(c))
             raise FileFormatError(f"{src}:{lineno}: {bad.strip()!r} is not a number") from None
     if len(rows) < 2:
         raise FileFormatError(f"{src}: {len(rows)} data row(s); at least 2 are needed")
@@ -116,11 +116,3 @@ def write_csv_markers(path: str | os.PathLike[str], time, markers, labels: list[
     for t, row in zip(time, values):
         buf.write(f"{t:.6f}," + ",".join("" if not np.isfinite(v) else f"{v:.10g}" for v in row) + "\n")
     return write_text_atomic(path, buf.getvalue())
-
-
-def _is_float(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True

@@ -35,6 +35,15 @@ class FileFormatError(_native.InputError):
     what is wrong (and the line, for text formats)."""
 
 
+def is_float(text: str) -> bool:
+    """Whether a text cell reads as a number (the text readers' check before naming a bad cell)."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def read_text_lines(path: Path, what: str) -> list[str]:
     """The lines of a UTF-8 text file, or a :class:`FileFormatError` saying it is not ``what``."""
     try:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ikid.io._atomic import write_text_atomic
-from ikid.io.markers import FileFormatError, MarkerData, ikid_marker_names, read_text_lines, unit_scale
+from ikid.io.markers import FileFormatError, MarkerData, ikid_marker_names, is_float, read_text_lines, unit_scale
 
 _HEADER_LINES = 5
 
@@ -65,7 +65,7 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
         try:
             row = [float(p) if p.strip() else np.nan for p in parts[:width]]
         except ValueError:
-            bad = next(p for p in parts[:width] if p.strip() and not _is_float(p))
+            bad = next(p for p in parts[:width] if p.strip() and not is_float(p))
             raise FileFormatError(f"{src}:{lineno}: {bad!r} is not a number") from None
         parsed.append(row + [np.nan] * (width - len(row)))
     if len(parsed) != n_frames:
@@ -84,12 +84,6 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
     return MarkerData(labels, time, positions, rate, src, header["Units"], {"header": header})
 
 
-def _is_float(s: str) -> bool:
-    try:
-        float(s)
-    except ValueError:
-        return False
-    return True
 
 
 def write_trc(

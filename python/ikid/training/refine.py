@@ -101,7 +101,7 @@ def train(data: dict[str, Any], window: int, hidden: list[int], minutes: float, 
     per_frame = Affine.minmax(used.min(0), used.max(0))
     inp = Affine(np.tile(per_frame.scale, window), np.tile(per_frame.shift, window))
     mean, std = data["targets"][data["train"]].mean(0), data["targets"][data["train"]].std(0) + 1e-12
-    out = Affine((1.0 / std).astype(np.float32), (-mean / std).astype(np.float32)).inverse()  # network units -> SI
+    standardise = Affine((1.0 / std).astype(np.float32), (-mean / std).astype(np.float32))  # SI -> network units
     in_scale, in_shift = torch.from_numpy(inp.scale), torch.from_numpy(inp.shift)
     # Every noise level counts alike: each output's squared error is weighed by 1 / its spread at
     # that level (else the noisiest levels' large corrections drown the small ones of 1 %).
@@ -109,10 +109,9 @@ def train(data: dict[str, Any], window: int, hidden: list[int], minutes: float, 
     spread = np.stack([data["targets"][data["train"][lv[data["train"]] == j]].std(0) for j in range(len(NOISE_LEVELS))])
     weight = torch.from_numpy(((std / spread) ** 2).astype(np.float32))  # (levels, outputs), in standardised units
     level_of = torch.from_numpy(lv)
-    y_scale, y_shift = torch.from_numpy((1.0 / std).astype(np.float32)), torch.from_numpy((-mean / std).astype(np.float32))
+    y_scale, y_shift = torch.from_numpy(standardise.scale), torch.from_numpy(standardise.shift)
     net = mlp(window * frames.shape[1], hidden, targets.shape[1])
     opt = torch.optim.Adam(net.parameters(), lr=1e-3)
-    sched_gamma = 0.5
     best, best_state, since, epochs, log = float("inf"), None, 0, 0, []
     t0 = time.perf_counter()
     xv = gather(frames, val_idx, window) * in_scale + in_shift
@@ -140,12 +139,12 @@ def train(data: dict[str, Any], window: int, hidden: list[int], minutes: float, 
             since += 1
             if since == 2:  # plateau: halve the step, then stop after a further 4 epochs without gain
                 for g in opt.param_groups:
-                    g["lr"] *= sched_gamma
+                    g["lr"] *= 0.5
             if since >= 6:
                 break
     assert best_state is not None
     net.load_state_dict(best_state)
-    return {"net": net, "input": inp, "output": out, "epochs": epochs, "best_val": best, "log": log,
+    return {"net": net, "input": inp, "output": standardise.inverse(), "epochs": epochs, "best_val": best, "log": log,
             "seconds": time.perf_counter() - t0}
 
 
