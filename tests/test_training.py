@@ -171,6 +171,23 @@ def test_wrist_track_matches_torch():
     assert np.all(np.abs(got - want).max(axis=0) <= 1e-5 * scale)
 
 
+def test_the_refiner_trainer_writes_a_refiner_the_tracker_takes(tmp_path):
+    """`python -m ikid.training.refine` end to end on a tiny budget: one trajectory per
+    recording, never in the +-+ octant compare-ekf tests as unseen, and a model card that
+    says so."""
+    from ikid.training import refine
+
+    out = tmp_path / "tiny-track.safetensors"
+    refine.main(["-o", str(out), "--recordings", "3", "--duration", "1.5", "--window", "8", "--hidden", "8", "--minutes", "0.02"])
+    model = ikid.load(str(out))
+    prov = model.card["provenance"]
+    assert model.feature_set == "tracker_state" and model.card["task"] == "refine" and model.window == 8
+    assert len(set(prov["seeds"])) == 3 and "+-+" not in prov["octants"]
+    rec = D.simulate_one({"name": "r", "protocol": "random", "seed": 9602, "duration": 0.5})
+    out = ikid.Tracker(refiner=model).run(noisy([rec], 0.02)[0].markers)
+    assert out["refined"][-1] and np.isfinite(out["tau"]).all()
+
+
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_model_matches_torch(name):
     model = ikid.load(name)
