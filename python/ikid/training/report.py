@@ -188,9 +188,17 @@ def occlusion_section(rep: Report, model: ikid.Model, recs: list[D.Recording]) -
         filled = r.with_markers(ikid.fill_gaps(r.markers)[0].astype(np.float64)) if np.isnan(r.markers).any() else r
         return reference_angles(filled)
 
+    refiner = ikid.load("wrist-track")
+
+    def tracked(r: D.Recording) -> np.ndarray:
+        # The shipped Kalman path, which leaves a missing marker out instead of filling it: how
+        # much losing each marker costs an estimator that uses the exact body model.
+        return ikid.Tracker(length_scale=r.meta["length_scale"], mass_scale=r.meta["mass_scale"], refiner=refiner).run(r.markers)["q"]
+
     for label, level in NOISE_LEVELS.items():
         rs = noisy(recs, level)
         base = second_half(rs, net)
+        tracked_base = second_half(rs, tracked)
         cases: dict[str, list[D.Recording]] = {}
         for k, name in enumerate(ikid.marker_names()):
             gone = []
@@ -202,11 +210,23 @@ def occlusion_section(rep: Report, model: ikid.Model, recs: list[D.Recording]) -
         cases["bursts, 1/s"] = [D.add_occlusion(r, 1.0, 0.02, 0.5, seed=EVAL_SEED + i, warmup_s=len(r) / 2000) for i, r in enumerate(rs)]
         for case, gone in cases.items():
             mse = second_half(gone, net)
-            rows.append([label if case.startswith("RSP") else "", case, base, mse, mse / base, second_half(gone, ref)])
-            out[f"{label} | {case}"] = {"mse": mse, "complete": base, "ratio": mse / base}
-    rep.table(["noise", "case", "complete markers", "network, one missing", "ratio", "reference IK on filled frames"], rows)
+            tracked_mse = second_half(gone, tracked)
+            rows.append([label if case.startswith("RSP") else "", case, base, mse, mse / base, second_half(gone, ref),
+                         tracked_base, tracked_mse, tracked_mse / tracked_base])
+            out[f"{label} | {case}"] = {"mse": mse, "complete": base, "ratio": mse / base,
+                                        "tracker": {"mse": tracked_mse, "complete": tracked_base, "ratio": tracked_mse / tracked_base}}
+    rep.table(["noise", "case", "complete markers", "network, one missing", "ratio", "reference IK on filled frames",
+               "Tracker + wrist-track, complete", "one missing", "ratio"], rows)
     worst = max(v["ratio"] for v in out.values())
-    rep.add(f"Worst ratio: **{worst:.2f}** (bound 2).", "")
+    noisy_worst = max(v["tracker"]["ratio"] for k, v in out.items() if not k.startswith("clean"))
+    below = max(v["tracker"]["mse"] / v["complete"] for v in out.values())
+    rep.add(f"Worst ratio: **{worst:.2f}** (bound 2). The last three columns are `ikid.Tracker` refined by `wrist-track` on "
+            "the same frames: a Kalman filter over the exact body model, which leaves the missing marker out rather than "
+            f"filling it. On noisy markers its worst ratio is {noisy_worst:.2f}x"
+            + (f" (its error with one marker missing stays at most {below:.2f}x the network's with every marker): so a filter "
+               "that knows the exact body model loses that much too when one marker is gone; the metacarpal heads (MC2, MC5) cost "
+               "most, because the two hand markers left tell less about the hand's roll. A network ratio near that is the markers' "
+               "geometry, not a defect of the fill." if below < 1 else "."), "")
     return out
 
 
