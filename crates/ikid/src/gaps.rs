@@ -8,7 +8,9 @@
 //!   both segments (the SCoRE functional joint centre, Ehrig et al. 2006): with `(R_f, o_f)`
 //!   and `(R_h, o_h)` the technical frames of a complete frame, it minimises
 //!   `Σ |R_f c_f + o_f − R_h c_h − o_h|²` over `(c_f, c_h)`. The 6×6 normal equations are
-//!   accumulated frame by frame, so learning never stops and costs O(1) per frame.
+//!   accumulated frame by frame, so learning never stops and costs O(1) per frame. Noisy
+//!   markers enter them through a short running mean ([`CENTRE_SMOOTHING_FRAMES`]): noise in
+//!   the technical frames would otherwise pull the centre off.
 //!
 //! When one marker of a segment is missing and the other segment is whole, the whole segment
 //! gives the joint centre in the lab; the two visible markers plus that centre fix the

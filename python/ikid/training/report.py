@@ -218,15 +218,12 @@ def occlusion_section(rep: Report, model: ikid.Model, recs: list[D.Recording]) -
     rep.table(["noise", "case", "complete markers", "network, one missing", "ratio", "reference IK on filled frames",
                "Tracker + wrist-track, complete", "one missing", "ratio"], rows)
     worst = max(v["ratio"] for v in out.values())
-    noisy_worst = max(v["tracker"]["ratio"] for k, v in out.items() if not k.startswith("clean"))
+    noisy_case, noisy_worst = max(((k, v["tracker"]["ratio"]) for k, v in out.items() if not k.startswith("clean")), key=lambda kv: kv[1])
     below = max(v["tracker"]["mse"] / v["complete"] for v in out.values())
     rep.add(f"Worst ratio: **{worst:.2f}** (bound 2). The last three columns are `ikid.Tracker` refined by `wrist-track` on "
-            "the same frames: a Kalman filter over the exact body model, which leaves the missing marker out rather than "
-            f"filling it. On noisy markers its worst ratio is {noisy_worst:.2f}x"
-            + (f" (its error with one marker missing stays at most {below:.2f}x the network's with every marker): so a filter "
-               "that knows the exact body model loses that much too when one marker is gone; the metacarpal heads (MC2, MC5) cost "
-               "most, because the two hand markers left tell less about the hand's roll. A network ratio near that is the markers' "
-               "geometry, not a defect of the fill." if below < 1 else "."), "")
+            "the same frames: a Kalman filter over the exact body model, which leaves a missing marker out instead of filling "
+            f"it. Its worst ratio on noisy markers is {noisy_worst:.2f}x ({noisy_case}), "
+            f"but from a lower base: with one marker missing its error is at most {below:.2f}x the network's with every marker.", "")
     return out
 
 
