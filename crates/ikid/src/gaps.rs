@@ -375,9 +375,9 @@ impl GapFiller {
             *dst = *v as f32;
         }
         // The visible markers of the occluded segment become their fitted positions too: the
-        // fit averages their noise with the joint centre's and the prior's (measured: at 5 %
-        // noise a hand marker missing costs 2.2× the complete-marker error unprojected, 1.8×
-        // projected).
+        // fit averages their noise with the joint centre's and the prior's (measured before the
+        // centre's running mean: at 5 % noise a hand marker missing cost 2.2× the
+        // complete-marker error unprojected, 1.8× projected).
         for k in (0..3).filter(|&k| k != missing_k) {
             let p = rot * (self.local_sum[first + k] / n) + t;
             for (dst, v) in frame[3 * (first + k)..3 * (first + k) + 3].iter_mut().zip(p.iter()) {
