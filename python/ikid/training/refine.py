@@ -14,8 +14,9 @@ any test set; one trajectory seen in many poses teaches the network that traject
 wrists move), in every joint-sign octant but +-+ (which ``make compare-ekf`` tests as unseen),
 cycling through three shoulder poses and five subject sizes (0.9-1.1); uniform marker noise at
 levels spanning 0.2-7 % (the thesis' definition) with fresh noise per realisation, half of them
-with one marker occluded in bursts; the tracker runs over each exactly as at inference. The last 10 % of every
-recording is validation (early stopping). Seeded and reproducible up to torch's CPU kernels.
+with one marker occluded in bursts; the tracker runs over each exactly as at inference. The
+last 10 % of every recording is validation (early stopping). Seeded and reproducible up to
+torch's CPU kernels.
 """
 
 from __future__ import annotations
