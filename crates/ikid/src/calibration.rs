@@ -300,6 +300,73 @@ mod tests {
         }
     }
 
+    /// A seeded random marker placement: every marker moved up to `reach` metres per axis.
+    fn random_shift(seed: u64, reach: f64) -> [[f64; 3]; 6] {
+        let mut rng = crate::rng::SplitMix::new(seed);
+        std::array::from_fn(|_| std::array::from_fn(|_| rng.uniform(-reach, reach)))
+    }
+
+    #[test]
+    fn calibration_recovers_angles_for_many_placements_and_any_pair_of_movements() {
+        // Two movements leave the third axis to the Procrustes fit's reflection guard: each
+        // placement and pair must still give a proper rotation that reads the angles exactly.
+        let q = [-0.4, 0.5, 0.25];
+        for seed in 0..12u64 {
+            let shift = random_shift(seed, 0.015);
+            let pair = [(0, 1), (0, 2), (1, 2)][seed as usize % 3];
+            let statics = frames(&[[0.0; 3]; 12], &shift, 0.9, 0.2);
+            let moves: Vec<(usize, Vec<f32>)> = [pair.0, pair.1].iter().map(|&j| (j, frames(&single(j, 120, 0.5), &shift, 0.9, 0.2))).collect();
+            let refs: Vec<(usize, &[f32])> = moves.iter().map(|(j, f)| (*j, f.as_slice())).collect();
+            let (cal, _) = Calibration::from_trials(&statics, &refs).unwrap();
+            for r in [cal.forearm, cal.hand] {
+                assert!((r.matrix().determinant() - 1.0).abs() < 1e-9, "seed {seed}: not a rotation");
+            }
+            let mut frame = frames(&[q], &shift, 0.9, 0.2);
+            cal.apply(&mut frame, 0).unwrap();
+            let mut out = [0.0f32; 3];
+            FeatureSet::Angles.compute(&frame, &mut out, 0).unwrap();
+            for k in 0..3 {
+                assert!((out[k] as f64 - q[k]).abs() < 1e-4, "seed {seed} pair {pair:?}: {out:?} vs {q:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_static_trial_needs_its_documented_number_of_frames() {
+        let flex = frames(&single(1, 100, 0.6), &SHIFT, 1.0, 0.0);
+        let pron = frames(&single(0, 100, 0.6), &SHIFT, 1.0, 0.0);
+        let moves: [(usize, &[f32]); 2] = [(1, &flex), (0, &pron)];
+        for n in [1, MIN_STATIC_FRAMES - 1] {
+            let statics = frames(&vec![[0.0; 3]; n], &SHIFT, 1.0, 0.0);
+            let err = Calibration::from_trials(&statics, &moves).unwrap_err().to_string();
+            assert!(err.contains(&format!("has {n} frames, at least 10")), "{err}");
+        }
+        let statics = frames(&[[0.0; 3]; MIN_STATIC_FRAMES], &SHIFT, 1.0, 0.0);
+        assert!(Calibration::from_trials(&statics, &moves).is_ok());
+    }
+
+    #[test]
+    fn from_matrices_round_trips_a_calibration_and_refuses_what_is_not_a_rotation() {
+        let statics = frames(&[[0.0; 3]; 20], &SHIFT, 1.0, 0.0);
+        let moves: Vec<(usize, Vec<f32>)> = (0..2).map(|j| (j, frames(&single(j, 200, 0.6), &SHIFT, 1.0, 0.0))).collect();
+        let refs: Vec<(usize, &[f32])> = moves.iter().map(|(j, f)| (*j, f.as_slice())).collect();
+        let (cal, _) = Calibration::from_trials(&statics, &refs).unwrap();
+        let back = Calibration::from_matrices(*cal.forearm.matrix(), *cal.hand.matrix()).unwrap();
+        assert!((back.forearm.matrix() - cal.forearm.matrix()).abs().max() < 1e-12);
+        assert!((back.hand.matrix() - cal.hand.matrix()).abs().max() < 1e-12);
+        assert_ne!(back, Calibration::body_model(), "the measured placement differs from the model's");
+        let reflection = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
+        let stretched = Matrix3::from_diagonal(&Vector3::new(1.0, 1.01, 1.0));
+        let mut nan = Matrix3::identity();
+        nan[(1, 2)] = f64::NAN;
+        for (m, which) in [(reflection, "forearm"), (stretched, "forearm"), (nan, "forearm")] {
+            let err = Calibration::from_matrices(m, Matrix3::identity()).unwrap_err().to_string();
+            assert!(err.contains(&format!("the {which} matrix is not a rotation")), "{err}");
+        }
+        let err = Calibration::from_matrices(Matrix3::identity(), reflection).unwrap_err().to_string();
+        assert!(err.contains("the hand matrix is not a rotation"), "{err}");
+    }
+
     #[test]
     fn body_model_calibration_changes_no_angle() {
         let mut frame = frames(&[[0.3, 0.2, -0.1]], &[[0.0; 3]; 6], 1.0, 0.0);

@@ -367,6 +367,28 @@ mod tests {
     }
 
     #[test]
+    fn the_gravity_features_point_up_in_the_forearms_technical_frame() {
+        // By hand: the forearm's technical frame from its markers (e1 along RSP→USP, e3
+        // normal to the triangle, e2 = e3 × e1), and the lab's up, +y (gravity is −y), in it.
+        for (q, shoulder) in [([0.4, -0.3, 0.2], 0.0), ([-0.9, 0.6, -0.2], 0.7), ([1.1, 0.1, 0.3], -0.3)] {
+            let frame = frame_for(q, shoulder);
+            let m = |k: usize| Vector3::new(frame[3 * k] as f64, frame[3 * k + 1] as f64, frame[3 * k + 2] as f64);
+            let e1 = (m(1) - m(0)).normalize();
+            let e3 = e1.cross(&(m(2) - m(0))).normalize();
+            let e2 = e3.cross(&e1);
+            let want = [e1.y, e2.y, e3.y];
+            let mut rg = [0.0f32; 15];
+            FeatureSet::RelativeGravity.compute(&frame, &mut rg, 0).unwrap();
+            let mut ag = [0.0f32; 6];
+            FeatureSet::AnglesGravity.compute(&frame, &mut ag, 0).unwrap();
+            for k in 0..3 {
+                assert!((rg[12 + k] as f64 - want[k]).abs() < 1e-6, "{rg:?} vs {want:?}");
+                assert!((ag[3 + k] as f64 - want[k]).abs() < 1e-6, "{ag:?} vs {want:?}");
+            }
+        }
+    }
+
+    #[test]
     fn angles_are_exact_on_clean_markers_for_any_size_and_pose() {
         for (q, shoulder, scale) in [([0.5, 0.2, -0.1], 0.3, 1.0), ([-1.2, 1.1, 0.4], -0.35, 0.85), ([1.3, -1.0, -0.3], 0.8, 1.2)] {
             let body = BodyModel::scaled(scale, 1.0);

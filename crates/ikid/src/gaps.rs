@@ -676,6 +676,113 @@ mod tests {
     }
 
     #[test]
+    fn a_jump_of_any_marker_is_dropped_filled_and_flagged() {
+        // Each marker in turn jumps 2 cm away from its segment for one frame (the third of each
+        // segment, FAP and MCB, included): the filler names that marker alone and puts it back
+        // near the truth.
+        let body = BodyModel::default();
+        let (mut filler, frames) = calibrated(&body, 0.1);
+        for m in 0..N_MARKERS {
+            let truth = frames[300 + m];
+            let mut f = truth;
+            let first = 3 * (m / 3);
+            let centroid = (marker(&truth, first) + marker(&truth, first + 1) + marker(&truth, first + 2)) / 3.0;
+            let out = (marker(&truth, m) - centroid).normalize() * 0.02;
+            for a in 0..3 {
+                f[3 * m + a] += out[a] as f32;
+            }
+            assert_eq!(filler.fill(&mut f, m).unwrap(), 1 << m, "{}", MARKERS[m].name);
+            let err = (0..18).map(|k| (f[k] - truth[k]).abs()).fold(0.0, f32::max);
+            assert!(err < 5e-4, "{}: {err} m", MARKERS[m].name);
+        }
+    }
+
+    /// `frame` with marker `m` turned by `deg` about marker `pivot` of the same segment, in
+    /// the segment's plane: its distance to `pivot` is kept, to the third marker not.
+    fn swung(frame: &[f32; 18], m: usize, pivot: usize, deg: f64) -> [f32; 18] {
+        let (p, x) = (marker(frame, pivot), marker(frame, m));
+        let first = 3 * (m / 3);
+        let normal = (marker(frame, first + 1) - marker(frame, first)).cross(&(marker(frame, first + 2) - marker(frame, first)));
+        let turn = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(normal), deg.to_radians());
+        let moved = p + turn * (x - p);
+        let mut out = *frame;
+        for k in 0..3 {
+            out[3 * m + k] = moved[k] as f32;
+        }
+        out
+    }
+
+    /// Which of a segment's pairs (0–1, 0–2, 1–2) changed length by more than the floor.
+    fn broken_pairs(truth: &[f32; 18], f: &[f32; 18], first: usize) -> [bool; 3] {
+        let d = |x: &[f32; 18], a: usize, b: usize| (marker(x, first + a) - marker(x, first + b)).norm();
+        [(0, 1), (0, 2), (1, 2)].map(|(a, b)| (d(f, a, b) - d(truth, a, b)).abs() > OUTLIER_FLOOR)
+    }
+
+    #[test]
+    fn the_outlier_detector_names_the_marker_the_distances_point_to() {
+        // The rigid-distance branches alone (no previous frame to compare positions with), by
+        // geometry: a marker that moved breaks its two pairs; one broken pair cannot tell its
+        // two markers apart; three broken pairs point to the marker of the two largest breaks.
+        let body = BodyModel::default();
+        let (mut filler, frames) = calibrated(&body, 0.0);
+        filler.forget_last_frame();
+        let truth = frames[320];
+        assert_eq!(filler.outliers(&truth), 0);
+        for segment in 0..2 {
+            let first = 3 * segment;
+            for k in 0..3 {
+                let m = first + k;
+                let mut f = truth;
+                // Away from the segment's centroid: both of its distances grow.
+                let centroid = (marker(&truth, first) + marker(&truth, first + 1) + marker(&truth, first + 2)) / 3.0;
+                let out = (marker(&truth, m) - centroid).normalize() * 0.02;
+                for a in 0..3 {
+                    f[3 * m + a] += out[a] as f32;
+                }
+                assert_eq!(filler.outliers(&f), 1 << m, "{} moved", MARKERS[m].name);
+            }
+            for (a, b) in [(0, 1), (0, 2), (1, 2)] {
+                // Swing a about the pair's third marker: only the pair (a, b) changes length.
+                let c = 3 - a - b;
+                let f = swung(&truth, first + a, first + c, 40.0);
+                let pair = [(0, 1), (0, 2), (1, 2)].iter().position(|&p| p == (a, b)).unwrap();
+                assert_eq!(broken_pairs(&truth, &f, first), std::array::from_fn(|k| k == pair), "the set-up breaks one pair");
+                assert_eq!(filler.outliers(&f), (1 << (first + a)) | (1 << (first + b)), "pair {a}-{b} of segment {segment}");
+            }
+            // Marker 2 far off, marker 1 a little: all three pairs break; marker 2 is named.
+            let mut f = truth;
+            let centroid = (marker(&truth, first) + marker(&truth, first + 1) + marker(&truth, first + 2)) / 3.0;
+            for (k, reach) in [(2, 0.05), (1, 0.02)] {
+                let out = (marker(&truth, first + k) - centroid).normalize() * reach;
+                for a in 0..3 {
+                    f[3 * (first + k) + a] += out[a] as f32;
+                }
+            }
+            assert_eq!(broken_pairs(&truth, &f, first), [true; 3], "the set-up breaks all three pairs");
+            assert_eq!(filler.outliers(&f), 1 << (first + 2), "segment {segment}: the far marker");
+        }
+    }
+
+    #[test]
+    fn a_marker_moving_too_far_between_frames_is_named_by_its_motion() {
+        // A segment shifts rigidly by 2 cm in one 10-ms frame (as when labels jump to another
+        // arm's markers): every distance holds, every marker of it moves too far; the other
+        // segment is untouched.
+        let body = BodyModel::default();
+        let (filler, frames) = calibrated(&body, 0.0);
+        let truth = frames[300];
+        for segment in 0..2 {
+            let first = 3 * segment;
+            let mut f = truth;
+            for m in first..first + 3 {
+                f[3 * m] += 0.02;
+            }
+            assert_eq!(broken_pairs(&truth, &f, first), [false; 3]);
+            assert_eq!(filler.outliers(&f), 0b111 << first, "segment {segment}");
+        }
+    }
+
+    #[test]
     fn noise_is_not_mistaken_for_a_jump() {
         // ±5 mm uniform noise on every coordinate (the thesis' 5 % on the hand): never flagged.
         let body = BodyModel::default();

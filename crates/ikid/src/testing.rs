@@ -9,8 +9,8 @@ use nalgebra::{DMatrix, DVector};
 pub use crate::rng::SplitMix;
 
 /// An IK-style model with random weights: `window` frames of `set`, ReLU hidden layers of
-/// the given widths, `n_outputs` identity outputs. Weights are scaled (He-style) so
-/// activations stay O(1), as in a trained network.
+/// the given widths, `n_outputs` outputs, random input and output scaling. Weights are scaled
+/// (He-style) so activations stay O(1), as in a trained network.
 pub fn random_model(set: FeatureSet, window: usize, hidden: &[usize], n_outputs: usize, seed: u64) -> Model {
     let mut rng = SplitMix::new(seed);
     let widths: Vec<usize> = std::iter::once(window * set.feature_len()).chain(hidden.iter().copied()).chain([n_outputs]).collect();
@@ -27,7 +27,15 @@ pub fn random_model(set: FeatureSet, window: usize, hidden: &[usize], n_outputs:
         })
         .collect();
     let activations: Vec<Activation> = layers.iter().map(|l| l.activation).collect();
-    let mlp = Mlp::new(Affine::identity(widths[0]), layers, Affine::identity(n_outputs)).expect("shapes chain");
+    // Scaling as a trained model has it (min–max in, its inverse out), never the identity, so
+    // every test of a model also tests how the packed kernel folds the scaling in.
+    let mut affine = |n: usize, scale: (f64, f64), shift: f64| Affine {
+        scale: DVector::from_fn(n, |_, _| rng.uniform(scale.0, scale.1) as f32),
+        shift: DVector::from_fn(n, |_, _| rng.uniform(-shift, shift) as f32),
+    };
+    let input = affine(widths[0], (0.5, 2.0), 0.5);
+    let output = affine(n_outputs, (0.5, 3.0), 0.2);
+    let mlp = Mlp::new(input, layers, output).expect("shapes chain");
     let outputs = (0..n_outputs)
         .map(|i| OutputSpec { name: COORDINATES.get(i).map_or(format!("out{i}"), |c| c.name.to_string()), unit: "rad".into() })
         .collect();

@@ -551,7 +551,8 @@ mod tests {
             assert_eq!(b.refined, out.is_some(), "frame {i}");
             assert_eq!(b.noise, a.noise);
             assert_eq!(b.state.qd, a.state.qd, "q̇ is the filter's");
-            let per_unit = refiner_gate(a.noise);
+            // The gate by hand: σ / (σ + 0.1 mm).
+            let per_unit = a.noise / (a.noise + 1e-4);
             let (sd_q, sd_qdd) = bare.state_std();
             for k in 0..3 {
                 let (dq, dqdd) = out.as_ref().map_or((0.0, 0.0), |o| (f64::from(o[k]), f64::from(o[3 + k])));
@@ -574,6 +575,104 @@ mod tests {
         assert!(err.contains("1000 Hz") && err.contains("500 Hz"), "{err}");
         refined.set_refiner(None).unwrap();
         assert!(refined.refiner().is_none());
+    }
+
+    #[test]
+    fn the_refiner_gate_is_half_open_at_its_noise_and_closed_on_clean_markers() {
+        // By hand: σ / (σ + 0.1 mm).
+        assert_eq!(refiner_gate(0.0), 0.0);
+        assert!((refiner_gate(1e-4) - 0.5).abs() < 1e-12);
+        assert!((refiner_gate(1e-3) - 1e-3 / 1.1e-3).abs() < 1e-12);
+        assert!((refiner_gate(1e-6) - 1e-6 / 1.01e-4).abs() < 1e-12);
+        assert!(refiner_gate(1.0) > 0.9999 && refiner_gate(1.0) < 1.0);
+    }
+
+    /// Hand marker coordinates of `frames` (back to back) and their noise as the tracker is
+    /// documented to learn it, computed here from the third differences alone: per coordinate
+    /// a running mean of d³²/20 over the frames where four consecutive values are present
+    /// (weight 1/(n+1), or the forgetting rate once that is larger), and the same with the
+    /// initial guess counting as `PRIOR_FRAMES − 1` samples.
+    fn third_difference_noise(frames: &[f64], settings: &TrackerSettings) -> (Vec<[f64; N_HAND]>, Vec<[f64; N_HAND]>) {
+        let hand: Vec<[f64; N_HAND]> = frames.chunks_exact(MARKER_FRAME_LEN).map(|f| std::array::from_fn(|i| f[HAND_START + i])).collect();
+        let forget = 1.0 / (settings.noise_memory_s * settings.rate_hz);
+        let mut data = [0.0; N_HAND];
+        let mut guessed = [settings.initial_marker_noise.powi(2); N_HAND];
+        let mut n = [0.0; N_HAND];
+        let (mut data_out, mut guessed_out) = (Vec::new(), Vec::new());
+        for t in 0..hand.len() {
+            if t >= 3 {
+                for i in 0..N_HAND {
+                    let d3 = hand[t][i] - 3.0 * hand[t - 1][i] + 3.0 * hand[t - 2][i] - hand[t - 3][i];
+                    if d3.is_nan() {
+                        continue;
+                    }
+                    let sample = d3 * d3 / 20.0;
+                    let w = f64::max(1.0 / (n[i] + 1.0), forget);
+                    data[i] = (1.0 - w) * data[i] + w * sample;
+                    let w = f64::max(1.0 / (n[i] + PRIOR_FRAMES), forget);
+                    guessed[i] = (1.0 - w) * guessed[i] + w * sample;
+                    n[i] += 1.0;
+                }
+            }
+            data_out.push(data.map(f64::sqrt));
+            guessed_out.push(guessed.map(f64::sqrt));
+        }
+        (data_out, guessed_out)
+    }
+
+    #[test]
+    fn the_reported_noise_is_the_third_difference_estimate_of_the_data() {
+        let body = BodyModel::default();
+        let q = trajectory(3000, 1000.0);
+        let mut f = frames(&body, &q, 0.2);
+        uniform_range(&mut f, 0.02, 17).unwrap();
+        // MC5 missing for a while: those coordinates skip the samples that touch the gap.
+        for i in 700..720 {
+            f[i * MARKER_FRAME_LEN + 12..i * MARKER_FRAME_LEN + 15].fill(f64::NAN);
+        }
+        for settings in [TrackerSettings::default(), TrackerSettings { noise_memory_s: 0.05, initial_marker_noise: 3e-3, ..Default::default() }] {
+            let (data, guessed) = third_difference_noise(&f, &settings);
+            let mut tracker = Tracker::new(body.clone(), settings).unwrap();
+            for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+                let out = tracker.push(frame).unwrap().unwrap();
+                let mean = (data[i].iter().sum::<f64>() / N_HAND as f64).max(MIN_REPORTED_NOISE);
+                assert!((out.noise / mean - 1.0).abs() < 1e-9, "frame {i}: {} vs {mean} ({settings:?})", out.noise);
+                let learned = tracker.marker_noise();
+                for k in 0..N_HAND {
+                    assert!((learned[k] / guessed[i][k] - 1.0).abs() < 1e-9, "frame {i} coordinate {k}: {} vs {}", learned[k], guessed[i][k]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_short_noise_memory_forgets_old_noise_and_a_long_one_does_not() {
+        // 2 s of 5 % noise, then 2 s of clean markers: a 0.1 s memory reads the clean markers
+        // as clean by the end, a 100 s memory still remembers the noise.
+        let body = BodyModel::default();
+        let q = trajectory(4000, 1000.0);
+        let clean = frames(&body, &q, 0.0);
+        let mut f = clean.clone();
+        uniform_range(&mut f[..2000 * MARKER_FRAME_LEN], 0.05, 3).unwrap();
+        let last_noise = |memory: f64| {
+            let mut tracker = Tracker::new(body.clone(), TrackerSettings { noise_memory_s: memory, ..Default::default() }).unwrap();
+            let mut noisy_end = 0.0;
+            let mut out = None;
+            for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+                out = tracker.push(frame).unwrap();
+                if i == 1999 {
+                    noisy_end = out.unwrap().noise;
+                }
+            }
+            (noisy_end, out.unwrap().noise)
+        };
+        let (noisy_short, end_short) = last_noise(0.1);
+        let (noisy_long, end_long) = last_noise(100.0);
+        assert!(noisy_short > 1e-4 && noisy_long > 1e-4, "{noisy_short} {noisy_long}");
+        // After 20 memories of clean frames: down by e^-20 in variance.
+        assert!(end_short < 1e-3 * noisy_short, "short memory: {end_short} after {noisy_short}");
+        // With n samples the running mean halves its variance at most: σ falls by ≤ √2.
+        assert!(end_long > noisy_long / 1.5, "long memory: {end_long} after {noisy_long}");
     }
 
     #[test]

@@ -177,6 +177,7 @@ fn stream_fills_then_predicts_and_matches_batch_bit_for_bit() {
     let mut features = vec![0f32; 50 * 24];
     FeatureSet::Basis.compute_rows(&frames, &mut features).unwrap();
     let want = m.mlp().forward_reference(&features[10 * 24..15 * 24]);
+    assert_eq!(want.len(), 3, "the oracle gives one value per output");
     for (g, w) in batch[10 * 3..11 * 3].iter().zip(&want) {
         assert!((g - w).abs() <= 1e-5 * w.abs().max(1e-3), "{g} vs {w}");
     }

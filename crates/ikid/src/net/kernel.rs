@@ -469,6 +469,7 @@ mod tests {
             let x: Vec<f32> = (0..widths[0]).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
             packed.forward(&x, &mut scratch, &mut out);
             let want = mlp.forward_reference(&x);
+            assert_eq!(want.len(), out.len(), "the oracle gives one value per output");
             let scale = want.iter().fold(1e-3f32, |m, v| m.max(v.abs()));
             for (g, w) in out.iter().zip(&want) {
                 assert!((g - w).abs() <= 1e-5 * scale, "{widths:?} fma={use_fma}: {g} vs {w}");

@@ -146,3 +146,82 @@ impl Mlp {
         self.output.apply(&h).as_slice().to_vec()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 2 → 2 (ReLU) → 1 with input and output scaling, small enough to compute by hand.
+    fn hand_network() -> Mlp {
+        Mlp::new(
+            Affine { scale: DVector::from_vec(vec![2.0, 0.5]), shift: DVector::from_vec(vec![-1.0, 1.0]) },
+            vec![
+                Dense {
+                    weight: DMatrix::from_row_slice(2, 2, &[1.0, -2.0, 0.5, 3.0]),
+                    bias: DVector::from_vec(vec![0.25, -1.0]),
+                    activation: Activation::Relu,
+                },
+                Dense { weight: DMatrix::from_row_slice(1, 2, &[2.0, -1.0]), bias: DVector::from_vec(vec![0.5]), activation: Activation::Identity },
+            ],
+            Affine { scale: DVector::from_vec(vec![10.0]), shift: DVector::from_vec(vec![3.0]) },
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn the_oracle_computes_what_the_formula_says() {
+        let net = hand_network();
+        // x = (1, 2): scaled (1, 2); hidden (1 − 4 + 0.25, 0.5 + 6 − 1) = (−2.75, 5.5) → ReLU
+        // (0, 5.5); output 0 − 5.5 + 0.5 = −5; scaled −50 + 3 = −47.
+        assert_eq!(net.forward_reference(&[1.0, 2.0]), vec![-47.0]);
+        // x = (3, −4): scaled (5, −1); hidden (5 + 2 + 0.25, 2.5 − 3 − 1) = (7.25, −1.5) → (7.25, 0);
+        // output 14.5 + 0.5 = 15; scaled 153.
+        assert_eq!(net.forward_reference(&[3.0, -4.0]), vec![153.0]);
+        assert_eq!(net.widths(), vec![2, 2, 1]);
+        assert_eq!(net.multiply_adds(), 6);
+        assert_eq!((net.n_inputs(), net.n_outputs()), (2, 1));
+    }
+
+    #[test]
+    fn affine_and_activation_by_hand() {
+        let a = Affine { scale: DVector::from_vec(vec![2.0, -1.0, 0.0]), shift: DVector::from_vec(vec![1.0, 1.0, 4.0]) };
+        assert_eq!(a.apply(&DVector::from_vec(vec![3.0, 5.0, 9.0])).as_slice(), &[7.0, -4.0, 4.0]);
+        assert_eq!((a.len(), a.is_empty()), (3, false));
+        let id = Affine::identity(2);
+        assert_eq!(id.apply(&DVector::from_vec(vec![-1.5, 2.5])).as_slice(), &[-1.5, 2.5]);
+        assert!(Affine::identity(0).is_empty());
+        let mut v = [-1.0, 0.0, 2.0];
+        Activation::Relu.apply(&mut v);
+        assert_eq!(v, [0.0, 0.0, 2.0]);
+        let mut v = [-1.0, 2.0];
+        Activation::Identity.apply(&mut v);
+        assert_eq!(v, [-1.0, 2.0]);
+        assert_eq!((Activation::Relu.name(), Activation::Identity.name()), ("relu", "identity"));
+    }
+
+    #[test]
+    fn a_network_that_does_not_chain_is_refused_with_the_reason() {
+        let net = hand_network();
+        let err = |input: Affine, layers: Vec<Dense>, output: Affine| Mlp::new(input, layers, output).unwrap_err().to_string();
+        assert!(err(net.input.clone(), vec![], net.output.clone()).contains("has no layers"));
+        let e = err(Affine::identity(3), net.layers.clone(), net.output.clone());
+        assert!(e.contains("layer 0 takes 2 inputs but receives 3"), "{e}");
+        let mut short_bias = net.layers.clone();
+        short_bias[1].bias = DVector::from_vec(vec![0.5, 0.5]);
+        let e = err(net.input.clone(), short_bias, net.output.clone());
+        assert!(e.contains("layer 1 has 1 outputs but 2 biases"), "{e}");
+        let e = err(net.input.clone(), net.layers.clone(), Affine::identity(2));
+        assert!(e.contains("output scaling has 2 elements, network gives 1"), "{e}");
+        for poison in 0..4 {
+            let (mut input, mut layers, mut output) = (net.input.clone(), net.layers.clone(), net.output.clone());
+            match poison {
+                0 => input.shift[1] = f32::NAN,
+                1 => output.scale[0] = f32::INFINITY,
+                2 => layers[0].weight[(1, 0)] = f32::NAN,
+                _ => layers[1].bias[0] = f32::NEG_INFINITY,
+            }
+            let e = err(input, layers, output);
+            assert!(e.contains("non-finite"), "{poison}: {e}");
+        }
+    }
+}

@@ -1,0 +1,70 @@
+//! A stream's calibration and last output, as a user of the Rust API sees them: the
+//! calibration moves every frame before the network reads it (the same as calibrating the
+//! frames first), and `output()` is what the last push returned.
+
+use ikid::testing::{random_frames, random_model};
+use ikid::{Calibration, FeatureSet};
+use nalgebra::{Matrix3, Rotation3, Vector3};
+
+/// A placement 12° and 20° away from the body model's, about skew axes.
+fn a_subjects_calibration() -> Calibration {
+    let model = Calibration::body_model();
+    let turn = |axis: [f64; 3], deg: f64| Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(Vector3::from(axis)), deg.to_radians());
+    let forearm: Matrix3<f64> = (turn([1.0, 2.0, 0.5], 12.0) * model.forearm).into_inner();
+    let hand: Matrix3<f64> = (turn([-0.3, 1.0, 2.0], 20.0) * model.hand).into_inner();
+    Calibration::from_matrices(forearm, hand).unwrap()
+}
+
+#[test]
+fn a_calibrated_stream_equals_an_uncalibrated_one_on_calibrated_frames() {
+    let model = random_model(FeatureSet::Angles, 5, &[24], 3, 9);
+    let cal = a_subjects_calibration();
+    let frames = random_frames(FeatureSet::Angles, 60, 4);
+    let mut calibrated = model.stream();
+    calibrated.set_calibration(Some(cal)).unwrap();
+    assert_eq!(calibrated.calibration(), Some(&cal));
+    let (mut plain, mut raw) = (model.stream(), model.stream());
+    let mut differs = 0;
+    for (i, frame) in frames.chunks_exact(18).enumerate() {
+        let mut moved = frame.to_vec();
+        cal.apply(&mut moved, i).unwrap();
+        let got = calibrated.push(frame).unwrap().map(<[f32]>::to_vec);
+        let want = plain.push(&moved).unwrap().map(<[f32]>::to_vec);
+        assert_eq!(got, want, "frame {i}");
+        let uncalibrated = raw.push(frame).unwrap().map(<[f32]>::to_vec);
+        if let (Some(g), Some(u)) = (&got, &uncalibrated) {
+            differs += usize::from(g.iter().zip(u).any(|(a, b)| (a - b).abs() > 1e-3));
+        }
+    }
+    assert_eq!(differs, 56, "every output must change with a 12-20° placement difference");
+    // None goes back to the markers as they come.
+    calibrated.set_calibration(None).unwrap();
+    assert!(calibrated.calibration().is_none());
+}
+
+#[test]
+fn a_joint_state_stream_refuses_a_calibration() {
+    let mut stream = random_model(FeatureSet::JointState, 5, &[8], 3, 1).stream();
+    let err = stream.set_calibration(Some(a_subjects_calibration())).unwrap_err().to_string();
+    assert!(err.contains("calibration") && err.contains("joint_state"), "{err}");
+    stream.set_calibration(None).unwrap();
+}
+
+#[test]
+fn output_is_the_last_prediction_and_equals_batch_prediction() {
+    let model = random_model(FeatureSet::Relative, 4, &[16, 16], 3, 5);
+    let frames = random_frames(FeatureSet::Relative, 30, 8);
+    let mut batch = vec![0f32; model.n_predictions(30) * 3];
+    assert_eq!(model.predict(&frames, &mut batch).unwrap(), 27);
+    let mut stream = model.stream();
+    for (i, frame) in frames.chunks_exact(18).enumerate() {
+        let pushed = stream.push(frame).unwrap().map(<[f32]>::to_vec);
+        if i >= 3 {
+            let pushed = pushed.expect("window full");
+            assert_eq!(stream.output(), &pushed[..], "frame {i}");
+            assert_eq!(stream.output(), &batch[(i - 3) * 3..(i - 2) * 3], "frame {i}");
+        } else {
+            assert!(pushed.is_none());
+        }
+    }
+}
