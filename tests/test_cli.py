@@ -151,8 +151,10 @@ def test_id_from_a_mot_file_equals_the_api(trial, tmp_path, capsys):
     want = ikid.reference_id(q, qd, np.gradient(qd, t_file, axis=0))
     np.testing.assert_allclose(tau, want, rtol=1e-6, atol=1e-8)
     # Central differences of exact angles: torques close to the simulator's own.
+    # Per torque, relative to the truth's variance (a constant scores 1; these 1e-7-6e-6): the
+    # former bound on the pooled RMSE, 0.05 of the largest torque, held with s_p and e_f constant.
     inner = slice(2, -2)
-    assert np.sqrt(((tau[inner] - trial.tau[inner]) ** 2).mean()) < 0.05 * np.abs(trial.tau).max()
+    assert np.all(((tau[inner] - trial.tau[inner]) ** 2).mean(0) <= 1e-3 * trial.tau[inner].var(0))
 
     assert cli(["id", str(tmp_path / "t.mot"), "-o", str(tmp_path / "net.sto")]) == 0
     t, tau = read_sto(tmp_path / "net.sto")

@@ -219,7 +219,10 @@ def test_run_command_writes_angles_and_torques_for_a_folder(trial, tmp_path, cap
         t, tau = io.read_sto(tmp_path / "out" / f"trial{k}.sto")
         np.testing.assert_allclose(tau, ikid.load("wrist-chain").predict(io.read_c3d(tmp_path / "in" / f"trial{k}.c3d").frames(
             io.MarkerMap.load(tmp_path / "lab.toml"))), atol=1e-8)
-        assert np.mean((tau - trial.tau[np.round(t * 1000).astype(int)]) ** 2) < 1e-2  # N·m²
+        # Per torque, the MSE is a fraction of the truth's variance (its MSE about its mean): a
+        # constant prediction scores >= 1 there, zero 2.0-2.9; wrist-chain 0.02-0.19 on this trial.
+        truth = trial.tau[np.round(t * 1000).astype(int)]
+        assert np.all(np.mean((tau - truth) ** 2, axis=0) <= 0.5 * truth.var(axis=0))
 
 
 def test_map_template_lists_the_files_labels(trial, tmp_path, capsys):
