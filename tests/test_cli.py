@@ -7,6 +7,7 @@ import importlib.util
 import io
 import json
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -315,10 +316,62 @@ def test_train_chain_needs_torques(lab, tmp_path, capsys):
 # --- bench ---------------------------------------------------------------------------------------
 
 
-def test_bench_prints_latency_and_throughput(capsys):
-    assert cli(["bench", "--model", "wrist-ik", "--frames", "2000"]) == 0
+NUM = r"([-+0-9.eE]+|nan|inf)"
+
+
+@pytest.mark.parametrize(("name", "frames"), [("wrist-ik", 2000), ("wrist-id", 700)])
+def test_bench_prints_latency_and_throughput(capsys, name, frames):
+    assert cli(["bench", "--model", name, "--frames", str(frames)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    model = ikid.load(name)
+    # What was run: the model as loaded, on the frames asked for.
+    assert lines[0] == (f"{name}: {model.feature_set} x {model.window}, layers {'-'.join(map(str, model.layer_widths))}, "
+                        f"{frames} frames"), lines[0]
+    m = re.fullmatch(rf"  Stream\.push \(Python\): p50 {NUM} µs, p99 {NUM} µs, max {NUM} µs "
+                     rf"\(budget 2000 µs: {NUM}× headroom at p99\)", lines[1])
+    assert m, lines[1]
+    p50, p99, worst, headroom = map(float, m.groups())
+    assert np.isfinite([p50, p99, worst]).all() and 0 < p50 <= p99 <= worst, lines[1]
+    assert headroom == pytest.approx(2000 / p99, rel=0.01, abs=1), lines[1]  # p99 printed to 0.01 µs
+    # One line per thread count, each a time per frame and the rate it implies.
+    assert len(lines) == 4
+    for threads, line in zip((1, 2), lines[2:]):
+        m = re.fullmatch(rf"  predict, {threads} threads?: {NUM} µs per frame \({NUM} M frames/s\)", line)
+        assert m, line
+        us, rate = map(float, m.groups())
+        assert np.isfinite([us, rate]).all() and us > 0 and rate > 0, line
+        assert us * rate == pytest.approx(1, rel=0.05), line  # both printed to 3 significant digits or so
+
+
+def test_demo_prints_the_errors_and_latency_of_what_it_streamed(capsys, tmp_path):
+    assert cli(["demo", "--seconds", "2", "--seed", "9902", "--plot", str(tmp_path / "demo.png")]) == 0
     out = capsys.readouterr().out
-    assert "Stream.push (Python): p50" in out and "predict, 2 threads" in out
+    trial = ikid.simulate("random", seed=9902, duration=2.0, shoulder_flexion=np.radians(30)).with_noise("uniform", seed=9902, fraction=0.01)
+    assert f"   {len(trial.time)} frames at 1000 Hz" in out
+    # The printed errors are those of the shipped models on that trial (batch prediction, the
+    # simulator's truth), once both windows are full.
+    ik, chain = ikid.load("wrist-ik"), ikid.load("wrist-chain")
+    ok = max(ik.window, chain.window)
+    ang = np.degrees(ik.predict(trial.markers)[ok - ik.window + 1 :] - trial.q[ok:])
+    tau = chain.predict(trial.markers)[ok - chain.window + 1 :] - trial.tau[ok:]
+    ref = np.degrees(ikid.reference_ik(trial.markers)[ok:] - trial.q[ok:])
+    rms = lambda x: np.sqrt(np.mean(x**2, axis=0))  # noqa: E731
+    span = trial.tau[ok:].max(0) - trial.tau[ok:].min(0)
+    for k, name in enumerate(ikid.coordinate_names()):
+        m = re.search(rf"^   {name} +{NUM} °  +{NUM} °  +{NUM} N·m  +{NUM} %$", out, re.MULTILINE)
+        assert m, out
+        got = np.array(m.groups(), float)
+        want = [rms(ang)[k], rms(ref)[k], rms(tau)[k], 100 * rms(tau)[k] / span[k]]
+        assert np.all(np.abs(got - want) <= [1e-3, 1e-3, 1e-4, 1e-2]), (name, got, want)  # a unit of the last printed digit
+    m = re.search(rf"angle MSE {NUM} rad² \(reference IK per frame {NUM}\); torque MSE {NUM} N·m²", out)
+    assert m, out
+    np.testing.assert_allclose(np.array(m.groups(), float),
+                               [np.mean(np.radians(ang) ** 2), np.mean(np.radians(ref) ** 2), np.mean(tau**2)], rtol=0.01)
+    m = re.search(rf"from Python: p50 {NUM} µs, p99 {NUM} µs", out)
+    assert m, out
+    p50, p99 = map(float, m.groups())
+    assert np.isfinite([p50, p99]).all() and 0 < p50 <= p99, m.group(0)
+    assert (tmp_path / "demo.png").stat().st_size > 0
 
 
 def test_import_ikid_and_the_cli_do_not_import_torch():
