@@ -11,6 +11,9 @@ __all__ = [
     "IkidError",
     "ModelFileError",
     "InputError",
+    "ArgumentError",
+    "ReadError",
+    "NotFoundError",
     "COORDINATES",
     "MARKERS",
     "FEATURE_SETS",
@@ -43,9 +46,22 @@ MARKERS: list[tuple[str, str, str]]
 FEATURE_SETS: list[str]
 SIMULATOR: str
 
-class IkidError(Exception): ...
+class IkidError(Exception):
+    """Base of every ikid error. From the core: ``kind`` ("input", "argument", "model_file",
+    "io"), ``code`` (stable reason), ``frame`` (or None), ``markers``, ``reason`` (the message
+    without its ``frame N:`` prefix); None/empty when raised by Python code."""
+
+    kind: str | None
+    code: str | None
+    frame: int | None
+    markers: list[str] | tuple[()]
+    reason: str | None
+
 class ModelFileError(IkidError): ...
 class InputError(IkidError, ValueError): ...
+class ArgumentError(InputError): ...
+class ReadError(IkidError, OSError): ...
+class NotFoundError(ReadError, FileNotFoundError): ...
 
 _Floats = npt.ArrayLike
 

@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import re
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -373,8 +372,8 @@ def cmd_stream(args: argparse.Namespace) -> int:
                 if filled:
                     status = "filled:" + "+".join(filled)
         except ikid.InputError as e:
-            # The stream numbers frames from its own last reset; the line's frame column is the one to read.
-            reason = re.sub(r"^frame \d+: ", "", str(e))
+            # The line's frame column is the one to read: the reason alone goes in the status.
+            reason = e.reason or str(e)
             status = "refused:" + reason.replace(",", ";").replace("\n", " ")
             if args.strict:
                 print(f"ikid: error: frame {frame}: {e}", file=sys.stderr)

@@ -10,7 +10,6 @@ reason, in :attr:`Run.refused`, never written as a guess.
 
 from __future__ import annotations
 
-import re
 from collections import Counter
 from dataclasses import dataclass, field
 
@@ -58,18 +57,16 @@ class Run:
         return ", ".join(parts)
 
 
-def _reason(message: str) -> str:
-    """A short, countable reason from a stream's error message."""
-    message = re.sub(r"^frame \d+: ", "", message)
-    m = re.match(r"missing marker\(s\) (\S+) not filled", message)
-    if m:
-        return f"missing {m.group(1)} (not fillable)"
-    m = re.match(r"marker\(s\) (\S+) inconsistent", message)
-    if m:
-        return f"{m.group(1)} jumped"
-    if "(missing or non-finite)" in message:
+def _reason(error: _native.InputError) -> str:
+    """A short, countable reason for a refused frame, from the core's classification."""
+    markers = ", ".join(error.markers)
+    if error.code == "missing_markers":
+        return f"missing {markers} (not fillable)"
+    if error.code == "outlier_marker":
+        return f"{markers} jumped"
+    if error.code == "non_finite_input":
         return "missing marker (model refuses gaps)"
-    return message.split(";")[0]
+    return (error.reason or str(error)).split(";")[0]
 
 
 def check_rate(model: _native.Model, rate_hz: float, source: str, allow_resample: bool) -> bool:
@@ -111,7 +108,7 @@ def run_model(model: _native.Model, frames, time, *, rate_hz: float | None = Non
         try:
             out = stream.push(frame, time=float(t))
         except _native.InputError as e:
-            refused[_reason(str(e))] += 1
+            refused[_reason(e)] += 1
             continue
         if out is None:
             refused["window filling"] += 1

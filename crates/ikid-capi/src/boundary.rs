@@ -1,6 +1,6 @@
 //! The panic boundary, status codes, the thread-local last error, and pointer checks.
 
-use ikid_core::Error;
+use ikid_core::{Error, ErrorKind};
 use std::cell::RefCell;
 use std::ffi::{CString, c_char};
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -39,17 +39,14 @@ impl Failure {
 }
 
 impl From<Error> for Failure {
+    /// The status is the core's [`ErrorKind`], mapped here once and exhaustively (a new kind
+    /// does not compile until it has a status); the message is the core's.
     fn from(e: Error) -> Self {
-        let status = match &e {
-            Error::Io { .. } => ikid_status::Io,
-            Error::FrameLength { .. }
-            | Error::NonFiniteInput { .. }
-            | Error::NonFiniteOutput { .. }
-            | Error::DegenerateSegment { .. }
-            | Error::MissingMarkers { .. }
-            | Error::OutlierMarker { .. } => ikid_status::Input,
-            Error::BadArgument { .. } => ikid_status::InvalidArgument,
-            _ => ikid_status::ModelFile,
+        let status = match e.kind() {
+            ErrorKind::Input => ikid_status::Input,
+            ErrorKind::Argument => ikid_status::InvalidArgument,
+            ErrorKind::ModelFile => ikid_status::ModelFile,
+            ErrorKind::Io => ikid_status::Io,
         };
         Failure::new(status, e.to_string())
     }

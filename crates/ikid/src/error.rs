@@ -1,4 +1,7 @@
-//! The core's one error type: every failure names the field, tensor or value at fault.
+//! The core's one error type: every failure names the field, tensor or value at fault, and
+//! is classified here once — its [`ErrorKind`], a stable [`code`](Error::code), the frame and
+//! the markers it concerns — so that Python's exception classes, C's status codes and any
+//! caller's counting all derive from the same facts instead of from message text.
 
 use thiserror::Error;
 
@@ -16,6 +19,14 @@ pub enum Error {
         path: String,
         /// Underlying I/O error.
         source: std::io::Error,
+    },
+    /// A model file read from disk is invalid: `source` says how, this names the file.
+    #[error("model file {path}: {source}")]
+    InModelFile {
+        /// Path that was read.
+        path: String,
+        /// What is wrong with its content (a model-file error).
+        source: Box<Error>,
     },
     /// The bytes are not a valid safetensors container (truncated, corrupt header, ...).
     #[error("not a valid safetensors model file: {0}")]
@@ -147,7 +158,123 @@ pub enum Error {
     },
 }
 
+/// What kind of failure an [`Error`] is; each binding maps every kind (exhaustively) to its
+/// own notion: a Python exception class, a C status code.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ErrorKind {
+    /// A frame, or an array of frames, is unusable: wrong length, a missing or non-finite
+    /// value, degenerate or jumping markers, or an input so far outside the training range
+    /// that the prediction is not finite. Per-frame errors of this kind carry the frame.
+    Input,
+    /// An argument other than frame data is out of its range: a buffer size, a setting, a
+    /// name, a calibration, a time stamp.
+    Argument,
+    /// A model file is corrupt, truncated, or does not fit its model card.
+    ModelFile,
+    /// A file could not be read: not found, not a regular file, too large, no permission.
+    Io,
+}
+
+impl ErrorKind {
+    /// Every kind, in the order documented to users.
+    pub const ALL: [ErrorKind; 4] = [ErrorKind::Input, ErrorKind::Argument, ErrorKind::ModelFile, ErrorKind::Io];
+
+    /// The kind's stable name (`"input"`, `"argument"`, `"model_file"`, `"io"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ErrorKind::Input => "input",
+            ErrorKind::Argument => "argument",
+            ErrorKind::ModelFile => "model_file",
+            ErrorKind::Io => "io",
+        }
+    }
+}
+
 impl Error {
+    /// The kind of failure: what a binding maps to an exception class or a status code.
+    pub fn kind(&self) -> ErrorKind {
+        match self {
+            Error::Io { .. } => ErrorKind::Io,
+            Error::InModelFile { source, .. } => source.kind(),
+            Error::Container(_)
+            | Error::ModelCard(_)
+            | Error::UnsupportedVersion { .. }
+            | Error::UnknownFeatureSet { .. }
+            | Error::MissingTensor { .. }
+            | Error::UnexpectedTensor { .. }
+            | Error::WrongDtype { .. }
+            | Error::ShapeMismatch { .. }
+            | Error::NonFiniteWeight { .. } => ErrorKind::ModelFile,
+            Error::FrameLength { .. }
+            | Error::NonFiniteInput { .. }
+            | Error::MissingMarkers { .. }
+            | Error::OutlierMarker { .. }
+            | Error::DegenerateSegment { .. }
+            | Error::NonFiniteOutput { .. } => ErrorKind::Input,
+            Error::BadArgument { .. } => ErrorKind::Argument,
+        }
+    }
+
+    /// A stable, machine-readable reason (one per variant; `"not_found"` for a missing file),
+    /// for callers that count or branch on errors: rewording a message never changes it.
+    pub fn code(&self) -> &'static str {
+        match self {
+            Error::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => "not_found",
+            Error::Io { .. } => "io",
+            Error::InModelFile { source, .. } => source.code(),
+            Error::Container(_) => "container",
+            Error::ModelCard(_) => "model_card",
+            Error::UnsupportedVersion { .. } => "unsupported_version",
+            Error::UnknownFeatureSet { .. } => "unknown_feature_set",
+            Error::MissingTensor { .. } => "missing_tensor",
+            Error::UnexpectedTensor { .. } => "unexpected_tensor",
+            Error::WrongDtype { .. } => "wrong_dtype",
+            Error::ShapeMismatch { .. } => "shape_mismatch",
+            Error::NonFiniteWeight { .. } => "non_finite_weight",
+            Error::FrameLength { .. } => "frame_length",
+            Error::NonFiniteInput { .. } => "non_finite_input",
+            Error::MissingMarkers { .. } => "missing_markers",
+            Error::OutlierMarker { .. } => "outlier_marker",
+            Error::DegenerateSegment { .. } => "degenerate_segment",
+            Error::NonFiniteOutput { .. } => "non_finite_output",
+            Error::BadArgument { .. } => "bad_argument",
+        }
+    }
+
+    /// The frame a per-frame error concerns (its index within the call or stream), if any.
+    pub fn frame(&self) -> Option<usize> {
+        match self {
+            Error::NonFiniteInput { frame, .. }
+            | Error::MissingMarkers { frame, .. }
+            | Error::OutlierMarker { frame, .. }
+            | Error::DegenerateSegment { frame, .. }
+            | Error::NonFiniteOutput { frame, .. } => Some(*frame),
+            _ => None,
+        }
+    }
+
+    /// The markers an error concerns ([`crate::body::MARKERS`] names), empty if none.
+    pub fn markers(&self) -> Vec<&str> {
+        match self {
+            Error::MissingMarkers { markers, .. } | Error::OutlierMarker { markers, .. } => markers.split(", ").collect(),
+            Error::NonFiniteInput { field, .. } => {
+                let name = field.split('.').next().unwrap_or(field);
+                crate::body::MARKERS.iter().map(|m| m.name).filter(|m| *m == name).collect()
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// The message without its `frame N: ` prefix: what went wrong, for a caller that reports
+    /// the frame in its own numbering (a file's line, a stream's count).
+    pub fn message_without_frame(&self) -> String {
+        let message = self.to_string();
+        match self.frame() {
+            Some(frame) => message.strip_prefix(&format!("frame {frame}: ")).map_or(message.clone(), str::to_string),
+            None => message,
+        }
+    }
+
     /// The same error attributed to frame `frame` of a larger call (per-frame errors only).
     pub fn renumbered(self, frame: usize) -> Self {
         match self {
@@ -157,6 +284,69 @@ impl Error {
             Error::OutlierMarker { markers, detail, .. } => Error::OutlierMarker { frame, markers, detail },
             Error::NonFiniteOutput { value, .. } => Error::NonFiniteOutput { frame, value },
             other => other,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An error and the kind, code, frame and markers a user relies on for it.
+    type Expected = (Error, ErrorKind, &'static str, Option<usize>, Vec<&'static str>);
+
+    /// One error of every variant.
+    fn every_variant() -> Vec<Expected> {
+        let io = |kind| Error::Io { path: "m.safetensors".into(), source: std::io::Error::from(kind) };
+        use ErrorKind::*;
+        vec![
+            (io(std::io::ErrorKind::NotFound), Io, "not_found", None, vec![]),
+            (io(std::io::ErrorKind::PermissionDenied), Io, "io", None, vec![]),
+            (Error::Container("bad header".into()), ModelFile, "container", None, vec![]),
+            (Error::InModelFile { path: "m.safetensors".into(), source: Box::new(Error::MissingTensor { name: "b".into() }) }, ModelFile, "missing_tensor", None, vec![]),
+            (Error::ModelCard("no task".into()), ModelFile, "model_card", None, vec![]),
+            (Error::UnsupportedVersion { found: 9, supported: 1 }, ModelFile, "unsupported_version", None, vec![]),
+            (Error::UnknownFeatureSet { name: "x".into(), known: "markers".into() }, ModelFile, "unknown_feature_set", None, vec![]),
+            (Error::MissingTensor { name: "a".into() }, ModelFile, "missing_tensor", None, vec![]),
+            (Error::UnexpectedTensor { name: "a".into() }, ModelFile, "unexpected_tensor", None, vec![]),
+            (Error::WrongDtype { name: "a".into(), dtype: "F16".into() }, ModelFile, "wrong_dtype", None, vec![]),
+            (Error::ShapeMismatch { name: "a".into(), found: vec![1], expected: vec![2] }, ModelFile, "shape_mismatch", None, vec![]),
+            (Error::NonFiniteWeight { name: "a".into(), index: 3, value: f32::NAN }, ModelFile, "non_finite_weight", None, vec![]),
+            (Error::FrameLength { feature_set: "markers", found: 17, expected: 18 }, Input, "frame_length", None, vec![]),
+            (Error::NonFiniteInput { frame: 4, field: "MC5.y".into(), value: f32::NAN }, Input, "non_finite_input", Some(4), vec!["MC5"]),
+            (Error::NonFiniteInput { frame: 4, field: "q.ra_wr_s_p".into(), value: f32::NAN }, Input, "non_finite_input", Some(4), vec![]),
+            (Error::MissingMarkers { frame: 7, markers: "RSP, MC2".into(), reason: "why" }, Input, "missing_markers", Some(7), vec!["RSP", "MC2"]),
+            (Error::OutlierMarker { frame: 8, markers: "FAP".into(), detail: "far".into() }, Input, "outlier_marker", Some(8), vec!["FAP"]),
+            (Error::DegenerateSegment { frame: 9, segment: "hand" }, Input, "degenerate_segment", Some(9), vec![]),
+            (Error::NonFiniteOutput { frame: 10, value: f32::INFINITY }, Input, "non_finite_output", Some(10), vec![]),
+            (Error::BadArgument { what: "rate_hz", detail: "is 0".into() }, Argument, "bad_argument", None, vec![]),
+        ]
+    }
+
+    #[test]
+    fn every_error_is_classified_with_its_frame_and_markers() {
+        let mut codes = std::collections::HashSet::new();
+        for (err, kind, code, frame, markers) in every_variant() {
+            assert_eq!((err.kind(), err.code(), err.frame(), err.markers()), (kind, code, frame, markers), "{err:?}");
+            codes.insert(code);
+            let message = err.message_without_frame();
+            match frame {
+                Some(f) => assert_eq!(format!("frame {f}: {message}"), err.to_string()),
+                None => assert_eq!(message, err.to_string()),
+            }
+        }
+        // Codes are unique per variant: one input error appears twice, and a file's error has
+        // the code of what is wrong inside it.
+        assert_eq!(codes.len(), every_variant().len() - 2);
+        assert_eq!(ErrorKind::ALL.map(ErrorKind::name), ["input", "argument", "model_file", "io"]);
+    }
+
+    #[test]
+    fn renumbering_moves_only_per_frame_errors() {
+        for (err, _, code, frame, _) in every_variant() {
+            let moved = err.renumbered(42);
+            assert_eq!(moved.code(), code);
+            assert_eq!(moved.frame(), frame.map(|_| 42));
         }
     }
 }

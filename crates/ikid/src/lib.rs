@@ -38,7 +38,7 @@ pub mod testing;
 pub mod tracker;
 
 pub use calibration::Calibration;
-pub use error::{Error, Result};
+pub use error::{Error, ErrorKind, Result};
 pub use features::FeatureSet;
 pub use gaps::{GapFiller, MissingMarkers};
 pub use model::{Model, ModelCard, OutputSpec};

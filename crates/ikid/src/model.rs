@@ -224,6 +224,32 @@ pub struct Model {
     inner: Arc<Inner>,
 }
 
+/// Largest model file [`Model::load`] reads, bytes. The thesis' largest network is ~0.5 MB;
+/// 256 MiB leaves room for any MLP that could run in real time.
+pub const MAX_MODEL_FILE_BYTES: u64 = 256 << 20;
+
+/// The bytes of the regular file at `path`, refusing anything else (directory, pipe, device)
+/// and anything larger than `limit` before reading it; a file that grows while being read is
+/// cut at `limit + 1` bytes and refused.
+pub fn read_bounded(path: &Path, limit: u64) -> std::io::Result<Vec<u8>> {
+    use std::io::{Error as IoError, ErrorKind as IoKind, Read};
+    let meta = std::fs::metadata(path)?;
+    if !meta.is_file() {
+        let what = if meta.is_dir() { "a directory" } else { "not a regular file (a pipe, socket or device)" };
+        return Err(IoError::new(IoKind::InvalidInput, format!("it is {what}; expected a file")));
+    }
+    let too_large = |size: u64| IoError::new(IoKind::InvalidData, format!("it is {size} bytes, more than the {limit} bytes accepted"));
+    if meta.len() > limit {
+        return Err(too_large(meta.len()));
+    }
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    std::fs::File::open(path)?.take(limit + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > limit {
+        return Err(too_large(bytes.len() as u64));
+    }
+    Ok(bytes)
+}
+
 #[derive(Debug)]
 struct Inner {
     card: ModelCard,
@@ -233,11 +259,14 @@ struct Inner {
 }
 
 impl Model {
-    /// Loads and validates a `.safetensors` model file.
+    /// Loads and validates a `.safetensors` model file. Reads only a regular file of at most
+    /// [`MAX_MODEL_FILE_BYTES`]: a directory, a named pipe or a device (`/dev/zero`) is refused
+    /// before it is opened, so a wrong path never hangs or fills memory.
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.display().to_string(), source })?;
-        Self::from_bytes(&bytes)
+        let name = || path.display().to_string();
+        let bytes = read_bounded(path, MAX_MODEL_FILE_BYTES).map_err(|source| Error::Io { path: name(), source })?;
+        Self::from_bytes(&bytes).map_err(|e| Error::InModelFile { path: name(), source: Box::new(e) })
     }
 
     /// Validates a model held in memory (the bytes of a `.safetensors` file).

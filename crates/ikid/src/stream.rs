@@ -43,6 +43,9 @@ pub struct Stream {
     gap_restarts: u64,
     /// The subject's marker placement, applied to each (filled) frame before its features.
     calibration: Option<Calibration>,
+    /// Frames pushed since the stream was made (accepted or refused): the next frame's
+    /// number, which its errors carry.
+    pushed: usize,
 }
 
 impl Stream {
@@ -64,6 +67,7 @@ impl Stream {
             last_time: None,
             gap_restarts: 0,
             calibration: None,
+            pushed: 0,
             model,
         }
     }
@@ -129,7 +133,17 @@ impl Stream {
 
     /// Pushes one frame ([`Model::frame_len`] values). Returns `None` until the window is
     /// full, then the prediction for this frame ([`Model::n_outputs`] values).
+    /// Errors name the frame by its number in this stream (0 for the first frame pushed).
     pub fn push(&mut self, frame: &[f32]) -> Result<Option<&[f32]>> {
+        let index = self.pushed;
+        self.pushed += 1;
+        self.prepare(frame, index)?;
+        self.advance(index)
+    }
+
+    /// Checks, fills and calibrates `frame` and computes its features into `incoming`; an
+    /// error leaves the window and the filler as they were.
+    fn prepare(&mut self, frame: &[f32], index: usize) -> Result<()> {
         let set = self.model.feature_set();
         if self.policy == MissingMarkers::Fill {
             if frame.len() != MARKER_FRAME_LEN {
@@ -138,28 +152,33 @@ impl Stream {
             // The filler learns only from frames it accepts, and refuses before changing
             // anything, so a refused frame leaves it and the window as they were.
             self.frame_buf.copy_from_slice(frame);
-            let mask = self.filler.fill(&mut self.frame_buf, 0)?;
+            let mask = self.filler.fill(&mut self.frame_buf, index)?;
             if let Some(calibration) = &self.calibration {
-                calibration.apply(&mut self.frame_buf, 0)?;
+                calibration.apply(&mut self.frame_buf, index)?;
             }
-            set.compute(&self.frame_buf, &mut self.incoming, 0)?;
+            set.compute(&self.frame_buf, &mut self.incoming, index)?;
             self.filled_mask = mask;
         } else {
             if set.frame_len() == MARKER_FRAME_LEN {
                 // Refuse a marker that jumped (the filler watches complete frames either way).
-                self.filler.check(frame, 0)?;
+                self.filler.check(frame, index)?;
             }
             match &self.calibration {
                 Some(calibration) => {
-                    set.check_frame(frame, 0)?;
+                    set.check_frame(frame, index)?;
                     self.frame_buf.copy_from_slice(frame);
-                    calibration.apply(&mut self.frame_buf, 0)?;
-                    set.compute(&self.frame_buf, &mut self.incoming, 0)?;
+                    calibration.apply(&mut self.frame_buf, index)?;
+                    set.compute(&self.frame_buf, &mut self.incoming, index)?;
                 }
-                None => set.compute(frame, &mut self.incoming, 0)?,
+                None => set.compute(frame, &mut self.incoming, index)?,
             }
             self.filled_mask = 0;
         }
+        Ok(())
+    }
+
+    /// Accepts the prepared frame into the window and runs the network once it is full.
+    fn advance(&mut self, index: usize) -> Result<Option<&[f32]>> {
         let nf = self.incoming.len();
         let w = self.model.window();
         self.ring[self.head * nf..(self.head + 1) * nf].copy_from_slice(&self.incoming);
@@ -176,7 +195,7 @@ impl Stream {
         self.model.packed().forward(&self.input, &mut self.scratch, &mut self.output);
         self.model.add_offset(&self.input, &mut self.output);
         if let Some(&value) = self.output.iter().find(|v| !v.is_finite()) {
-            return Err(Error::NonFiniteOutput { frame: 0, value });
+            return Err(Error::NonFiniteOutput { frame: index, value });
         }
         Ok(Some(&self.output))
     }
@@ -189,6 +208,30 @@ impl Stream {
     /// increase is refused, and so is a frame less than half a period after the previous one
     /// (a source at a faster rate than the model's would be silently mis-timed; resample it).
     pub fn push_at(&mut self, time_s: f64, frame: &[f32]) -> Result<Option<&[f32]>> {
+        let index = self.pushed;
+        self.pushed += 1;
+        let gap = self.check_time(time_s)?;
+        if gap {
+            // The frame before the gap is no guide to this one (nor to the next, should this
+            // one be refused: it comes after the same gap).
+            self.filler.forget_last_frame();
+        }
+        self.prepare(frame, index)?;
+        if gap {
+            // Restart the window only for a frame that is accepted: a refused one leaves the
+            // stream as it was.
+            self.head = 0;
+            self.filled = 0;
+            self.gap_restarts += 1;
+        }
+        self.last_time = Some(time_s);
+        let produced = self.advance(index)?.is_some();
+        Ok(produced.then_some(&self.output[..]))
+    }
+
+    /// Refuses a time that does not follow the last frame's at the model's rate; true after
+    /// a gap of more than 1.5 periods. Changes nothing.
+    fn check_time(&self, time_s: f64) -> Result<bool> {
         if !time_s.is_finite() {
             return Err(Error::BadArgument { what: "time", detail: format!("is {time_s}, expected a finite number of seconds") });
         }
@@ -208,14 +251,15 @@ impl Stream {
                     ),
                 });
             }
-            if (time_s - last) * rate > 1.5 {
-                self.reset();
-                self.gap_restarts += 1;
-            }
+            return Ok((time_s - last) * rate > 1.5);
         }
-        let produced = self.push(frame)?.is_some();
-        self.last_time = Some(time_s);
-        Ok(produced.then_some(&self.output[..]))
+        Ok(false)
+    }
+
+    /// Frames pushed since the stream was made, refused ones included (the next frame's
+    /// number in errors).
+    pub fn frames_pushed(&self) -> usize {
+        self.pushed
     }
 
     /// Times [`push_at`](Self::push_at) restarted the window after a gap.

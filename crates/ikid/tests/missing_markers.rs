@@ -123,3 +123,28 @@ fn frames_from_a_faster_source_are_refused_not_mistimed() {
     assert!(stream.push_at(0.0009, &frames[18..36]).is_ok());
     assert!(stream.push_at(0.0021, &frames[36..54]).is_ok());
 }
+
+#[test]
+fn stream_errors_name_the_frame_by_its_number_in_the_stream() {
+    let model = random_model(FeatureSet::Angles, 5, &[16], 3, 3);
+    let mut frames = random_frames(FeatureSet::Angles, 40, 6);
+    frames[30 * 18 + 13] = f32::NAN; // MC5.y of frame 30
+    let mut stream = model.stream();
+    for (i, frame) in frames.chunks_exact(18).enumerate() {
+        match stream.push(frame) {
+            Err(e) => {
+                assert_eq!(i, 30, "{e}");
+                assert_eq!((e.frame(), e.code(), e.markers()), (Some(30), "non_finite_input", vec!["MC5"]));
+                assert!(e.to_string().starts_with("frame 30: value MC5.y"), "{e}");
+            }
+            Ok(_) => assert_ne!(i, 30),
+        }
+    }
+    assert_eq!(stream.frames_pushed(), 40);
+    // Frames refused for their time stamp count too.
+    let mut timed = model.stream();
+    timed.push_at(0.0, &frames[..18]).unwrap();
+    assert!(timed.push_at(0.0, &frames[18..36]).is_err());
+    let err = timed.push_at(0.001, &frames[30 * 18..31 * 18]).unwrap_err();
+    assert_eq!(err.frame(), Some(2), "{err}");
+}

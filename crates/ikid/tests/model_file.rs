@@ -355,3 +355,29 @@ fn output_offset_is_checked_against_the_features() {
     card["output_offset"] = "oldest".into();
     assert!(load_err(&build(&t, &card)).to_string().contains("\"oldest\""));
 }
+
+#[test]
+fn load_refuses_what_is_not_a_bounded_regular_file_without_reading_it() {
+    let dir = std::env::temp_dir().join(format!("ikid-bounded-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // A directory, /dev/zero (endless), a named pipe (would block) and a 4 GB sparse file.
+    let fifo = dir.join("fifo");
+    let _ = std::fs::remove_file(&fifo);
+    let made_fifo = std::process::Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success());
+    let sparse = dir.join("huge.safetensors");
+    std::fs::File::create(&sparse).unwrap().set_len(4 << 30).unwrap();
+    let mut cases = vec![(dir.clone(), "a directory"), ("/dev/zero".into(), "not a regular file"), (sparse.clone(), "4294967296 bytes")];
+    if made_fifo {
+        cases.push((fifo.clone(), "not a regular file"));
+    }
+    for (path, says) in cases {
+        let started = std::time::Instant::now();
+        let err = Model::load(&path).unwrap_err();
+        assert!(matches!(err, Error::Io { .. }), "{err}");
+        assert_eq!(err.kind(), ikid::ErrorKind::Io);
+        let message = err.to_string();
+        assert!(message.contains(&path.display().to_string()) && message.contains(says), "{message}");
+        assert!(started.elapsed().as_secs_f64() < 1.0, "{} took {:?}", path.display(), started.elapsed());
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
