@@ -332,6 +332,31 @@ mod tests {
     }
 
     #[test]
+    fn markers_far_from_the_models_placement_are_refused_as_mislabelled() {
+        // The hand's markers turned 90° about the hand's long axis (as if MC2/MC5/MCB were
+        // labelled round the wrong way): beyond the 60° a placement may differ.
+        let body = body::BodyModel::default();
+        let turn = Rotation3::from_axis_angle(&Vector3::x_axis(), 90f64.to_radians());
+        let mut shift = [[0.0; 3]; 6];
+        for m in 3..6 {
+            let o = Vector3::from(body.marker_offsets[m]);
+            let moved = turn * o - o;
+            shift[m] = [moved.x, moved.y, moved.z];
+        }
+        let statics = frames(&[[0.0; 3]; 20], &shift, 1.0, 0.0);
+        let moves: Vec<(usize, Vec<f32>)> = (0..2).map(|j| (j, frames(&single(j, 200, 0.6), &shift, 1.0, 0.0))).collect();
+        let refs: Vec<(usize, &[f32])> = moves.iter().map(|(j, f)| (*j, f.as_slice())).collect();
+        let err = Calibration::from_trials(&statics, &refs).unwrap_err().to_string();
+        assert!(err.contains("from the body model's placement (at most 60°): are they labelled right?"), "{err}");
+        // 15 mm misplacements are well inside it.
+        let statics = frames(&[[0.0; 3]; 20], &SHIFT, 1.0, 0.0);
+        let moves: Vec<(usize, Vec<f32>)> = (0..2).map(|j| (j, frames(&single(j, 200, 0.6), &SHIFT, 1.0, 0.0))).collect();
+        let refs: Vec<(usize, &[f32])> = moves.iter().map(|(j, f)| (*j, f.as_slice())).collect();
+        let (_, report) = Calibration::from_trials(&statics, &refs).unwrap();
+        assert!(report.placement_deg.iter().all(|&a| a < MAX_PLACEMENT_DEG), "{report:?}");
+    }
+
+    #[test]
     fn a_static_trial_needs_its_documented_number_of_frames() {
         let flex = frames(&single(1, 100, 0.6), &SHIFT, 1.0, 0.0);
         let pron = frames(&single(0, 100, 0.6), &SHIFT, 1.0, 0.0);

@@ -749,18 +749,42 @@ mod tests {
                 assert_eq!(broken_pairs(&truth, &f, first), std::array::from_fn(|k| k == pair), "the set-up breaks one pair");
                 assert_eq!(filler.outliers(&f), (1 << (first + a)) | (1 << (first + b)), "pair {a}-{b} of segment {segment}");
             }
-            // Marker 2 far off, marker 1 a little: all three pairs break; marker 2 is named.
-            let mut f = truth;
+            // One marker far off, another a little: all three pairs break; the far one, whose
+            // two pairs break most, is named.
             let centroid = (marker(&truth, first) + marker(&truth, first + 1) + marker(&truth, first + 2)) / 3.0;
-            for (k, reach) in [(2, 0.05), (1, 0.02)] {
-                let out = (marker(&truth, first + k) - centroid).normalize() * reach;
-                for a in 0..3 {
-                    f[3 * (first + k) + a] += out[a] as f32;
+            for (far, near) in [(2, 1), (0, 1), (1, 2)] {
+                let mut f = truth;
+                for (k, reach) in [(far, 0.06), (near, 0.02)] {
+                    let out = (marker(&truth, first + k) - centroid).normalize() * reach;
+                    for a in 0..3 {
+                        f[3 * (first + k) + a] += out[a] as f32;
+                    }
                 }
+                assert_eq!(broken_pairs(&truth, &f, first), [true; 3], "the set-up breaks all three pairs");
+                assert_eq!(filler.outliers(&f), 1 << (first + far), "segment {segment}: marker {far} far, {near} near");
             }
-            assert_eq!(broken_pairs(&truth, &f, first), [true; 3], "the set-up breaks all three pairs");
-            assert_eq!(filler.outliers(&f), 1 << (first + 2), "segment {segment}: the far marker");
         }
+    }
+
+    #[test]
+    fn jumps_are_watched_from_the_documented_number_of_complete_frames() {
+        let body = BodyModel::default();
+        let frames = trial(&body, 0.0, 60);
+        let mut filler = GapFiller::new();
+        let jumped = |f: &[f32; 18]| {
+            let mut f = *f;
+            f[13] += 0.03; // MC5 3 cm off
+            f
+        };
+        for (i, f) in frames.iter().enumerate() {
+            if filler.complete_frames() == MIN_CALIBRATION_FRAMES {
+                assert_eq!(filler.outliers(&jumped(f)), 1 << 4, "after {i} complete frames");
+                return;
+            }
+            assert_eq!(filler.outliers(&jumped(f)), 0, "before {MIN_CALIBRATION_FRAMES} frames nothing is known to jump ({i})");
+            filler.fill(&mut f.clone(), i).unwrap();
+        }
+        panic!("never reached {MIN_CALIBRATION_FRAMES} complete frames");
     }
 
     #[test]
