@@ -176,7 +176,8 @@ pub unsafe extern "C" fn ikid_predict(
     guard(|| {
         let m = &unsafe { non_null(model, "model") }?.model;
         let rows = unsafe { non_null_mut(rows, "rows") }?;
-        let (frames, out) = unsafe { recording_args(m, frames, n_frames, frame_len, out, out_len, m.n_predictions(n_frames)) }?;
+        let (frames, out) =
+            unsafe { recording_args(m, frames, n_frames, frame_len, out, out_len, m.n_predictions(n_frames)) }?;
         *rows = m.predict(frames, out)?;
         Ok(())
     })
@@ -201,14 +202,21 @@ pub(crate) unsafe fn recording_args<'a>(
     if frame_len != m.frame_len() {
         return Err(Failure::new(
             ikid_status::Input,
-            format!("frame_len is {frame_len}, the model's feature set {:?} takes {}", m.feature_set().name(), m.frame_len()),
+            format!(
+                "frame_len is {frame_len}, the model's feature set {:?} takes {}",
+                m.feature_set().name(),
+                m.frame_len()
+            ),
         ));
     }
     let overflow = || Failure::new(ikid_status::InvalidArgument, "n_frames × frame_len overflows");
     let frames = unsafe { slice(frames, n_frames.checked_mul(frame_len).ok_or_else(overflow)?, "frames") }?;
     let need = rows.checked_mul(m.n_outputs()).ok_or_else(overflow)?;
     if out_len < need {
-        return Err(Failure::new(ikid_status::InvalidArgument, format!("out has room for {out_len} floats, {need} needed")));
+        return Err(Failure::new(
+            ikid_status::InvalidArgument,
+            format!("out has room for {out_len} floats, {need} needed"),
+        ));
     }
     Ok((frames, unsafe { slice_mut(out, need, "out") }?))
 }

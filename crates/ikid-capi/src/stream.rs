@@ -80,7 +80,10 @@ unsafe fn push_one(
     let ready = unsafe { non_null_mut(ready, "ready") }?;
     let n_out = s.model().n_outputs();
     if out_len < n_out {
-        return Err(Failure::new(ikid_status::InvalidArgument, format!("out has room for {out_len} floats, the model gives {n_out}")));
+        return Err(Failure::new(
+            ikid_status::InvalidArgument,
+            format!("out has room for {out_len} floats, the model gives {n_out}"),
+        ));
     }
     let out = unsafe { slice_mut(out, n_out, "out") }?;
     let pushed = match time_s {
@@ -105,12 +108,17 @@ unsafe fn push_one(
 /// `stream` must be a live handle used by no other thread meanwhile; `policy` a
 /// NUL-terminated string.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn ikid_stream_set_missing_markers(stream: *mut ikid_stream, policy: *const std::ffi::c_char) -> ikid_status {
+pub unsafe extern "C" fn ikid_stream_set_missing_markers(
+    stream: *mut ikid_stream,
+    policy: *const std::ffi::c_char,
+) -> ikid_status {
     guard(|| {
         let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
         let policy = unsafe { non_null(policy, "policy") }?;
         // SAFETY: non-null and NUL-terminated (caller's contract).
-        let name = unsafe { std::ffi::CStr::from_ptr(policy) }.to_str().map_err(|_| Failure::new(ikid_status::InvalidArgument, "policy is not UTF-8"))?;
+        let name = unsafe { std::ffi::CStr::from_ptr(policy) }
+            .to_str()
+            .map_err(|_| Failure::new(ikid_status::InvalidArgument, "policy is not UTF-8"))?;
         s.set_missing_markers(ikid_core::MissingMarkers::from_name(name)?)?;
         Ok(())
     })
@@ -126,7 +134,11 @@ pub unsafe extern "C" fn ikid_stream_set_missing_markers(stream: *mut ikid_strea
 /// `stream` must be a live handle used by no other thread meanwhile; `forearm` and `hand`
 /// must each be NULL or point to 9 readable doubles.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn ikid_stream_set_calibration(stream: *mut ikid_stream, forearm: *const f64, hand: *const f64) -> ikid_status {
+pub unsafe extern "C" fn ikid_stream_set_calibration(
+    stream: *mut ikid_stream,
+    forearm: *const f64,
+    hand: *const f64,
+) -> ikid_status {
     guard(|| {
         let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
         let calibration = match (forearm.is_null(), hand.is_null()) {
@@ -136,7 +148,12 @@ pub unsafe extern "C" fn ikid_stream_set_calibration(stream: *mut ikid_stream, f
                 let h = unsafe { slice(hand, 9, "hand") }?;
                 Some(ikid_core::Calibration::from_matrices(Matrix3::from_row_slice(f), Matrix3::from_row_slice(h))?)
             }
-            _ => return Err(Failure::new(ikid_status::InvalidArgument, "forearm and hand: give both matrices, or both NULL to remove the calibration")),
+            _ => {
+                return Err(Failure::new(
+                    ikid_status::InvalidArgument,
+                    "forearm and hand: give both matrices, or both NULL to remove the calibration",
+                ));
+            }
         };
         s.set_calibration(calibration)?;
         Ok(())

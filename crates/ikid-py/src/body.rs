@@ -10,7 +10,8 @@ use pyo3::types::{PyDict, PyList};
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let coords: Vec<(&str, &str, (f64, f64))> = COORDINATES.iter().map(|c| (c.name, c.positive, c.range)).collect();
     m.add("COORDINATES", coords)?;
-    let markers: Vec<(&str, &str, &str)> = MARKERS.iter().map(|mk| (mk.name, mk.segment.name(), mk.description)).collect();
+    let markers: Vec<(&str, &str, &str)> =
+        MARKERS.iter().map(|mk| (mk.name, mk.segment.name(), mk.description)).collect();
     m.add("MARKERS", markers)?;
     m.add_function(wrap_pyfunction!(forward_markers, m)?)?;
     m.add_function(wrap_pyfunction!(body_model, m)?)?;
@@ -19,12 +20,19 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 
 /// A subject scaled from the default, each marker moved by `marker_shift` `(6, 3)` (metres,
 /// in its segment's frame); the one place Python reads the body model from.
-pub(crate) fn subject(length_scale: f64, mass_scale: f64, marker_shift: Option<&Bound<'_, PyAny>>) -> PyResult<BodyModel> {
+pub(crate) fn subject(
+    length_scale: f64,
+    mass_scale: f64,
+    marker_shift: Option<&Bound<'_, PyAny>>,
+) -> PyResult<BodyModel> {
     let mut body = BodyModel::try_scaled(length_scale, mass_scale).py_err()?;
     if let Some(shift) = marker_shift {
         with_f64_rows(shift, "marker_shift", 3, |v, n| {
             if n != body.marker_offsets.len() || v.iter().any(|x| !x.is_finite()) {
-                return Err(input(format!("marker_shift: expected {} finite rows of 3 (metres), got {n} rows", body.marker_offsets.len())));
+                return Err(input(format!(
+                    "marker_shift: expected {} finite rows of 3 (metres), got {n} rows",
+                    body.marker_offsets.len()
+                )));
             }
             for (o, s) in body.marker_offsets.iter_mut().zip(v.chunks_exact(3)) {
                 for k in 0..3 {

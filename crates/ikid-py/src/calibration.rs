@@ -47,7 +47,10 @@ impl Calibration {
         for (key, value) in movements.iter() {
             let name: String = key.extract().map_err(|_| input("movements: keys must be coordinate names"))?;
             let j = COORDINATES.iter().position(|c| c.name == name).ok_or_else(|| {
-                input(format!("movements: unknown coordinate {name:?} (known: {})", COORDINATES.map(|c| c.name).join(", ")))
+                input(format!(
+                    "movements: unknown coordinate {name:?} (known: {})",
+                    COORDINATES.map(|c| c.name).join(", ")
+                ))
             })?;
             moves.push((j, frames_of(&value, &format!("movements[{name:?}]"))?));
         }
@@ -65,7 +68,8 @@ impl Calibration {
     /// From its two 3×3 rotation matrices (as `forearm` and `hand` give them).
     #[staticmethod]
     fn from_matrices(forearm: &Bound<'_, PyAny>, hand: &Bound<'_, PyAny>) -> PyResult<Self> {
-        let inner = ikid::Calibration::from_matrices(read_matrix(forearm, "forearm")?, read_matrix(hand, "hand")?).py_err()?;
+        let inner =
+            ikid::Calibration::from_matrices(read_matrix(forearm, "forearm")?, read_matrix(hand, "hand")?).py_err()?;
         Ok(Calibration { inner, report: None })
     }
 

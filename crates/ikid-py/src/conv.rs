@@ -14,7 +14,10 @@ const MAX_STACK_FRAME: usize = 64;
 /// sequence of numbers.
 fn as_float_array<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<Bound<'py, PyUntypedArray>> {
     if obj.is_instance_of::<PyBytes>() || obj.is_instance_of::<PyByteArray>() || obj.is_instance_of::<PyString>() {
-        return Err(input(format!("{what}: expected a float array or a sequence of numbers, got {}", obj.get_type().name()?)));
+        return Err(input(format!(
+            "{what}: expected a float array or a sequence of numbers, got {}",
+            obj.get_type().name()?
+        )));
     }
     let arr = match obj.cast::<PyUntypedArray>() {
         Ok(arr) => arr.clone(),
@@ -43,7 +46,12 @@ fn check_rank(what: &str, shape: &[usize], ndim: usize) -> PyResult<()> {
 
 /// Calls `f` with the values of `obj` as contiguous f32 in C order, and its shape. A
 /// C-contiguous float32 array is read in place; anything else is converted.
-pub fn with_floats<R>(obj: &Bound<'_, PyAny>, what: &str, ndim: usize, f: impl FnOnce(&[f32], &[usize]) -> PyResult<R>) -> PyResult<R> {
+pub fn with_floats<R>(
+    obj: &Bound<'_, PyAny>,
+    what: &str,
+    ndim: usize,
+    f: impl FnOnce(&[f32], &[usize]) -> PyResult<R>,
+) -> PyResult<R> {
     let arr = as_float_array(obj, what)?;
     let shape = arr.shape().to_vec();
     check_rank(what, &shape, ndim)?;
@@ -116,7 +124,12 @@ pub fn with_frame_f64<R>(obj: &Bound<'_, PyAny>, f: impl FnOnce(&[f64]) -> PyRes
 
 /// Calls `f` with an `(n, cols)` float array as f64 values (C order) and `n`; for quantities
 /// kept in f64 (angles, markers for the reference solvers and the simulator).
-pub fn with_f64_rows<R>(obj: &Bound<'_, PyAny>, what: &str, cols: usize, f: impl FnOnce(&[f64], usize) -> PyResult<R>) -> PyResult<R> {
+pub fn with_f64_rows<R>(
+    obj: &Bound<'_, PyAny>,
+    what: &str,
+    cols: usize,
+    f: impl FnOnce(&[f64], usize) -> PyResult<R>,
+) -> PyResult<R> {
     let arr = as_float_array(obj, what)?;
     let shape = arr.shape().to_vec();
     if shape.len() != 2 || shape[1] != cols {

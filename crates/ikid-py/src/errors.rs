@@ -14,9 +14,24 @@ use pyo3::sync::PyOnceLock;
 use pyo3::types::{PyDict, PyTuple, PyType};
 
 create_exception!(ikid, IkidError, PyException, "Base class of every error raised by ikid.");
-create_exception!(ikid, ModelFileError, IkidError, "A model file is corrupt, truncated, or does not fit its model card.");
-create_exception!(ikid, InputError, IkidError, "A frame or array is unusable (wrong length, missing marker, jump...); also a ValueError.");
-create_exception!(ikid, ArgumentError, InputError, "An argument other than frame data is out of range (a setting, a buffer, a calibration, a time).");
+create_exception!(
+    ikid,
+    ModelFileError,
+    IkidError,
+    "A model file is corrupt, truncated, or does not fit its model card."
+);
+create_exception!(
+    ikid,
+    InputError,
+    IkidError,
+    "A frame or array is unusable (wrong length, missing marker, jump...); also a ValueError."
+);
+create_exception!(
+    ikid,
+    ArgumentError,
+    InputError,
+    "An argument other than frame data is out of range (a setting, a buffer, a calibration, a time)."
+);
 
 /// `ReadError(IkidError, OSError)` and `NotFoundError(ReadError, FileNotFoundError)`: made with
 /// `type()`, since an OSError base cannot be given to an existing class.

@@ -31,11 +31,20 @@ fn feature_set_info<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyD
 
 /// Features of every frame: `frames` is `(n, frame_len)`, the result `(n, feature_len)` float32.
 #[pyfunction]
-fn compute_features<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>, feature_set: &str) -> PyResult<Bound<'py, PyArray2<f32>>> {
+fn compute_features<'py>(
+    py: Python<'py>,
+    frames: &Bound<'py, PyAny>,
+    feature_set: &str,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let set = self::feature_set(feature_set)?;
     with_floats(frames, "frames", 2, |values, shape| {
         if shape[1] != set.frame_len() {
-            return Err(input(format!("frames: {} columns, feature set {:?} takes {}", shape[1], set.name(), set.frame_len())));
+            return Err(input(format!(
+                "frames: {} columns, feature set {:?} takes {}",
+                shape[1],
+                set.name(),
+                set.frame_len()
+            )));
         }
         let mut out = vec![0f32; shape[0] * set.feature_len()];
         py.detach(|| set.compute_rows(values, &mut out)).py_err()?;
@@ -60,7 +69,11 @@ fn fill_gaps<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>, unfillable: &str)
     };
     with_floats(frames, "frames", 2, |values, shape| {
         if shape[1] != ikid::body::MARKER_FRAME_LEN {
-            return Err(input(format!("frames: {} columns, marker frames have {}", shape[1], ikid::body::MARKER_FRAME_LEN)));
+            return Err(input(format!(
+                "frames: {} columns, marker frames have {}",
+                shape[1],
+                ikid::body::MARKER_FRAME_LEN
+            )));
         }
         let (filled, masks) = py.detach(|| ikid::model::fill_gaps(values, keep)).py_err()?;
         Ok((filled.into_pyarray(py).reshape([shape[0], shape[1]])?, masks.into_pyarray(py)))

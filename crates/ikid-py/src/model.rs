@@ -104,7 +104,12 @@ impl Model {
     /// row `i` for frame `i + window - 1`. Runs on `threads` threads (default: all cores;
     /// every count gives bit-identical results). Releases the GIL.
     #[pyo3(signature = (frames, threads = None))]
-    fn predict<'py>(&self, py: Python<'py>, frames: &Bound<'py, PyAny>, threads: Option<usize>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    fn predict<'py>(
+        &self,
+        py: Python<'py>,
+        frames: &Bound<'py, PyAny>,
+        threads: Option<usize>,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let (fl, no) = (self.inner.frame_len(), self.inner.n_outputs());
         with_floats(frames, "frames", 2, |values, shape| {
             if shape[1] != fl {
@@ -185,7 +190,12 @@ impl Stream {
     /// time that does not increase is refused. Holds the GIL (a push takes microseconds);
     /// `push_many` releases it.
     #[pyo3(signature = (frame, time = None))]
-    fn push<'py>(&mut self, py: Python<'py>, frame: &Bound<'py, PyAny>, time: Option<f64>) -> PyResult<Option<Bound<'py, PyArray1<f32>>>> {
+    fn push<'py>(
+        &mut self,
+        py: Python<'py>,
+        frame: &Bound<'py, PyAny>,
+        time: Option<f64>,
+    ) -> PyResult<Option<Bound<'py, PyArray1<f32>>>> {
         let stream = &mut self.inner;
         with_frame(frame, |values| {
             // The GIL stays held: releasing and re-taking it costs more than the few
@@ -278,7 +288,8 @@ fn build_model(
             biases.len()
         )));
     }
-    let vector = |obj: &Bound<'_, PyAny>, what: &str| with_floats(obj, what, 1, |v, _| Ok(DVector::from_column_slice(v)));
+    let vector =
+        |obj: &Bound<'_, PyAny>, what: &str| with_floats(obj, what, 1, |v, _| Ok(DVector::from_column_slice(v)));
     let mut layers = Vec::with_capacity(weights.len());
     for (k, ((w, b), act)) in weights.iter().zip(&biases).zip(activations).enumerate() {
         let weight = with_floats(w, &format!("weights[{k}]"), 2, |v, s| Ok(DMatrix::from_row_slice(s[0], s[1], v)))?;

@@ -21,7 +21,12 @@ fn subject(length_scale: f64, mass_scale: f64) -> PyResult<BodyModel> {
 /// segment fitting on the subject's marker layout. Releases the GIL.
 #[pyfunction]
 #[pyo3(signature = (markers, length_scale=1.0, mass_scale=1.0))]
-fn reference_ik<'py>(py: Python<'py>, markers: &Bound<'py, PyAny>, length_scale: f64, mass_scale: f64) -> PyResult<Bound<'py, PyArray2<f64>>> {
+fn reference_ik<'py>(
+    py: Python<'py>,
+    markers: &Bound<'py, PyAny>,
+    length_scale: f64,
+    mass_scale: f64,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let body = subject(length_scale, mass_scale)?;
     with_f64_rows(markers, "markers", MARKER_FRAME_LEN, |values, n| {
         let mut q = vec![0.0; n * N_COORDINATES];

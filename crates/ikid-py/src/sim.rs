@@ -66,7 +66,14 @@ fn simulate<'py>(
     if octants.is_some() && protocol.name != "random" {
         return Err(input("octants apply to the \"random\" protocol only"));
     }
-    let config = SimConfig { body: BodyModel::try_scaled(length_scale, mass_scale).py_err()?, shoulder_flexion, dt, substeps, output_every, ..Default::default() };
+    let config = SimConfig {
+        body: BodyModel::try_scaled(length_scale, mass_scale).py_err()?,
+        shoulder_flexion,
+        dt,
+        substeps,
+        output_every,
+        ..Default::default()
+    };
     let trial = py.detach(|| run(&config, &protocol)).map_err(sim_err)?;
     let d = PyDict::new(py);
     d.set_item("time", PyArray1::from_slice(py, &trial.time))?;
@@ -81,7 +88,11 @@ fn simulate<'py>(
 }
 
 /// Applies a noise model to a copy of `markers` `(n, 18)` and returns it.
-fn with_noise<'py>(py: Python<'py>, markers: &Bound<'py, PyAny>, f: impl FnOnce(&mut [f64]) -> ikid::Result<()> + Send) -> PyResult<Bound<'py, PyArray2<f64>>> {
+fn with_noise<'py>(
+    py: Python<'py>,
+    markers: &Bound<'py, PyAny>,
+    f: impl FnOnce(&mut [f64]) -> ikid::Result<()> + Send,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     with_f64_rows(markers, "markers", MARKER_FRAME_LEN, |values, n| {
         let mut out = values.to_vec();
         py.detach(|| f(&mut out)).py_err()?;
@@ -91,19 +102,35 @@ fn with_noise<'py>(py: Python<'py>, markers: &Bound<'py, PyAny>, f: impl FnOnce(
 
 /// The thesis' noise: uniform in ±`fraction` of each coordinate column's range.
 #[pyfunction]
-fn noise_uniform<'py>(py: Python<'py>, markers: &Bound<'py, PyAny>, fraction: f64, seed: u64) -> PyResult<Bound<'py, PyArray2<f64>>> {
+fn noise_uniform<'py>(
+    py: Python<'py>,
+    markers: &Bound<'py, PyAny>,
+    fraction: f64,
+    seed: u64,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     with_noise(py, markers, |m| noise::uniform_range(m, fraction, seed))
 }
 
 /// Gaussian noise of `sigma` metres on every value.
 #[pyfunction]
-fn noise_gaussian<'py>(py: Python<'py>, markers: &Bound<'py, PyAny>, sigma: f64, seed: u64) -> PyResult<Bound<'py, PyArray2<f64>>> {
+fn noise_gaussian<'py>(
+    py: Python<'py>,
+    markers: &Bound<'py, PyAny>,
+    sigma: f64,
+    seed: u64,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     with_noise(py, markers, |m| noise::gaussian(m, sigma, seed))
 }
 
 /// Slow sinusoidal drift of peak `amplitude` metres per coordinate.
 #[pyfunction]
-fn noise_drift<'py>(py: Python<'py>, markers: &Bound<'py, PyAny>, amplitude: f64, rate_hz: f64, seed: u64) -> PyResult<Bound<'py, PyArray2<f64>>> {
+fn noise_drift<'py>(
+    py: Python<'py>,
+    markers: &Bound<'py, PyAny>,
+    amplitude: f64,
+    rate_hz: f64,
+    seed: u64,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     with_noise(py, markers, |m| noise::drift(m, amplitude, rate_hz, seed))
 }
 
@@ -121,5 +148,7 @@ fn noise_occlusion<'py>(
     seed: u64,
     markers_affected: Vec<usize>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    with_noise(py, markers, |m| noise::occlusion(m, bursts_per_second, min_s, max_s, rate_hz, &markers_affected, seed).map(|_| ()))
+    with_noise(py, markers, |m| {
+        noise::occlusion(m, bursts_per_second, min_s, max_s, rate_hz, &markers_affected, seed).map(|_| ())
+    })
 }

@@ -6,7 +6,9 @@ use crate::conv::{with_f64_rows, with_frame_f64};
 use crate::errors::{IntoPy, input};
 use crate::model::Model;
 use ikid::body::{MARKER_FRAME_LEN, N_COORDINATES};
-use ikid::tracker::{DEFAULT_JERK_NOISE, REFINER_GATE_NOISE, Tracker as CoreTracker, TrackerOutput, TrackerSettings, refiner_outputs};
+use ikid::tracker::{
+    DEFAULT_JERK_NOISE, REFINER_GATE_NOISE, Tracker as CoreTracker, TrackerOutput, TrackerSettings, refiner_outputs,
+};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -80,34 +82,37 @@ impl Tracker {
     /// with every marker). Continues from the tracker's state. Releases the GIL.
     fn run<'py>(&mut self, py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
         let tracker = &mut self.inner;
-        let (out, missing, noise, refined, start, n) = with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |values, n| {
-            let mut out = vec![f64::NAN; 4 * n * N_COORDINATES];
-            let mut missing = vec![0u8; n];
-            let mut noise = vec![f64::NAN; n];
-            let mut refined = vec![false; n];
-            let mut start = None;
-            py.detach(|| -> ikid::Result<()> {
-                for (i, frame) in values.chunks_exact(MARKER_FRAME_LEN).enumerate() {
-                    let result = tracker.push(frame).map_err(|e| e.renumbered(i))?;
-                    if let Some(o) = result {
-                        start.get_or_insert(i);
-                        for (k, row) in rows(&o).iter().enumerate() {
-                            out[(k * n + i) * N_COORDINATES..(k * n + i + 1) * N_COORDINATES].copy_from_slice(row);
+        let (out, missing, noise, refined, start, n) =
+            with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |values, n| {
+                let mut out = vec![f64::NAN; 4 * n * N_COORDINATES];
+                let mut missing = vec![0u8; n];
+                let mut noise = vec![f64::NAN; n];
+                let mut refined = vec![false; n];
+                let mut start = None;
+                py.detach(|| -> ikid::Result<()> {
+                    for (i, frame) in values.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+                        let result = tracker.push(frame).map_err(|e| e.renumbered(i))?;
+                        if let Some(o) = result {
+                            start.get_or_insert(i);
+                            for (k, row) in rows(&o).iter().enumerate() {
+                                out[(k * n + i) * N_COORDINATES..(k * n + i + 1) * N_COORDINATES].copy_from_slice(row);
+                            }
+                            missing[i] = o.missing;
+                            noise[i] = o.noise;
+                            refined[i] = o.refined;
+                        } else {
+                            missing[i] = ikid::tracker::missing_markers(frame);
                         }
-                        missing[i] = o.missing;
-                        noise[i] = o.noise;
-                        refined[i] = o.refined;
-                    } else {
-                        missing[i] = ikid::tracker::missing_markers(frame);
                     }
-                }
-                Ok(())
-            })
-            .py_err()?;
-            Ok((out, missing, noise, refined, start, n))
-        })?;
+                    Ok(())
+                })
+                .py_err()?;
+                Ok((out, missing, noise, refined, start, n))
+            })?;
         let Some(start) = start else {
-            return Err(input(format!("frames: none of the {n} frames has every marker, so the tracker never started")));
+            return Err(input(format!(
+                "frames: none of the {n} frames has every marker, so the tracker never started"
+            )));
         };
         let d = PyDict::new(py);
         for (k, name) in ["q", "qd", "qdd", "tau"].iter().enumerate() {

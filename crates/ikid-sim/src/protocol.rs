@@ -57,7 +57,9 @@ impl Octants {
             let s = s.as_ref();
             let chars: Vec<char> = s.chars().collect();
             if chars.len() != N_COORDINATES || chars.iter().any(|c| *c != '+' && *c != '-') {
-                return Err(format!("octant {s:?} must be {N_COORDINATES} signs ('+' or '-') for s_p, e_f, ad_ab, e.g. \"+-+\""));
+                return Err(format!(
+                    "octant {s:?} must be {N_COORDINATES} signs ('+' or '-') for s_p, e_f, ad_ab, e.g. \"+-+\""
+                ));
             }
             let k: usize = chars.iter().enumerate().filter(|(_, c)| **c == '-').map(|(i, _)| 1 << i).sum();
             mask |= 1 << k;

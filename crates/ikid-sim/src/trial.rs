@@ -34,7 +34,15 @@ pub struct SimConfig {
 
 impl Default for SimConfig {
     fn default() -> Self {
-        SimConfig { body: BodyModel::default(), shoulder_flexion: 0.0, dt: 1e-3, substeps: 1, output_every: 1, kp: 400.0, kd: 40.0 }
+        SimConfig {
+            body: BodyModel::default(),
+            shoulder_flexion: 0.0,
+            dt: 1e-3,
+            substeps: 1,
+            output_every: 1,
+            kp: 400.0,
+            kd: 40.0,
+        }
     }
 }
 
@@ -62,7 +70,12 @@ pub fn simulate(config: &SimConfig, protocol: &Protocol) -> Result<Trial> {
     check("dt", config.dt, config.dt > 0.0 && config.dt <= 0.01, "a step between 0 and 0.01 s")?;
     check("substeps", config.substeps as f64, (1..=64).contains(&config.substeps), "1..=64")?;
     check("output_every", config.output_every as f64, config.output_every >= 1, "at least 1")?;
-    check("shoulder_flexion", config.shoulder_flexion, config.shoulder_flexion.abs() <= std::f64::consts::PI, "within ±π rad")?;
+    check(
+        "shoulder_flexion",
+        config.shoulder_flexion,
+        config.shoulder_flexion.abs() <= std::f64::consts::PI,
+        "within ±π rad",
+    )?;
     check("kp", config.kp, config.kp >= 0.0, "non-negative")?;
     check("kd", config.kd, config.kd >= 0.0, "non-negative")?;
     check_body(&config.body)?;
@@ -101,7 +114,11 @@ pub fn simulate(config: &SimConfig, protocol: &Protocol) -> Result<Trial> {
 }
 
 /// Marker positions from the simulated segment poses.
-fn markers(body: &BodyModel, forearm: &nalgebra::Isometry3<f64>, hand: &nalgebra::Isometry3<f64>) -> [f64; MARKER_FRAME_LEN] {
+fn markers(
+    body: &BodyModel,
+    forearm: &nalgebra::Isometry3<f64>,
+    hand: &nalgebra::Isometry3<f64>,
+) -> [f64; MARKER_FRAME_LEN] {
     let mut frame = [0.0; MARKER_FRAME_LEN];
     for (i, m) in MARKERS.iter().enumerate() {
         let pose = if m.segment == Segment::Forearm { forearm } else { hand };
@@ -174,7 +191,9 @@ mod tests {
         let p = Protocol::random(1, 0.1);
         let bad = |c: SimConfig| simulate(&c, &p).unwrap_err().to_string();
         assert!(bad(SimConfig { dt: -1.0, ..Default::default() }).contains("dt is -1"));
-        assert!(bad(SimConfig { shoulder_flexion: f64::NAN, ..Default::default() }).contains("shoulder_flexion is NaN"));
+        assert!(
+            bad(SimConfig { shoulder_flexion: f64::NAN, ..Default::default() }).contains("shoulder_flexion is NaN")
+        );
         let mut body = BodyModel::default();
         body.hand.mass = -0.4;
         assert!(bad(SimConfig { body, ..Default::default() }).contains("segment mass is -0.4"));

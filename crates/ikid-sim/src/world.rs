@@ -44,7 +44,11 @@ fn pose(iso: &Isometry3<f64>) -> Pose {
 }
 
 fn mass_properties(p: &SegmentParams) -> MassProperties {
-    MassProperties::new(Vector::new(p.com[0], p.com[1], p.com[2]), p.mass, Vector::new(p.inertia[0], p.inertia[1], p.inertia[2]))
+    MassProperties::new(
+        Vector::new(p.com[0], p.com[1], p.com[2]),
+        p.mass,
+        Vector::new(p.inertia[0], p.inertia[1], p.inertia[2]),
+    )
 }
 
 impl WristWorld {
@@ -56,7 +60,11 @@ impl WristWorld {
         let mut bodies = RigidBodySet::new();
         let fixed = bodies.insert(RigidBodyBuilder::fixed().pose(at_wrist));
         let dynamic = |p: &SegmentParams| {
-            RigidBodyBuilder::dynamic().pose(at_wrist).additional_mass_properties(mass_properties(p)).can_sleep(false).build()
+            RigidBodyBuilder::dynamic()
+                .pose(at_wrist)
+                .additional_mass_properties(mass_properties(p))
+                .can_sleep(false)
+                .build()
         };
         let link1 = bodies.insert(dynamic(&VIRTUAL_LINK));
         let link2 = bodies.insert(dynamic(&VIRTUAL_LINK));

@@ -2,8 +2,8 @@
 //! network shapes, with random weights (cost does not depend on the values).
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use ikid::testing::{random_frames, random_model};
 use ikid::FeatureSet;
+use ikid::testing::{random_frames, random_model};
 use std::hint::black_box;
 
 /// (label, feature set, hidden widths): input width is window (5) × the set's features.

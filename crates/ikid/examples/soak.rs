@@ -54,7 +54,13 @@ fn quantiles(ns: &mut [u32]) -> (f64, f64, f64) {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let pushes: usize = args.iter().position(|a| a == "--pushes").and_then(|i| args.get(i + 1)).map(|v| v.parse()).transpose()?.unwrap_or(10_000_000);
+    let pushes: usize = args
+        .iter()
+        .position(|a| a == "--pushes")
+        .and_then(|i| args.get(i + 1))
+        .map(|v| v.parse())
+        .transpose()?
+        .unwrap_or(10_000_000);
     let model = random_model(FeatureSet::Angles, 50, &[128, 128], 3, 1);
     let mut frames = random_frames(FeatureSet::Angles, 4096, 2);
     // Every 7th frame after the first 1000 loses one marker (in turn): the fill path soaks too.
@@ -101,7 +107,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
          \"first_million_us\": [{f50:.2}, {f99:.2}, {fmax:.0}], \"last_million_us\": [{l50:.2}, {l99:.2}, {lmax:.0}], \"checksum\": {sink}}}"
     );
     if allocs != 0 || rss_after > rss_before + 1024 {
-        return Err(format!("not flat: {allocs} allocations (first at push {first_alloc_at:?}), RSS {rss_before} → {rss_after} KiB").into());
+        return Err(format!(
+            "not flat: {allocs} allocations (first at push {first_alloc_at:?}), RSS {rss_before} → {rss_after} KiB"
+        )
+        .into());
     }
     Ok(())
 }

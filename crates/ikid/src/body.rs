@@ -38,18 +38,8 @@ const DEG: f64 = std::f64::consts::PI / 180.0;
 /// position (AAOS / Norkin & White): pronation and supination 80° each, flexion 80°,
 /// extension 70°, ulnar deviation (adduction) 30°, radial deviation (abduction) 20°.
 pub const COORDINATES: [Coordinate; 3] = [
-    Coordinate {
-        name: "ra_wr_s_p",
-        positive: "supination",
-        axis: [0.0, -1.0, 0.0],
-        range: (-80.0 * DEG, 80.0 * DEG),
-    },
-    Coordinate {
-        name: "ra_wr_e_f",
-        positive: "flexion",
-        axis: [0.0, 0.0, 1.0],
-        range: (-70.0 * DEG, 80.0 * DEG),
-    },
+    Coordinate { name: "ra_wr_s_p", positive: "supination", axis: [0.0, -1.0, 0.0], range: (-80.0 * DEG, 80.0 * DEG) },
+    Coordinate { name: "ra_wr_e_f", positive: "flexion", axis: [0.0, 0.0, 1.0], range: (-70.0 * DEG, 80.0 * DEG) },
     Coordinate {
         name: "ra_wr_ad_ab",
         positive: "adduction (ulnar deviation)",
@@ -209,11 +199,7 @@ impl Default for BodyModel {
             // Segment x is volar (antero-posterior: rotation about it is frontal-plane, i.e.
             // the "transverse" radius in de Leva's naming), z is radial (sagittal-plane
             // rotation), y is the long axis.
-            [
-                mass * (trans * len).powi(2),
-                mass * (long * len).powi(2),
-                mass * (sag * len).powi(2),
-            ]
+            [mass * (trans * len).powi(2), mass * (long * len).powi(2), mass * (sag * len).powi(2)]
         };
         BodyModel {
             upper_arm_length: 0.2817,
@@ -277,19 +263,14 @@ impl BodyModel {
         let flexion = Rotation3::from_axis_angle(&Vector3::z_axis(), shoulder_flexion);
         let arm_length = self.upper_arm_length + self.forearm.length;
         let wrist = Vector3::from(self.shoulder) + flexion * Vector3::new(0.0, -arm_length, 0.0);
-        Isometry3::from_parts(
-            Translation3::from(wrist),
-            UnitQuaternion::from_rotation_matrix(&(flexion * neutral)),
-        )
+        Isometry3::from_parts(Translation3::from(wrist), UnitQuaternion::from_rotation_matrix(&(flexion * neutral)))
     }
 
     /// Marker positions in the lab for wrist angles `q` and a forearm pose, as one frame of
     /// [`MARKER_FRAME_LEN`] values in [`MARKERS`] order.
     pub fn marker_frame(&self, q: &[f64; 3], forearm_pose: &Isometry3<f64>) -> [f64; MARKER_FRAME_LEN] {
-        let hand_pose = forearm_pose * Isometry3::from_parts(
-            Translation3::identity(),
-            UnitQuaternion::from_rotation_matrix(&wrist_rotation(q)),
-        );
+        let hand_pose = forearm_pose
+            * Isometry3::from_parts(Translation3::identity(), UnitQuaternion::from_rotation_matrix(&wrist_rotation(q)));
         let mut frame = [0.0; MARKER_FRAME_LEN];
         for (i, marker) in MARKERS.iter().enumerate() {
             let pose = match marker.segment {
@@ -309,11 +290,17 @@ impl BodyModel {
     pub fn marker_frames(&self, q: &[f64], shoulder_flexion: f64) -> crate::Result<Vec<f64>> {
         use crate::Error;
         if !q.len().is_multiple_of(N_COORDINATES) {
-            return Err(Error::BadArgument { what: "q", detail: format!("{} values is not a whole number of angle triples", q.len()) });
+            return Err(Error::BadArgument {
+                what: "q",
+                detail: format!("{} values is not a whole number of angle triples", q.len()),
+            });
         }
         if let Some(i) = q.iter().position(|v| !v.is_finite()) {
             let name = COORDINATES[i % N_COORDINATES].name;
-            return Err(Error::BadArgument { what: "q", detail: format!("row {}: {name} is {}", i / N_COORDINATES, q[i]) });
+            return Err(Error::BadArgument {
+                what: "q",
+                detail: format!("row {}: {name} is {}", i / N_COORDINATES, q[i]),
+            });
         }
         if !shoulder_flexion.is_finite() {
             return Err(Error::BadArgument { what: "shoulder_flexion", detail: format!("is {shoulder_flexion}") });

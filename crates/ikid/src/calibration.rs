@@ -82,7 +82,10 @@ impl Calibration {
         for (name, m) in [("forearm", &forearm), ("hand", &hand)] {
             let off = (m.transpose() * m - Matrix3::identity()).abs().max();
             if !m.iter().all(|v| v.is_finite()) || off > 1e-6 || m.determinant() < 0.0 {
-                return Err(bad(format!("the {name} matrix is not a rotation (|MᵀM − I| = {off:.2e}, det {:.3})", m.determinant())));
+                return Err(bad(format!(
+                    "the {name} matrix is not a rotation (|MᵀM − I| = {off:.2e}, det {:.3})",
+                    m.determinant()
+                )));
             }
         }
         Ok(Calibration { forearm: Rotation3::from_matrix(&forearm), hand: Rotation3::from_matrix(&hand) })
@@ -94,7 +97,10 @@ impl Calibration {
     pub fn from_trials(static_frames: &[f32], movements: &[(usize, &[f32])]) -> Result<(Self, CalibrationReport)> {
         let statics = relative_rotations(static_frames, "static trial")?;
         if statics.len() < MIN_STATIC_FRAMES {
-            return Err(bad(format!("the static trial has {} frames, at least {MIN_STATIC_FRAMES} are needed", statics.len())));
+            return Err(bad(format!(
+                "the static trial has {} frames, at least {MIN_STATIC_FRAMES} are needed",
+                statics.len()
+            )));
         }
         let neutral = mean_rotation(&statics);
         let spread = statics.iter().map(|s| angle_deg(&(s * neutral.inverse()))).fold(0.0, f64::max);
@@ -120,17 +126,22 @@ impl Calibration {
             let rotations = relative_rotations(frames, name)?;
             // Rotation vectors via quaternions: Rotation3::scaled_axis is NaN when round-off puts
             // the trace a hair above 3 (a frame at neutral).
-            let vectors: Vec<Vector3<f64>> =
-                rotations.iter().map(|r| UnitQuaternion::from_rotation_matrix(&(r * neutral.inverse())).scaled_axis()).collect();
+            let vectors: Vec<Vector3<f64>> = rotations
+                .iter()
+                .map(|r| UnitQuaternion::from_rotation_matrix(&(r * neutral.inverse())).scaled_axis())
+                .collect();
             let scatter = vectors.iter().fold(Matrix3::zeros(), |acc, v| acc + v * v.transpose());
             let eigen = SymmetricEigen::new(scatter);
             let k = eigen.eigenvalues.imax();
             let mut axis: Vector3<f64> = eigen.eigenvectors.column(k).into_owned();
             let purity = eigen.eigenvalues[k] / eigen.eigenvalues.sum().max(f64::MIN_POSITIVE);
-            let range = vectors.iter().map(|v| v.dot(&axis)).fold((f64::MAX, f64::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
+            let range =
+                vectors.iter().map(|v| v.dot(&axis)).fold((f64::MAX, f64::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
             let range_deg = (range.1 - range.0).to_degrees();
             if range_deg < MIN_MOVEMENT_DEG {
-                return Err(bad(format!("the {name} movement spans {range_deg:.1}°; at least {MIN_MOVEMENT_DEG}° shows its axis")));
+                return Err(bad(format!(
+                    "the {name} movement spans {range_deg:.1}°; at least {MIN_MOVEMENT_DEG}° shows its axis"
+                )));
             }
             if purity < MIN_AXIS_PURITY {
                 return Err(bad(format!(
@@ -149,7 +160,8 @@ impl Calibration {
         }
         for (a, (_, t1)) in measured.iter().enumerate() {
             for (_, t2) in &measured[a + 1..] {
-                report.axis_skew_deg = report.axis_skew_deg.max((t1.dot(t2).clamp(-1.0, 1.0).acos().to_degrees() - 90.0).abs());
+                report.axis_skew_deg =
+                    report.axis_skew_deg.max((t1.dot(t2).clamp(-1.0, 1.0).acos().to_degrees() - 90.0).abs());
             }
         }
         if report.axis_skew_deg > MAX_AXIS_SKEW_DEG {
@@ -162,10 +174,12 @@ impl Calibration {
         let n = measured.iter().fold(Matrix3::zeros(), |acc, (a, t)| acc + t * a.transpose());
         let svd = n.svd(true, true);
         let (u, v_t) = (svd.u.expect("requested"), svd.v_t.expect("requested"));
-        let d = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, (v_t.transpose() * u.transpose()).determinant().signum()));
+        let d =
+            Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, (v_t.transpose() * u.transpose()).determinant().signum()));
         let forearm = Rotation3::from_matrix(&(v_t.transpose() * d * u.transpose()));
         let hand = forearm * neutral;
-        report.placement_deg = [angle_deg(&(forearm * default.forearm.inverse())), angle_deg(&(hand * default.hand.inverse()))];
+        report.placement_deg =
+            [angle_deg(&(forearm * default.forearm.inverse())), angle_deg(&(hand * default.hand.inverse()))];
         if let Some(worst) = report.placement_deg.iter().copied().find(|&a| a > MAX_PLACEMENT_DEG) {
             return Err(bad(format!(
                 "the markers sit {worst:.0}° from the body model's placement (at most {MAX_PLACEMENT_DEG}°): are they labelled right?"
@@ -218,7 +232,10 @@ fn relative_rotations(frames: &[f32], what: &str) -> Result<Vec<Rotation3<f64>>>
         .enumerate()
         .map(|(i, f)| {
             if let Some(k) = f.iter().position(|v| !v.is_finite()) {
-                return Err(bad(format!("{what}: frame {i}: marker {} is missing; fill gaps first", body::MARKERS[k / 3].name)));
+                return Err(bad(format!(
+                    "{what}: frame {i}: marker {} is missing; fill gaps first",
+                    body::MARKERS[k / 3].name
+                )));
             }
             let (_, b_f) = technical_frame(f, Segment::Forearm, i)?;
             let (_, b_h) = technical_frame(f, Segment::Hand, i)?;
@@ -276,13 +293,20 @@ mod tests {
             .collect()
     }
 
-    const SHIFT: [[f64; 3]; 6] =
-        [[0.0, 0.01, 0.015], [-0.012, 0.0, 0.01], [0.015, -0.01, 0.0], [0.0, 0.015, -0.01], [0.01, 0.0, 0.015], [-0.015, 0.01, 0.0]];
+    const SHIFT: [[f64; 3]; 6] = [
+        [0.0, 0.01, 0.015],
+        [-0.012, 0.0, 0.01],
+        [0.015, -0.01, 0.0],
+        [0.0, 0.015, -0.01],
+        [0.01, 0.0, 0.015],
+        [-0.015, 0.01, 0.0],
+    ];
 
     #[test]
     fn calibrated_angles_are_exact_under_misplaced_markers_and_another_size() {
         let statics = frames(&[[0.0; 3]; 20], &SHIFT, 1.2, 0.4);
-        let moves: Vec<(usize, Vec<f32>)> = (0..2).map(|j| (j, frames(&single(j, 200, 0.6), &SHIFT, 1.2, 0.4))).collect();
+        let moves: Vec<(usize, Vec<f32>)> =
+            (0..2).map(|j| (j, frames(&single(j, 200, 0.6), &SHIFT, 1.2, 0.4))).collect();
         let refs: Vec<(usize, &[f32])> = moves.iter().map(|(j, f)| (*j, f.as_slice())).collect();
         let (cal, report) = Calibration::from_trials(&statics, &refs).unwrap();
         assert!(report.placement_deg[1] > 5.0, "the shift should matter: {report:?}");
@@ -315,7 +339,8 @@ mod tests {
             let shift = random_shift(seed, 0.015);
             let pair = [(0, 1), (0, 2), (1, 2)][seed as usize % 3];
             let statics = frames(&[[0.0; 3]; 12], &shift, 0.9, 0.2);
-            let moves: Vec<(usize, Vec<f32>)> = [pair.0, pair.1].iter().map(|&j| (j, frames(&single(j, 120, 0.5), &shift, 0.9, 0.2))).collect();
+            let moves: Vec<(usize, Vec<f32>)> =
+                [pair.0, pair.1].iter().map(|&j| (j, frames(&single(j, 120, 0.5), &shift, 0.9, 0.2))).collect();
             let refs: Vec<(usize, &[f32])> = moves.iter().map(|(j, f)| (*j, f.as_slice())).collect();
             let (cal, _) = Calibration::from_trials(&statics, &refs).unwrap();
             for r in [cal.forearm, cal.hand] {
@@ -338,19 +363,21 @@ mod tests {
         let body = body::BodyModel::default();
         let turn = Rotation3::from_axis_angle(&Vector3::x_axis(), 90f64.to_radians());
         let mut shift = [[0.0; 3]; 6];
-        for m in 3..6 {
-            let o = Vector3::from(body.marker_offsets[m]);
+        for (s, offset) in shift.iter_mut().zip(&body.marker_offsets).skip(3) {
+            let o = Vector3::from(*offset);
             let moved = turn * o - o;
-            shift[m] = [moved.x, moved.y, moved.z];
+            *s = [moved.x, moved.y, moved.z];
         }
         let statics = frames(&[[0.0; 3]; 20], &shift, 1.0, 0.0);
-        let moves: Vec<(usize, Vec<f32>)> = (0..2).map(|j| (j, frames(&single(j, 200, 0.6), &shift, 1.0, 0.0))).collect();
+        let moves: Vec<(usize, Vec<f32>)> =
+            (0..2).map(|j| (j, frames(&single(j, 200, 0.6), &shift, 1.0, 0.0))).collect();
         let refs: Vec<(usize, &[f32])> = moves.iter().map(|(j, f)| (*j, f.as_slice())).collect();
         let err = Calibration::from_trials(&statics, &refs).unwrap_err().to_string();
         assert!(err.contains("from the body model's placement (at most 60°): are they labelled right?"), "{err}");
         // 15 mm misplacements are well inside it.
         let statics = frames(&[[0.0; 3]; 20], &SHIFT, 1.0, 0.0);
-        let moves: Vec<(usize, Vec<f32>)> = (0..2).map(|j| (j, frames(&single(j, 200, 0.6), &SHIFT, 1.0, 0.0))).collect();
+        let moves: Vec<(usize, Vec<f32>)> =
+            (0..2).map(|j| (j, frames(&single(j, 200, 0.6), &SHIFT, 1.0, 0.0))).collect();
         let refs: Vec<(usize, &[f32])> = moves.iter().map(|(j, f)| (*j, f.as_slice())).collect();
         let (_, report) = Calibration::from_trials(&statics, &refs).unwrap();
         assert!(report.placement_deg.iter().all(|&a| a < MAX_PLACEMENT_DEG), "{report:?}");
@@ -373,7 +400,8 @@ mod tests {
     #[test]
     fn from_matrices_round_trips_a_calibration_and_refuses_what_is_not_a_rotation() {
         let statics = frames(&[[0.0; 3]; 20], &SHIFT, 1.0, 0.0);
-        let moves: Vec<(usize, Vec<f32>)> = (0..2).map(|j| (j, frames(&single(j, 200, 0.6), &SHIFT, 1.0, 0.0))).collect();
+        let moves: Vec<(usize, Vec<f32>)> =
+            (0..2).map(|j| (j, frames(&single(j, 200, 0.6), &SHIFT, 1.0, 0.0))).collect();
         let refs: Vec<(usize, &[f32])> = moves.iter().map(|(j, f)| (*j, f.as_slice())).collect();
         let (cal, _) = Calibration::from_trials(&statics, &refs).unwrap();
         let back = Calibration::from_matrices(*cal.forearm.matrix(), *cal.hand.matrix()).unwrap();
@@ -410,12 +438,20 @@ mod tests {
         assert!(err(Calibration::from_trials(&statics, &[(1, &flex)])).contains("at least two different coordinates"));
         assert!(err(Calibration::from_trials(&flex, &[(1, &flex), (0, &flex)])).contains("must hold the neutral pose"));
         let tiny = frames(&single(0, 100, 0.05), &SHIFT, 1.0, 0.0);
-        assert!(err(Calibration::from_trials(&statics, &[(1, &flex), (0, &tiny)])).contains("ra_wr_s_p movement spans"));
-        let mixed: Vec<[f64; 3]> = single(0, 100, 0.6).iter().zip(single(1, 100, 0.6)).map(|(a, b)| [a[0], b[1], 0.0]).collect();
+        assert!(
+            err(Calibration::from_trials(&statics, &[(1, &flex), (0, &tiny)])).contains("ra_wr_s_p movement spans")
+        );
+        let mixed: Vec<[f64; 3]> =
+            single(0, 100, 0.6).iter().zip(single(1, 100, 0.6)).map(|(a, b)| [a[0], b[1], 0.0]).collect();
         let mixed = frames(&mixed, &SHIFT, 1.0, 0.0);
-        assert!(err(Calibration::from_trials(&statics, &[(1, &flex), (0, &mixed)])).contains("move each coordinate alone"));
+        assert!(
+            err(Calibration::from_trials(&statics, &[(1, &flex), (0, &mixed)])).contains("move each coordinate alone")
+        );
         let mut gap = statics.clone();
         gap[4] = f32::NAN;
-        assert!(err(Calibration::from_trials(&gap, &[(1, &flex), (0, &flex)])).contains("static trial: frame 0: marker USP is missing"));
+        assert!(
+            err(Calibration::from_trials(&gap, &[(1, &flex), (0, &flex)]))
+                .contains("static trial: frame 0: marker USP is missing")
+        );
     }
 }

@@ -141,7 +141,9 @@ pub enum Error {
     },
     /// The network's prediction is not finite: the input lies far outside anything the
     /// model was trained on (e.g. millimetres given to a metre model).
-    #[error("frame {frame}: the prediction is not finite ({value}); the input is far outside the model's training range (units?)")]
+    #[error(
+        "frame {frame}: the prediction is not finite ({value}); the input is far outside the model's training range (units?)"
+    )]
     NonFiniteOutput {
         /// Index of the frame within the call.
         frame: usize,
@@ -256,7 +258,9 @@ impl Error {
     /// The markers an error concerns ([`crate::body::MARKERS`] names), empty if none.
     pub fn markers(&self) -> Vec<&str> {
         match self {
-            Error::MissingMarkers { markers, .. } | Error::OutlierMarker { markers, .. } => markers.split(", ").collect(),
+            Error::MissingMarkers { markers, .. } | Error::OutlierMarker { markers, .. } => {
+                markers.split(", ").collect()
+            }
             Error::NonFiniteInput { field, .. } => {
                 let name = field.split('.').next().unwrap_or(field);
                 crate::body::MARKERS.iter().map(|m| m.name).filter(|m| *m == name).collect()
@@ -303,20 +307,77 @@ mod tests {
             (io(std::io::ErrorKind::NotFound), Io, "not_found", None, vec![]),
             (io(std::io::ErrorKind::PermissionDenied), Io, "io", None, vec![]),
             (Error::Container("bad header".into()), ModelFile, "container", None, vec![]),
-            (Error::InModelFile { path: "m.safetensors".into(), source: Box::new(Error::MissingTensor { name: "b".into() }) }, ModelFile, "missing_tensor", None, vec![]),
+            (
+                Error::InModelFile {
+                    path: "m.safetensors".into(),
+                    source: Box::new(Error::MissingTensor { name: "b".into() }),
+                },
+                ModelFile,
+                "missing_tensor",
+                None,
+                vec![],
+            ),
             (Error::ModelCard("no task".into()), ModelFile, "model_card", None, vec![]),
             (Error::UnsupportedVersion { found: 9, supported: 1 }, ModelFile, "unsupported_version", None, vec![]),
-            (Error::UnknownFeatureSet { name: "x".into(), known: "markers".into() }, ModelFile, "unknown_feature_set", None, vec![]),
+            (
+                Error::UnknownFeatureSet { name: "x".into(), known: "markers".into() },
+                ModelFile,
+                "unknown_feature_set",
+                None,
+                vec![],
+            ),
             (Error::MissingTensor { name: "a".into() }, ModelFile, "missing_tensor", None, vec![]),
             (Error::UnexpectedTensor { name: "a".into() }, ModelFile, "unexpected_tensor", None, vec![]),
             (Error::WrongDtype { name: "a".into(), dtype: "F16".into() }, ModelFile, "wrong_dtype", None, vec![]),
-            (Error::ShapeMismatch { name: "a".into(), found: vec![1], expected: vec![2] }, ModelFile, "shape_mismatch", None, vec![]),
-            (Error::NonFiniteWeight { name: "a".into(), index: 3, value: f32::NAN }, ModelFile, "non_finite_weight", None, vec![]),
-            (Error::FrameLength { feature_set: "markers", found: 17, expected: 18 }, Input, "frame_length", None, vec![]),
-            (Error::NonFiniteInput { frame: 4, field: "MC5.y".into(), value: f32::NAN }, Input, "non_finite_input", Some(4), vec!["MC5"]),
-            (Error::NonFiniteInput { frame: 4, field: "q.ra_wr_s_p".into(), value: f32::NAN }, Input, "non_finite_input", Some(4), vec![]),
-            (Error::MissingMarkers { frame: 7, markers: "RSP, MC2".into(), reason: "why" }, Input, "missing_markers", Some(7), vec!["RSP", "MC2"]),
-            (Error::OutlierMarker { frame: 8, markers: "FAP".into(), detail: "far".into() }, Input, "outlier_marker", Some(8), vec!["FAP"]),
+            (
+                Error::ShapeMismatch { name: "a".into(), found: vec![1], expected: vec![2] },
+                ModelFile,
+                "shape_mismatch",
+                None,
+                vec![],
+            ),
+            (
+                Error::NonFiniteWeight { name: "a".into(), index: 3, value: f32::NAN },
+                ModelFile,
+                "non_finite_weight",
+                None,
+                vec![],
+            ),
+            (
+                Error::FrameLength { feature_set: "markers", found: 17, expected: 18 },
+                Input,
+                "frame_length",
+                None,
+                vec![],
+            ),
+            (
+                Error::NonFiniteInput { frame: 4, field: "MC5.y".into(), value: f32::NAN },
+                Input,
+                "non_finite_input",
+                Some(4),
+                vec!["MC5"],
+            ),
+            (
+                Error::NonFiniteInput { frame: 4, field: "q.ra_wr_s_p".into(), value: f32::NAN },
+                Input,
+                "non_finite_input",
+                Some(4),
+                vec![],
+            ),
+            (
+                Error::MissingMarkers { frame: 7, markers: "RSP, MC2".into(), reason: "why" },
+                Input,
+                "missing_markers",
+                Some(7),
+                vec!["RSP", "MC2"],
+            ),
+            (
+                Error::OutlierMarker { frame: 8, markers: "FAP".into(), detail: "far".into() },
+                Input,
+                "outlier_marker",
+                Some(8),
+                vec!["FAP"],
+            ),
             (Error::DegenerateSegment { frame: 9, segment: "hand" }, Input, "degenerate_segment", Some(9), vec![]),
             (Error::NonFiniteOutput { frame: 10, value: f32::INFINITY }, Input, "non_finite_output", Some(10), vec![]),
             (Error::BadArgument { what: "rate_hz", detail: "is 0".into() }, Argument, "bad_argument", None, vec![]),

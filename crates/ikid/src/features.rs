@@ -125,10 +125,9 @@ impl FeatureSet {
                 .flat_map(|s| ["origin", "e1", "e2", "e3"].map(move |v| format!("{}.{v}", s.name())))
                 .flat_map(|prefix| xyz(&prefix))
                 .collect(),
-            FeatureSet::Relative => (0..3)
-                .flat_map(|r| (0..3).map(move |c| format!("rel.r{r}{c}")))
-                .chain(xyz("rel.t"))
-                .collect(),
+            FeatureSet::Relative => {
+                (0..3).flat_map(|r| (0..3).map(move |c| format!("rel.r{r}{c}"))).chain(xyz("rel.t")).collect()
+            }
             FeatureSet::RelativeGravity => FeatureSet::Relative.feature_names().into_iter().chain(xyz("up")).collect(),
             FeatureSet::Angles => COORDINATES.iter().map(|c| format!("angle.{}", c.name)).collect(),
             FeatureSet::AnglesGravity => FeatureSet::Angles.feature_names().into_iter().chain(xyz("up")).collect(),
@@ -266,7 +265,8 @@ pub(crate) fn technical_in_anatomical() -> &'static (Matrix3<f64>, Matrix3<f64>)
         // An array, not a Vec: the first push of a stream runs this and must not allocate.
         let frame = body.marker_frame(&[0.0; N_COORDINATES], &pose).map(|v| v as f32);
         let anatomical = pose.rotation.to_rotation_matrix().into_inner();
-        let technical = |segment| technical_frame(&frame, segment, 0).expect("the body model's markers span each segment").1;
+        let technical =
+            |segment| technical_frame(&frame, segment, 0).expect("the body model's markers span each segment").1;
         (anatomical.transpose() * technical(Segment::Forearm), anatomical.transpose() * technical(Segment::Hand))
     })
 }
@@ -390,9 +390,12 @@ mod tests {
 
     #[test]
     fn angles_are_exact_on_clean_markers_for_any_size_and_pose() {
-        for (q, shoulder, scale) in [([0.5, 0.2, -0.1], 0.3, 1.0), ([-1.2, 1.1, 0.4], -0.35, 0.85), ([1.3, -1.0, -0.3], 0.8, 1.2)] {
+        for (q, shoulder, scale) in
+            [([0.5, 0.2, -0.1], 0.3, 1.0), ([-1.2, 1.1, 0.4], -0.35, 0.85), ([1.3, -1.0, -0.3], 0.8, 1.2)]
+        {
             let body = BodyModel::scaled(scale, 1.0);
-            let frame: Vec<f32> = body.marker_frame(&q, &body.forearm_pose(shoulder)).iter().map(|&v| v as f32).collect();
+            let frame: Vec<f32> =
+                body.marker_frame(&q, &body.forearm_pose(shoulder)).iter().map(|&v| v as f32).collect();
             let mut out = [0.0f32; 3];
             FeatureSet::Angles.compute(&frame, &mut out, 0).unwrap();
             for k in 0..3 {

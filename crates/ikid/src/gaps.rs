@@ -205,10 +205,13 @@ impl GapFiller {
             for i in (0..N_MARKERS).filter(|i| outliers & (1 << i) != 0) {
                 frame[3 * i..3 * i + 3].fill(f32::NAN);
             }
-            return self.fill_missing(frame, outliers, frame_index).inspect_err(|_| frame.copy_from_slice(&original)).map_err(|e| match e {
-                Error::MissingMarkers { .. } => self.outlier_error(&original, outliers, frame_index),
-                other => other,
-            });
+            return self
+                .fill_missing(frame, outliers, frame_index)
+                .inspect_err(|_| frame.copy_from_slice(&original))
+                .map_err(|e| match e {
+                    Error::MissingMarkers { .. } => self.outlier_error(&original, outliers, frame_index),
+                    other => other,
+                });
         }
         self.fill_missing(frame, missing, frame_index)
     }
@@ -319,7 +322,8 @@ impl GapFiller {
     }
 
     fn fill_missing(&mut self, frame: &mut [f32], missing: u8, frame_index: usize) -> Result<u8> {
-        let unfillable = |reason: &'static str| Error::MissingMarkers { frame: frame_index, markers: mask_names(missing), reason };
+        let unfillable =
+            |reason: &'static str| Error::MissingMarkers { frame: frame_index, markers: mask_names(missing), reason };
         let per_segment = SEGMENTS.map(|s| (missing >> first_marker(s)) & 0b111);
         let (occluded, whole) = match per_segment {
             [m, 0] if m.count_ones() == 1 => (Segment::Forearm, Segment::Hand),
@@ -365,7 +369,8 @@ impl GapFiller {
         // markers from the occluded one (marker noise estimated from each segment's pair
         // distances; the centre's doubled for its lever).
         weight[2] = (self.noise_variance(seg) + NOISE_FLOOR) / (2.0 * self.noise_variance(1 - seg) + NOISE_FLOOR);
-        let (rot, t) = rigid_fit(&local, &lab, &weight).ok_or_else(|| unfillable("the visible markers and the joint centre are collinear"))?;
+        let (rot, t) = rigid_fit(&local, &lab, &weight)
+            .ok_or_else(|| unfillable("the visible markers and the joint centre are collinear"))?;
         let filled = rot * missing_local + t;
         if !filled.iter().all(|v| v.is_finite()) {
             return Err(unfillable("the fit did not give a finite position"));
@@ -420,7 +425,8 @@ impl GapFiller {
             self.motion_sum[1] += (o_h - p_h).norm_squared();
             for (s, segment) in SEGMENTS.into_iter().enumerate() {
                 let first = first_marker(segment);
-                self.marker_motion_sum[s] += (first..first + 3).map(|i| (marker(frame, i) - marker(last, i)).norm_squared()).sum::<f64>() / 3.0;
+                self.marker_motion_sum[s] +=
+                    (first..first + 3).map(|i| (marker(frame, i) - marker(last, i)).norm_squared()).sum::<f64>() / 3.0;
             }
             self.motion_frames += 1;
         }
@@ -454,7 +460,9 @@ impl GapFiller {
         if eigen.eigenvalues.min() < MIN_MOTION {
             return None;
         }
-        let x = eigen.eigenvectors * Matrix6::from_diagonal(&eigen.eigenvalues.map(|l| 1.0 / l)) * eigen.eigenvectors.transpose()
+        let x = eigen.eigenvectors
+            * Matrix6::from_diagonal(&eigen.eigenvalues.map(|l| 1.0 / l))
+            * eigen.eigenvectors.transpose()
             * (self.rhs / self.complete_frames as f64);
         Some((x.fixed_rows::<3>(0).into_owned(), x.fixed_rows::<3>(3).into_owned()))
     }
@@ -478,10 +486,13 @@ fn marker(frame: &[f32], i: usize) -> Vector3<f64> {
     Vector3::new(frame[3 * i] as f64, frame[3 * i + 1] as f64, frame[3 * i + 2] as f64)
 }
 
-
 /// Rotation and translation taking the `local` points onto the `lab` ones in the weighted
 /// least-squares sense (Kabsch); `None` when the points are (nearly) collinear.
-fn rigid_fit<const N: usize>(local: &[Vector3<f64>; N], lab: &[Vector3<f64>; N], weight: &[f64; N]) -> Option<(Matrix3<f64>, Vector3<f64>)> {
+fn rigid_fit<const N: usize>(
+    local: &[Vector3<f64>; N],
+    lab: &[Vector3<f64>; N],
+    weight: &[f64; N],
+) -> Option<(Matrix3<f64>, Vector3<f64>)> {
     let total: f64 = weight.iter().sum();
     let lc = (0..N).map(|k| local[k] * weight[k]).sum::<Vector3<f64>>() / total;
     let gc = (0..N).map(|k| lab[k] * weight[k]).sum::<Vector3<f64>>() / total;
@@ -702,7 +713,8 @@ mod tests {
     fn swung(frame: &[f32; 18], m: usize, pivot: usize, deg: f64) -> [f32; 18] {
         let (p, x) = (marker(frame, pivot), marker(frame, m));
         let first = 3 * (m / 3);
-        let normal = (marker(frame, first + 1) - marker(frame, first)).cross(&(marker(frame, first + 2) - marker(frame, first)));
+        let normal =
+            (marker(frame, first + 1) - marker(frame, first)).cross(&(marker(frame, first + 2) - marker(frame, first)));
         let turn = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(normal), deg.to_radians());
         let moved = p + turn * (x - p);
         let mut out = *frame;
@@ -746,8 +758,16 @@ mod tests {
                 let c = 3 - a - b;
                 let f = swung(&truth, first + a, first + c, 40.0);
                 let pair = [(0, 1), (0, 2), (1, 2)].iter().position(|&p| p == (a, b)).unwrap();
-                assert_eq!(broken_pairs(&truth, &f, first), std::array::from_fn(|k| k == pair), "the set-up breaks one pair");
-                assert_eq!(filler.outliers(&f), (1 << (first + a)) | (1 << (first + b)), "pair {a}-{b} of segment {segment}");
+                assert_eq!(
+                    broken_pairs(&truth, &f, first),
+                    std::array::from_fn(|k| k == pair),
+                    "the set-up breaks one pair"
+                );
+                assert_eq!(
+                    filler.outliers(&f),
+                    (1 << (first + a)) | (1 << (first + b)),
+                    "pair {a}-{b} of segment {segment}"
+                );
             }
             // One marker far off, another a little: all three pairs break; the far one, whose
             // two pairs break most, is named.
@@ -781,7 +801,11 @@ mod tests {
                 assert_eq!(filler.outliers(&jumped(f)), 1 << 4, "after {i} complete frames");
                 return;
             }
-            assert_eq!(filler.outliers(&jumped(f)), 0, "before {MIN_CALIBRATION_FRAMES} frames nothing is known to jump ({i})");
+            assert_eq!(
+                filler.outliers(&jumped(f)),
+                0,
+                "before {MIN_CALIBRATION_FRAMES} frames nothing is known to jump ({i})"
+            );
             filler.fill(&mut f.clone(), i).unwrap();
         }
         panic!("never reached {MIN_CALIBRATION_FRAMES} complete frames");

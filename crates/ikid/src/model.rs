@@ -8,8 +8,8 @@
 //! oldest frame first. The card ([`ModelCard`]) is JSON under the metadata key
 //! [`CARD_KEY`]. The loader checks everything and names what is wrong.
 
-use crate::error::{Error, Result};
 use crate::body::MARKER_FRAME_LEN;
+use crate::error::{Error, Result};
 use crate::features::FeatureSet;
 use crate::gaps::{GapFiller, MissingMarkers};
 use crate::net::{Activation, Affine, BATCH, Dense, Mlp, PackedMlp};
@@ -93,7 +93,15 @@ pub struct ModelCard {
 
 impl ModelCard {
     /// A card with the required fields and empty provenance/metrics.
-    pub fn new(name: &str, task: &str, feature_set: FeatureSet, window: usize, frame_rate_hz: f64, outputs: Vec<OutputSpec>, activations: &[Activation]) -> Self {
+    pub fn new(
+        name: &str,
+        task: &str,
+        feature_set: FeatureSet,
+        window: usize,
+        frame_rate_hz: f64,
+        outputs: Vec<OutputSpec>,
+        activations: &[Activation],
+    ) -> Self {
         ModelCard {
             format: FORMAT.into(),
             format_version: FORMAT_VERSION,
@@ -116,7 +124,8 @@ impl ModelCard {
 
     /// Parses and checks a card (everything that does not need the tensors).
     pub fn from_json(json: &str) -> Result<Self> {
-        let value: serde_json::Value = serde_json::from_str(json).map_err(|e| Error::ModelCard(format!("not valid JSON: {e}")))?;
+        let value: serde_json::Value =
+            serde_json::from_str(json).map_err(|e| Error::ModelCard(format!("not valid JSON: {e}")))?;
         match value.get("format").and_then(|v| v.as_str()) {
             Some(FORMAT) => {}
             other => return Err(Error::ModelCard(format!("field \"format\" is {other:?}, expected {FORMAT:?}"))),
@@ -142,7 +151,9 @@ impl ModelCard {
             .iter()
             .enumerate()
             .map(|(k, a)| {
-                parse_activation(a).map_err(|_| Error::ModelCard(format!("field \"activations\"[{k}] is {a:?}, expected \"relu\" or \"identity\"")))
+                parse_activation(a).map_err(|_| {
+                    Error::ModelCard(format!("field \"activations\"[{k}] is {a:?}, expected \"relu\" or \"identity\""))
+                })
             })
             .collect()
     }
@@ -175,10 +186,18 @@ impl ModelCard {
         if !(self.frame_rate_hz.is_finite() && self.frame_rate_hz > 0.0) {
             return bad(format!("field \"frame_rate_hz\" is {}, expected a positive number", self.frame_rate_hz));
         }
-        let policy = MissingMarkers::from_name(&self.missing_markers)
-            .map_err(|_| Error::ModelCard(format!("field \"missing_markers\" is {:?}, expected one of {:?}", self.missing_markers, MissingMarkers::ALL.map(|p| p.name()))))?;
+        let policy = MissingMarkers::from_name(&self.missing_markers).map_err(|_| {
+            Error::ModelCard(format!(
+                "field \"missing_markers\" is {:?}, expected one of {:?}",
+                self.missing_markers,
+                MissingMarkers::ALL.map(|p| p.name())
+            ))
+        })?;
         if policy == MissingMarkers::Fill && set.frame_len() != MARKER_FRAME_LEN {
-            return bad(format!("field \"missing_markers\" is \"fill\" but feature set {:?} does not take marker frames", self.feature_set));
+            return bad(format!(
+                "field \"missing_markers\" is \"fill\" but feature set {:?} does not take marker frames",
+                self.feature_set
+            ));
         }
         if self.outputs.is_empty() {
             return bad("field \"outputs\" is empty".into());
@@ -238,7 +257,9 @@ pub fn read_bounded(path: &Path, limit: u64) -> std::io::Result<Vec<u8>> {
         let what = if meta.is_dir() { "a directory" } else { "not a regular file (a pipe, socket or device)" };
         return Err(IoError::new(IoKind::InvalidInput, format!("it is {what}; expected a file")));
     }
-    let too_large = |size: u64| IoError::new(IoKind::InvalidData, format!("it is {size} bytes, more than the {limit} bytes accepted"));
+    let too_large = |size: u64| {
+        IoError::new(IoKind::InvalidData, format!("it is {size} bytes, more than the {limit} bytes accepted"))
+    };
     if meta.len() > limit {
         return Err(too_large(meta.len()));
     }
@@ -273,11 +294,9 @@ impl Model {
     pub fn from_bytes(bytes: &[u8]) -> Result<Self> {
         let (_, meta) = SafeTensors::read_metadata(bytes).map_err(|e| Error::Container(e.to_string()))?;
         let tensors = SafeTensors::deserialize(bytes).map_err(|e| Error::Container(e.to_string()))?;
-        let json = meta
-            .metadata()
-            .as_ref()
-            .and_then(|m| m.get(CARD_KEY))
-            .ok_or_else(|| Error::ModelCard(format!("the file's __metadata__ has no {CARD_KEY:?} key: not an ikid model file")))?;
+        let json = meta.metadata().as_ref().and_then(|m| m.get(CARD_KEY)).ok_or_else(|| {
+            Error::ModelCard(format!("the file's __metadata__ has no {CARD_KEY:?} key: not an ikid model file"))
+        })?;
         let card = ModelCard::from_json(json)?;
         let set = FeatureSet::from_name(&card.feature_set)?;
         let n_in = card.window * set.feature_len();
@@ -332,7 +351,11 @@ impl Model {
         let packed = PackedMlp::new(&mlp);
         // Finite tensors can still overflow once the scaling is folded in.
         if let Some((layer, value)) = packed.first_non_finite() {
-            return Err(Error::NonFiniteWeight { name: format!("layers.{layer}.weight (scaling folded in)"), index: 0, value });
+            return Err(Error::NonFiniteWeight {
+                name: format!("layers.{layer}.weight (scaling folded in)"),
+                index: 0,
+                value,
+            });
         }
         Ok(Model { inner: Arc::new(Inner { card, feature_set, mlp, packed }) })
     }
@@ -467,35 +490,45 @@ impl Model {
         const ROWS_PER_BLOCK: usize = 8 * BATCH;
         let mut features = vec![0f32; frames.len() / fl * nf];
         let blocks = frames.chunks(FRAMES_PER_BLOCK * fl).zip(features.chunks_mut(FRAMES_PER_BLOCK * nf));
-        for_each_claimed(blocks, threads, || (), |(), b, (frames, features)| {
-            for (i, (frame, row)) in frames.chunks_exact(fl).zip(features.chunks_exact_mut(nf)).enumerate() {
-                set.compute(frame, row, b * FRAMES_PER_BLOCK + i)?;
-            }
-            Ok(())
-        })?;
+        for_each_claimed(
+            blocks,
+            threads,
+            || (),
+            |(), b, (frames, features)| {
+                for (i, (frame, row)) in frames.chunks_exact(fl).zip(features.chunks_exact_mut(nf)).enumerate() {
+                    set.compute(frame, row, b * FRAMES_PER_BLOCK + i)?;
+                }
+                Ok(())
+            },
+        )?;
         let net = self.packed();
         // Windows of consecutive frames are contiguous slices of the feature rows.
         let window = |i: usize| &features[i * nf..(i + w) * nf];
         let scratch = || (net.scratch(), net.batch_scratch());
-        for_each_claimed(out.chunks_mut(ROWS_PER_BLOCK * no), threads, scratch, |(scratch, batch_scratch), b, chunk| {
-            let mut row = b * ROWS_PER_BLOCK;
-            let mut groups = chunk.chunks_exact_mut(BATCH * no);
-            for group in &mut groups {
-                let mut rows = group.chunks_exact_mut(no);
-                let outs = std::array::from_fn(|_| rows.next().expect("BATCH rows per group"));
-                net.forward_batch(std::array::from_fn(|s| window(row + s)), batch_scratch, outs);
-                for (s, out) in group.chunks_exact_mut(no).enumerate() {
-                    self.add_offset(window(row + s), out);
+        for_each_claimed(
+            out.chunks_mut(ROWS_PER_BLOCK * no),
+            threads,
+            scratch,
+            |(scratch, batch_scratch), b, chunk| {
+                let mut row = b * ROWS_PER_BLOCK;
+                let mut groups = chunk.chunks_exact_mut(BATCH * no);
+                for group in &mut groups {
+                    let mut rows = group.chunks_exact_mut(no);
+                    let outs = std::array::from_fn(|_| rows.next().expect("BATCH rows per group"));
+                    net.forward_batch(std::array::from_fn(|s| window(row + s)), batch_scratch, outs);
+                    for (s, out) in group.chunks_exact_mut(no).enumerate() {
+                        self.add_offset(window(row + s), out);
+                    }
+                    row += BATCH;
                 }
-                row += BATCH;
-            }
-            for out in groups.into_remainder().chunks_exact_mut(no) {
-                net.forward(window(row), scratch, out);
-                self.add_offset(window(row), out);
-                row += 1;
-            }
-            Ok(())
-        })?;
+                for out in groups.into_remainder().chunks_exact_mut(no) {
+                    net.forward(window(row), scratch, out);
+                    self.add_offset(window(row), out);
+                    row += 1;
+                }
+                Ok(())
+            },
+        )?;
         if let Some(i) = out.iter().position(|v| !v.is_finite()) {
             // Output row r is the prediction for frame r + window - 1.
             return Err(Error::NonFiniteOutput { frame: i / no + w - 1, value: out[i] });
@@ -577,7 +610,8 @@ fn read_f32(name: &str, t: &TensorView<'_>, expected: &[Option<usize>]) -> Resul
         return Err(Error::WrongDtype { name: name.into(), dtype: format!("{:?}", t.dtype()) });
     }
     let shape = t.shape().to_vec();
-    let fits = shape.len() == expected.len() && shape.iter().zip(expected).all(|(s, e)| e.is_none_or(|e| *s == e) && *s > 0);
+    let fits =
+        shape.len() == expected.len() && shape.iter().zip(expected).all(|(s, e)| e.is_none_or(|e| *s == e) && *s > 0);
     if !fits {
         return Err(Error::ShapeMismatch {
             name: name.into(),
@@ -610,7 +644,9 @@ pub fn to_bytes(card: &ModelCard, mlp: &Mlp) -> Result<Vec<u8>> {
         tensors.into_iter().map(|(n, s, v)| (n, s, v.iter().flat_map(|x| x.to_le_bytes()).collect())).collect();
     let views = bytes
         .iter()
-        .map(|(n, s, b)| Ok((n.as_str(), TensorView::new(Dtype::F32, s.clone(), b).map_err(|e| Error::Container(e.to_string()))?)))
+        .map(|(n, s, b)| {
+            Ok((n.as_str(), TensorView::new(Dtype::F32, s.clone(), b).map_err(|e| Error::Container(e.to_string()))?))
+        })
         .collect::<Result<Vec<_>>>()?;
     let meta = HashMap::from([(CARD_KEY.to_string(), card.to_json())]);
     safetensors::serialize(views, Some(meta)).map_err(|e| Error::Container(e.to_string()))

@@ -17,13 +17,20 @@ use crate::rng::SplitMix;
 
 fn frames_of(markers: &[f64]) -> Result<usize> {
     if !markers.len().is_multiple_of(MARKER_FRAME_LEN) {
-        return Err(Error::BadArgument { what: "markers", detail: format!("{} values is not a whole number of 18-value frames", markers.len()) });
+        return Err(Error::BadArgument {
+            what: "markers",
+            detail: format!("{} values is not a whole number of 18-value frames", markers.len()),
+        });
     }
     Ok(markers.len() / MARKER_FRAME_LEN)
 }
 
 fn parameter(what: &'static str, value: f64, ok: bool, expected: &str) -> Result<()> {
-    if ok && value.is_finite() { Ok(()) } else { Err(Error::BadArgument { what, detail: format!("is {value}, expected {expected}") }) }
+    if ok && value.is_finite() {
+        Ok(())
+    } else {
+        Err(Error::BadArgument { what, detail: format!("is {value}, expected {expected}") })
+    }
 }
 
 /// Adds uniform noise in ±`fraction` × (range of each coordinate column) — the thesis'
@@ -64,7 +71,11 @@ pub fn drift(markers: &mut [f64], amplitude: f64, rate_hz: f64, seed: u64) -> Re
     frames_of(markers)?;
     let mut rng = SplitMix::new(seed);
     let waves: [(f64, f64, f64); MARKER_FRAME_LEN] = std::array::from_fn(|_| {
-        (amplitude * rng.uniform(0.5, 1.0), std::f64::consts::TAU * rng.uniform(0.05, 0.2), rng.uniform(0.0, std::f64::consts::TAU))
+        (
+            amplitude * rng.uniform(0.5, 1.0),
+            std::f64::consts::TAU * rng.uniform(0.05, 0.2),
+            rng.uniform(0.0, std::f64::consts::TAU),
+        )
     });
     for (n, frame) in markers.chunks_exact_mut(MARKER_FRAME_LEN).enumerate() {
         let t = n as f64 / rate_hz;
@@ -93,7 +104,10 @@ pub fn occlusion(
     parameter("min_s", min_s, min_s >= 0.0 && min_s <= max_s, "0 ≤ min_s ≤ max_s")?;
     parameter("max_s", max_s, max_s >= 0.0, "≥ 0")?;
     if let Some(&bad) = markers_affected.iter().find(|&&m| m >= N_MARKERS) {
-        return Err(Error::BadArgument { what: "markers_affected", detail: format!("marker index {bad} is not below {N_MARKERS}") });
+        return Err(Error::BadArgument {
+            what: "markers_affected",
+            detail: format!("marker index {bad} is not below {N_MARKERS}"),
+        });
     }
     let n = frames_of(markers)?;
     let all: Vec<usize> = (0..N_MARKERS).collect();
@@ -126,7 +140,9 @@ mod tests {
     use super::*;
 
     fn recording(n: usize) -> Vec<f64> {
-        (0..n * MARKER_FRAME_LEN).map(|i| ((i % MARKER_FRAME_LEN) as f64 * 0.01) + ((i / MARKER_FRAME_LEN) as f64 * 0.001).sin()).collect()
+        (0..n * MARKER_FRAME_LEN)
+            .map(|i| ((i % MARKER_FRAME_LEN) as f64 * 0.01) + ((i / MARKER_FRAME_LEN) as f64 * 0.001).sin())
+            .collect()
     }
 
     #[test]
@@ -160,7 +176,11 @@ mod tests {
         let d: Vec<f64> = a.iter().zip(&clean).map(|(x, y)| x - y).collect();
         assert!(d.iter().all(|v| v.abs() <= 0.005 + 1e-15));
         // Frame-to-frame change ≤ 2π · 0.2 Hz · A / 1 kHz.
-        let step = d.chunks(MARKER_FRAME_LEN).zip(d.chunks(MARKER_FRAME_LEN).skip(1)).flat_map(|(p, q)| p.iter().zip(q).map(|(x, y)| (x - y).abs())).fold(0.0, f64::max);
+        let step = d
+            .chunks(MARKER_FRAME_LEN)
+            .zip(d.chunks(MARKER_FRAME_LEN).skip(1))
+            .flat_map(|(p, q)| p.iter().zip(q).map(|(x, y)| (x - y).abs()))
+            .fold(0.0, f64::max);
         assert!(step <= std::f64::consts::TAU * 0.2 * 0.005 / 1000.0 + 1e-15);
     }
 

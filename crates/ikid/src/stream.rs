@@ -94,7 +94,10 @@ impl Stream {
         if policy == MissingMarkers::Fill && self.model.frame_len() != MARKER_FRAME_LEN {
             return Err(Error::BadArgument {
                 what: "missing-marker policy",
-                detail: format!("\"fill\" needs marker frames; feature set {:?} takes joint states", self.model.feature_set().name()),
+                detail: format!(
+                    "\"fill\" needs marker frames; feature set {:?} takes joint states",
+                    self.model.feature_set().name()
+                ),
             });
         }
         self.policy = policy;
@@ -108,7 +111,10 @@ impl Stream {
         if calibration.is_some() && self.model.frame_len() != MARKER_FRAME_LEN {
             return Err(Error::BadArgument {
                 what: "calibration",
-                detail: format!("needs marker frames; feature set {:?} takes joint states", self.model.feature_set().name()),
+                detail: format!(
+                    "needs marker frames; feature set {:?} takes joint states",
+                    self.model.feature_set().name()
+                ),
             });
         }
         self.calibration = calibration;
@@ -147,7 +153,11 @@ impl Stream {
         let set = self.model.feature_set();
         if self.policy == MissingMarkers::Fill {
             if frame.len() != MARKER_FRAME_LEN {
-                return Err(Error::FrameLength { feature_set: set.name(), found: frame.len(), expected: MARKER_FRAME_LEN });
+                return Err(Error::FrameLength {
+                    feature_set: set.name(),
+                    found: frame.len(),
+                    expected: MARKER_FRAME_LEN,
+                });
             }
             // The filler learns only from frames it accepts, and refuses before changing
             // anything, so a refused frame leaves it and the window as they were.
@@ -233,11 +243,17 @@ impl Stream {
     /// a gap of more than 1.5 periods. Changes nothing.
     fn check_time(&self, time_s: f64) -> Result<bool> {
         if !time_s.is_finite() {
-            return Err(Error::BadArgument { what: "time", detail: format!("is {time_s}, expected a finite number of seconds") });
+            return Err(Error::BadArgument {
+                what: "time",
+                detail: format!("is {time_s}, expected a finite number of seconds"),
+            });
         }
         if let Some(last) = self.last_time {
             if time_s <= last {
-                return Err(Error::BadArgument { what: "time", detail: format!("{time_s} s does not follow the previous frame's {last} s") });
+                return Err(Error::BadArgument {
+                    what: "time",
+                    detail: format!("{time_s} s does not follow the previous frame's {last} s"),
+                });
             }
             let rate = self.model.card().frame_rate_hz;
             if (time_s - last) * rate < 0.5 {

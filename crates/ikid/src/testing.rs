@@ -13,7 +13,8 @@ pub use crate::rng::SplitMix;
 /// (He-style) so activations stay O(1), as in a trained network.
 pub fn random_model(set: FeatureSet, window: usize, hidden: &[usize], n_outputs: usize, seed: u64) -> Model {
     let mut rng = SplitMix::new(seed);
-    let widths: Vec<usize> = std::iter::once(window * set.feature_len()).chain(hidden.iter().copied()).chain([n_outputs]).collect();
+    let widths: Vec<usize> =
+        std::iter::once(window * set.feature_len()).chain(hidden.iter().copied()).chain([n_outputs]).collect();
     let layers: Vec<Dense> = widths
         .windows(2)
         .enumerate()
@@ -37,7 +38,10 @@ pub fn random_model(set: FeatureSet, window: usize, hidden: &[usize], n_outputs:
     let output = affine(n_outputs, (0.5, 3.0), 0.2);
     let mlp = Mlp::new(input, layers, output).expect("shapes chain");
     let outputs = (0..n_outputs)
-        .map(|i| OutputSpec { name: COORDINATES.get(i).map_or(format!("out{i}"), |c| c.name.to_string()), unit: "rad".into() })
+        .map(|i| OutputSpec {
+            name: COORDINATES.get(i).map_or(format!("out{i}"), |c| c.name.to_string()),
+            unit: "rad".into(),
+        })
         .collect();
     let card = ModelCard::new("random", "ik", set, window, 1000.0, outputs, &activations);
     Model::from_parts(card, mlp).expect("random model is valid")
@@ -49,7 +53,8 @@ pub fn random_refiner(window: usize, hidden: &[usize], seed: u64) -> Model {
     let base = random_model(FeatureSet::TrackerState, window, hidden, 6, seed);
     let mut card = base.card().clone();
     card.task = "refine".into();
-    card.outputs = crate::tracker::refiner_outputs().into_iter().map(|name| OutputSpec { name, unit: "rad/mm".into() }).collect();
+    card.outputs =
+        crate::tracker::refiner_outputs().into_iter().map(|name| OutputSpec { name, unit: "rad/mm".into() }).collect();
     Model::from_parts(card, base.mlp().clone()).expect("random refiner is valid")
 }
 

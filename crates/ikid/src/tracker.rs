@@ -95,7 +95,12 @@ impl Default for TrackerSettings {
     /// 1 kHz; [`DEFAULT_JERK_NOISE`]; a 10 s noise memory; 1 mm noise assumed at first (a
     /// guess too small makes the filter trust its first noisy frames and can throw it off).
     fn default() -> Self {
-        TrackerSettings { rate_hz: 1000.0, jerk_noise: DEFAULT_JERK_NOISE, noise_memory_s: 10.0, initial_marker_noise: 1e-3 }
+        TrackerSettings {
+            rate_hz: 1000.0,
+            jerk_noise: DEFAULT_JERK_NOISE,
+            noise_memory_s: 10.0,
+            initial_marker_noise: 1e-3,
+        }
     }
 }
 
@@ -219,9 +224,18 @@ impl Tracker {
             return Ok(());
         };
         let name = model.card().name.clone();
-        let bad = |detail: String| Err(Error::BadArgument { what: "refiner", detail: format!("model {name:?} cannot refine a tracker: {detail}") });
+        let bad = |detail: String| {
+            Err(Error::BadArgument {
+                what: "refiner",
+                detail: format!("model {name:?} cannot refine a tracker: {detail}"),
+            })
+        };
         if model.feature_set() != FeatureSet::TrackerState {
-            return bad(format!("it reads {} frames, not {}", model.feature_set().name(), FeatureSet::TrackerState.name()));
+            return bad(format!(
+                "it reads {} frames, not {}",
+                model.feature_set().name(),
+                FeatureSet::TrackerState.name()
+            ));
         }
         let names: Vec<String> = model.card().outputs.iter().map(|o| o.name.clone()).collect();
         if names != refiner_outputs() {
@@ -240,7 +254,10 @@ impl Tracker {
     pub fn state_std(&self) -> ([f64; N_COORDINATES], [f64; N_COORDINATES]) {
         match &self.state {
             None => ([0.0; N_COORDINATES], [0.0; N_COORDINATES]),
-            Some((_, p)) => (std::array::from_fn(|c| p[(c, c)].max(0.0).sqrt()), std::array::from_fn(|c| p[(6 + c, 6 + c)].max(0.0).sqrt())),
+            Some((_, p)) => (
+                std::array::from_fn(|c| p[(c, c)].max(0.0).sqrt()),
+                std::array::from_fn(|c| p[(6 + c, 6 + c)].max(0.0).sqrt()),
+            ),
         }
     }
 
@@ -291,7 +308,9 @@ impl Tracker {
         let Some(forearm) = self.forearm else { return Ok(None) };
 
         let (mut x, mut p) = match self.state {
-            Some((x, p)) => (self.transition * x, self.transition * p * self.transition.transpose() + self.process_noise),
+            Some((x, p)) => {
+                (self.transition * x, self.transition * p * self.transition.transpose() + self.process_noise)
+            }
             None => {
                 if missing != 0 {
                     return Ok(None);
@@ -310,11 +329,7 @@ impl Tracker {
             return Err(Error::NonFiniteOutput { frame: index, value });
         }
         self.state = Some((x, p));
-        let mut state = JointState {
-            q: [x[0], x[1], x[2]],
-            qd: [x[3], x[4], x[5]],
-            qdd: [x[6], x[7], x[8]],
-        };
+        let mut state = JointState { q: [x[0], x[1], x[2]], qd: [x[3], x[4], x[5]], qdd: [x[6], x[7], x[8]] };
         // The data's own estimate (floored: none yet in the first frames), so that clean
         // markers read as clean at once rather than as the fading initial guess.
         let noise = (self.data_variance.iter().map(|v| v.sqrt()).sum::<f64>() / N_HAND as f64).max(MIN_REPORTED_NOISE);
@@ -422,7 +437,11 @@ impl Tracker {
 
 /// Bit `i` set: marker `i` of `frame` ([`MARKERS`] order) has a NaN coordinate.
 pub fn missing_markers(frame: &[f64]) -> u8 {
-    frame.chunks_exact(3).enumerate().filter(|(_, xyz)| xyz.iter().any(|v| v.is_nan())).fold(0, |bits, (m, _)| bits | 1 << m)
+    frame
+        .chunks_exact(3)
+        .enumerate()
+        .filter(|(_, xyz)| xyz.iter().any(|v| v.is_nan()))
+        .fold(0, |bits, (m, _)| bits | 1 << m)
 }
 
 #[cfg(test)]
@@ -514,7 +533,13 @@ mod tests {
         let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
         for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
             let out = tracker.push(frame).unwrap().unwrap();
-            let expect = if (1000..1200).contains(&i) { 1 << 4 } else if i == 1500 { 1 << 2 } else { 0 };
+            let expect = if (1000..1200).contains(&i) {
+                1 << 4
+            } else if i == 1500 {
+                1 << 2
+            } else {
+                0
+            };
             assert_eq!(out.missing, expect, "frame {i}");
             for c in 0..3 {
                 // Two hand markers and the wrist centre still fix the hand: no loss on clean data.
@@ -566,9 +591,11 @@ mod tests {
             }
         }
         // The wrong kind of model is refused with the reason.
-        let err = refined.set_refiner(Some(random_model(FeatureSet::JointState, 5, &[8], 6, 1))).unwrap_err().to_string();
+        let err =
+            refined.set_refiner(Some(random_model(FeatureSet::JointState, 5, &[8], 6, 1))).unwrap_err().to_string();
         assert!(err.contains("reads joint_state frames"), "{err}");
-        let err = refined.set_refiner(Some(random_model(FeatureSet::TrackerState, 5, &[8], 3, 1))).unwrap_err().to_string();
+        let err =
+            refined.set_refiner(Some(random_model(FeatureSet::TrackerState, 5, &[8], 3, 1))).unwrap_err().to_string();
         assert!(err.contains("its outputs are"), "{err}");
         let mut slow = Tracker::new(body, TrackerSettings { rate_hz: 500.0, ..Default::default() }).unwrap();
         let err = slow.set_refiner(Some(refiner)).unwrap_err().to_string();
@@ -593,7 +620,8 @@ mod tests {
     /// (weight 1/(n+1), or the forgetting rate once that is larger), and the same with the
     /// initial guess counting as `PRIOR_FRAMES − 1` samples.
     fn third_difference_noise(frames: &[f64], settings: &TrackerSettings) -> (Vec<[f64; N_HAND]>, Vec<[f64; N_HAND]>) {
-        let hand: Vec<[f64; N_HAND]> = frames.chunks_exact(MARKER_FRAME_LEN).map(|f| std::array::from_fn(|i| f[HAND_START + i])).collect();
+        let hand: Vec<[f64; N_HAND]> =
+            frames.chunks_exact(MARKER_FRAME_LEN).map(|f| std::array::from_fn(|i| f[HAND_START + i])).collect();
         let forget = 1.0 / (settings.noise_memory_s * settings.rate_hz);
         let mut data = [0.0; N_HAND];
         let mut guessed = [settings.initial_marker_noise.powi(2); N_HAND];
@@ -630,7 +658,10 @@ mod tests {
         for i in 700..720 {
             f[i * MARKER_FRAME_LEN + 12..i * MARKER_FRAME_LEN + 15].fill(f64::NAN);
         }
-        for settings in [TrackerSettings::default(), TrackerSettings { noise_memory_s: 0.05, initial_marker_noise: 3e-3, ..Default::default() }] {
+        for settings in [
+            TrackerSettings::default(),
+            TrackerSettings { noise_memory_s: 0.05, initial_marker_noise: 3e-3, ..Default::default() },
+        ] {
             let (data, guessed) = third_difference_noise(&f, &settings);
             let mut tracker = Tracker::new(body.clone(), settings).unwrap();
             for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
@@ -639,7 +670,12 @@ mod tests {
                 assert!((out.noise / mean - 1.0).abs() < 1e-9, "frame {i}: {} vs {mean} ({settings:?})", out.noise);
                 let learned = tracker.marker_noise();
                 for k in 0..N_HAND {
-                    assert!((learned[k] / guessed[i][k] - 1.0).abs() < 1e-9, "frame {i} coordinate {k}: {} vs {}", learned[k], guessed[i][k]);
+                    assert!(
+                        (learned[k] / guessed[i][k] - 1.0).abs() < 1e-9,
+                        "frame {i} coordinate {k}: {} vs {}",
+                        learned[k],
+                        guessed[i][k]
+                    );
                 }
             }
         }
@@ -655,7 +691,8 @@ mod tests {
         let mut f = clean.clone();
         uniform_range(&mut f[..2000 * MARKER_FRAME_LEN], 0.05, 3).unwrap();
         let last_noise = |memory: f64| {
-            let mut tracker = Tracker::new(body.clone(), TrackerSettings { noise_memory_s: memory, ..Default::default() }).unwrap();
+            let mut tracker =
+                Tracker::new(body.clone(), TrackerSettings { noise_memory_s: memory, ..Default::default() }).unwrap();
             let mut noisy_end = 0.0;
             let mut out = None;
             for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
@@ -690,7 +727,8 @@ mod tests {
         bad[13] = f64::INFINITY;
         let err = tracker.push(&bad).unwrap_err().to_string();
         assert!(err.contains("MC5.y"), "{err}");
-        let err = Tracker::new(BodyModel::default(), TrackerSettings { jerk_noise: -1.0, ..Default::default() }).unwrap_err();
+        let err =
+            Tracker::new(BodyModel::default(), TrackerSettings { jerk_noise: -1.0, ..Default::default() }).unwrap_err();
         assert!(err.to_string().contains("jerk_noise"), "{err}");
         tracker.reset();
         assert!(tracker.push(&f[..MARKER_FRAME_LEN]).unwrap().is_none());

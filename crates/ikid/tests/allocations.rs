@@ -113,10 +113,12 @@ fn filling_a_missing_marker_never_allocates() {
 fn tracker_push_never_allocates_even_refined() {
     let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let body = ikid::body::BodyModel::default();
-    let q: Vec<f64> = (0..400).flat_map(|i| {
-        let t = i as f64 / 1000.0;
-        [0.5 * (3.0 * t).sin(), -0.4 * (2.0 * t).sin(), 0.2 * (5.0 * t).cos()]
-    }).collect();
+    let q: Vec<f64> = (0..400)
+        .flat_map(|i| {
+            let t = i as f64 / 1000.0;
+            [0.5 * (3.0 * t).sin(), -0.4 * (2.0 * t).sin(), 0.2 * (5.0 * t).cos()]
+        })
+        .collect();
     let mut frames = body.marker_frames(&q, 0.2).expect("valid angles");
     ikid::noise::uniform_range(&mut frames, 0.02, 3).expect("valid noise");
     // A marker missing now and then, a forearm marker once: the paths that skip corrections.

@@ -9,7 +9,9 @@ use nalgebra::{Matrix3, Rotation3, Vector3};
 /// A placement 12° and 20° away from the body model's, about skew axes.
 fn a_subjects_calibration() -> Calibration {
     let model = Calibration::body_model();
-    let turn = |axis: [f64; 3], deg: f64| Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(Vector3::from(axis)), deg.to_radians());
+    let turn = |axis: [f64; 3], deg: f64| {
+        Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(Vector3::from(axis)), deg.to_radians())
+    };
     let forearm: Matrix3<f64> = (turn([1.0, 2.0, 0.5], 12.0) * model.forearm).into_inner();
     let hand: Matrix3<f64> = (turn([-0.3, 1.0, 2.0], 20.0) * model.hand).into_inner();
     Calibration::from_matrices(forearm, hand).unwrap()

@@ -30,9 +30,12 @@ fn parts(m: &Model) -> (Vec<Tensor>, serde_json::Value) {
 }
 
 fn build(tensors: &[Tensor], card: &serde_json::Value) -> Vec<u8> {
-    let bytes: Vec<(String, Vec<usize>, Vec<u8>)> =
-        tensors.iter().map(|(n, s, v)| (n.clone(), s.clone(), v.iter().flat_map(|x| x.to_le_bytes()).collect())).collect();
-    let views: Vec<_> = bytes.iter().map(|(n, s, b)| (n.as_str(), TensorView::new(Dtype::F32, s.clone(), b).unwrap())).collect();
+    let bytes: Vec<(String, Vec<usize>, Vec<u8>)> = tensors
+        .iter()
+        .map(|(n, s, v)| (n.clone(), s.clone(), v.iter().flat_map(|x| x.to_le_bytes()).collect()))
+        .collect();
+    let views: Vec<_> =
+        bytes.iter().map(|(n, s, b)| (n.as_str(), TensorView::new(Dtype::F32, s.clone(), b).unwrap())).collect();
     safetensors::serialize(views, Some(HashMap::from([(CARD_KEY.to_string(), card.to_string())]))).unwrap()
 }
 
@@ -119,9 +122,15 @@ fn wrong_dtype_is_named() {
     let m = model();
     let bytes = m.to_bytes();
     let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
-    let f64_data: Vec<u8> = st.tensor("output.shift").unwrap().data().chunks_exact(4)
-        .flat_map(|b| (f32::from_le_bytes(b.try_into().unwrap()) as f64).to_le_bytes()).collect();
-    let mut views: Vec<(String, TensorView<'_>)> = st.tensors().into_iter().filter(|(n, _)| n != "output.shift").collect();
+    let f64_data: Vec<u8> = st
+        .tensor("output.shift")
+        .unwrap()
+        .data()
+        .chunks_exact(4)
+        .flat_map(|b| (f32::from_le_bytes(b.try_into().unwrap()) as f64).to_le_bytes())
+        .collect();
+    let mut views: Vec<(String, TensorView<'_>)> =
+        st.tensors().into_iter().filter(|(n, _)| n != "output.shift").collect();
     views.push(("output.shift".into(), TensorView::new(Dtype::F64, vec![3], &f64_data).unwrap()));
     let meta = HashMap::from([(CARD_KEY.to_string(), m.card().to_json())]);
     let err = load_err(&safetensors::serialize(views, Some(meta)).unwrap());
@@ -172,7 +181,10 @@ fn stream_fills_then_predicts_and_matches_batch_bit_for_bit() {
             Some(out) => streamed.extend_from_slice(out),
         }
     }
-    assert_eq!(streamed.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), batch.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+    assert_eq!(
+        streamed.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        batch.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    );
     // And both match the plain nalgebra oracle on the same window.
     let mut features = vec![0f32; 50 * 24];
     FeatureSet::Basis.compute_rows(&frames, &mut features).unwrap();
@@ -271,7 +283,8 @@ fn push_many_equals_pushing_one_by_one() {
     let m = model();
     let frames = random_frames(FeatureSet::Markers, 23, 4);
     let mut one = m.stream();
-    let want: Vec<f32> = frames.chunks_exact(18).filter_map(|f| one.push(f).unwrap().map(<[f32]>::to_vec)).flatten().collect();
+    let want: Vec<f32> =
+        frames.chunks_exact(18).filter_map(|f| one.push(f).unwrap().map(<[f32]>::to_vec)).flatten().collect();
     let mut many = m.stream();
     let mut got = Vec::new();
     // In packets of 3 frames: the first packets fill the window.
@@ -293,7 +306,11 @@ fn non_finite_predictions_are_errors_never_outputs() {
     // One linear layer summing its 90 inputs: 90 × 1e37 overflows f32.
     use ikid::net::{Activation, Affine, Dense, Mlp};
     use ikid::{ModelCard, OutputSpec};
-    let layer = Dense { weight: nalgebra::DMatrix::from_element(3, 90, 1.0), bias: nalgebra::DVector::zeros(3), activation: Activation::Identity };
+    let layer = Dense {
+        weight: nalgebra::DMatrix::from_element(3, 90, 1.0),
+        bias: nalgebra::DVector::zeros(3),
+        activation: Activation::Identity,
+    };
     let mlp = Mlp::new(Affine::identity(90), vec![layer], Affine::identity(3)).unwrap();
     let outputs = (0..3).map(|i| OutputSpec { name: format!("o{i}"), unit: "rad".into() }).collect();
     let card = ModelCard::new("sum", "ik", FeatureSet::Markers, 5, 1000.0, outputs, &[Activation::Identity]);
@@ -340,8 +357,12 @@ fn output_offset_adds_the_newest_frames_angles_in_stream_and_batch() {
         }
     }
     let mut stream = offset.stream();
-    let streamed: Vec<f32> = frames.chunks_exact(18).filter_map(|f| stream.push(f).unwrap().map(<[f32]>::to_vec)).flatten().collect();
-    assert_eq!(streamed.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), b.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+    let streamed: Vec<f32> =
+        frames.chunks_exact(18).filter_map(|f| stream.push(f).unwrap().map(<[f32]>::to_vec)).flatten().collect();
+    assert_eq!(
+        streamed.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        b.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    );
     // It survives a save/load round trip.
     assert!(Model::from_bytes(&offset.to_bytes()).unwrap().adds_newest_features());
 }
@@ -366,7 +387,11 @@ fn load_refuses_what_is_not_a_bounded_regular_file_without_reading_it() {
     let made_fifo = std::process::Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success());
     let sparse = dir.join("huge.safetensors");
     std::fs::File::create(&sparse).unwrap().set_len(4 << 30).unwrap();
-    let mut cases = vec![(dir.clone(), "a directory"), ("/dev/zero".into(), "not a regular file"), (sparse.clone(), "4294967296 bytes")];
+    let mut cases = vec![
+        (dir.clone(), "a directory"),
+        ("/dev/zero".into(), "not a regular file"),
+        (sparse.clone(), "4294967296 bytes"),
+    ];
     if made_fifo {
         cases.push((fifo.clone(), "not a regular file"));
     }

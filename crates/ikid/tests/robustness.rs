@@ -142,14 +142,24 @@ fn threads_sharing_a_model_get_bit_identical_results() {
     let frames = random_frames(FeatureSet::Markers, 2000, 10);
     let reference: Vec<u32> = {
         let mut s = model.stream();
-        frames.chunks_exact(18).filter_map(|f| s.push(f).unwrap().map(<[f32]>::to_vec)).flatten().map(f32::to_bits).collect()
+        frames
+            .chunks_exact(18)
+            .filter_map(|f| s.push(f).unwrap().map(<[f32]>::to_vec))
+            .flatten()
+            .map(f32::to_bits)
+            .collect()
     };
     let results: Vec<(Vec<u32>, Vec<u32>)> = std::thread::scope(|scope| {
         let handles: Vec<_> = (0..8)
             .map(|_| {
                 scope.spawn(|| {
                     let mut s = model.stream();
-                    let streamed = frames.chunks_exact(18).filter_map(|f| s.push(f).unwrap().map(<[f32]>::to_vec)).flatten().map(f32::to_bits).collect();
+                    let streamed = frames
+                        .chunks_exact(18)
+                        .filter_map(|f| s.push(f).unwrap().map(<[f32]>::to_vec))
+                        .flatten()
+                        .map(f32::to_bits)
+                        .collect();
                     let mut batch = vec![0f32; model.n_predictions(2000) * 3];
                     model.predict(&frames, &mut batch).unwrap();
                     (streamed, batch.into_iter().map(f32::to_bits).collect())

@@ -86,7 +86,12 @@ impl PackedMlp {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn forward_batch_avx2_fma(net: &PackedMlp, xs: [&[f32]; BATCH], scratch: &mut BatchScratch, mut outs: [&mut [f32]; BATCH]) {
+fn forward_batch_avx2_fma(
+    net: &PackedMlp,
+    xs: [&[f32]; BATCH],
+    scratch: &mut BatchScratch,
+    mut outs: [&mut [f32]; BATCH],
+) {
     use super::kernel::avx2;
     let last = net.layers.len() - 1;
     for (k, layer) in net.layers.iter().enumerate() {
@@ -135,7 +140,9 @@ mod avx2_batch {
         let zero = _mm256_setzero_ps();
         // Raw pointers in the hot loop: the bounds are established once, here.
         assert!(xs.iter().all(|x| x.len() >= n_in) && ys.iter().all(|y| y.len() >= layer.panel_bias.len()));
-        for (p, (w, bias)) in layer.panels.chunks_exact(n_in * PANEL).zip(layer.panel_bias.chunks_exact(PANEL)).enumerate() {
+        for (p, (w, bias)) in
+            layer.panels.chunks_exact(n_in * PANEL).zip(layer.panel_bias.chunks_exact(PANEL)).enumerate()
+        {
             let wp = w.as_ptr();
             // This panel's weights (n_in rows × PANEL floats) stay in L1 across the groups.
             for g in 0..GROUPS {
@@ -179,7 +186,11 @@ mod tests {
 
     #[test]
     fn forward_batch_equals_forward_bit_for_bit() {
-        for (set, hidden) in [(FeatureSet::Markers, &[300, 300][..]), (FeatureSet::JointState, &[330, 60, 165]), (FeatureSet::Relative, &[70, 9])] {
+        for (set, hidden) in [
+            (FeatureSet::Markers, &[300, 300][..]),
+            (FeatureSet::JointState, &[330, 60, 165]),
+            (FeatureSet::Relative, &[70, 9]),
+        ] {
             let model = random_model(set, 5, hidden, 3, 4);
             let net = model.packed();
             let nf = set.feature_len();

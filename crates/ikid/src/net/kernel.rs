@@ -157,7 +157,10 @@ impl PackedMlp {
     /// The first layer whose packed (scaling-folded) weights or biases hold a non-finite
     /// value, with that value.
     pub fn first_non_finite(&self) -> Option<(usize, f32)> {
-        self.layers.iter().enumerate().find_map(|(k, l)| l.weights.iter().chain(&l.bias).find(|v| !v.is_finite()).map(|&v| (k, v)))
+        self.layers
+            .iter()
+            .enumerate()
+            .find_map(|(k, l)| l.weights.iter().chain(&l.bias).find(|v| !v.is_finite()).map(|&v| (k, v)))
     }
 
     /// Work space sized for this network.
@@ -375,7 +378,12 @@ pub(super) mod avx2 {
     /// AVX2 kernel: `B` outputs per block as `V = B / 8` vectors, `LANES` interleaved
     /// accumulator sets (`LANES × V` registers) to hide the FMA latency.
     #[target_feature(enable = "avx2,fma")]
-    pub(in crate::net) fn layer<const B: usize, const V: usize, const LANES: usize>(layer: &PackedLayer, x: &[f32], active: &[u32], y: &mut [f32]) {
+    pub(in crate::net) fn layer<const B: usize, const V: usize, const LANES: usize>(
+        layer: &PackedLayer,
+        x: &[f32],
+        active: &[u32],
+        y: &mut [f32],
+    ) {
         assert!(B == 8 * V);
         let n_in = x.len();
         let split = active.len() - active.len() % LANES;
@@ -436,8 +444,8 @@ pub(super) mod avx2 {
 mod tests {
     use super::*;
     use crate::net::{Affine, Dense};
-    use nalgebra::{DMatrix, DVector};
     use crate::testing::SplitMix;
+    use nalgebra::{DMatrix, DVector};
 
     fn random_mlp(widths: &[usize], seed: u64) -> Mlp {
         let mut rng = SplitMix::new(seed);
@@ -463,7 +471,10 @@ mod tests {
     fn fma_testable() -> bool {
         let available = fma_available();
         if !available {
-            assert!(std::env::var_os("CI").is_none(), "CI must test the AVX2+FMA kernel, but this CPU lacks AVX2 or FMA");
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI must test the AVX2+FMA kernel, but this CPU lacks AVX2 or FMA"
+            );
             eprintln!("skipped: this CPU lacks AVX2+FMA, so only the portable kernel is tested");
         }
         available

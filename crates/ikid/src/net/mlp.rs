@@ -161,7 +161,11 @@ mod tests {
                     bias: DVector::from_vec(vec![0.25, -1.0]),
                     activation: Activation::Relu,
                 },
-                Dense { weight: DMatrix::from_row_slice(1, 2, &[2.0, -1.0]), bias: DVector::from_vec(vec![0.5]), activation: Activation::Identity },
+                Dense {
+                    weight: DMatrix::from_row_slice(1, 2, &[2.0, -1.0]),
+                    bias: DVector::from_vec(vec![0.5]),
+                    activation: Activation::Identity,
+                },
             ],
             Affine { scale: DVector::from_vec(vec![10.0]), shift: DVector::from_vec(vec![3.0]) },
         )
@@ -184,7 +188,8 @@ mod tests {
 
     #[test]
     fn affine_and_activation_by_hand() {
-        let a = Affine { scale: DVector::from_vec(vec![2.0, -1.0, 0.0]), shift: DVector::from_vec(vec![1.0, 1.0, 4.0]) };
+        let a =
+            Affine { scale: DVector::from_vec(vec![2.0, -1.0, 0.0]), shift: DVector::from_vec(vec![1.0, 1.0, 4.0]) };
         assert_eq!(a.apply(&DVector::from_vec(vec![3.0, 5.0, 9.0])).as_slice(), &[7.0, -4.0, 4.0]);
         assert_eq!((a.len(), a.is_empty()), (3, false));
         let id = Affine::identity(2);
@@ -202,7 +207,9 @@ mod tests {
     #[test]
     fn a_network_that_does_not_chain_is_refused_with_the_reason() {
         let net = hand_network();
-        let err = |input: Affine, layers: Vec<Dense>, output: Affine| Mlp::new(input, layers, output).unwrap_err().to_string();
+        let err = |input: Affine, layers: Vec<Dense>, output: Affine| {
+            Mlp::new(input, layers, output).unwrap_err().to_string()
+        };
         assert!(err(net.input.clone(), vec![], net.output.clone()).contains("has no layers"));
         let e = err(Affine::identity(3), net.layers.clone(), net.output.clone());
         assert!(e.contains("layer 0 takes 2 inputs but receives 3"), "{e}");

@@ -36,7 +36,11 @@ pub fn inverse_dynamics(body: &BodyModel, shoulder_flexion: f64, state: &JointSt
 /// [`inverse_dynamics`] with the forearm's orientation in the lab given directly (e.g. fitted
 /// to its markers): the forearm is still taken to be at rest; only gravity's direction in
 /// the forearm frame depends on it.
-pub fn inverse_dynamics_at(body: &BodyModel, forearm: &Rotation3<f64>, state: &JointState) -> Result<[f64; N_COORDINATES]> {
+pub fn inverse_dynamics_at(
+    body: &BodyModel,
+    forearm: &Rotation3<f64>,
+    state: &JointState,
+) -> Result<[f64; N_COORDINATES]> {
     let values = state.q.iter().chain(&state.qd).chain(&state.qdd);
     if let Some(i) = values.clone().position(|v| !v.is_finite()) {
         let kind = ["q", "qd", "qdd"][i / N_COORDINATES];
@@ -79,7 +83,10 @@ pub fn inverse_dynamics_at(body: &BodyModel, forearm: &Rotation3<f64>, state: &J
     if let Some(i) = tau.iter().position(|t| !t.is_finite()) {
         return Err(Error::BadArgument {
             what: "joint state",
-            detail: format!("gives a non-finite {} torque (velocities or accelerations too large?)", COORDINATES[i].name),
+            detail: format!(
+                "gives a non-finite {} torque (velocities or accelerations too large?)",
+                COORDINATES[i].name
+            ),
         });
     }
     Ok(tau)
@@ -87,12 +94,27 @@ pub fn inverse_dynamics_at(body: &BodyModel, forearm: &Rotation3<f64>, state: &J
 
 /// Torques for many joint states: `q`, `qd`, `qdd` hold `n` rows of [`N_COORDINATES`] each,
 /// `out` receives `n` rows of torques. Errors name the row.
-pub fn inverse_dynamics_rows(body: &BodyModel, shoulder_flexion: f64, q: &[f64], qd: &[f64], qdd: &[f64], out: &mut [f64]) -> Result<()> {
+pub fn inverse_dynamics_rows(
+    body: &BodyModel,
+    shoulder_flexion: f64,
+    q: &[f64],
+    qd: &[f64],
+    qdd: &[f64],
+    out: &mut [f64],
+) -> Result<()> {
     let n = q.len() / N_COORDINATES;
-    if [q.len(), qd.len(), qdd.len(), out.len()].iter().any(|&l| l != n * N_COORDINATES) || !q.len().is_multiple_of(N_COORDINATES) {
+    if [q.len(), qd.len(), qdd.len(), out.len()].iter().any(|&l| l != n * N_COORDINATES)
+        || !q.len().is_multiple_of(N_COORDINATES)
+    {
         return Err(Error::BadArgument {
             what: "joint states",
-            detail: format!("q, qd, qdd and out have {}, {}, {} and {} values; expected equal whole rows of 3", q.len(), qd.len(), qdd.len(), out.len()),
+            detail: format!(
+                "q, qd, qdd and out have {}, {}, {} and {} values; expected equal whole rows of 3",
+                q.len(),
+                qd.len(),
+                qdd.len(),
+                out.len()
+            ),
         });
     }
     if !shoulder_flexion.is_finite() {
@@ -126,7 +148,8 @@ mod tests {
         let w_hat = dr * hand.matrix().transpose();
         let omega = Vector3::new(w_hat[(2, 1)], w_hat[(0, 2)], w_hat[(1, 0)]);
         let c = hand * Vector3::from(body.hand.com);
-        let i_com = hand.matrix() * Matrix3::from_diagonal(&Vector3::from(body.hand.inertia)) * hand.matrix().transpose();
+        let i_com =
+            hand.matrix() * Matrix3::from_diagonal(&Vector3::from(body.hand.inertia)) * hand.matrix().transpose();
         let v = omega.cross(&c);
         let kinetic = 0.5 * body.hand.mass * v.dot(&v) + 0.5 * omega.dot(&(i_com * omega));
         let potential = -body.hand.mass * Vector3::from(GRAVITY).dot(&c);
@@ -136,7 +159,10 @@ mod tests {
     /// τ = d/dt ∂L/∂q̇ − ∂L/∂q by central differences along q(t) = q + q̇ t + ½ q̈ t².
     fn lagrange_torques(body: &BodyModel, shoulder: f64, s: &JointState) -> [f64; 3] {
         let at = |t: f64| -> ([f64; 3], [f64; 3]) {
-            (std::array::from_fn(|i| s.q[i] + s.qd[i] * t + 0.5 * s.qdd[i] * t * t), std::array::from_fn(|i| s.qd[i] + s.qdd[i] * t))
+            (
+                std::array::from_fn(|i| s.q[i] + s.qd[i] * t + 0.5 * s.qdd[i] * t * t),
+                std::array::from_fn(|i| s.qd[i] + s.qdd[i] * t),
+            )
         };
         let dl_dqd = |q: [f64; 3], qd: [f64; 3], i: usize| {
             let e = 1e-4;
