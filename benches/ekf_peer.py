@@ -67,7 +67,9 @@ SKIP = 51
 EKF_DEFAULT = (1e-10, 1e-5)
 # ikid.Tracker's jerk_noise (rad²/s⁵), chosen on the validation trials like the EKF's setting.
 TRACKER_GRID = [1e2, 3e2, 1e3, 3e3, 1e4, 3e4, 1e5]
-EKF_GRID = [(nf, ef) for nf in (1e-11, 3e-11, 1e-10, 3e-10, 1e-9, 3e-9, 1e-8, 3e-8, 1e-7) for ef in (1e-5, 1e-3)]
+EKF_GRID = [
+    (nf, ef) for nf in (1e-11, 3e-11, 1e-10, 3e-10, 1e-9, 3e-9, 1e-8, 3e-8, 1e-7) for ef in (1e-5, 1e-3)
+]
 LATENCY_FRAMES, LATENCY_ROUNDS, RUST_PUSHES, RUST_REPEATS = 3000, 7, 100_000, 3
 
 ANGLE_METHODS = {
@@ -101,9 +103,15 @@ def trial_specs() -> list[dict[str, Any]]:
         k = 0
         for shoulder in SHOULDERS_DEG:
             for size in SIZES:
-                spec = {"name": f"{family.split()[0]}_s{shoulder:+.0f}_x{size:.2f}_seed{base + k}", "protocol": "random",
-                        "seed": base + k, "duration": DURATION_S, "shoulder_deg": shoulder, "length_scale": size,
-                        "mass_scale": size**3}
+                spec = {
+                    "name": f"{family.split()[0]}_s{shoulder:+.0f}_x{size:.2f}_seed{base + k}",
+                    "protocol": "random",
+                    "seed": base + k,
+                    "duration": DURATION_S,
+                    "shoulder_deg": shoulder,
+                    "length_scale": size,
+                    "mass_scale": size**3,
+                }
                 if octants:
                     spec["octants"] = octants
                 spec["family"] = family
@@ -113,8 +121,18 @@ def trial_specs() -> list[dict[str, Any]]:
 
 
 def validation_specs() -> list[dict[str, Any]]:
-    return [{"name": f"val_seed{s}", "protocol": "random", "seed": s, "duration": VALIDATION_S, "shoulder_deg": sh,
-             "length_scale": x, "mass_scale": x**3} for s, sh, x in VALIDATION]
+    return [
+        {
+            "name": f"val_seed{s}",
+            "protocol": "random",
+            "seed": s,
+            "duration": VALIDATION_S,
+            "shoulder_deg": sh,
+            "length_scale": x,
+            "mass_scale": x**3,
+        }
+        for s, sh, x in VALIDATION
+    ]
 
 
 def training_use() -> tuple[set[int], set[float]]:
@@ -130,7 +148,9 @@ def training_use() -> tuple[set[int], set[float]]:
         d = tomllib.loads(path.read_text()).get("data")
         if not d or "seeds" not in d:
             continue  # a search config (its base is listed itself)
-        specs = D.recording_set("random", seeds=d["seeds"], shoulders_deg=d["shoulders_deg"], length_scales=d["length_scales"])
+        specs = D.recording_set(
+            "random", seeds=d["seeds"], shoulders_deg=d["shoulders_deg"], length_scales=d["length_scales"]
+        )
         seeds.update(spec["seed"] for spec in specs)
         sizes.update(float(x) for x in d["length_scales"])
     trained = ikid.load("wrist-track").card["provenance"]  # the refiner's own trials, as shipped
@@ -144,8 +164,11 @@ def check_held_out(specs: list[dict[str, Any]]) -> dict[str, Any]:
     ours = {s["seed"] for s in specs}
     if ours & seeds:
         raise RuntimeError(f"test/validation seeds {sorted(ours & seeds)} were used in training")
-    return {"training_seeds": sorted(seeds), "training_sizes": sorted(sizes),
-            "test_sizes_seen_in_training": sorted({s["length_scale"] for s in specs} & sizes)}
+    return {
+        "training_seeds": sorted(seeds),
+        "training_sizes": sorted(sizes),
+        "test_sizes_seen_in_training": sorted({s["length_scale"] for s in specs} & sizes),
+    }
 
 
 def simulate(specs: list[dict[str, Any]]) -> list[D.Recording]:
@@ -162,8 +185,14 @@ def condition(rec: D.Recording, i: int, level_name: str, occluded: bool) -> D.Re
     level = NOISE[level_name]
     r = D.add_noise(rec, "uniform", level, NOISE_SEED + 100 * list(NOISE).index(level_name) + i)
     if occluded:
-        r = D.add_occlusion(r, OCCLUSION["bursts_per_s"], OCCLUSION["min_s"], OCCLUSION["max_s"], seed=OCCLUSION_SEED + i,
-                            warmup_s=OCCLUSION["warmup_s"])
+        r = D.add_occlusion(
+            r,
+            OCCLUSION["bursts_per_s"],
+            OCCLUSION["min_s"],
+            OCCLUSION["max_s"],
+            seed=OCCLUSION_SEED + i,
+            warmup_s=OCCLUSION["warmup_s"],
+        )
     return r
 
 
@@ -176,18 +205,31 @@ def last_tenth(n: int) -> slice:
 
 
 def biorbd_model(meta: dict[str, Any], folder: str) -> Any:
-    path = Path(folder) / f"s{meta['shoulder_flexion_rad']:.6f}_x{meta['length_scale']:.4f}_m{meta['mass_scale']:.6f}.bioMod"
+    path = (
+        Path(folder)
+        / f"s{meta['shoulder_flexion_rad']:.6f}_x{meta['length_scale']:.4f}_m{meta['mass_scale']:.6f}.bioMod"
+    )
     if not path.exists():
-        write_biomod(path, length_scale=meta["length_scale"], mass_scale=meta["mass_scale"],
-                     shoulder_flexion=meta["shoulder_flexion_rad"])
+        write_biomod(
+            path,
+            length_scale=meta["length_scale"],
+            mass_scale=meta["mass_scale"],
+            shoulder_flexion=meta["shoulder_flexion_rad"],
+        )
     return biorbd.Model(str(path))
 
 
-def run_ekf(model: Any, markers: np.ndarray, noise_factor: float, error_factor: float) -> dict[str, np.ndarray]:
+def run_ekf(
+    model: Any, markers: np.ndarray, noise_factor: float, error_factor: float
+) -> dict[str, np.ndarray]:
     """biorbd's EKF frame by frame (causal), then biorbd's inverse dynamics on its state.
     A missing marker is NaN, which the filter treats as occluded."""
     kalman = biorbd.KalmanReconsMarkers(model, biorbd.KalmanParam(RATE_HZ, noise_factor, error_factor))
-    q, qd, qdd = biorbd.GeneralizedCoordinates(model), biorbd.GeneralizedVelocity(model), biorbd.GeneralizedAcceleration(model)
+    q, qd, qdd = (
+        biorbd.GeneralizedCoordinates(model),
+        biorbd.GeneralizedVelocity(model),
+        biorbd.GeneralizedAcceleration(model),
+    )
     n = len(markers)
     out = {k: np.empty((n, 3)) for k in ("q", "qd", "qdd", "tau")}
     for i in range(n):
@@ -243,7 +285,9 @@ def gaps_filled(markers: np.ndarray) -> np.ndarray:
     filled = ikid.fill_gaps(markers, unfillable="keep")[0].astype(np.float64)
     out = np.where(np.isnan(markers), filled, markers)
     if np.isnan(out).any():
-        raise RuntimeError("the gap filler left a frame unfilled (add_occlusion should have put those frames back)")
+        raise RuntimeError(
+            "the gap filler left a frame unfilled (add_occlusion should have put those frames back)"
+        )
     return out
 
 
@@ -280,7 +324,9 @@ def causal_mean(x: np.ndarray, n: int) -> np.ndarray:
     return cm(x, n)
 
 
-def run_tracker(rec: D.Recording, jerk_noise: float, refiner: ikid.Model | None = None) -> dict[str, np.ndarray]:
+def run_tracker(
+    rec: D.Recording, jerk_noise: float, refiner: ikid.Model | None = None
+) -> dict[str, np.ndarray]:
     """ikid.Tracker over the trial (missing markers NaN: it leaves them out, like the EKF)."""
     out = ikid.Tracker(**subject(rec), jerk_noise=jerk_noise, refiner=refiner).run(rec.markers)
     if out["start"] != 0:
@@ -288,14 +334,18 @@ def run_tracker(rec: D.Recording, jerk_noise: float, refiner: ikid.Model | None 
     return out
 
 
-def ikid_estimates(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, refiner: ikid.Model, jerk_noise: float) -> dict[str, dict[str, np.ndarray]]:
+def ikid_estimates(
+    rec: D.Recording, ik: ikid.Model, chain: ikid.Model, refiner: ikid.Model, jerk_noise: float
+) -> dict[str, dict[str, np.ndarray]]:
     from ikid.training.report import classical_chain
 
     n = len(rec)
     ref = ikid.reference_ik(gaps_filled(rec.markers), **subject(rec))
     pad = np.full((ik.window - 1, 3), np.nan)
     net_q = np.vstack([pad, ik.predict(rec.markers).astype(np.float64)])
-    net_tau = np.vstack([np.full((chain.window - 1, 3), np.nan), chain.predict(rec.markers).astype(np.float64)])
+    net_tau = np.vstack(
+        [np.full((chain.window - 1, 3), np.nan), chain.predict(rec.markers).astype(np.float64)]
+    )
     # Backward differences need finite angles: the chain starts at the network's first output.
     w = ik.window - 1
     chain_tau = np.vstack([pad, classical_chain(rec, net_q[w:])])
@@ -303,9 +353,21 @@ def ikid_estimates(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, refiner:
     tracked = run_tracker(rec, jerk_noise)
     refined = run_tracker(rec, jerk_noise, refiner)
     return {
-        "q": {"ref": ref, "ref_mean5": causal_mean(ref, 5), "ref_mean25": causal_mean(ref, 25), "wrist_ik": net_q,
-              "tracker": tracked["q"], "tracker_refined": refined["q"], "biorbd_ls_all": least_squares_ik(rec, ref)},
-        "tau": {"wrist_chain": net_tau, "wrist_ik_rnea": chain_tau, "tracker": tracked["tau"], "tracker_refined": refined["tau"]},
+        "q": {
+            "ref": ref,
+            "ref_mean5": causal_mean(ref, 5),
+            "ref_mean25": causal_mean(ref, 25),
+            "wrist_ik": net_q,
+            "tracker": tracked["q"],
+            "tracker_refined": refined["q"],
+            "biorbd_ls_all": least_squares_ik(rec, ref),
+        },
+        "tau": {
+            "wrist_chain": net_tau,
+            "wrist_ik_rnea": chain_tau,
+            "tracker": tracked["tau"],
+            "tracker_refined": refined["tau"],
+        },
     }
 
 
@@ -345,22 +407,52 @@ def scopes(n: int) -> dict[str, slice]:
 def rust_latency() -> dict[str, Any]:
     """Per-push p50/p99 of the two shipped models from Rust (crates/ikid/examples/latency.rs),
     median over ``RUST_REPEATS`` runs (the machine is shared)."""
-    runs: dict[str, list[dict[str, Any]]] = {"wrist-ik": [], "wrist-chain": [], "tracker": [], "tracker_refined": []}
+    runs: dict[str, list[dict[str, Any]]] = {
+        "wrist-ik": [],
+        "wrist-chain": [],
+        "tracker": [],
+        "tracker_refined": [],
+    }
     for _ in range(RUST_REPEATS):
         for name in runs:
-            what = (["--tracker"] if name == "tracker" else
-                    ["--tracker", "--refiner", str(ROOT / "python/ikid/models/wrist-track.safetensors")] if name == "tracker_refined" else
-                    ["--model", str(ROOT / "python/ikid/models" / f"{name}.safetensors")])
-            cmd = ["cargo", "run", "--release", "-q", "-p", "ikid", "--example", "latency", "--", *what, "--pushes", str(RUST_PUSHES)]
+            what = (
+                ["--tracker"]
+                if name == "tracker"
+                else ["--tracker", "--refiner", str(ROOT / "python/ikid/models/wrist-track.safetensors")]
+                if name == "tracker_refined"
+                else ["--model", str(ROOT / "python/ikid/models" / f"{name}.safetensors")]
+            )
+            cmd = [
+                "cargo",
+                "run",
+                "--release",
+                "-q",
+                "-p",
+                "ikid",
+                "--example",
+                "latency",
+                "--",
+                *what,
+                "--pushes",
+                str(RUST_PUSHES),
+            ]
             res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
             if res.returncode != 0:
                 raise RuntimeError(f"{' '.join(cmd)} failed:\n{res.stderr[-2000:]}")
             runs[name].append(next(json.loads(ln) for ln in res.stdout.splitlines() if ln.startswith("{")))
-    return {name: {"p50_us": float(np.median([r["p50_us"] for r in rs])), "p99_us": float(np.median([r["p99_us"] for r in rs])),
-                   "runs": rs} for name, rs in runs.items()}
+    return {
+        name: {
+            "p50_us": float(np.median([r["p50_us"] for r in rs])),
+            "p99_us": float(np.median([r["p99_us"] for r in rs])),
+            "runs": rs,
+        }
+        for name, rs in runs.items()
+    }
 
 
-def python_latency(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, refiner: ikid.Model, jerk_noise: float) -> dict[str, Any]:
+def python_latency(
+    rec: D.Recording, ik: ikid.Model, chain: ikid.Model, refiner: ikid.Model, jerk_noise: float
+) -> dict[str, Any]:
     """One markers → angles + torques step from Python: ikid (wrist-ik and wrist-chain
     ``Stream.push``) and biorbd (EKF ``reconstructFrame`` + ``InverseDynamics``, outputs read
     out as arrays), in alternating rounds of ``LATENCY_FRAMES`` frames, after a warm-up round.
@@ -369,7 +461,9 @@ def python_latency(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, refiner:
     frames32 = [np.ascontiguousarray(f, np.float32) for f in frames64]
     with tempfile.TemporaryDirectory() as folder:
         model = biorbd_model(rec.meta, folder)
-    rounds: dict[str, list[tuple[float, float, float]]] = {k: [] for k in ("ikid", "ikid_ik", "ikid_chain", "tracker", "tracker_refined", "ekf_id", "ekf", "id")}
+    rounds: dict[str, list[tuple[float, float, float]]] = {
+        k: [] for k in ("ikid", "ikid_ik", "ikid_chain", "tracker", "tracker_refined", "ekf_id", "ekf", "id")
+    }
     many: list[float] = []
     tracker_many: dict[str, list[float]] = {"tracker": [], "tracker_refined": []}
     clock = time.perf_counter_ns
@@ -384,7 +478,11 @@ def python_latency(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, refiner:
             t2 = clock()
             t[i] = (t0, t1, t2)
         ok = slice(ik.window, None)  # full windows only
-        ikid_ns = {"ikid": t[ok, 2] - t[ok, 0], "ikid_ik": t[ok, 1] - t[ok, 0], "ikid_chain": t[ok, 2] - t[ok, 1]}
+        ikid_ns = {
+            "ikid": t[ok, 2] - t[ok, 0],
+            "ikid_ik": t[ok, 1] - t[ok, 0],
+            "ikid_chain": t[ok, 2] - t[ok, 1],
+        }
         del a, b
         # The same frames through the Rust loop (``push_many``: one call): the core's own cost per
         # frame on this trajectory, without Python's per-call overhead (a mean, no percentiles).
@@ -414,7 +512,11 @@ def python_latency(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, refiner:
             tracker.run(frames64[ik.window :])
             tracker_many[key].append((clock() - t0) / (len(frames64) - ik.window) / 1e3)
         kalman = biorbd.KalmanReconsMarkers(model, biorbd.KalmanParam(RATE_HZ, *EKF_DEFAULT))
-        q, qd, qdd = biorbd.GeneralizedCoordinates(model), biorbd.GeneralizedVelocity(model), biorbd.GeneralizedAcceleration(model)
+        q, qd, qdd = (
+            biorbd.GeneralizedCoordinates(model),
+            biorbd.GeneralizedVelocity(model),
+            biorbd.GeneralizedAcceleration(model),
+        )
         t = np.empty((len(frames64), 3), np.int64)
         for i, f in enumerate(frames64):
             t0 = clock()
@@ -430,9 +532,18 @@ def python_latency(rec: D.Recording, ik: ikid.Model, chain: ikid.Model, refiner:
         if r == 0:
             continue  # warm-up round
         for k, v in {**ikid_ns, **ekf_ns}.items():
-            rounds[k].append((float(np.median(v)) / 1e3, float(np.percentile(v, 99)) / 1e3, float(np.mean(v)) / 1e3))
-    out: dict[str, Any] = {k: {"p50_us": float(np.median([r[0] for r in v])), "p99_us": float(np.median([r[1] for r in v])),
-                               "mean_us": float(np.median([r[2] for r in v])), "rounds": len(v)} for k, v in rounds.items()}
+            rounds[k].append(
+                (float(np.median(v)) / 1e3, float(np.percentile(v, 99)) / 1e3, float(np.mean(v)) / 1e3)
+            )
+    out: dict[str, Any] = {
+        k: {
+            "p50_us": float(np.median([r[0] for r in v])),
+            "p99_us": float(np.median([r[1] for r in v])),
+            "mean_us": float(np.median([r[2] for r in v])),
+            "rounds": len(v),
+        }
+        for k, v in rounds.items()
+    }
     out["ikid_rust_loop"] = {"mean_us": float(np.median(many[1:])), "rounds": len(many) - 1}
     for key, runs in tracker_many.items():
         out[f"{key}_rust_loop"] = {"mean_us": float(np.median(runs[1:])), "rounds": len(runs) - 1}
@@ -453,8 +564,14 @@ def tune_ekf(val: list[D.Recording], workers: int) -> dict[str, Any]:
     for i, rec in enumerate(val):
         for lvl in NOISE:
             r = condition(rec, 50 + i, lvl, occluded=False)
-            jobs.append({"key": (i, lvl), "meta": r.meta, "markers": r.markers,
-                         "ekf": {f"{nf:g}/{ef:g}": (nf, ef) for nf, ef in EKF_GRID}})
+            jobs.append(
+                {
+                    "key": (i, lvl),
+                    "meta": r.meta,
+                    "markers": r.markers,
+                    "ekf": {f"{nf:g}/{ef:g}": (nf, ef) for nf, ef in EKF_GRID},
+                }
+            )
     results = pool_map(biorbd_job, jobs, workers)
     table: dict[str, dict[str, dict[str, list[np.ndarray]]]] = {}
     for res in results:
@@ -466,17 +583,28 @@ def tune_ekf(val: list[D.Recording], workers: int) -> dict[str, Any]:
             cell["tau"].append(est["tau"][SKIP:] - rec.tau[SKIP:])
     grid: dict[str, dict[str, Any]] = {}
     for name, levels in table.items():
-        row = {lvl: {"angle_mse": float(np.mean(np.concatenate(c["q"]) ** 2)), "torque_mse": float(np.mean(np.concatenate(c["tau"]) ** 2))}
-               for lvl, c in levels.items()}
-        balanced = float(np.mean([math.log(v["angle_mse"]) + math.log(v["torque_mse"]) for v in row.values()]))
+        row = {
+            lvl: {
+                "angle_mse": float(np.mean(np.concatenate(c["q"]) ** 2)),
+                "torque_mse": float(np.mean(np.concatenate(c["tau"]) ** 2)),
+            }
+            for lvl, c in levels.items()
+        }
+        balanced = float(
+            np.mean([math.log(v["angle_mse"]) + math.log(v["torque_mse"]) for v in row.values()])
+        )
         noisy = math.log(row["5%"]["angle_mse"]) + math.log(row["5%"]["torque_mse"])
         grid[name] = {"levels": row, "objective_5pct": noisy, "objective_all_levels": balanced}
     # Ties (error_factor barely matters after start-up) go to the first, i.e. biorbd's default error_factor.
     best = min(grid, key=lambda k: grid[k]["objective_5pct"])
     balanced_best = min(grid, key=lambda k: grid[k]["objective_all_levels"])
     nf, ef = (float(x) for x in best.split("/"))
-    return {"chosen": (nf, ef), "best_over_all_levels": [float(x) for x in balanced_best.split("/")], "grid": grid,
-            "trials": [r.name for r in val]}
+    return {
+        "chosen": (nf, ef),
+        "best_over_all_levels": [float(x) for x in balanced_best.split("/")],
+        "grid": grid,
+        "trials": [r.name for r in val],
+    }
 
 
 def tune_tracker(val: list[D.Recording], ekf_grid: dict[str, dict[str, Any]]) -> dict[str, Any]:
@@ -484,8 +612,12 @@ def tune_tracker(val: list[D.Recording], ekf_grid: dict[str, dict[str, Any]]) ->
     itself): on the validation trials (all frames after ``SKIP``), the grid point whose worst
     ratio to the best EKF grid point's MSE — over 0/1/5 % noise, angles and torques — is
     smallest."""
-    best_ekf = {lvl: {k: min(cell["levels"][lvl][k] for cell in ekf_grid.values()) for k in ("angle_mse", "torque_mse")}
-                for lvl in NOISE}
+    best_ekf = {
+        lvl: {
+            k: min(cell["levels"][lvl][k] for cell in ekf_grid.values()) for k in ("angle_mse", "torque_mse")
+        }
+        for lvl in NOISE
+    }
     noisy = {lvl: [condition(rec, 50 + i, lvl, occluded=False) for i, rec in enumerate(val)] for lvl in NOISE}
     grid: dict[str, dict[str, Any]] = {}
     for s in TRACKER_GRID:
@@ -496,7 +628,10 @@ def tune_tracker(val: list[D.Recording], ekf_grid: dict[str, dict[str, Any]]) ->
                 out = run_tracker(r, s)
                 eq.append(out["q"][SKIP:] - rec.q[SKIP:])
                 et.append(out["tau"][SKIP:] - rec.tau[SKIP:])
-            row[lvl] = {"angle_mse": float(np.mean(np.concatenate(eq) ** 2)), "torque_mse": float(np.mean(np.concatenate(et) ** 2))}
+            row[lvl] = {
+                "angle_mse": float(np.mean(np.concatenate(eq) ** 2)),
+                "torque_mse": float(np.mean(np.concatenate(et) ** 2)),
+            }
         worst = max(row[lvl][k] / best_ekf[lvl][k] for lvl in NOISE for k in ("angle_mse", "torque_mse"))
         grid[f"{s:g}"] = {"levels": row, "worst_ratio_to_best_ekf": worst}
     best = min(grid, key=lambda k: grid[k]["worst_ratio_to_best_ekf"])
@@ -504,20 +639,35 @@ def tune_tracker(val: list[D.Recording], ekf_grid: dict[str, dict[str, Any]]) ->
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "ekf.md")
     parser.add_argument("--json", type=Path, default=ROOT / "target" / "ekf_peer.json")
-    parser.add_argument("--quick", action="store_true", help="smoke run for development: one pose, one size, 4 s trials, "
-                        "a 2-point EKF grid; writes target/ekf_quick.{md,json}")
-    parser.add_argument("--render", action="store_true", help="only rewrite the Markdown from the JSON of an earlier run")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="smoke run for development: one pose, one size, 4 s trials, "
+        "a 2-point EKF grid; writes target/ekf_quick.{md,json}",
+    )
+    parser.add_argument(
+        "--render", action="store_true", help="only rewrite the Markdown from the JSON of an earlier run"
+    )
     args = parser.parse_args()
     if args.render:
         write_markdown(args.out, markdown(json.loads(args.json.read_text())))
         return
     if args.quick:
         global SHOULDERS_DEG, SIZES, DURATION_S, EKF_GRID, LATENCY_ROUNDS, RUST_PUSHES
-        SHOULDERS_DEG, SIZES, DURATION_S, EKF_GRID, LATENCY_ROUNDS, RUST_PUSHES = [0.0], [1.0], 4.0, [EKF_DEFAULT, (1e-9, 1e-5)], 2, 20_000
+        SHOULDERS_DEG, SIZES, DURATION_S, EKF_GRID, LATENCY_ROUNDS, RUST_PUSHES = (
+            [0.0],
+            [1.0],
+            4.0,
+            [EKF_DEFAULT, (1e-9, 1e-5)],
+            2,
+            20_000,
+        )
         args.out, args.json = ROOT / "target" / "ekf_quick.md", ROOT / "target" / "ekf_quick.json"
     started = time.perf_counter()
     log = lambda msg: print(f"[{time.perf_counter() - started:6.0f} s] {msg}", flush=True)  # noqa: E731
@@ -525,27 +675,45 @@ def main() -> None:
     specs, vspecs = trial_specs(), validation_specs()
     held = check_held_out(specs + vspecs)
     recs, val = simulate(specs), simulate(vspecs)
-    log(f"simulated {len(recs)} test trials ({sum(len(r) for r in recs)} frames) and {len(val)} validation trials")
+    log(
+        f"simulated {len(recs)} test trials ({sum(len(r) for r in recs)} frames) and {len(val)} validation trials"
+    )
 
     tuning = tune_ekf(val, args.workers)
     ekf = {"ekf_default": EKF_DEFAULT, "ekf_tuned": tuning["chosen"]}
-    log(f"EKF tuned on validation: noise_factor={tuning['chosen'][0]:g}, error_factor={tuning['chosen'][1]:g}")
+    log(
+        f"EKF tuned on validation: noise_factor={tuning['chosen'][0]:g}, error_factor={tuning['chosen'][1]:g}"
+    )
 
     tracker_tuning = tune_tracker(val, tuning["grid"])
     jerk = tracker_tuning["chosen"]
-    log(f"Tracker tuned on validation: jerk_noise={jerk:g} (ikid.DEFAULT_JERK_NOISE = {ikid.DEFAULT_JERK_NOISE:g})")
+    log(
+        f"Tracker tuned on validation: jerk_noise={jerk:g} (ikid.DEFAULT_JERK_NOISE = {ikid.DEFAULT_JERK_NOISE:g})"
+    )
 
     conditions = [(lvl, occ) for occ in (False, True) for lvl in NOISE]
     data = {(i, c): condition(rec, i, *c) for i, rec in enumerate(recs) for c in conditions}
-    jobs = [{"key": key, "meta": r.meta, "markers": r.markers, "ekf": ekf,
-             "ls_slice": (last_tenth(len(r)).start, last_tenth(len(r)).stop)} for key, r in data.items()]
+    jobs = [
+        {
+            "key": key,
+            "meta": r.meta,
+            "markers": r.markers,
+            "ekf": ekf,
+            "ls_slice": (last_tenth(len(r)).start, last_tenth(len(r)).stop),
+        }
+        for key, r in data.items()
+    ]
     ik, chain, refiner = ikid.load("wrist-ik"), ikid.load("wrist-chain"), ikid.load("wrist-track")
     scores, ls_check, ls_first = Scores(), 0.0, 0.0
 
-    def add(kind: str, cond: tuple[str, bool], rec: D.Recording, method: str, scope: str, e: np.ndarray) -> None:
+    def add(
+        kind: str, cond: tuple[str, bool], rec: D.Recording, method: str, scope: str, e: np.ndarray
+    ) -> None:
         groups = ("all", f"family={rec.meta['family']}", f"size={rec.meta['length_scale']:g}")
         for group in groups:
-            scores.add("|".join([kind, cond[0], "occluded" if cond[1] else "complete", group, method, scope]), e)
+            scores.add(
+                "|".join([kind, cond[0], "occluded" if cond[1] else "complete", group, method, scope]), e
+            )
 
     # Each trial condition is scored as its biorbd results arrive (ikid's run here meanwhile).
     for res in pool_map(biorbd_job, jobs, args.workers):
@@ -570,20 +738,39 @@ def main() -> None:
                 add("q", cond, rec, m, scope, est[s] - rec.q[s])
             for m in TORQUE_METHODS:
                 add("tau", cond, rec, m, scope, tau_est[m][s] - rec.tau[s])
-    log(f"biorbd and ikid on {len(jobs)} trial conditions (EKF x2 on all frames, biorbd IK on the last 10 %); "
-        f"biorbd IK vs batched least squares: max |Δq| = {ls_check:.2g} rad ({ls_first:.2g} on the runs' first frames)")
+    log(
+        f"biorbd and ikid on {len(jobs)} trial conditions (EKF x2 on all frames, biorbd IK on the last 10 %); "
+        f"biorbd IK vs batched least squares: max |Δq| = {ls_check:.2g} rad ({ls_first:.2g} on the runs' first frames)"
+    )
 
     lat_rec = D.add_noise(recs[0], "uniform", 0.01, NOISE_SEED + 99)
     latency = {"python": python_latency(lat_rec, ik, chain, refiner, jerk), "rust": rust_latency()}
     log("latency done")
 
     result = {
-        "machine": machine(), "ikid_version": ikid.__version__, "biorbd_version": biorbd.__version__,
-        "held_out": held, "trials": [r.name for r in recs], "frames": int(sum(len(r) for r in recs)),
-        "skip_frames": SKIP, "noise": NOISE, "occlusion": OCCLUSION, "ekf": {"default": EKF_DEFAULT, "tuned": tuning["chosen"]},
-        "tuning": tuning, "tracker_tuning": tracker_tuning,
-        "refiner": {"window": refiner.window, "layers": refiner.layer_widths, "seeds": refiner.card["provenance"]["seeds"],
-                    "sizes": refiner.card["provenance"]["length_scales"], "octants": refiner.card["provenance"].get("octants")}, "ls_check_max_abs_rad": ls_check, "ls_check_first_frame_max_abs_rad": ls_first, "scores": scores.result(), "latency": latency,
+        "machine": machine(),
+        "ikid_version": ikid.__version__,
+        "biorbd_version": biorbd.__version__,
+        "held_out": held,
+        "trials": [r.name for r in recs],
+        "frames": int(sum(len(r) for r in recs)),
+        "skip_frames": SKIP,
+        "noise": NOISE,
+        "occlusion": OCCLUSION,
+        "ekf": {"default": EKF_DEFAULT, "tuned": tuning["chosen"]},
+        "tuning": tuning,
+        "tracker_tuning": tracker_tuning,
+        "refiner": {
+            "window": refiner.window,
+            "layers": refiner.layer_widths,
+            "seeds": refiner.card["provenance"]["seeds"],
+            "sizes": refiner.card["provenance"]["length_scales"],
+            "octants": refiner.card["provenance"].get("octants"),
+        },
+        "ls_check_max_abs_rad": ls_check,
+        "ls_check_first_frame_max_abs_rad": ls_first,
+        "scores": scores.result(),
+        "latency": latency,
         "seconds": time.perf_counter() - started,
     }
     args.json.parent.mkdir(parents=True, exist_ok=True)
@@ -634,13 +821,15 @@ def markdown(res: dict[str, Any]) -> str:
         "ad_ab > 0; seeds 9550–9558), each at shoulder flexion 0°, 45°, −20° × subject sizes 0.85, 1.0, 1.15 (mass ∝ size³).",
         f"- Held out: no seed is among the {len(res['held_out']['training_seeds'])} seeds the shipped models trained on (checked against "
         f"their training configs and wrist-track's model card); the sizes 0.85 and 1.15 were never trained on (training used {', '.join(f'{x:g}' for x in res['held_out']['training_sizes'])}). "
-        + ("The shipped path's refiner, `wrist-track`, never saw the +-+ octant (its trials allow the other seven), so for the "
-           "shipped path (Tracker + wrist-track, which no other network enters) the octant trials are an unseen joint-sign "
-           "combination; the other shipped networks (wrist-ik, wrist-chain) trained on all eight, so for them they are new trajectories in "
-           "a seen one (docs/report.md measures a truly held-out octant with a retrained IK model). "
-           if res["refiner"].get("octants") and "+-+" not in res["refiner"]["octants"] else
-           "The shipped models trained on all eight joint-sign octants, so the octant trials are new trajectories in a seen sign "
-           "combination, not an unseen one (docs/report.md measures a truly held-out octant with a retrained model). ")
+        + (
+            "The shipped path's refiner, `wrist-track`, never saw the +-+ octant (its trials allow the other seven), so for the "
+            "shipped path (Tracker + wrist-track, which no other network enters) the octant trials are an unseen joint-sign "
+            "combination; the other shipped networks (wrist-ik, wrist-chain) trained on all eight, so for them they are new trajectories in "
+            "a seen one (docs/report.md measures a truly held-out octant with a retrained IK model). "
+            if res["refiner"].get("octants") and "+-+" not in res["refiner"]["octants"]
+            else "The shipped models trained on all eight joint-sign octants, so the octant trials are new trajectories in a seen sign "
+            "combination, not an unseen one (docs/report.md measures a truly held-out octant with a retrained model). "
+        )
         + "`wrist-chain` is a default-subject model (size 1.0, its card): on sizes 0.85 and 1.15 its torques are not expected to hold, "
         "so its torque criterion is judged on the size-1.0 trials and both are shown.",
         "- Noise: uniform ±p of each marker coordinate's range over the trial (the thesis' definition; the forearm is fixed in the lab, so "
@@ -663,16 +852,19 @@ def markdown(res: dict[str, Any]) -> str:
         f"{{{', '.join(f'{x:g}' for x in sorted({g[1] for g in EKF_GRID}))}}} (table below): the lowest log(angle MSE) + log(torque MSE) "
         "at 5 % noise. The best single setting for all three noise levels together (lowest mean of that over 0/1/5 %) is "
         f"noise_factor {tun['best_over_all_levels'][0]:g}, error_factor {tun['best_over_all_levels'][1]:g}"
-        + (" — biorbd's default — so the second setting is the one for noisy markers; each criterion below takes the better of the two "
-           "per condition." if tuple(tun["best_over_all_levels"]) == tuple(res["ekf"]["default"]) else "; each criterion below takes the "
-           "better of the two settings per condition."),
-        "- **biorbd least-squares IK**: `biorbd.InverseKinematics(...).solve(\"lm\")` (scipy Levenberg–Marquardt per frame, warm-started from "
+        + (
+            " — biorbd's default — so the second setting is the one for noisy markers; each criterion below takes the better of the two "
+            "per condition."
+            if tuple(tun["best_over_all_levels"]) == tuple(res["ekf"]["default"])
+            else "; each criterion below takes the better of the two settings per condition."
+        ),
+        '- **biorbd least-squares IK**: `biorbd.InverseKinematics(...).solve("lm")` (scipy Levenberg–Marquardt per frame, warm-started from '
         "the previous frame; missing markers left out). At ~0.9 ms a frame it runs on the last-10 % frames; the *all frames* column solves the "
         "same per-frame problem batched (Gauss–Newton on ikid's identical forward kinematics), which agrees with biorbd's solver "
         f"on every last-10 % frame to {res['ls_check_max_abs_rad']:.1g} rad, except on the first frame of a run, which biorbd solves within the "
         f"coordinate ranges (bounded trust region): up to {res['ls_check_first_frame_max_abs_rad']:.1g} rad where the noisy least-squares angle lies "
         "beyond a range limit. (biorbd's C++ `Model.inverseKinematics` fails in 1.12.4: "
-        "\"Wrong size for the Generalized Coordinates, expected 3 got 1\".)",
+        '"Wrong size for the Generalized Coordinates, expected 3 got 1".)',
         "- **ikid reference IK**: `ikid.reference_ik` (Kabsch fit of each segment per frame), and the same through a causal 5- and 25-frame mean.",
         "- **ikid wrist-ik** (shipped, markers → angles, 50-frame causal window) and **wrist-chain** (shipped, markers → torques).",
         "- **wrist-ik → RNEA**: wrist-ik's angles → causal backward differences → `ikid.reference_id` with the subject's true parameters "
@@ -684,8 +876,11 @@ def markdown(res: dict[str, Any]) -> str:
         "frame by frame, started on the first frame. Its one setting, jerk_noise, was chosen on the validation trials from "
         f"{{{', '.join(f'{x:g}' for x in TRACKER_GRID)}}} as the one whose worst ratio to the best EKF grid point (over 0/1/5 % "
         "noise, angle and torque MSE) is smallest (table below); it is `ikid.DEFAULT_JERK_NOISE`"
-        + (" (the default)." if res["tracker_tuning"]["chosen"] == res["tracker_tuning"]["default"] else
-           f" — NOT the package default {res['tracker_tuning']['default']:g}: update it."),
+        + (
+            " (the default)."
+            if res["tracker_tuning"]["chosen"] == res["tracker_tuning"]["default"]
+            else f" — NOT the package default {res['tracker_tuning']['default']:g}: update it."
+        ),
         "- **ikid Tracker + wrist-track** (shipped path, `ikid track`): the same tracker refined by the shipped `wrist-track` network "
         f"(`make models-track`): an MLP {'-'.join(map(str, res['refiner']['layers']))} over the tracker's last {res['refiner']['window']} "
         "states (q̇, q̈, log10 of the noise it measured) that corrects q and q̈, gated by that noise so clean markers stay as the "
@@ -696,37 +891,84 @@ def markdown(res: dict[str, Any]) -> str:
         "",
     ]
     efs = sorted({g[1] for g in EKF_GRID})
-    spread = max(abs(math.log(tun["grid"][f"{nf:g}/{ef:g}"]["levels"][l][k] / tun["grid"][f"{nf:g}/{efs[0]:g}"]["levels"][l][k]))
-                 for nf, ef in EKF_GRID for l in NOISE for k in ("angle_mse", "torque_mse"))
-    lines.extend(["### EKF tuning grid (validation trials, all frames after the first "
-                  f"{SKIP}; error_factor {EKF_GRID[0][1]:g}: the other values change an entry by at most {100 * (math.exp(spread) - 1):.0f} %, "
-                  "all in the JSON)", "",
-                  "| noise_factor | angle MSE 0 % | 1 % | 5 % | torque MSE 0 % | 1 % | 5 % |", "|---|---|---|---|---|---|---|"])
+    spread = max(
+        abs(
+            math.log(
+                tun["grid"][f"{nf:g}/{ef:g}"]["levels"][l][k]
+                / tun["grid"][f"{nf:g}/{efs[0]:g}"]["levels"][l][k]
+            )
+        )
+        for nf, ef in EKF_GRID
+        for l in NOISE
+        for k in ("angle_mse", "torque_mse")
+    )
+    lines.extend(
+        [
+            "### EKF tuning grid (validation trials, all frames after the first "
+            f"{SKIP}; error_factor {EKF_GRID[0][1]:g}: the other values change an entry by at most {100 * (math.exp(spread) - 1):.0f} %, "
+            "all in the JSON)",
+            "",
+            "| noise_factor | angle MSE 0 % | 1 % | 5 % | torque MSE 0 % | 1 % | 5 % |",
+            "|---|---|---|---|---|---|---|",
+        ]
+    )
     for key, cell in tun["grid"].items():
         nf, ef = (float(x) for x in key.split("/"))
         if ef != EKF_GRID[0][1]:
             continue
         lv = cell["levels"]
-        mark = " (default)" if (nf, ef) == tuple(res["ekf"]["default"]) else " (tuned)" if (nf, ef) == tuple(res["ekf"]["tuned"]) else ""
-        lines.append(f"| {nf:g}{mark} | " + " | ".join(fmt(lv[l]["angle_mse"]) for l in NOISE) + " | "
-                     + " | ".join(fmt(lv[l]["torque_mse"]) for l in NOISE) + " |")
+        mark = (
+            " (default)"
+            if (nf, ef) == tuple(res["ekf"]["default"])
+            else " (tuned)"
+            if (nf, ef) == tuple(res["ekf"]["tuned"])
+            else ""
+        )
+        lines.append(
+            f"| {nf:g}{mark} | "
+            + " | ".join(fmt(lv[l]["angle_mse"]) for l in NOISE)
+            + " | "
+            + " | ".join(fmt(lv[l]["torque_mse"]) for l in NOISE)
+            + " |"
+        )
     lines.append("")
-    lines.extend([f"### Tracker tuning grid (validation trials, all frames after the first {SKIP})", "",
-                  "| jerk_noise (rad²/s⁵) | angle MSE 0 % | 1 % | 5 % | torque MSE 0 % | 1 % | 5 % | worst ratio to the best EKF grid point |",
-                  "|---|---|---|---|---|---|---|---|"])
+    lines.extend(
+        [
+            f"### Tracker tuning grid (validation trials, all frames after the first {SKIP})",
+            "",
+            "| jerk_noise (rad²/s⁵) | angle MSE 0 % | 1 % | 5 % | torque MSE 0 % | 1 % | 5 % | worst ratio to the best EKF grid point |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+    )
     for key, cell in res["tracker_tuning"]["grid"].items():
         lv = cell["levels"]
         mark = " (chosen)" if float(key) == res["tracker_tuning"]["chosen"] else ""
-        lines.append(f"| {key}{mark} | " + " | ".join(fmt(lv[l]["angle_mse"]) for l in NOISE) + " | "
-                     + " | ".join(fmt(lv[l]["torque_mse"]) for l in NOISE) + f" | {cell['worst_ratio_to_best_ekf']:.2f} |")
+        lines.append(
+            f"| {key}{mark} | "
+            + " | ".join(fmt(lv[l]["angle_mse"]) for l in NOISE)
+            + " | "
+            + " | ".join(fmt(lv[l]["torque_mse"]) for l in NOISE)
+            + f" | {cell['worst_ratio_to_best_ekf']:.2f} |"
+        )
     be = res["tracker_tuning"]["best_ekf"]
-    lines.append("| best EKF grid point, per entry | " + " | ".join(fmt(be[l]["angle_mse"]) for l in NOISE) + " | "
-                 + " | ".join(fmt(be[l]["torque_mse"]) for l in NOISE) + " | |")
+    lines.append(
+        "| best EKF grid point, per entry | "
+        + " | ".join(fmt(be[l]["angle_mse"]) for l in NOISE)
+        + " | "
+        + " | ".join(fmt(be[l]["torque_mse"]) for l in NOISE)
+        + " | |"
+    )
     lines.append("")
 
     def angle_table(scope: str, title: str) -> None:
-        lines.extend([f"## Angles: MSE (rad²), {title}", "",
-                      "| noise | markers | " + " | ".join(ANGLE_METHODS.values()) + " |", "|---|---|" + "---|" * len(ANGLE_METHODS)])
+        lines.extend(
+            [
+                f"## Angles: MSE (rad²), {title}",
+                "",
+                "| noise | markers | " + " | ".join(ANGLE_METHODS.values()) + " |",
+                "|---|---|" + "---|" * len(ANGLE_METHODS),
+            ]
+        )
         for lvl, occ in conds:
             vals = [get("q", lvl, occ, "all", m, scope)["mse"] for m in ANGLE_METHODS]
             best = min(vals)
@@ -736,25 +978,50 @@ def markdown(res: dict[str, Any]) -> str:
 
     angle_table("last10", "last 10 % of every trial")
     angle_table("all", f"all frames after the first {SKIP}")
-    lines.extend(["### Angles: RMSE per DoF (degrees, s_p / e_f / ad_ab), last 10 %", "",
-                  "| noise | markers | " + " | ".join(ANGLE_METHODS.values()) + " |", "|---|---|" + "---|" * len(ANGLE_METHODS)])
+    lines.extend(
+        [
+            "### Angles: RMSE per DoF (degrees, s_p / e_f / ad_ab), last 10 %",
+            "",
+            "| noise | markers | " + " | ".join(ANGLE_METHODS.values()) + " |",
+            "|---|---|" + "---|" * len(ANGLE_METHODS),
+        ]
+    )
     for lvl, occ in conds:
-        cells = [" / ".join(f"{x:.2f}" for x in get("q", lvl, occ, "all", m, "last10")["rmse_deg"]) for m in ANGLE_METHODS]
+        cells = [
+            " / ".join(f"{x:.2f}" for x in get("q", lvl, occ, "all", m, "last10")["rmse_deg"])
+            for m in ANGLE_METHODS
+        ]
         lines.append(f"| {lvl} | {occ} | " + " | ".join(cells) + " |")
     lines.append("")
-    lines.extend(["### Angles by test family (MSE rad², last 10 %)", "",
-                  "| noise | markers | family | better EKF | Tracker + wrist-track | ratio to EKF | wrist-ik | wrist-ik / EKF |", "|---|---|---|---|---|---|---|---|"])
+    lines.extend(
+        [
+            "### Angles by test family (MSE rad², last 10 %)",
+            "",
+            "| noise | markers | family | better EKF | Tracker + wrist-track | ratio to EKF | wrist-ik | wrist-ik / EKF |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+    )
     for lvl, occ in conds:
         for fam in FAMILIES:
-            e = min(get("q", lvl, occ, f"family={fam}", m, "last10")["mse"] for m in ("ekf_default", "ekf_tuned"))
+            e = min(
+                get("q", lvl, occ, f"family={fam}", m, "last10")["mse"] for m in ("ekf_default", "ekf_tuned")
+            )
             k = get("q", lvl, occ, f"family={fam}", "tracker_refined", "last10")["mse"]
             w = get("q", lvl, occ, f"family={fam}", "wrist_ik", "last10")["mse"]
-            lines.append(f"| {lvl} | {occ} | {fam} | {fmt(e)} | {fmt(k)} | {k / e:.2f} | {fmt(w)} | {w / e:.2f} |")
+            lines.append(
+                f"| {lvl} | {occ} | {fam} | {fmt(e)} | {fmt(k)} | {k / e:.2f} | {fmt(w)} | {w / e:.2f} |"
+            )
     lines.append("")
 
     def torque_table(group: str, scope: str, title: str) -> None:
-        lines.extend([f"## Torques: MSE (N·m²) and RMSE per DoF (N·m, s_p / e_f / ad_ab), {title}", "",
-                      "| noise | markers | " + " | ".join(TORQUE_METHODS.values()) + " |", "|---|---|" + "---|" * len(TORQUE_METHODS)])
+        lines.extend(
+            [
+                f"## Torques: MSE (N·m²) and RMSE per DoF (N·m, s_p / e_f / ad_ab), {title}",
+                "",
+                "| noise | markers | " + " | ".join(TORQUE_METHODS.values()) + " |",
+                "|---|---|" + "---|" * len(TORQUE_METHODS),
+            ]
+        )
         for lvl, occ in conds:
             cells = []
             for m in TORQUE_METHODS:
@@ -775,38 +1042,47 @@ def markdown(res: dict[str, Any]) -> str:
     loop = py["ikid_rust_loop"]["mean_us"]
 
     def row(label: str, cell: dict[str, float], ratio: bool = False) -> str:
-        r = f" {ekf['p50_us'] / cell['p50_us']:.1f} | {ekf['p99_us'] / cell['p99_us']:.1f} | {ekf['mean_us'] / cell['mean_us']:.1f} |" if ratio else " | | |"
+        r = (
+            f" {ekf['p50_us'] / cell['p50_us']:.1f} | {ekf['p99_us'] / cell['p99_us']:.1f} | {ekf['mean_us'] / cell['mean_us']:.1f} |"
+            if ratio
+            else " | | |"
+        )
         return f"| {label} | {cell['p50_us']:.1f} | {cell['p99_us']:.1f} | {cell['mean_us']:.1f} |" + r
 
-    lines.extend([
-        "## Latency of the whole step (markers → angles + torques, one frame)", "",
-        f"Same run, same machine, one thread each. Python: {LATENCY_ROUNDS} alternating rounds of {LATENCY_FRAMES} frames of a held-out trial "
-        "at 1 % noise (after a warm-up round), per-frame p50, p99 and mean per round, median over rounds. ikid Tracker = one `Tracker.push` "
-        "(angles, velocities, accelerations and torques); *Rust example* for the Tracker: `latency.rs --tracker` (a smooth motion at 1 % "
-        "noise, 100000 pushes, median of 3 runs). Networks = `Stream.push` of wrist-ik then "
-        "of wrist-chain; biorbd = EKF `reconstructFrame` then `InverseDynamics`, outputs read out as arrays (markers passed as one NumPy "
-        "vector, biorbd's fastest input; building `NodeSegment`s would add ~60 µs). *Rust loop*: the same frames through "
-        "`Stream.push_many` (one call per model, the core's loop), mean per frame. *Rust example*: `crates/ikid/examples/latency.rs` "
-        f"per model ({RUST_PUSHES} pushes, median of {RUST_REPEATS} runs, p50s and p99s of the two models added); its frames are each a "
-        "new random pose, not a trajectory, so the gap filler's jump checks take another path than on real motion: shown, not used "
-        "for the criterion.", "",
-        "| step | p50 µs | p99 µs | mean µs | EKF + ID / this, p50 | p99 | mean |", "|---|---|---|---|---|---|---|",
-        row("biorbd EKF + ID (Python)", ekf) + "",
-        row("biorbd EKF alone (Python)", py["ekf"]),
-        row("biorbd ID alone (Python)", py["id"]),
-        row("ikid Tracker + wrist-track (Python `push`: q, q̇, q̈, τ)", py["tracker_refined"], ratio=True),
-        f"| ikid Tracker + wrist-track (Rust loop, `Tracker.run`) | | | {py['tracker_refined_rust_loop']['mean_us']:.2f} | | | {ekf['mean_us'] / py['tracker_refined_rust_loop']['mean_us']:.1f} |",
-        f"| ikid Tracker + wrist-track (Rust example, `Tracker::push`) | {rs['tracker_refined']['p50_us']:.2f} | {rs['tracker_refined']['p99_us']:.2f} | | {ekf['p50_us'] / rs['tracker_refined']['p50_us']:.1f} | {ekf['p99_us'] / rs['tracker_refined']['p99_us']:.1f} | |",
-        row("ikid Tracker alone (Python `push`)", py["tracker"], ratio=True),
-        f"| ikid Tracker alone (Rust loop) | | | {py['tracker_rust_loop']['mean_us']:.2f} | | | {ekf['mean_us'] / py['tracker_rust_loop']['mean_us']:.1f} |",
-        f"| ikid Tracker alone (Rust example) | {rs['tracker']['p50_us']:.2f} | {rs['tracker']['p99_us']:.2f} | | {ekf['p50_us'] / rs['tracker']['p50_us']:.1f} | {ekf['p99_us'] / rs['tracker']['p99_us']:.1f} | |",
-        row("ikid wrist-ik + wrist-chain (Python)", py["ikid"], ratio=True),
-        row("ikid wrist-ik alone (Python)", py["ikid_ik"]),
-        row("ikid wrist-chain alone (Python)", py["ikid_chain"]),
-        f"| ikid wrist-ik + wrist-chain (Rust loop) | | | {loop:.1f} | | | {ekf['mean_us'] / loop:.1f} |",
-        f"| ikid wrist-ik + wrist-chain (Rust example, random poses) | {rust_p50:.1f} | {rust_p99:.1f} | | | | |",
-        "",
-    ])
+    lines.extend(
+        [
+            "## Latency of the whole step (markers → angles + torques, one frame)",
+            "",
+            f"Same run, same machine, one thread each. Python: {LATENCY_ROUNDS} alternating rounds of {LATENCY_FRAMES} frames of a held-out trial "
+            "at 1 % noise (after a warm-up round), per-frame p50, p99 and mean per round, median over rounds. ikid Tracker = one `Tracker.push` "
+            "(angles, velocities, accelerations and torques); *Rust example* for the Tracker: `latency.rs --tracker` (a smooth motion at 1 % "
+            "noise, 100000 pushes, median of 3 runs). Networks = `Stream.push` of wrist-ik then "
+            "of wrist-chain; biorbd = EKF `reconstructFrame` then `InverseDynamics`, outputs read out as arrays (markers passed as one NumPy "
+            "vector, biorbd's fastest input; building `NodeSegment`s would add ~60 µs). *Rust loop*: the same frames through "
+            "`Stream.push_many` (one call per model, the core's loop), mean per frame. *Rust example*: `crates/ikid/examples/latency.rs` "
+            f"per model ({RUST_PUSHES} pushes, median of {RUST_REPEATS} runs, p50s and p99s of the two models added); its frames are each a "
+            "new random pose, not a trajectory, so the gap filler's jump checks take another path than on real motion: shown, not used "
+            "for the criterion.",
+            "",
+            "| step | p50 µs | p99 µs | mean µs | EKF + ID / this, p50 | p99 | mean |",
+            "|---|---|---|---|---|---|---|",
+            row("biorbd EKF + ID (Python)", ekf) + "",
+            row("biorbd EKF alone (Python)", py["ekf"]),
+            row("biorbd ID alone (Python)", py["id"]),
+            row("ikid Tracker + wrist-track (Python `push`: q, q̇, q̈, τ)", py["tracker_refined"], ratio=True),
+            f"| ikid Tracker + wrist-track (Rust loop, `Tracker.run`) | | | {py['tracker_refined_rust_loop']['mean_us']:.2f} | | | {ekf['mean_us'] / py['tracker_refined_rust_loop']['mean_us']:.1f} |",
+            f"| ikid Tracker + wrist-track (Rust example, `Tracker::push`) | {rs['tracker_refined']['p50_us']:.2f} | {rs['tracker_refined']['p99_us']:.2f} | | {ekf['p50_us'] / rs['tracker_refined']['p50_us']:.1f} | {ekf['p99_us'] / rs['tracker_refined']['p99_us']:.1f} | |",
+            row("ikid Tracker alone (Python `push`)", py["tracker"], ratio=True),
+            f"| ikid Tracker alone (Rust loop) | | | {py['tracker_rust_loop']['mean_us']:.2f} | | | {ekf['mean_us'] / py['tracker_rust_loop']['mean_us']:.1f} |",
+            f"| ikid Tracker alone (Rust example) | {rs['tracker']['p50_us']:.2f} | {rs['tracker']['p99_us']:.2f} | | {ekf['p50_us'] / rs['tracker']['p50_us']:.1f} | {ekf['p99_us'] / rs['tracker']['p99_us']:.1f} | |",
+            row("ikid wrist-ik + wrist-chain (Python)", py["ikid"], ratio=True),
+            row("ikid wrist-ik alone (Python)", py["ikid_ik"]),
+            row("ikid wrist-chain alone (Python)", py["ikid_chain"]),
+            f"| ikid wrist-ik + wrist-chain (Rust loop) | | | {loop:.1f} | | | {ekf['mean_us'] / loop:.1f} |",
+            f"| ikid wrist-ik + wrist-chain (Rust example, random poses) | {rust_p50:.1f} | {rust_p99:.1f} | | | | |",
+            "",
+        ]
+    )
     lines.extend(criteria(res, get, conds))
     return "\n".join(lines) + "\n"
 
@@ -815,63 +1091,123 @@ def criteria(res: dict[str, Any], get, conds) -> list[str]:
     """The issue's must-show criteria, each met or not, with the numbers. ikid's shipped path for
     the whole job is ``ikid.Tracker`` refined by ``wrist-track``; the other lines are shown for
     information."""
-    out = ["## Must-show criteria (held-out frames)", "",
-           "ikid's shipped path for angles and torques in one causal step is `ikid.Tracker` refined by the shipped `wrist-track` "
-           "network (`ikid track`); the criteria are judged on it. The bare tracker's and the other networks' lines follow each "
-           "criterion for information.", ""]
+    out = [
+        "## Must-show criteria (held-out frames)",
+        "",
+        "ikid's shipped path for angles and torques in one causal step is `ikid.Tracker` refined by the shipped `wrist-track` "
+        "network (`ikid track`); the criteria are judged on it. The bare tracker's and the other networks' lines follow each "
+        "criterion for information.",
+        "",
+    ]
     verdict = lambda ok: "**met**" if ok else "**not met**"  # noqa: E731
     better_ekf = lambda kind, lvl, occ, group, scope: min(  # noqa: E731
-        get(kind, lvl, occ, group, m, scope)["mse"] for m in ("ekf_default", "ekf_tuned"))
+        get(kind, lvl, occ, group, m, scope)["mse"] for m in ("ekf_default", "ekf_tuned")
+    )
     checks = []
-    angle_methods = (("tracker_refined", "ikid Tracker + wrist-track (shipped)", True), ("tracker", "ikid Tracker alone (information)", False),
-                     ("wrist_ik", "wrist-ik network (information)", False))
+    angle_methods = (
+        ("tracker_refined", "ikid Tracker + wrist-track (shipped)", True),
+        ("tracker", "ikid Tracker alone (information)", False),
+        ("wrist_ik", "wrist-ik network (information)", False),
+    )
     for method, label, counted in angle_methods:
         for scope, title in (("last10", "last 10 %"), ("all", "all frames")):
-            rows = [(lvl, occ, get("q", lvl, occ, "all", method, scope)["mse"], better_ekf("q", lvl, occ, "all", scope)) for lvl, occ in conds]
+            rows = [
+                (
+                    lvl,
+                    occ,
+                    get("q", lvl, occ, "all", method, scope)["mse"],
+                    better_ekf("q", lvl, occ, "all", scope),
+                )
+                for lvl, occ in conds
+            ]
             ok = all(w <= e for _, _, w, e in rows)
             if counted:
                 checks.append(ok)
             detail = "; ".join(f"{lvl} {occ}: {fmt(w)} vs {fmt(e)} ({w / e:.2f}×)" for lvl, occ, w, e in rows)
-            out.append(f"1. {label}: angle MSE ≤ the better EKF setting's at every noise level and with occlusion ({title}): "
-                       f"{verdict(ok)} — vs better EKF: {detail}.")
+            out.append(
+                f"1. {label}: angle MSE ≤ the better EKF setting's at every noise level and with occlusion ({title}): "
+                f"{verdict(ok)} — vs better EKF: {detail}."
+            )
     for method, label, counted in angle_methods:
         for scope, title in (("last10", "last 10 %"), ("all", "all frames")):
-            five = [(occ, get("q", "5%", occ, "all", method, scope)["mse"], better_ekf("q", "5%", occ, "all", scope)) for occ in ("complete", "occluded")]
+            five = [
+                (
+                    occ,
+                    get("q", "5%", occ, "all", method, scope)["mse"],
+                    better_ekf("q", "5%", occ, "all", scope),
+                )
+                for occ in ("complete", "occluded")
+            ]
             ok = all(w <= 0.5 * e for _, w, e in five)
             if counted:
                 checks.append(ok)
-            out.append(f"2. {label}: at 5 % noise angle MSE ≤ half the better EKF's ({title}): {verdict(ok)} — "
-                       + "; ".join(f"{occ}: {fmt(w)} vs ½ × {fmt(e)} = {fmt(e / 2)} ({w / e:.2f}×)" for occ, w, e in five) + ".")
-    for method, group, note, counted in (("tracker_refined", "all", "ikid Tracker + wrist-track (shipped), all sizes", True),
-                                         ("tracker_refined", "size=1", "ikid Tracker + wrist-track, size 1.0 (information)", False),
-                                         ("tracker", "all", "ikid Tracker alone, all sizes (information)", False),
-                                         ("wrist_chain", "size=1", "wrist-chain network, default-size subject (its domain; information)", False),
-                                         ("wrist_ik_rnea", "all", "wrist-ik → differences → RNEA, all sizes (information)", False)):
+            out.append(
+                f"2. {label}: at 5 % noise angle MSE ≤ half the better EKF's ({title}): {verdict(ok)} — "
+                + "; ".join(
+                    f"{occ}: {fmt(w)} vs ½ × {fmt(e)} = {fmt(e / 2)} ({w / e:.2f}×)" for occ, w, e in five
+                )
+                + "."
+            )
+    for method, group, note, counted in (
+        ("tracker_refined", "all", "ikid Tracker + wrist-track (shipped), all sizes", True),
+        ("tracker_refined", "size=1", "ikid Tracker + wrist-track, size 1.0 (information)", False),
+        ("tracker", "all", "ikid Tracker alone, all sizes (information)", False),
+        (
+            "wrist_chain",
+            "size=1",
+            "wrist-chain network, default-size subject (its domain; information)",
+            False,
+        ),
+        ("wrist_ik_rnea", "all", "wrist-ik → differences → RNEA, all sizes (information)", False),
+    ):
         for scope, title in (("last10", "last 10 %"), ("all", "all frames")):
             if not method.startswith("tracker") and scope == "all":
                 continue
-            rows = [(lvl, occ, get("tau", lvl, occ, group, method, scope)["mse"], better_ekf("tau", lvl, occ, group, scope)) for lvl, occ in conds]
+            rows = [
+                (
+                    lvl,
+                    occ,
+                    get("tau", lvl, occ, group, method, scope)["mse"],
+                    better_ekf("tau", lvl, occ, group, scope),
+                )
+                for lvl, occ in conds
+            ]
             ok = all(t <= 0.5 * e for _, _, t, e in rows)
             if counted:
                 checks.append(ok)
-            out.append(f"3. {note}: chain torque MSE ≤ half the better EKF + ID chain's at every noise level ({title}): {verdict(ok)} — "
-                       + "; ".join(f"{lvl} {occ}: {fmt(t)} vs ½ × {fmt(e)} ({t / e:.2f}×)" for lvl, occ, t, e in rows) + ".")
+            out.append(
+                f"3. {note}: chain torque MSE ≤ half the better EKF + ID chain's at every noise level ({title}): {verdict(ok)} — "
+                + "; ".join(
+                    f"{lvl} {occ}: {fmt(t)} vs ½ × {fmt(e)} ({t / e:.2f}×)" for lvl, occ, t, e in rows
+                )
+                + "."
+            )
     py, rs = res["latency"]["python"], res["latency"]["rust"]
     ekf = py["ekf_id"]
-    for key, label, counted in (("tracker_refined", "ikid Tracker + wrist-track (shipped)", True), ("tracker", "ikid Tracker alone (information)", False)):
+    for key, label, counted in (
+        ("tracker_refined", "ikid Tracker + wrist-track (shipped)", True),
+        ("tracker", "ikid Tracker alone (information)", False),
+    ):
         r_py, r_p99 = ekf["p50_us"] / py[key]["p50_us"], ekf["p99_us"] / py[key]["p99_us"]
         r_rs = ekf["p50_us"] / rs[key]["p50_us"]
         ok = r_py >= 4 and r_rs >= 4
         if counted:
             checks.append(ok)
-        out.append(f"4. {label}: whole step ≥ 4× faster than EKF + ID: {verdict(ok)} — Python p50 {r_py:.1f}× "
-                   f"({py[key]['p50_us']:.1f} vs {ekf['p50_us']:.1f} µs; p99 {r_p99:.1f}×), Rust p50 {r_rs:.1f}× "
-                   f"({rs[key]['p50_us']:.2f} µs against the EKF + ID's Python p50).")
+        out.append(
+            f"4. {label}: whole step ≥ 4× faster than EKF + ID: {verdict(ok)} — Python p50 {r_py:.1f}× "
+            f"({py[key]['p50_us']:.1f} vs {ekf['p50_us']:.1f} µs; p99 {r_p99:.1f}×), Rust p50 {r_rs:.1f}× "
+            f"({rs[key]['p50_us']:.2f} µs against the EKF + ID's Python p50)."
+        )
     loop = py["ikid_rust_loop"]["mean_us"]
-    out.append(f"4. wrist-ik + wrist-chain networks (information): Python p50 {ekf['p50_us'] / py['ikid']['p50_us']:.1f}×, Rust loop "
-               f"{ekf['mean_us'] / loop:.1f}× (mean {loop:.1f} µs vs {ekf['mean_us']:.1f} µs).")
-    out += ["", f"{sum(checks)} of {len(checks)} checks met for ikid's shipped path, Tracker + wrist-track (1, 2 and 3 on the last 10 % and on all "
-            "frames, 3 over all sizes; 4)."]
+    out.append(
+        f"4. wrist-ik + wrist-chain networks (information): Python p50 {ekf['p50_us'] / py['ikid']['p50_us']:.1f}×, Rust loop "
+        f"{ekf['mean_us'] / loop:.1f}× (mean {loop:.1f} µs vs {ekf['mean_us']:.1f} µs)."
+    )
+    out += [
+        "",
+        f"{sum(checks)} of {len(checks)} checks met for ikid's shipped path, Tracker + wrist-track (1, 2 and 3 on the last 10 % and on all "
+        "frames, 3 over all sizes; 4).",
+    ]
     return out + [""]
 
 

@@ -65,7 +65,9 @@ def main() -> None:
     osim.Logger.setLevelString("warn")
     model = ikid.load("wrist-ik")
     load_before = os.getloadavg()[0]
-    specs = D.recording_set("random", seeds=[9300], shoulders_deg=SHOULDERS_DEG, length_scales=[1.0], duration=DURATION)
+    specs = D.recording_set(
+        "random", seeds=[9300], shoulders_deg=SHOULDERS_DEG, length_scales=[1.0], duration=DURATION
+    )
     clean = D.simulate_all(specs)
     results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="ikid-opensim-") as tmp:
@@ -83,7 +85,10 @@ def main() -> None:
         "opensim": osim.GetVersionAndDate(),
         "ikid": ikid.__version__,
         "model": {"name": model.name, "window": model.window, "feature_set": model.feature_set},
-        "trials": [{"name": r.name, "frames": len(r), "shoulder_deg": s["shoulder_deg"], "seed": s["seed"]} for r, s in zip(clean, specs)],
+        "trials": [
+            {"name": r.name, "frames": len(r), "shoulder_deg": s["shoulder_deg"], "seed": s["seed"]}
+            for r, s in zip(clean, specs)
+        ],
         "methods": METHODS,
         "results": results,
     }
@@ -103,10 +108,14 @@ def evaluate(model: ikid.Model, recs: list[D.Recording], work: Path) -> dict:
     seconds: dict[str, float] = dict.fromkeys(METHODS, 0.0)
     frames = 0
     for rec in recs:
-        shoulder, ls, ms, rate = (rec.meta[k] for k in ("shoulder_flexion_rad", "length_scale", "mass_scale", "rate_hz"))
+        shoulder, ls, ms, rate = (
+            rec.meta[k] for k in ("shoulder_flexion_rad", "length_scale", "mass_scale", "rate_hz")
+        )
         n = len(rec)
         trc = io.write_trc(work / f"{rec.name}.trc", np.arange(n) / rate, rec.markers, rate_hz=rate)
-        osim_path = ios.write_osim(work / f"{rec.name}.osim", length_scale=ls, mass_scale=ms, shoulder_flexion=shoulder)
+        osim_path = ios.write_osim(
+            work / f"{rec.name}.osim", length_scale=ls, mass_scale=ms, shoulder_flexion=shoulder
+        )
         out: dict[str, np.ndarray] = {}
 
         for key, acc in (("opensim", None), ("opensim_converged", CONVERGED_ACCURACY)):
@@ -145,7 +154,10 @@ def evaluate(model: ikid.Model, recs: list[D.Recording], work: Path) -> dict:
         # Score every method on the frames all of them answer (the network's first full window on).
         answered = np.isfinite(out["ikid_stream"]).all(axis=1) & np.isfinite(out["ikid_predict"]).all(axis=1)
         if not answered[w - 1 :].all():
-            print(f"{rec.name}: the stream gave no output for {int((~answered[w - 1:]).sum())} frames", file=sys.stderr)
+            print(
+                f"{rec.name}: the stream gave no output for {int((~answered[w - 1 :]).sum())} frames",
+                file=sys.stderr,
+            )
         tail = np.zeros(n, bool)
         tail[int(round(0.9 * n)) :] = True
         for key, q in out.items():
@@ -167,10 +179,17 @@ def evaluate(model: ikid.Model, recs: list[D.Recording], work: Path) -> dict:
         }
     # How far apart the two least-squares answers are (rad, worst frame): OpenSim's converged
     # IK against the closed form of the same problem, and against ikid's segment fit.
-    conv = {k: np.concatenate([x for x in errs[k]]) for k in ("opensim_converged", "known_forearm_ls", "reference_ik")}
+    conv = {
+        k: np.concatenate([x for x in errs[k]])
+        for k in ("opensim_converged", "known_forearm_ls", "reference_ik")
+    }
     summary["max_abs_diff_rad"] = {
-        "opensim_converged_vs_known_forearm_ls": float(np.abs(conv["opensim_converged"] - conv["known_forearm_ls"]).max()),
-        "opensim_converged_vs_reference_ik": float(np.abs(conv["opensim_converged"] - conv["reference_ik"]).max()),
+        "opensim_converged_vs_known_forearm_ls": float(
+            np.abs(conv["opensim_converged"] - conv["known_forearm_ls"]).max()
+        ),
+        "opensim_converged_vs_reference_ik": float(
+            np.abs(conv["opensim_converged"] - conv["reference_ik"]).max()
+        ),
     }
     return summary
 
@@ -191,7 +210,9 @@ def quiet_stdout():
         os.close(devnull)
 
 
-def known_forearm_least_squares(markers: np.ndarray, shoulder: float, length_scale: float, mass_scale: float) -> np.ndarray:
+def known_forearm_least_squares(
+    markers: np.ndarray, shoulder: float, length_scale: float, mass_scale: float
+) -> np.ndarray:
     """The problem OpenSim's IK solves on ikid's ``.osim``, in closed form: the forearm is
     welded at its known pose and the hand only rotates about the known wrist centre, so each
     frame is a Procrustes fit of the hand markers without translation, then the wrist angles
@@ -245,7 +266,9 @@ def render(report: dict) -> str:
             m = r["methods"][key]
             rmse = " / ".join(f"{v:.3f}" for v in m["rmse_deg"])
             rmse_t = " / ".join(f"{v:.3f}" for v in m["rmse_deg_last10"])
-            lines.append(f"| {label} | {title} | {m['mse']:.2e} | {rmse} | {m['mse_last10']:.2e} | {rmse_t} | {m['ms_per_frame']:.4f} |")
+            lines.append(
+                f"| {label} | {title} | {m['mse']:.2e} | {rmse} | {m['mse_last10']:.2e} | {rmse_t} | {m['ms_per_frame']:.4f} |"
+            )
     diffs = "; ".join(
         f"{label}: {r['max_abs_diff_rad']['opensim_converged_vs_known_forearm_ls']:.1e} rad vs the closed form, "
         f"{r['max_abs_diff_rad']['opensim_converged_vs_reference_ik']:.1e} rad vs reference_ik"

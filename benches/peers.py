@@ -44,8 +44,11 @@ START, END = "<!-- peers:start -->", "<!-- peers:end -->"
 
 
 def thesis_nets() -> list[tuple[str, str, list[int]]]:
-    return [("ik_markers_90-300-300-3", "markers", [300, 300]), ("ik_basis_120-240-240-3", "basis", [240, 240]),
-            ("id_45-330-60-165-3", "joint_state", [330, 60, 165])]
+    return [
+        ("ik_markers_90-300-300-3", "markers", [300, 300]),
+        ("ik_basis_120-240-240-3", "basis", [240, 240]),
+        ("id_45-330-60-165-3", "joint_state", [330, 60, 165]),
+    ]
 
 
 def networks() -> list[tuple[str, ikid.Model, nn.Sequential, Path]]:
@@ -61,8 +64,13 @@ def networks() -> list[tuple[str, ikid.Model, nn.Sequential, Path]]:
             seq += [nn.Linear(a, b), nn.ReLU()]
         net = nn.Sequential(*seq[:-1]).eval()
         task = "id" if fs == "joint_state" else "ik"
-        model = export(net, OUT / f"{label}.safetensors", ModelSpec(name=label, task=task, feature_set=fs, window=5),
-                       Affine.identity(n_in), Affine.identity(3))
+        model = export(
+            net,
+            OUT / f"{label}.safetensors",
+            ModelSpec(name=label, task=task, feature_set=fs, window=5),
+            Affine.identity(n_in),
+            Affine.identity(3),
+        )
         nets.append((label, model, net, WindowModel(net, Affine.identity(n_in), Affine.identity(3))))
     for name in ikid.available_models():
         model = ikid.load(name)
@@ -106,7 +114,11 @@ def numpy_forward(model: WindowModel):
     """The model as NumPy float32 matmuls (scaling and output offset included), for the NumPy column."""
     s_in, b_in = model.in_scale.numpy(), model.in_shift.numpy()
     s_out, b_out = model.out_scale.numpy(), model.out_shift.numpy()
-    layers = [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy()) for m in model.net if isinstance(m, nn.Linear)]
+    layers = [
+        (m.weight.detach().numpy().T.copy(), m.bias.detach().numpy())
+        for m in model.net
+        if isinstance(m, nn.Linear)
+    ]
     offset, n_out = model.offset_features, model.n_out
 
     def forward(x: np.ndarray) -> np.ndarray:
@@ -133,8 +145,26 @@ def ort_session(path: Path, threads: int) -> ort.InferenceSession:
 
 
 def rust_push(path: Path) -> dict[str, float]:
-    cmd = ["cargo", "run", "--release", "-q", "-p", "ikid", "--example", "latency", "--", "--pushes", "200000", "--model", str(path)]
-    line = subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True, text=True).stdout.strip().splitlines()[-1]
+    cmd = [
+        "cargo",
+        "run",
+        "--release",
+        "-q",
+        "-p",
+        "ikid",
+        "--example",
+        "latency",
+        "--",
+        "--pushes",
+        "200000",
+        "--model",
+        str(path),
+    ]
+    line = (
+        subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True, text=True)
+        .stdout.strip()
+        .splitlines()[-1]
+    )
     return json.loads(line)
 
 
@@ -146,10 +176,19 @@ def clock_ghz() -> float:
 def measure(label: str, model: ikid.Model, net: nn.Sequential, onnx_path: Path) -> dict:
     frames = frames_for(model, 1024)
     n_in = model.layer_widths[0]
-    windows = ikid.compute_features(frames, model.feature_set) if model.feature_set != "joint_state" else frames
-    x1 = np.ascontiguousarray(np.lib.stride_tricks.sliding_window_view(windows, (model.window, windows.shape[1]))[:, 0]
-                              .reshape(-1, n_in)[:1].astype(np.float32))
-    r: dict = {"network": label, "widths": model.layer_widths, "macs": int(sum(a * b for a, b in zip(model.layer_widths, model.layer_widths[1:])))}
+    windows = (
+        ikid.compute_features(frames, model.feature_set) if model.feature_set != "joint_state" else frames
+    )
+    x1 = np.ascontiguousarray(
+        np.lib.stride_tricks.sliding_window_view(windows, (model.window, windows.shape[1]))[:, 0]
+        .reshape(-1, n_in)[:1]
+        .astype(np.float32)
+    )
+    r: dict = {
+        "network": label,
+        "widths": model.layer_widths,
+        "macs": int(sum(a * b for a, b in zip(model.layer_widths, model.layer_widths[1:]))),
+    }
 
     stream = model.stream()
     stream.push_many(frames)
@@ -163,10 +202,21 @@ def measure(label: str, model: ikid.Model, net: nn.Sequential, onnx_path: Path) 
     rust = rust_push(OUT / f"{label}.safetensors")
     r["ikid_rust_push"] = {"p50_us": rust["p50_us"], "p99_us": rust["p99_us"], "max_us": rust["max_us"]}
     np.savetxt(OUT / f"{label}.frames.csv", frames_for(model, 1000), fmt="%.9g", delimiter=",")
-    capi = subprocess.run([str(ROOT / "target" / "c" / "abi_overhead"), str(OUT / f"{label}.safetensors"), str(OUT / f"{label}.frames.csv")],
-                          check=True, capture_output=True, text=True).stdout
+    capi = subprocess.run(
+        [
+            str(ROOT / "target" / "c" / "abi_overhead"),
+            str(OUT / f"{label}.safetensors"),
+            str(OUT / f"{label}.frames.csv"),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
     c = json.loads(capi)
-    r["ikid_c_push"] = {"p50_us": c.get("push_p50_us", float("nan")), "p99_us": c.get("push_p99_us", float("nan"))}
+    r["ikid_c_push"] = {
+        "p50_us": c.get("push_p50_us", float("nan")),
+        "p99_us": c.get("push_p99_us", float("nan")),
+    }
 
     sess = ort_session(onnx_path, 1)
     name = sess.get_inputs()[0].name
@@ -189,14 +239,27 @@ def measure(label: str, model: ikid.Model, net: nn.Sequential, onnx_path: Path) 
 
     # Batch: BATCH windows (ikid gets the BATCH + window - 1 frames they come from).
     many_frames = frames_for(model, BATCH + model.window - 1)
-    feats = ikid.compute_features(many_frames, model.feature_set) if model.feature_set != "joint_state" else many_frames
-    xb = np.ascontiguousarray(np.lib.stride_tricks.sliding_window_view(feats, (model.window, feats.shape[1]))[:, 0].reshape(-1, n_in))
+    feats = (
+        ikid.compute_features(many_frames, model.feature_set)
+        if model.feature_set != "joint_state"
+        else many_frames
+    )
+    xb = np.ascontiguousarray(
+        np.lib.stride_tricks.sliding_window_view(feats, (model.window, feats.shape[1]))[:, 0].reshape(
+            -1, n_in
+        )
+    )
     xbt = torch.as_tensor(xb)
     # The features alone (one thread), which ikid's predict includes and the peers get for free.
-    r["batch_ikid_features_1t"] = (per_sample_us(lambda: ikid.compute_features(many_frames, model.feature_set), len(many_frames))
-                                   if model.feature_set != "joint_state" else 0.0)
+    r["batch_ikid_features_1t"] = (
+        per_sample_us(lambda: ikid.compute_features(many_frames, model.feature_set), len(many_frames))
+        if model.feature_set != "joint_state"
+        else 0.0
+    )
     for threads in (1, 2):
-        r[f"batch_ikid_{threads}t"] = per_sample_us(lambda: model.predict(many_frames, threads=threads), BATCH)
+        r[f"batch_ikid_{threads}t"] = per_sample_us(
+            lambda: model.predict(many_frames, threads=threads), BATCH
+        )
         s = ort_session(onnx_path, threads)
         r[f"batch_ort_{threads}t"] = per_sample_us(lambda: s.run(None, {name: xb}), BATCH)
         torch.set_num_threads(threads)
@@ -237,9 +300,11 @@ def table(results: list[dict], ghz: float) -> list[str]:
             s = f"{v['p50_us']:.2f} / {v['p99_us']:.1f}"
             return s + (f" ({v['p50_us'] / base:.1f}×)" if ratio else "")
 
-        lines.append(f"| {r['network']} | {floor:.2f} | {cell('ikid_rust_push', False)} | {cell('ikid_c_push', False)} | "
-                     f"{cell('ikid_python_push', False)} | {cell('ort_run')} | {cell('ort_iobinding')} | {cell('torch_eager')} | "
-                     f"{cell('torchscript')} | {cell('numpy')} |")
+        lines.append(
+            f"| {r['network']} | {floor:.2f} | {cell('ikid_rust_push', False)} | {cell('ikid_c_push', False)} | "
+            f"{cell('ikid_python_push', False)} | {cell('ort_run')} | {cell('ort_iobinding')} | {cell('torch_eager')} | "
+            f"{cell('torchscript')} | {cell('numpy')} |"
+        )
     lines += [
         "",
         f"### Batch ({BATCH} windows; µs per sample, 1 thread / 2 threads; {cores} cores)",
@@ -254,10 +319,12 @@ def table(results: list[dict], ghz: float) -> list[str]:
     for r in results:
         floor = 2 * r["macs"] / peak_1 * 1e6
         ratio = f"{r['batch_ikid_1t'] / r['batch_ort_1t']:.2f} / {r['batch_ikid_2t'] / r['batch_ort_2t']:.2f}"
-        lines.append(f"| {r['network']} | {floor:.3f} | {r['batch_ikid_1t']:.3f} / {r['batch_ikid_2t']:.3f} | "
-                     f"{r['batch_ikid_features_1t']:.3f} | {r['batch_ort_1t']:.3f} / {r['batch_ort_2t']:.3f} | {ratio} | "
-                     f"{r['batch_torch_1t']:.3f} / {r['batch_torch_2t']:.3f} | "
-                     f"{r['batch_numpy']:.3f} | {r['max_rel_diff_ikid_vs_torch']:.1e} |")
+        lines.append(
+            f"| {r['network']} | {floor:.3f} | {r['batch_ikid_1t']:.3f} / {r['batch_ikid_2t']:.3f} | "
+            f"{r['batch_ikid_features_1t']:.3f} | {r['batch_ort_1t']:.3f} / {r['batch_ort_2t']:.3f} | {ratio} | "
+            f"{r['batch_torch_1t']:.3f} / {r['batch_torch_2t']:.3f} | "
+            f"{r['batch_numpy']:.3f} | {r['max_rel_diff_ikid_vs_torch']:.1e} |"
+        )
     return lines
 
 

@@ -27,8 +27,21 @@ PUSHES = 200_000
 
 
 def rust_latency() -> dict[str, dict]:
-    cmd = ["cargo", "run", "--release", "-q", "-p", "ikid", "--example", "latency", "--",
-           "--pushes", str(PUSHES), "--save-dir", str(MODELS)]
+    cmd = [
+        "cargo",
+        "run",
+        "--release",
+        "-q",
+        "-p",
+        "ikid",
+        "--example",
+        "latency",
+        "--",
+        "--pushes",
+        str(PUSHES),
+        "--save-dir",
+        str(MODELS),
+    ]
     out = subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True, text=True).stdout
     rows = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
     return {r["model"]: r for r in rows}
@@ -70,8 +83,11 @@ def python_push(model: ikid.Model, n: int) -> dict[str, float]:
         stream.push_many(block)
         in_rust = (clock() - t) / 1000
         diffs.append((one_by_one - in_rust) / 1000)
-    return {"p50_us": float(np.median(ns)) / 1000, "p99_us": float(np.percentile(ns, 99)) / 1000,
-            "overhead_us": float(np.median(diffs))}
+    return {
+        "p50_us": float(np.median(ns)) / 1000,
+        "p99_us": float(np.percentile(ns, 99)) / 1000,
+        "overhead_us": float(np.median(diffs)),
+    }
 
 
 def c_abi(label: str) -> dict[str, float]:
@@ -79,8 +95,12 @@ def c_abi(label: str) -> dict[str, float]:
     model = ikid.load(MODELS / f"{label}.safetensors")
     csv = MODELS / f"{label}.frames.csv"
     np.savetxt(csv, frames_for(model, 1000), fmt="%.9g", delimiter=",")
-    out = subprocess.run([str(ROOT / "target" / "c" / "abi_overhead"), str(MODELS / f"{label}.safetensors"), str(csv)],
-                         check=True, capture_output=True, text=True).stdout
+    out = subprocess.run(
+        [str(ROOT / "target" / "c" / "abi_overhead"), str(MODELS / f"{label}.safetensors"), str(csv)],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
     return json.loads(out)
 
 
@@ -98,8 +118,13 @@ def _timed(fn) -> float:
 
 def soak(pushes: int = 10_000_000) -> list[str]:
     """The 10^7-push soak (crates/ikid/examples/soak.rs): allocations, memory, latency drift."""
-    out = subprocess.run(["cargo", "run", "--release", "-q", "-p", "ikid", "--example", "soak", "--", "--pushes", str(pushes)],
-                         cwd=ROOT, check=True, capture_output=True, text=True).stdout
+    out = subprocess.run(
+        ["cargo", "run", "--release", "-q", "-p", "ikid", "--example", "soak", "--", "--pushes", str(pushes)],
+        cwd=ROOT,
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
     r = json.loads(out.strip().splitlines()[-1])
     f, la = r["first_million_us"], r["last_million_us"]
     return [
@@ -128,8 +153,12 @@ def machine() -> str:
         lscpu = subprocess.run(["lscpu"], capture_output=True, text=True).stdout
         wanted = ("Model name", "CPU(s):", "L2 cache", "L3 cache", "Flags")
         lines = [ln for ln in lscpu.splitlines() if ln.startswith(wanted)]
-        lines = [("Flags: avx2 fma" if "avx2" in ln and "fma" in ln else "Flags: no avx2/fma") if ln.startswith("Flags") else ln
-                 for ln in lines]
+        lines = [
+            ("Flags: avx2 fma" if "avx2" in ln and "fma" in ln else "Flags: no avx2/fma")
+            if ln.startswith("Flags")
+            else ln
+            for ln in lines
+        ]
         return "; ".join(" ".join(ln.split()) for ln in lines)
     except OSError:
         return platform.processor()
@@ -206,14 +235,19 @@ def main() -> None:
         "## Simulator (`cargo run --release -p ikid-sim --example sim_speed`, one core)",
         "",
         "```",
-        subprocess.run(["cargo", "run", "--release", "-q", "-p", "ikid-sim", "--example", "sim_speed"], cwd=ROOT, check=True,
-                       capture_output=True, text=True).stdout.strip(),
+        subprocess.run(
+            ["cargo", "run", "--release", "-q", "-p", "ikid-sim", "--example", "sim_speed"],
+            cwd=ROOT,
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout.strip(),
         "```",
     ]
     out = ROOT / "docs" / "performance.md"
     # Keep the section `make bench-peers` writes.
     old = out.read_text() if out.exists() else ""
-    peers = old[old.index("<!-- peers:start -->"):] if "<!-- peers:start -->" in old else ""
+    peers = old[old.index("<!-- peers:start -->") :] if "<!-- peers:start -->" in old else ""
     out.write_text("\n".join(lines) + "\n" + ("\n" + peers if peers else ""))
     print("\n".join(lines))
 

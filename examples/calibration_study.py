@@ -24,13 +24,16 @@ def single(j, n=4000, amp=0.6):
 def main() -> None:
     rng = np.random.default_rng(5)
     model = ikid.load("wrist-ik")
-    print("| trial seed | size | noise | nominal | uncalibrated | calibrated | perfect calibration | calibrated / nominal |")
+    print(
+        "| trial seed | size | noise | nominal | uncalibrated | calibrated | perfect calibration | calibrated / nominal |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for seed in (9100, 9101):
         q = ikid.simulate("random", seed=seed, duration=20, shoulder_flexion=SHOULDER).q
         for scale in (0.8, 1.2):
             shift = rng.uniform(-0.015, 0.015, (6, 3))
             for noise in (0.0, 0.01):
+
                 def markers(qq, s, shift=shift, scale=scale, noise=noise):
                     m = ikid.forward_markers(qq, SHOULDER, scale, scale**3, shift)
                     return _native.noise_uniform(m, noise, s) if noise else m
@@ -40,14 +43,28 @@ def main() -> None:
                     return float(np.mean((run.values - q[run.frame]) ** 2))
 
                 def calibration(with_noise):
-                    f = markers if with_noise else (lambda qq, s, shift=shift, scale=scale: ikid.forward_markers(qq, SHOULDER, scale, scale**3, shift))
-                    return ikid.calibrate(f(np.zeros((2000, 3)), 2), {"ra_wr_s_p": f(single(0), 3), "ra_wr_e_f": f(single(1), 4)})
+                    f = (
+                        markers
+                        if with_noise
+                        else (
+                            lambda qq, s, shift=shift, scale=scale: ikid.forward_markers(
+                                qq, SHOULDER, scale, scale**3, shift
+                            )
+                        )
+                    )
+                    return ikid.calibrate(
+                        f(np.zeros((2000, 3)), 2),
+                        {"ra_wr_s_p": f(single(0), 3), "ra_wr_e_f": f(single(1), 4)},
+                    )
 
                 nominal_frames = ikid.forward_markers(q, SHOULDER)
                 nominal = mse(_native.noise_uniform(nominal_frames, noise, 1) if noise else nominal_frames)
                 moved = markers(q, 1)
                 cal = mse(moved, calibration(True))
-                print(f"| {seed} | {scale} | {noise:.0%} | {nominal:.3g} | {mse(moved):.3g} | {cal:.3g} | {mse(moved, calibration(False)):.3g} | {cal / nominal:.2f} |", flush=True)
+                print(
+                    f"| {seed} | {scale} | {noise:.0%} | {nominal:.3g} | {mse(moved):.3g} | {cal:.3g} | {mse(moved, calibration(False)):.3g} | {cal / nominal:.2f} |",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

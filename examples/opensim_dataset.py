@@ -37,7 +37,14 @@ from ikid import io
 from ikid.interop import opensim as ios
 
 #: The lab's label for each ikid marker, and the order the lab's files list them in.
-LAB_LABELS = {"RSP": "R_RSTY", "USP": "R_USTY", "FAP": "R_FARM", "MC2": "R_MCP2", "MC5": "R_MCP5", "MCB": "R_HAND"}
+LAB_LABELS = {
+    "RSP": "R_RSTY",
+    "USP": "R_USTY",
+    "FAP": "R_FARM",
+    "MC2": "R_MCP2",
+    "MC5": "R_MCP5",
+    "MCB": "R_HAND",
+}
 FILE_ORDER = ["R_MCP2", "R_MCP5", "R_HAND", "R_LEPI", "R_RSTY", "R_USTY", "R_FARM"]
 #: Seed of the lab's marker placement (fixed: one lab, one placement, whatever --seed).
 PLACEMENT_SEED = 20_261_123
@@ -48,13 +55,19 @@ SWEEP = 0.95  # fraction of each coordinate's range the motion spans
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--out", required=True, type=Path, help="folder to write the trials into (created)")
     ap.add_argument("--trials", type=int, default=6, help="number of trials (default 6)")
     ap.add_argument("--duration", type=float, default=20.0, help="seconds per trial (default 20)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the motions and subjects (default 0)")
-    ap.add_argument("--rate", type=float, default=1000.0, help="frame rate, Hz (default 1000, the shipped models' rate)")
-    ap.add_argument("--no-torques", action="store_true", help="skip the .sto torques (OpenSim inverse dynamics)")
+    ap.add_argument(
+        "--rate", type=float, default=1000.0, help="frame rate, Hz (default 1000, the shipped models' rate)"
+    )
+    ap.add_argument(
+        "--no-torques", action="store_true", help="skip the .sto torques (OpenSim inverse dynamics)"
+    )
     args = ap.parse_args(argv)
     for what, v in (("--trials", args.trials), ("--duration", args.duration), ("--rate", args.rate)):
         if not (v > 0 and math.isfinite(v)):
@@ -84,19 +97,29 @@ def main(argv: list[str] | None = None) -> int:
         start = time.perf_counter()
         length_scale = float(rng.uniform(0.9, 1.1))
         shoulder_deg = SHOULDERS_DEG[k % len(SHOULDERS_DEG)]
-        subject = {"length_scale": length_scale, "mass_scale": length_scale**3, "shoulder_flexion": math.radians(shoulder_deg)}
+        subject = {
+            "length_scale": length_scale,
+            "mass_scale": length_scale**3,
+            "shoulder_flexion": math.radians(shoulder_deg),
+        }
         placement = lab_markers(length_scale)
         model = ios.write_osim(args.out / f"{name}.osim", markers=placement, name=name, **subject)
         q, qd, qdd, sines = motion(t, rng)
         markers = ios.marker_positions(model, q)  # (n, 3 * 7), the model's marker order
         model_order = [lab for lab, _, _ in placement]
-        cols = np.concatenate([np.arange(3 * model_order.index(lab), 3 * model_order.index(lab) + 3) for lab in FILE_ORDER])
+        cols = np.concatenate(
+            [np.arange(3 * model_order.index(lab), 3 * model_order.index(lab) + 3) for lab in FILE_ORDER]
+        )
         io.write_trc(args.out / f"{name}.trc", t, markers[:, cols], rate_hz=args.rate, labels=FILE_ORDER)
         io.write_mot(args.out / f"{name}.mot", t, q)
         if not args.no_torques:
             io.write_sto(args.out / f"{name}.sto", t, ios.inverse_dynamics(model, q, qd, qdd))
-        manifest["trials"].append({"name": name, **subject, "shoulder_deg": shoulder_deg, "frames": n, "sines": sines})
-        print(f"{name}: {n} frames, length x{length_scale:.3f}, shoulder {shoulder_deg:+.0f} deg ({time.perf_counter() - start:.1f} s)")
+        manifest["trials"].append(
+            {"name": name, **subject, "shoulder_deg": shoulder_deg, "frames": n, "sines": sines}
+        )
+        print(
+            f"{name}: {n} frames, length x{length_scale:.3f}, shoulder {shoulder_deg:+.0f} deg ({time.perf_counter() - start:.1f} s)"
+        )
     (args.out / "dataset.json").write_text(json.dumps(manifest, indent=1))
     print(f"wrote {args.trials} trials to {args.out} (markers mapped by {args.out / 'map.toml'})")
     return 0
@@ -137,8 +160,15 @@ def motion(t: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndar
         q[:, j] = (lo + hi) / 2 + k * (s - s.mean())
         qd[:, j] = k * (np.cos(arg) @ (a * w))
         qdd[:, j] = -k * (np.sin(arg) @ (a * w**2))
-        params.append({"coordinate": c["name"], "freq_hz": f.tolist(), "amplitude": (k * a).tolist(), "phase": phase.tolist(),
-                       "offset": (lo + hi) / 2 - k * s.mean()})
+        params.append(
+            {
+                "coordinate": c["name"],
+                "freq_hz": f.tolist(),
+                "amplitude": (k * a).tolist(),
+                "phase": phase.tolist(),
+                "offset": (lo + hi) / 2 - k * s.mean(),
+            }
+        )
     return q, qd, qdd, params
 
 

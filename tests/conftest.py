@@ -16,7 +16,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # for `training`
 
 
-def make_card(feature_set: str = "markers", window: int = 5, activations=("relu", "relu", "identity"), **extra):
+def make_card(
+    feature_set: str = "markers", window: int = 5, activations=("relu", "relu", "identity"), **extra
+):
     card = {
         "format": "ikid-model",
         "format_version": 1,

@@ -12,7 +12,9 @@ import pytest
 import ikid
 from ikid.interop.biorbd import biomod_text, write_biomod
 
-biorbd = pytest.importorskip("biorbd", reason="biorbd is an optional evaluation dependency (pip install 'ikid[eval]')")
+biorbd = pytest.importorskip(
+    "biorbd", reason="biorbd is an optional evaluation dependency (pip install 'ikid[eval]')"
+)
 
 SHOULDERS = [0.0, math.radians(45.0), math.radians(-20.0)]
 # (length_scale, mass_scale): small and large subjects, one with a mass not following length.
@@ -28,7 +30,7 @@ def random_states(seed: int, n: int = 40) -> tuple[np.ndarray, np.ndarray, np.nd
     return rng.uniform(lo, hi, (n, 3)), rng.uniform(-15.0, 15.0, (n, 3)), rng.uniform(-800.0, 800.0, (n, 3))
 
 
-def load(tmp_path, **kw) -> "biorbd.Model":
+def load(tmp_path, **kw) -> biorbd.Model:
     path = write_biomod(tmp_path / "wrist.bioMod", **kw)
     return biorbd.Model(str(path))
 
@@ -43,12 +45,16 @@ def test_forward_kinematics_and_inverse_dynamics_match_ikid(tmp_path, shoulder, 
     model = load(tmp_path, length_scale=length_scale, mass_scale=mass_scale, shoulder_flexion=shoulder)
     q, qd, qdd = random_states(seed=int(1000 * (shoulder + length_scale + mass_scale)))
 
-    fk_err = np.abs(biorbd_markers(model, q) - ikid.forward_markers(q, shoulder_flexion=shoulder, length_scale=length_scale,
-                                                                    mass_scale=mass_scale)).max()
+    fk_err = np.abs(
+        biorbd_markers(model, q)
+        - ikid.forward_markers(q, shoulder_flexion=shoulder, length_scale=length_scale, mass_scale=mass_scale)
+    ).max()
     assert fk_err <= FK_TOL_M, f"biorbd markers differ from ikid's by {fk_err:.3g} m"
 
     tau_biorbd = np.array([model.InverseDynamics(a, b, c).to_array() for a, b, c in zip(q, qd, qdd)])
-    tau_ikid = ikid.reference_id(q, qd, qdd, shoulder_flexion=shoulder, length_scale=length_scale, mass_scale=mass_scale)
+    tau_ikid = ikid.reference_id(
+        q, qd, qdd, shoulder_flexion=shoulder, length_scale=length_scale, mass_scale=mass_scale
+    )
     # The states are violent enough that a wrong inertia, centre of mass or axis shows up.
     assert np.abs(tau_ikid).max() > 0.5
     id_err = np.abs(tau_biorbd - tau_ikid).max()
@@ -89,7 +95,9 @@ def test_marker_shift_moves_the_markers(tmp_path):
     q, _, _ = random_states(seed=9)
     expect = ikid.forward_markers(q, shoulder_flexion=SHOULDERS[2], length_scale=1.1, marker_shift=shift)
     assert np.abs(biorbd_markers(model, q) - expect).max() <= FK_TOL_M
-    assert np.abs(expect - ikid.forward_markers(q, shoulder_flexion=SHOULDERS[2], length_scale=1.1)).max() > 5e-3
+    assert (
+        np.abs(expect - ikid.forward_markers(q, shoulder_flexion=SHOULDERS[2], length_scale=1.1)).max() > 5e-3
+    )
 
 
 def test_numbers_are_written_positionally():
@@ -97,7 +105,12 @@ def test_numbers_are_written_positionally():
     # must be plain positional notation so that stod reads it exactly.
     text = biomod_text(ikid.body_model(length_scale=1.37, mass_scale=0.61, shoulder_flexion=0.3))
     body = [line for line in text.splitlines() if not line.lstrip().startswith("//")]
-    assert not any("e-" in tok or "e+" in tok for line in body for tok in line.split() if tok[0].isdigit() or tok[0] == "-")
+    assert not any(
+        "e-" in tok or "e+" in tok
+        for line in body
+        for tok in line.split()
+        if tok[0].isdigit() or tok[0] == "-"
+    )
 
 
 def test_write_is_atomic_and_reports_bad_arguments(tmp_path):

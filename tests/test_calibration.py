@@ -73,7 +73,9 @@ def test_calibration_restores_the_nominal_accuracy_under_misplacement_and_size(m
 def test_calibration_reports_what_it_measured_and_round_trips(tmp_path):
     cal = ikid.calibrate(*Subject(3, 1.0).calibration_trials())
     r = cal.report
-    assert set(r["movements"]) == {"ra_wr_s_p", "ra_wr_e_f"} and r["movements"]["ra_wr_e_f"]["range_deg"] == pytest.approx(68.75, abs=0.1)
+    assert set(r["movements"]) == {"ra_wr_s_p", "ra_wr_e_f"} and r["movements"]["ra_wr_e_f"][
+        "range_deg"
+    ] == pytest.approx(68.75, abs=0.1)
     assert r["axis_skew_deg"] < 0.01 and min(r["placement_deg"]) > 1.0
     back = ikid.load_calibration(ikid.save_calibration(cal, tmp_path / "s.json", subject="s01"))
     np.testing.assert_allclose(back.forearm, cal.forearm, atol=1e-15)
@@ -89,16 +91,26 @@ def test_bad_calibrations_say_what_is_wrong(tmp_path):
         ikid.calibrate(moves["ra_wr_e_f"], moves)
     with pytest.raises(ikid.InputError, match="at least two different coordinates"):
         ikid.calibrate(static, {"ra_wr_e_f": moves["ra_wr_e_f"]})
-    with pytest.raises(ikid.InputError, match=r'unknown coordinate "wrist_flex" \(known: ra_wr_s_p, ra_wr_e_f, ra_wr_ad_ab\)'):
+    with pytest.raises(
+        ikid.InputError, match=r'unknown coordinate "wrist_flex" \(known: ra_wr_s_p, ra_wr_e_f, ra_wr_ad_ab\)'
+    ):
         ikid.calibrate(static, {"wrist_flex": moves["ra_wr_e_f"], "ra_wr_s_p": moves["ra_wr_s_p"]})
     both = subject.markers(single(0) + single(1))
     with pytest.raises(ikid.InputError, match="move each coordinate alone"):
         ikid.calibrate(static, {"ra_wr_s_p": both, "ra_wr_e_f": moves["ra_wr_e_f"]})
-    (tmp_path / "bad.json").write_text(json.dumps({"format": "ikid-calibration", "format_version": 1, "forearm": np.eye(3).tolist(),
-                                                    "hand": (2 * np.eye(3)).tolist()}))
+    (tmp_path / "bad.json").write_text(
+        json.dumps(
+            {
+                "format": "ikid-calibration",
+                "format_version": 1,
+                "forearm": np.eye(3).tolist(),
+                "hand": (2 * np.eye(3)).tolist(),
+            }
+        )
+    )
     with pytest.raises(ikid.InputError, match="the hand matrix is not a rotation"):
         ikid.load_calibration(tmp_path / "bad.json")
-    with pytest.raises(ikid.InputError, match="calibration: needs marker frames; feature set \"joint_state\""):
+    with pytest.raises(ikid.InputError, match='calibration: needs marker frames; feature set "joint_state"'):
         ikid.load("wrist-id").stream(calibration=ikid.Calibration.body_model())
 
 
@@ -108,7 +120,12 @@ def test_calibrate_and_ik_commands_on_c3d_files(motion, tmp_path):
     names = tuple(ikid.marker_names())
 
     def c3d(name, frames):
-        return str(io.write_c3d(tmp_path / name, io.MarkerData(names, np.arange(len(frames)) / 1000.0, frames.reshape(-1, 6, 3), 1000.0)))
+        return str(
+            io.write_c3d(
+                tmp_path / name,
+                io.MarkerData(names, np.arange(len(frames)) / 1000.0, frames.reshape(-1, 6, 3), 1000.0),
+            )
+        )
 
     args = ["calibrate", "--static", c3d("static.c3d", static), "-o", str(tmp_path / "s.json")]
     for coord, frames in moves.items():

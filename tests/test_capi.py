@@ -12,12 +12,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-import ikid
 from conftest import ROOT, make_model, marker_frames
 
+import ikid
+
 BIN = ROOT / "target" / "c"
-VALGRIND = ["valgrind", "--error-exitcode=99", "--leak-check=full", "--errors-for-leak-kinds=definite,indirect", "-q"]
+VALGRIND = [
+    "valgrind",
+    "--error-exitcode=99",
+    "--leak-check=full",
+    "--errors-for-leak-kinds=definite,indirect",
+    "-q",
+]
 
 
 def built(name: str) -> Path:
@@ -64,16 +70,26 @@ def run_checked(cmd: list, check) -> None:
     check(run(cmd))
     if shutil.which("valgrind") is None:
         if in_ci():
-            pytest.fail("valgrind is not installed, and CI is set: in CI the C programs must run under valgrind (apt-get install valgrind)")
-        pytest.skip("valgrind is not installed: the program passed natively, but its memory checks did not run "
-                    "(in CI, with CI set, this is a failure)")
+            pytest.fail(
+                "valgrind is not installed, and CI is set: in CI the C programs must run under valgrind (apt-get install valgrind)"
+            )
+        pytest.skip(
+            "valgrind is not installed: the program passed natively, but its memory checks did not run "
+            "(in CI, with CI set, this is a failure)"
+        )
     check(run(VALGRIND + cmd))
 
 
 def test_c_test_program_passes_under_valgrind(fixtures):
     d = fixtures[0]
-    cmd = [built("test_capi"), d / "model.safetensors", d / "frames.csv", d / "expected.csv", d / "corrupt.safetensors",
-           d / "expected_calibrated.csv"]
+    cmd = [
+        built("test_capi"),
+        d / "model.safetensors",
+        d / "frames.csv",
+        d / "expected.csv",
+        d / "corrupt.safetensors",
+        d / "expected_calibrated.csv",
+    ]
 
     def check(result):
         assert result.returncode == 0, result.stdout + result.stderr
@@ -101,7 +117,7 @@ def test_example_host_program_matches_python(fixtures):
         np.testing.assert_array_equal(rows[:, 0], np.arange(model.window - 1, len(frames)))
         np.testing.assert_allclose(rows[:, 1:], expected, atol=1e-6)  # printed with 6 decimals
         # The latency line: every frame counted, percentiles of real time (not timing targets).
-        (n, p50, p99), = LATENCY.findall(result.stderr)
+        ((n, p50, p99),) = LATENCY.findall(result.stderr)
         p50, p99 = float(p50), float(p99)
         assert int(n) == len(frames) and np.isfinite([p50, p99]).all() and 0 < p50 <= p99, result.stderr
 
@@ -130,9 +146,26 @@ def test_host_build_through_pkg_config(fixtures, tmp_path, link):
     assert pc.returncode == 0, pc.stderr
     args = pc.stdout.split()
     if link == "static":  # prefer the archive over the shared library
-        args = [a for a in args if a != "-likid"] + [str(prefix / "lib" / "libikid.a")] + [a for a in args if a.startswith("-l") and a != "-likid"]
+        args = (
+            [a for a in args if a != "-likid"]
+            + [str(prefix / "lib" / "libikid.a")]
+            + [a for a in args if a.startswith("-l") and a != "-likid"]
+        )
     exe = tmp_path / f"host_{link}"
-    cc = run(["cc", "-std=c11", "-O2", "-Wall", "-Wextra", "-Werror", ROOT / "examples" / "c" / "stream_csv.c", "-o", exe, *args])
+    cc = run(
+        [
+            "cc",
+            "-std=c11",
+            "-O2",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            ROOT / "examples" / "c" / "stream_csv.c",
+            "-o",
+            exe,
+            *args,
+        ]
+    )
     assert cc.returncode == 0, cc.stderr
     run_env = {**os.environ, "LD_LIBRARY_PATH": str(prefix / "lib")}
     result = run([exe, d / "model.safetensors", d / "frames.csv"], env=run_env)
@@ -155,7 +188,22 @@ def test_header_compiles_and_links_as_cpp(tmp_path):
     )
     exe = tmp_path / "host"
     lib = ROOT / "target" / "release"
-    cc = run(["c++", "-std=c++17", "-Wall", "-Wextra", "-Werror", f"-I{ROOT / 'include'}", src, "-o", exe, f"-L{lib}", "-likid", f"-Wl,-rpath,{lib}"])
+    cc = run(
+        [
+            "c++",
+            "-std=c++17",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            f"-I{ROOT / 'include'}",
+            src,
+            "-o",
+            exe,
+            f"-L{lib}",
+            "-likid",
+            f"-Wl,-rpath,{lib}",
+        ]
+    )
     assert cc.returncode == 0, cc.stderr
     out = run([exe]).stdout.strip().split("|")
     assert out[1] == "3" and "/nonexistent.safetensors" in out[2], out

@@ -66,7 +66,9 @@ def test_stream_from_stdin_gives_one_line_per_frame_equal_to_stream_push(trial, 
     header, status, values = parse_output(captured.out, 6)
     assert header == ["frame", "status", *ikid.coordinate_names(), *ikid.coordinate_names()]
     assert len(status) == len(frames)
-    want = np.hstack([stream_reference(ikid.load("wrist-ik"), frames), stream_reference(ikid.load("wrist-chain"), frames)])
+    want = np.hstack(
+        [stream_reference(ikid.load("wrist-ik"), frames), stream_reference(ikid.load("wrist-chain"), frames)]
+    )
     ik_window, chain_window = ikid.load("wrist-ik").window, ikid.load("wrist-chain").window
     first = max(ik_window, chain_window) - 1
     assert status[:first] == ["filling"] * first and set(status[first:]) == {"ok"}
@@ -104,7 +106,9 @@ def test_stream_at_another_rate_is_refused_with_the_reason(trial, monkeypatch, c
     err = capsys.readouterr().err
     assert "250 Hz" in err and "1000 Hz" in err and "not resampled" in err
     # Time stamps 0.4 ms apart (a 2.5 kHz source) are refused frame by frame, not mis-timed.
-    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(trial.markers[:3], with_time=np.arange(3) * 4e-4)))
+    monkeypatch.setattr(
+        sys, "stdin", io.StringIO(csv_lines(trial.markers[:3], with_time=np.arange(3) * 4e-4))
+    )
     assert cli(["stream", "--time"]) == 0
     _, status, _ = parse_output(capsys.readouterr().out, 3)
     assert status[1].startswith("refused:") and "resample the source to 1000 Hz" in status[1]
@@ -114,8 +118,12 @@ def test_stream_at_another_rate_is_refused_with_the_reason(trial, monkeypatch, c
 def test_stream_over_udp_on_localhost(trial):
     """A subprocess listening on a free port; datagrams in, lines out; stops by itself."""
     frames = trial.markers[:120].astype(np.float32).astype(np.float64)
-    proc = subprocess.Popen([IKID, "stream", "--udp", "0", "--count", str(len(frames)), "--idle", "20"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [IKID, "stream", "--udp", "0", "--count", str(len(frames)), "--idle", "20"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         line = proc.stderr.readline()  # "ikid stream: listening on udp 127.0.0.1:PORT"
         assert "listening on udp 127.0.0.1:" in line, line
@@ -135,7 +143,9 @@ def test_stream_over_udp_on_localhost(trial):
 
 
 def test_stream_over_udp_stops_when_idle():
-    proc = subprocess.run([IKID, "stream", "--udp", "0", "--idle", "0.5"], capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [IKID, "stream", "--udp", "0", "--idle", "0.5"], capture_output=True, text=True, timeout=60
+    )
     assert proc.returncode == 0 and "no frame for 0.5 s" in proc.stderr
     assert proc.stdout.strip() == "frame,status,ra_wr_s_p,ra_wr_e_f,ra_wr_ad_ab"
 
@@ -177,7 +187,9 @@ def test_id_refuses_a_file_at_another_rate(trial, tmp_path, capsys):
 LAB_LABELS = ["R.RadStyl", "R.UlnStyl", "R.Forearm", "R.MCP2", "R.MCP5", "R.HandBase"]
 
 
-def write_lab_trial(folder: Path, name: str, seed: int, seconds: float, rate_divisor: int = 1, torques: bool = True) -> None:
+def write_lab_trial(
+    folder: Path, name: str, seed: int, seconds: float, rate_divisor: int = 1, torques: bool = True
+) -> None:
     t = ikid.simulate("random", seed=seed, duration=seconds)
     sl = slice(None, None, rate_divisor)
     write_trc(folder / f"{name}.trc", t.time[sl], t.markers[sl], 1000.0 / rate_divisor, labels=LAB_LABELS)
@@ -255,26 +267,63 @@ def test_a_gap_the_filler_cannot_bridge_splits_the_trial(lab, tmp_path):
     assert all(np.isfinite(r.markers).all() for r in recs)
 
 
-needs_torch = pytest.mark.skipif(importlib.util.find_spec("torch") is None,
-                                 reason="training needs the training extra (make test installs it)")
+needs_torch = pytest.mark.skipif(
+    importlib.util.find_spec("torch") is None,
+    reason="training needs the training extra (make test installs it)",
+)
 
 
 @needs_torch
 def test_train_and_report_on_a_lab_folder_through_the_cli(lab, tmp_path, capsys):
     root, mapping = lab
     out = tmp_path / "lab-ik.safetensors"
-    args = ["train", "--data", str(root / "train"), "--map", str(mapping), "--task", "ik", "--minutes", "0.05",
-            "--window", "5", "--hidden", "16,16", "--no-onnx", "-o", str(out)]
+    args = [
+        "train",
+        "--data",
+        str(root / "train"),
+        "--map",
+        str(mapping),
+        "--task",
+        "ik",
+        "--minutes",
+        "0.05",
+        "--window",
+        "5",
+        "--hidden",
+        "16,16",
+        "--no-onnx",
+        "-o",
+        str(out),
+    ]
     assert cli(args) == 0
     model = ikid.load(out)
     assert model.name == "lab-ik" and model.window == 5 and model.layer_widths == [15, 16, 16, 3]
     prov = model.card["provenance"]
-    assert prov["data"]["lab"] == str((root / "train").resolve()) and prov["recordings"] == 2 and prov["simulator"] is None
+    assert (
+        prov["data"]["lab"] == str((root / "train").resolve())
+        and prov["recordings"] == 2
+        and prov["simulator"] is None
+    )
     assert model.frame_rate_hz == 1000.0 and "test_clean" in model.card["metrics"]
     capsys.readouterr()
 
     report = tmp_path / "lab.md"
-    assert cli(["report", "--model", str(out), "--data", str(root / "test"), "--map", str(mapping), "-o", str(report)]) == 0
+    assert (
+        cli(
+            [
+                "report",
+                "--model",
+                str(out),
+                "--data",
+                str(root / "test"),
+                "--map",
+                str(mapping),
+                "-o",
+                str(report),
+            ]
+        )
+        == 0
+    )
     from ikid.training.data import load_lab_recordings
 
     rec = load_lab_recordings(root / "test", mapping)[0]
@@ -291,7 +340,15 @@ def test_train_and_report_on_a_lab_folder_through_the_cli(lab, tmp_path, capsys)
 @needs_torch
 def test_train_refuses_contradictory_or_bad_options(lab, tmp_path, capsys):
     root, mapping = lab
-    base = ["train", "--data", str(root / "train"), "--map", str(mapping), "-o", str(tmp_path / "m.safetensors")]
+    base = [
+        "train",
+        "--data",
+        str(root / "train"),
+        "--map",
+        str(mapping),
+        "-o",
+        str(tmp_path / "m.safetensors"),
+    ]
     assert cli([*base, "--config", "wrist-ik", "--task", "chain"]) == 2
     assert "--task chain but config 'wrist-ik' trains task 'ik'" in capsys.readouterr().err
     assert cli([*base, "--hidden", "128;128"]) == 2
@@ -307,8 +364,24 @@ def test_train_chain_needs_torques(lab, tmp_path, capsys):
     folder = tmp_path / "no_torques"
     folder.mkdir()
     write_lab_trial(folder, "x", 9940, 1.0, torques=False)
-    assert cli(["train", "--data", str(folder), "--map", str(mapping), "--task", "chain", "--minutes", "0.01",
-                "-o", str(tmp_path / "c.safetensors")]) == 2
+    assert (
+        cli(
+            [
+                "train",
+                "--data",
+                str(folder),
+                "--map",
+                str(mapping),
+                "--task",
+                "chain",
+                "--minutes",
+                "0.01",
+                "-o",
+                str(tmp_path / "c.safetensors"),
+            ]
+        )
+        == 2
+    )
     assert "torques (a same-stem .sto)" in capsys.readouterr().err
     assert not (tmp_path / "c.safetensors").exists()
 
@@ -325,10 +398,15 @@ def test_bench_prints_latency_and_throughput(capsys, name, frames):
     lines = capsys.readouterr().out.splitlines()
     model = ikid.load(name)
     # What was run: the model as loaded, on the frames asked for.
-    assert lines[0] == (f"{name}: {model.feature_set} x {model.window}, layers {'-'.join(map(str, model.layer_widths))}, "
-                        f"{frames} frames"), lines[0]
-    m = re.fullmatch(rf"  Stream\.push \(Python\): p50 {NUM} µs, p99 {NUM} µs, max {NUM} µs "
-                     rf"\(budget 2000 µs: {NUM}× headroom at p99\)", lines[1])
+    assert lines[0] == (
+        f"{name}: {model.feature_set} x {model.window}, layers {'-'.join(map(str, model.layer_widths))}, "
+        f"{frames} frames"
+    ), lines[0]
+    m = re.fullmatch(
+        rf"  Stream\.push \(Python\): p50 {NUM} µs, p99 {NUM} µs, max {NUM} µs "
+        rf"\(budget 2000 µs: {NUM}× headroom at p99\)",
+        lines[1],
+    )
     assert m, lines[1]
     p50, p99, worst, headroom = map(float, m.groups())
     assert np.isfinite([p50, p99, worst]).all() and 0 < p50 <= p99 <= worst, lines[1]
@@ -346,7 +424,9 @@ def test_bench_prints_latency_and_throughput(capsys, name, frames):
 def test_demo_prints_the_errors_and_latency_of_what_it_streamed(capsys, tmp_path):
     assert cli(["demo", "--seconds", "2", "--seed", "9902", "--plot", str(tmp_path / "demo.png")]) == 0
     out = capsys.readouterr().out
-    trial = ikid.simulate("random", seed=9902, duration=2.0, shoulder_flexion=np.radians(30)).with_noise("uniform", seed=9902, fraction=0.01)
+    trial = ikid.simulate("random", seed=9902, duration=2.0, shoulder_flexion=np.radians(30)).with_noise(
+        "uniform", seed=9902, fraction=0.01
+    )
     assert f"   {len(trial.time)} frames at 1000 Hz" in out
     # The printed errors are those of the shipped models on that trial (batch prediction, the
     # simulator's truth), once both windows are full.
@@ -362,11 +442,18 @@ def test_demo_prints_the_errors_and_latency_of_what_it_streamed(capsys, tmp_path
         assert m, out
         got = np.array(m.groups(), float)
         want = [rms(ang)[k], rms(ref)[k], rms(tau)[k], 100 * rms(tau)[k] / span[k]]
-        assert np.all(np.abs(got - want) <= [1e-3, 1e-3, 1e-4, 1e-2]), (name, got, want)  # a unit of the last printed digit
+        assert np.all(np.abs(got - want) <= [1e-3, 1e-3, 1e-4, 1e-2]), (
+            name,
+            got,
+            want,
+        )  # a unit of the last printed digit
     m = re.search(rf"angle MSE {NUM} rad² \(reference IK per frame {NUM}\); torque MSE {NUM} N·m²", out)
     assert m, out
-    np.testing.assert_allclose(np.array(m.groups(), float),
-                               [np.mean(np.radians(ang) ** 2), np.mean(np.radians(ref) ** 2), np.mean(tau**2)], rtol=0.01)
+    np.testing.assert_allclose(
+        np.array(m.groups(), float),
+        [np.mean(np.radians(ang) ** 2), np.mean(np.radians(ref) ** 2), np.mean(tau**2)],
+        rtol=0.01,
+    )
     m = re.search(rf"from Python: p50 {NUM} µs, p99 {NUM} µs", out)
     assert m, out
     p50, p99 = map(float, m.groups())
@@ -376,21 +463,46 @@ def test_demo_prints_the_errors_and_latency_of_what_it_streamed(capsys, tmp_path
 
 def test_import_ikid_and_the_cli_do_not_import_torch():
     code = "import sys, ikid, ikid.cli, ikid.training.data, ikid.training.evaluate; print('torch' in sys.modules)"
-    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={**os.environ}).stdout.strip() == "False"
+    assert (
+        subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, env={**os.environ}
+        ).stdout.strip()
+        == "False"
+    )
 
 
-def test_track_writes_the_trackers_angles_and_torques(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    t = ikid.simulate("random", seed=9903, duration=1.0, length_scale=1.1, mass_scale=1.3).with_noise("uniform", 6, fraction=0.01)
+def test_track_writes_the_trackers_angles_and_torques(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    t = ikid.simulate("random", seed=9903, duration=1.0, length_scale=1.1, mass_scale=1.3).with_noise(
+        "uniform", 6, fraction=0.01
+    )
     markers = t.markers.copy()
     markers[0, 9] = np.nan  # the first frame lacks MC2: the tracker starts on the second
     write_trc(tmp_path / "t.trc", t.time, markers, 1000.0)
-    assert cli(["track", str(tmp_path / "t.trc"), "-o", str(tmp_path / "out" / "t"), "--length-scale", "1.1", "--mass-scale", "1.3"]) == 0
+    assert (
+        cli(
+            [
+                "track",
+                str(tmp_path / "t.trc"),
+                "-o",
+                str(tmp_path / "out" / "t"),
+                "--length-scale",
+                "1.1",
+                "--mass-scale",
+                "1.3",
+            ]
+        )
+        == 0
+    )
     time_mot, q = read_mot(tmp_path / "out" / "t.mot")
     time_sto, tau = read_sto(tmp_path / "out" / "t.sto")
     # The same frames through the Python API (read back from the file, as the CLI did).
     from ikid.io import read_markers
 
-    expected = ikid.Tracker(length_scale=1.1, mass_scale=1.3, refiner=ikid.load("wrist-track")).run(read_markers(tmp_path / "t.trc").frames(None))
+    expected = ikid.Tracker(length_scale=1.1, mass_scale=1.3, refiner=ikid.load("wrist-track")).run(
+        read_markers(tmp_path / "t.trc").frames(None)
+    )
     assert expected["start"] == 1
     np.testing.assert_allclose(time_mot, t.time[1:], atol=1e-9)
     np.testing.assert_allclose(time_sto, t.time[1:], atol=1e-9)
@@ -402,7 +514,22 @@ def test_track_writes_the_trackers_angles_and_torques(tmp_path: Path, capsys: py
     assert "length_scale: is -1" in capsys.readouterr().err
     assert not (tmp_path / "bad.mot").exists()
     # --refiner none: the bare filter.
-    assert cli(["track", str(tmp_path / "t.trc"), "-o", str(tmp_path / "bare"), "--length-scale", "1.1", "--mass-scale", "1.3",
-                "--refiner", "none"]) == 0
+    assert (
+        cli(
+            [
+                "track",
+                str(tmp_path / "t.trc"),
+                "-o",
+                str(tmp_path / "bare"),
+                "--length-scale",
+                "1.1",
+                "--mass-scale",
+                "1.3",
+                "--refiner",
+                "none",
+            ]
+        )
+        == 0
+    )
     bare = ikid.Tracker(length_scale=1.1, mass_scale=1.3).run(read_markers(tmp_path / "t.trc").frames(None))
     np.testing.assert_allclose(read_mot(tmp_path / "bare.mot")[1], bare["q"][1:], atol=1e-8)

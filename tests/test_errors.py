@@ -9,14 +9,19 @@ import os
 
 import numpy as np
 import pytest
+from conftest import ROOT, make_model, marker_frames
 
 import ikid
-from conftest import ROOT, make_model, marker_frames
 
 LIB = ROOT / "target" / "release" / "libikid.so"
 # ikid_status values (include/ikid.h).
 C_STATUS = {"argument": 2, "io": 3, "model_file": 4, "input": 5}
-PY_CLASS = {"argument": ikid.ArgumentError, "io": ikid.ReadError, "model_file": ikid.ModelFileError, "input": ikid.InputError}
+PY_CLASS = {
+    "argument": ikid.ArgumentError,
+    "io": ikid.ReadError,
+    "model_file": ikid.ModelFileError,
+    "input": ikid.InputError,
+}
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +34,14 @@ def libikid():
     lib.ikid_stream_new.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_void_p)]
     lib.ikid_stream_free.argtypes = [ctypes.c_void_p]
     f32p, f64p = ctypes.POINTER(ctypes.c_float), ctypes.POINTER(ctypes.c_double)
-    lib.ikid_stream_push.argtypes = [ctypes.c_void_p, f32p, ctypes.c_size_t, f32p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_bool)]
+    lib.ikid_stream_push.argtypes = [
+        ctypes.c_void_p,
+        f32p,
+        ctypes.c_size_t,
+        f32p,
+        ctypes.c_size_t,
+        ctypes.POINTER(ctypes.c_bool),
+    ]
     lib.ikid_stream_set_calibration.argtypes = [ctypes.c_void_p, f64p, f64p]
     lib.ikid_last_error.restype = ctypes.c_char_p
     return lib
@@ -59,7 +71,12 @@ def agree(kind: str, py_error: ikid.IkidError, c_status: int, c_message: str) ->
 
 @pytest.mark.parametrize("case", ["missing", "directory", "dev_zero", "corrupt"])
 def test_model_file_errors_agree(libikid, model_file, tmp_path, case):
-    path = {"missing": tmp_path / "nope.safetensors", "directory": tmp_path, "dev_zero": "/dev/zero", "corrupt": tmp_path / "bad.safetensors"}[case]
+    path = {
+        "missing": tmp_path / "nope.safetensors",
+        "directory": tmp_path,
+        "dev_zero": "/dev/zero",
+        "corrupt": tmp_path / "bad.safetensors",
+    }[case]
     if case == "corrupt":
         path.write_bytes(model_file.read_bytes()[:100])
     kind = "model_file" if case == "corrupt" else "io"
@@ -67,7 +84,10 @@ def test_model_file_errors_agree(libikid, model_file, tmp_path, case):
         ikid.Model.load(path)
     agree(kind, caught.value, *c_load(libikid, path))
     if case == "missing":
-        assert isinstance(caught.value, (ikid.NotFoundError, FileNotFoundError)) and caught.value.code == "not_found"
+        assert (
+            isinstance(caught.value, (ikid.NotFoundError, FileNotFoundError))
+            and caught.value.code == "not_found"
+        )
     else:
         assert not isinstance(caught.value, FileNotFoundError)
     assert str(path) in str(caught.value)

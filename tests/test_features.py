@@ -8,9 +8,20 @@ import ikid
 
 
 def test_feature_set_info_sizes():
-    sizes = {name: (ikid.feature_set_info(name)["frame_len"], ikid.feature_set_info(name)["feature_len"]) for name in ikid.FEATURE_SETS}
-    assert sizes == {"markers": (18, 18), "basis": (18, 24), "relative": (18, 12), "relative_gravity": (18, 15), "angles": (18, 3), "angles_gravity": (18, 6), "joint_state": (9, 9),
-                     "tracker_state": (10, 7)}
+    sizes = {
+        name: (ikid.feature_set_info(name)["frame_len"], ikid.feature_set_info(name)["feature_len"])
+        for name in ikid.FEATURE_SETS
+    }
+    assert sizes == {
+        "markers": (18, 18),
+        "basis": (18, 24),
+        "relative": (18, 12),
+        "relative_gravity": (18, 15),
+        "angles": (18, 3),
+        "angles_gravity": (18, 6),
+        "joint_state": (9, 9),
+        "tracker_state": (10, 7),
+    }
     with pytest.raises(ikid.InputError, match="unknown feature set"):
         ikid.feature_set_info("pixels")
 
@@ -43,7 +54,10 @@ def test_relative_features_ignore_a_rigid_motion_of_the_whole_arm():
     a = ikid.compute_features(frames.reshape(20, 18), "relative")
     b = ikid.compute_features(moved.reshape(20, 18), "relative")
     np.testing.assert_allclose(a, b, atol=1e-5)
-    assert not np.allclose(ikid.compute_features(frames.reshape(20, 18), "basis"), ikid.compute_features(moved.reshape(20, 18), "basis"))
+    assert not np.allclose(
+        ikid.compute_features(frames.reshape(20, 18), "basis"),
+        ikid.compute_features(moved.reshape(20, 18), "basis"),
+    )
 
 
 def test_degenerate_markers_and_nan_are_named():

@@ -18,13 +18,17 @@ from ikid.cli import main as cli
 from ikid.pipeline import run_model
 
 LAB_LABELS = ("R_RSTY", "R_USTY", "R_FA", "R_MCP2", "R_MCP5", "R_MCB3")
-LAB_MAP = "[markers]\n" + "\n".join(f'{m} = "{lab}"' for m, lab in zip(ikid.marker_names(), LAB_LABELS)) + "\n"
+LAB_MAP = (
+    "[markers]\n" + "\n".join(f'{m} = "{lab}"' for m, lab in zip(ikid.marker_names(), LAB_LABELS)) + "\n"
+)
 
 
 @pytest.fixture(scope="module")
 def trial():
     """A fresh simulated trial (seed unused in training), 1 % noise, with a lab's extra marker."""
-    return ikid.simulate("random", seed=7001, duration=3.0, shoulder_flexion=0.3).with_noise("uniform", 11, fraction=0.01)
+    return ikid.simulate("random", seed=7001, duration=3.0, shoulder_flexion=0.3).with_noise(
+        "uniform", 11, fraction=0.01
+    )
 
 
 def lab_data(trial, labels=LAB_LABELS, extra=True) -> io.MarkerData:
@@ -46,7 +50,11 @@ def test_trc_round_trip_keeps_positions_and_gaps(trial, tmp_path, units):
     markers[100:130, 3:6] = np.nan  # USP unseen for 30 frames
     path = io.write_trc(tmp_path / "t.trc", trial.time, markers, trial.rate_hz, units=units)
     data = io.read_trc(path)
-    assert data.labels == tuple(ikid.marker_names()) and data.rate_hz == trial.rate_hz and data.file_units == units
+    assert (
+        data.labels == tuple(ikid.marker_names())
+        and data.rate_hz == trial.rate_hz
+        and data.file_units == units
+    )
     got = data.frames()
     assert np.array_equal(np.isnan(got), np.isnan(markers))
     assert np.nanmax(np.abs(got - markers)) < 1e-6 * {"mm": 1, "cm": 10, "m": 1000}[units]
@@ -71,15 +79,18 @@ def test_csv_round_trip_keeps_positions_and_gaps(trial, tmp_path, units):
     np.testing.assert_allclose(io.read_markers(tmp_path / "r.csv").frames(), trial.markers, atol=1e-9)
 
 
-@pytest.mark.parametrize(("text", "message"), [
-    ("t,RSP.x\n0,1\n", "first column must be 'time'"),
-    ("time,RSP.x,RSP.y\n0,1,2\n0.001,1,2\n", "RSP lack an x, y or z"),
-    ("time,RSP.x,RSP.y,RSP.z,RSP.w\n", "'RSP.w' is not"),
-    ("time,A.x,A.y,A.z\n0,1,2,3\n0.001,1,two,3\n", ":3: 'two' is not a number"),
-    ("time,A.x,A.y,A.z\n0,1,2,3\n0.001,1,2\n", ":3: 3 values, the header names 4"),
-    ("time,A.x,A.y,A.z\n0,1,2,3\n0.001,1,2,3\n0.005,1,2,3\n", "not evenly spaced"),
-    ("# units=inches\ntime,A.x,A.y,A.z\n0,1,2,3\n0.001,1,2,3\n", "inches"),
-])
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("t,RSP.x\n0,1\n", "first column must be 'time'"),
+        ("time,RSP.x,RSP.y\n0,1,2\n0.001,1,2\n", "RSP lack an x, y or z"),
+        ("time,RSP.x,RSP.y,RSP.z,RSP.w\n", "'RSP.w' is not"),
+        ("time,A.x,A.y,A.z\n0,1,2,3\n0.001,1,two,3\n", ":3: 'two' is not a number"),
+        ("time,A.x,A.y,A.z\n0,1,2,3\n0.001,1,2\n", ":3: 3 values, the header names 4"),
+        ("time,A.x,A.y,A.z\n0,1,2,3\n0.001,1,2,3\n0.005,1,2,3\n", "not evenly spaced"),
+        ("# units=inches\ntime,A.x,A.y,A.z\n0,1,2,3\n0.001,1,2,3\n", "inches"),
+    ],
+)
 def test_bad_csv_files_say_what_is_wrong(tmp_path, text, message):
     (tmp_path / "bad.csv").write_text(text)
     with pytest.raises(io.FileFormatError, match=re.escape(message)):
@@ -88,7 +99,9 @@ def test_bad_csv_files_say_what_is_wrong(tmp_path, text, message):
 
 def test_csv_writer_refuses_non_finite_values_and_writes_nothing(tmp_path):
     with pytest.raises(io.FileFormatError, match="not written"):
-        io.write_csv(tmp_path / "q.csv", [0.0, 0.001], [[0.1, np.nan, 0.0], [0.1, 0.2, 0.3]], ikid.coordinate_names())
+        io.write_csv(
+            tmp_path / "q.csv", [0.0, 0.001], [[0.1, np.nan, 0.0], [0.1, 0.2, 0.3]], ikid.coordinate_names()
+        )
     assert list(tmp_path.iterdir()) == []
 
 
@@ -115,8 +128,16 @@ def test_mot_and_sto_round_trip(trial, tmp_path):
 
 
 def test_storage_reads_radians_files_and_names_missing_columns(tmp_path):
-    path = io.write_storage(tmp_path / "r.mot", [0.0, 0.01], np.zeros((2, 3)), ["ra_wr_s_p", "ra_wr_e_f", "elbow_flex"], in_degrees=False)
-    with pytest.raises(ikid.InputError, match=r"no column\(s\) ra_wr_ad_ab; it has ra_wr_s_p, ra_wr_e_f, elbow_flex"):
+    path = io.write_storage(
+        tmp_path / "r.mot",
+        [0.0, 0.01],
+        np.zeros((2, 3)),
+        ["ra_wr_s_p", "ra_wr_e_f", "elbow_flex"],
+        in_degrees=False,
+    )
+    with pytest.raises(
+        ikid.InputError, match=r"no column\(s\) ra_wr_ad_ab; it has ra_wr_s_p, ra_wr_e_f, elbow_flex"
+    ):
         io.read_mot(path)
 
 
@@ -131,7 +152,10 @@ def test_marker_map_selects_a_labs_labels_in_ikid_order(trial, tmp_path):
 
 def test_missing_label_lists_the_labels_the_file_has(trial, tmp_path):
     (tmp_path / "lab.toml").write_text(LAB_MAP.replace("R_MCP5", "R_MCP5_typo"))
-    with pytest.raises(ikid.InputError, match=r"label\(s\) R_MCP5_typo \(MC5\) not found; the file has R_RSTY, .*R_MCP5, R_MCB3, C7"):
+    with pytest.raises(
+        ikid.InputError,
+        match=r"label\(s\) R_MCP5_typo \(MC5\) not found; the file has R_RSTY, .*R_MCP5, R_MCB3, C7",
+    ):
         lab_data(trial).frames(io.MarkerMap.load(tmp_path / "lab.toml"))
     with pytest.raises(ikid.InputError, match="give a marker map"):
         lab_data(trial).frames()
@@ -162,7 +186,9 @@ def test_resample_is_exact_for_quadratic_motion_and_keeps_gaps_local():
     new_t, new_x = io.resample(t, x, 1000.0)
     assert new_t[0] == t[0] and new_t[-1] <= t[-1] and np.allclose(np.diff(new_t), 1e-3)
     inner = (new_t > t[1]) & (new_t < t[-2])  # np.gradient is one-sided (first order) at the ends
-    np.testing.assert_allclose(new_x[inner], np.column_stack([3 * new_t**2 - new_t + 0.5, -new_t])[inner], atol=1e-9)
+    np.testing.assert_allclose(
+        new_x[inner], np.column_stack([3 * new_t**2 - new_t + 0.5, -new_t])[inner], atol=1e-9
+    )
     x[40] = np.nan
     _, gappy = io.resample(t, x, 1000.0)
     missing = np.isnan(gappy[:, 0])
@@ -174,7 +200,10 @@ def test_a_100_hz_file_is_refused_unless_resampled_then_runs_at_the_models_rate(
     path = io.write_trc(tmp_path / "slow.trc", trial.time[slow], trial.markers[slow], 100.0)
     data = io.read_trc(path)
     model = ikid.load("wrist-ik")
-    with pytest.raises(ikid.InputError, match=r"sampled at 100 Hz but model 'wrist-ik' was trained at 1000 Hz; resample it \(--resample"):
+    with pytest.raises(
+        ikid.InputError,
+        match=r"sampled at 100 Hz but model 'wrist-ik' was trained at 1000 Hz; resample it \(--resample",
+    ):
         run_model(model, data.frames(), data.time, rate_hz=data.rate_hz)
     run = run_model(model, data.frames(), data.time, rate_hz=data.rate_hz, resample_to_model=True)
     assert run.resampled_from_hz == 100.0 and run.rate_hz == 1000.0
@@ -190,8 +219,20 @@ def test_ik_command_on_c3d_and_trc_equals_the_python_api(trial, tmp_path):
     (tmp_path / "lab.toml").write_text(LAB_MAP)
     data = lab_data(trial)
     io.write_c3d(tmp_path / "trial.c3d", data)
-    io.write_trc(tmp_path / "trial.trc", data.time, data.positions.reshape(len(data), -1), data.rate_hz, labels=data.labels)
-    io.write_csv_markers(tmp_path / "trial.csv", data.time, data.positions.reshape(len(data), -1), labels=list(data.labels), units="mm")
+    io.write_trc(
+        tmp_path / "trial.trc",
+        data.time,
+        data.positions.reshape(len(data), -1),
+        data.rate_hz,
+        labels=data.labels,
+    )
+    io.write_csv_markers(
+        tmp_path / "trial.csv",
+        data.time,
+        data.positions.reshape(len(data), -1),
+        labels=list(data.labels),
+        units="mm",
+    )
     model = ikid.load("wrist-ik")
     want = model.predict(trial.markers)  # rows for frames window-1 ... n-1
     for src in ("trial.c3d", "trial.trc", "trial.csv"):
@@ -212,13 +253,34 @@ def test_run_command_writes_angles_and_torques_for_a_folder(trial, tmp_path, cap
     (tmp_path / "lab.toml").write_text(LAB_MAP)
     for k in range(2):
         io.write_c3d(tmp_path / "in" / f"trial{k}.c3d", lab_data(trial))
-    assert cli(["run", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--map", str(tmp_path / "lab.toml"), "--jobs", "2"]) == 0
+    assert (
+        cli(
+            [
+                "run",
+                str(tmp_path / "in"),
+                "-o",
+                str(tmp_path / "out"),
+                "--map",
+                str(tmp_path / "lab.toml"),
+                "--jobs",
+                "2",
+            ]
+        )
+        == 0
+    )
     assert "2/2 files processed, 0 failed" in capsys.readouterr().out
     for k in range(2):
         _, q = io.read_mot(tmp_path / "out" / f"trial{k}.mot")
         t, tau = io.read_sto(tmp_path / "out" / f"trial{k}.sto")
-        np.testing.assert_allclose(tau, ikid.load("wrist-chain").predict(io.read_c3d(tmp_path / "in" / f"trial{k}.c3d").frames(
-            io.MarkerMap.load(tmp_path / "lab.toml"))), atol=1e-8)
+        np.testing.assert_allclose(
+            tau,
+            ikid.load("wrist-chain").predict(
+                io.read_c3d(tmp_path / "in" / f"trial{k}.c3d").frames(
+                    io.MarkerMap.load(tmp_path / "lab.toml")
+                )
+            ),
+            atol=1e-8,
+        )
         # Per torque, the MSE is a fraction of the truth's variance (its MSE about its mean): a
         # constant prediction scores >= 1 there, zero 2.0-2.9; wrist-chain 0.02-0.19 on this trial.
         truth = trial.tau[np.round(t * 1000).astype(int)]
@@ -231,14 +293,18 @@ def test_map_template_lists_the_files_labels(trial, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "R_RSTY, R_USTY, R_FA, R_MCP2, R_MCP5, R_MCB3, C7" in text
     (tmp_path / "m.toml").write_text(text)
-    assert io.MarkerMap.load(tmp_path / "m.toml") == io.MarkerMap(io.MarkerMap.identity().labels, str(tmp_path / "m.toml"))
+    assert io.MarkerMap.load(tmp_path / "m.toml") == io.MarkerMap(
+        io.MarkerMap.identity().labels, str(tmp_path / "m.toml")
+    )
 
 
 # --- bad files: a clear error each, nothing written -------------------------------------------
 
 
 def _bad_trc_in_metres_labelled_mm(trial, tmp_path):
-    path = io.write_trc(tmp_path / "bad.trc", trial.time, trial.markers / 1000.0, trial.rate_hz)  # values in m, says mm
+    path = io.write_trc(
+        tmp_path / "bad.trc", trial.time, trial.markers / 1000.0, trial.rate_hz
+    )  # values in m, says mm
     return path, r"wrist markers are .* m apart .*units are 'mm' — are they\?"
 
 
@@ -251,7 +317,9 @@ def _bad_unknown_unit(trial, tmp_path):
 def _bad_all_nan_marker(trial, tmp_path):
     m = trial.markers.copy()
     m[:, 9:12] = np.nan
-    return io.write_trc(tmp_path / "bad.trc", trial.time, m, trial.rate_hz), r"marker MC2 \(label 'MC2'\) is missing in every frame"
+    return io.write_trc(
+        tmp_path / "bad.trc", trial.time, m, trial.rate_hz
+    ), r"marker MC2 \(label 'MC2'\) is missing in every frame"
 
 
 def _bad_truncated_trc(trial, tmp_path):
@@ -275,12 +343,22 @@ def _bad_not_a_c3d(trial, tmp_path):
 
 
 def _bad_rate(trial, tmp_path):
-    return io.write_trc(tmp_path / "bad.trc", trial.time[::4], trial.markers[::4], 250.0), r"sampled at 250 Hz but model 'wrist-ik' was trained at 1000 Hz"
+    return io.write_trc(
+        tmp_path / "bad.trc", trial.time[::4], trial.markers[::4], 250.0
+    ), r"sampled at 250 Hz but model 'wrist-ik' was trained at 1000 Hz"
 
 
 @pytest.mark.parametrize(
     "make_bad",
-    [_bad_trc_in_metres_labelled_mm, _bad_unknown_unit, _bad_all_nan_marker, _bad_truncated_trc, _bad_truncated_c3d, _bad_not_a_c3d, _bad_rate],
+    [
+        _bad_trc_in_metres_labelled_mm,
+        _bad_unknown_unit,
+        _bad_all_nan_marker,
+        _bad_truncated_trc,
+        _bad_truncated_c3d,
+        _bad_not_a_c3d,
+        _bad_rate,
+    ],
 )
 def test_bad_files_get_a_clear_error_and_no_output(trial, tmp_path, capsys, make_bad):
     path, message = make_bad(trial, tmp_path)
@@ -317,7 +395,9 @@ def test_a_parser_crash_is_reported_as_a_bad_file(tmp_path, monkeypatch):
 
     monkeypatch.setattr(c3d, "_CHILD", "import os, signal; os.kill(os.getpid(), signal.SIGSEGV)")
     (tmp_path / "x.c3d").write_bytes(b"\x02P" + b"\x00" * 510)
-    with pytest.raises(io.FileFormatError, match=r"x.c3d: not a readable C3D file: the C3D parser crashed \(signal 11\)"):
+    with pytest.raises(
+        io.FileFormatError, match=r"x.c3d: not a readable C3D file: the C3D parser crashed \(signal 11\)"
+    ):
         io.read_c3d(tmp_path / "x.c3d")
     assert subprocess.run([sys.executable, "-c", "import ikid"]).returncode == 0
 
@@ -325,10 +405,14 @@ def test_a_parser_crash_is_reported_as_a_bad_file(tmp_path, monkeypatch):
 def test_text_outputs_are_utf8_and_get_normal_permissions_whatever_the_locale(tmp_path):
     """An ASCII locale (C without UTF-8 mode) must not break writing '°' or '²', and outputs
     are not left private (mkstemp's 0600)."""
-    code = ("import sys; from ikid.io._atomic import write_text_atomic; "
-            "write_text_atomic(sys.argv[1], 'RMSE (\\u00b0), MSE (rad\\u00b2)\\n')")  # ASCII source: the locale is ASCII
+    code = (
+        "import sys; from ikid.io._atomic import write_text_atomic; "
+        "write_text_atomic(sys.argv[1], 'RMSE (\\u00b0), MSE (rad\\u00b2)\\n')"
+    )  # ASCII source: the locale is ASCII
     env = {**os.environ, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
-    result = subprocess.run([sys.executable, "-c", code, str(tmp_path / "r.md")], capture_output=True, text=True, env=env)
+    result = subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path / "r.md")], capture_output=True, text=True, env=env
+    )
     assert result.returncode == 0, result.stderr
     assert (tmp_path / "r.md").read_bytes().decode("utf-8") == "RMSE (°), MSE (rad²)\n"
     old = os.umask(0o022)

@@ -97,7 +97,9 @@ def test_a_fill_stream_fills_one_missing_marker_and_flags_it(model):
     # What cannot be filled (two markers of a segment) raises, or with "keep" stays missing.
     two = gone.copy()
     two[3200, 9:15] = np.nan
-    with pytest.raises(ikid.InputError, match=r"frame 3200: missing marker\(s\) MC2, MC5 not filled: only one"):
+    with pytest.raises(
+        ikid.InputError, match=r"frame 3200: missing marker\(s\) MC2, MC5 not filled: only one"
+    ):
         ikid.fill_gaps(two)
     kept, mask = ikid.fill_gaps(two, unfillable="keep")
     assert np.isnan(kept[3200, 9:15]).all() and mask[3200] == 0 and mask[3050] == 32
@@ -201,14 +203,21 @@ def test_review_regressions_inputs(model, frames):
 def test_input_far_outside_training_range_is_an_error_not_nan(frames):
     import json
 
-    from ikid import _native
-
     from conftest import make_card
+
+    from ikid import _native
 
     # A single linear layer summing 90 inputs: 90 x 1e37 overflows float32.
     card = make_card(activations=["identity"])
-    m = _native.build_model(json.dumps(card), [np.ones((3, 90), np.float32)], [np.zeros(3, np.float32)],
-                            np.ones(90, np.float32), np.zeros(90, np.float32), np.ones(3, np.float32), np.zeros(3, np.float32))
+    m = _native.build_model(
+        json.dumps(card),
+        [np.ones((3, 90), np.float32)],
+        [np.zeros(3, np.float32)],
+        np.ones(90, np.float32),
+        np.zeros(90, np.float32),
+        np.ones(3, np.float32),
+        np.zeros(3, np.float32),
+    )
     huge = np.full((10, 18), 1e37, np.float32)
     with pytest.raises(ikid.InputError, match="frame 4: the prediction is not finite"):
         m.predict(huge)

@@ -23,7 +23,9 @@ FK_TOL = 1e-6
 
 @pytest.fixture(scope="module")
 def osim():
-    osim = pytest.importorskip("opensim", reason="the opensim package is not installed (pip install 'ikid[eval]')")
+    osim = pytest.importorskip(
+        "opensim", reason="the opensim package is not installed (pip install 'ikid[eval]')"
+    )
     # OpenSim opens ./opensim.log (in the directory of the first model it loads) unless told not to.
     osim.Logger.removeFileSink()
     return osim
@@ -41,10 +43,17 @@ def random_angles(n: int, seed: int) -> np.ndarray:
 @pytest.mark.parametrize("shoulder_deg", [0.0, 45.0, -20.0])
 def test_opensim_forward_kinematics_equals_ikid(osim, tmp_path, length_scale, mass_scale, shoulder_deg):
     # A lab's placement differing from the model's: every marker moved, up to 15 mm.
-    shift = np.random.default_rng(int(shoulder_deg) + 100 + int(100 * length_scale)).uniform(-0.015, 0.015, (6, 3))
+    shift = np.random.default_rng(int(shoulder_deg) + 100 + int(100 * length_scale)).uniform(
+        -0.015, 0.015, (6, 3)
+    )
     shoulder = math.radians(shoulder_deg)
-    path = ios.write_osim(tmp_path / "s.osim", length_scale=length_scale, mass_scale=mass_scale,
-                          shoulder_flexion=shoulder, marker_shift=shift)
+    path = ios.write_osim(
+        tmp_path / "s.osim",
+        length_scale=length_scale,
+        mass_scale=mass_scale,
+        shoulder_flexion=shoulder,
+        marker_shift=shift,
+    )
     q = random_angles(40, seed=int(100 * length_scale) + int(shoulder_deg) + 20)
     theirs = ios.marker_positions(path, q)
     ours = ikid.forward_markers(q, shoulder, length_scale, mass_scale, shift)
@@ -58,8 +67,12 @@ def test_rotation_order_matters_so_the_check_can_fail(osim, tmp_path):
     text = ios.osim_text(shoulder_flexion=0.3)
     first, third = (text.index(f'<TransformAxis name="rotation{i}">') for i in (1, 3))
     end = lambda at: text.index("</TransformAxis>", at) + len("</TransformAxis>")  # noqa: E731
-    r1, r3 = text[first:end(first)], text[third:end(third)]
-    swapped = text.replace(r1, "@R1@").replace(r3, r1.replace("rotation1", "rotation3")).replace("@R1@", r3.replace("rotation3", "rotation1"))
+    r1, r3 = text[first : end(first)], text[third : end(third)]
+    swapped = (
+        text.replace(r1, "@R1@")
+        .replace(r3, r1.replace("rotation1", "rotation3"))
+        .replace("@R1@", r3.replace("rotation3", "rotation1"))
+    )
     (tmp_path / "reversed.osim").write_text(swapped)
     q = random_angles(20, seed=5)
     # Coordinates keep their names; reorder the values to the file's coordinate order.
@@ -81,7 +94,11 @@ def test_model_loads_cleanly_and_holds_the_body_model(osim, tmp_path):
         model.initSystem()
     finally:
         osim.Logger.removeFileSink()
-    bad = [ln for ln in log.read_text().splitlines() if "[warning]" in ln or "[error]" in ln or "[critical]" in ln]
+    bad = [
+        ln
+        for ln in log.read_text().splitlines()
+        if "[warning]" in ln or "[error]" in ln or "[critical]" in ln
+    ]
     assert not bad, "\n".join(bad)
 
     body = ikid.body_model(1.1, 1.3, 0.5)
@@ -119,12 +136,20 @@ def test_custom_marker_set_round_trips(osim, tmp_path):
     body = ikid.body_model(length_scale=0.9)
     shift = np.random.default_rng(3).uniform(-0.02, 0.02, (6, 3))
     labels = ["R_RSTY", "R_USTY", "R_FARM", "R_MCP2", "R_MCP5", "R_HAND"]
-    custom = [(lab, m["segment"], list(np.add(m["offset"], d))) for lab, m, d in zip(labels, body["markers"], shift)]
+    custom = [
+        (lab, m["segment"], list(np.add(m["offset"], d))) for lab, m, d in zip(labels, body["markers"], shift)
+    ]
     path = ios.write_osim(tmp_path / "c.osim", length_scale=0.9, shoulder_flexion=-0.35, markers=custom)
     model = osim.Model(str(path))
     markers = model.getMarkerSet()
-    got = [(markers.get(k).getName(), markers.get(k).getParentFrameName(), list(markers.get(k).get_location().to_numpy()))
-           for k in range(markers.getSize())]
+    got = [
+        (
+            markers.get(k).getName(),
+            markers.get(k).getParentFrameName(),
+            list(markers.get(k).get_location().to_numpy()),
+        )
+        for k in range(markers.getSize())
+    ]
     assert [(n, s) for n, s, _ in got] == [(n, f"/bodyset/{s}") for n, s, _ in custom]
     assert np.abs(np.array([o for *_, o in got]) - np.array([o for *_, o in custom])).max() == 0.0
     q = random_angles(20, seed=8)
@@ -132,15 +157,23 @@ def test_custom_marker_set_round_trips(osim, tmp_path):
     assert err <= FK_TOL
 
 
-@pytest.mark.parametrize("length_scale, mass_scale, shoulder_deg", [(1.0, 1.0, 0.0), (1.2, 1.7, 45.0), (0.85, 0.6, -20.0)])
+@pytest.mark.parametrize(
+    "length_scale, mass_scale, shoulder_deg", [(1.0, 1.0, 0.0), (1.2, 1.7, 45.0), (0.85, 0.6, -20.0)]
+)
 def test_opensim_inverse_dynamics_equals_ikid(osim, tmp_path, length_scale, mass_scale, shoulder_deg):
     """Masses, centres of mass, inertias, gravity and the joint's axes, all at once: OpenSim's
     inverse dynamics of the file equals ikid's Newton-Euler. Bound: ikid's two virtual links
     (inertia 1e-10 kg·m², left out of the file) at these accelerations, < 1e-7 N·m."""
     rng = np.random.default_rng(int(shoulder_deg) + 50)
-    q, qd, qdd = random_angles(30, seed=int(shoulder_deg) + 60), rng.uniform(-4, 4, (30, 3)), rng.uniform(-40, 40, (30, 3))
+    q, qd, qdd = (
+        random_angles(30, seed=int(shoulder_deg) + 60),
+        rng.uniform(-4, 4, (30, 3)),
+        rng.uniform(-40, 40, (30, 3)),
+    )
     shoulder = math.radians(shoulder_deg)
-    path = ios.write_osim(tmp_path / "s.osim", length_scale=length_scale, mass_scale=mass_scale, shoulder_flexion=shoulder)
+    path = ios.write_osim(
+        tmp_path / "s.osim", length_scale=length_scale, mass_scale=mass_scale, shoulder_flexion=shoulder
+    )
     theirs = ios.inverse_dynamics(path, q, qd, qdd)
     ours = ikid.reference_id(q, qd, qdd, shoulder, length_scale, mass_scale)
     assert np.abs(ours).max() > 0.05  # torques of a real size, not a vacuous comparison
@@ -161,7 +194,13 @@ def test_opensim_ik_returns_ikid_angles(osim, tmp_path):
     rate, n = 1000.0, 300
     t = np.arange(n) / rate
     # A smooth motion of all three coordinates across most of their ranges.
-    q = np.column_stack([1.2 * np.sin(2 * np.pi * t), 0.9 * np.sin(2 * np.pi * 0.7 * t + 0.3), 0.3 * np.sin(2 * np.pi * 1.3 * t + 1)])
+    q = np.column_stack(
+        [
+            1.2 * np.sin(2 * np.pi * t),
+            0.9 * np.sin(2 * np.pi * 0.7 * t + 0.3),
+            0.3 * np.sin(2 * np.pi * 1.3 * t + 1),
+        ]
+    )
     shoulder, length_scale = math.radians(45), 1.1
     io.write_trc(tmp_path / "trial.trc", t, ikid.forward_markers(q, shoulder, length_scale), rate_hz=rate)
     model = ios.write_osim(tmp_path / "s.osim", length_scale=length_scale, shoulder_flexion=shoulder)
@@ -177,7 +216,9 @@ def test_opensim_ik_returns_ikid_angles(osim, tmp_path):
 def test_ik_names_markers_missing_from_the_file(osim, tmp_path):
     t = np.arange(10) / 100.0
     frames = ikid.forward_markers(np.zeros((10, 3)))
-    io.write_trc(tmp_path / "t.trc", t, frames, rate_hz=100.0, labels=["RSP", "USP", "FAP", "MC2", "MC5", "XX"])
+    io.write_trc(
+        tmp_path / "t.trc", t, frames, rate_hz=100.0, labels=["RSP", "USP", "FAP", "MC2", "MC5", "XX"]
+    )
     model = ios.write_osim(tmp_path / "s.osim")
     with pytest.raises(ValueError, match="MCB"):
         ios.inverse_kinematics(model, tmp_path / "t.trc", tmp_path / "o.mot")
@@ -194,7 +235,12 @@ def test_opensim_dataset_example_writes_consistent_trials(osim, tmp_path):
     example = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(example)
     out = tmp_path / "ds"
-    assert example.main(["--out", str(out), "--trials", "2", "--duration", "0.3", "--rate", "500", "--seed", "4"]) == 0
+    assert (
+        example.main(
+            ["--out", str(out), "--trials", "2", "--duration", "0.3", "--rate", "500", "--seed", "4"]
+        )
+        == 0
+    )
     manifest = json.loads((out / "dataset.json").read_text())
     mapping = io.MarkerMap.load(out / "map.toml")
     for trial in manifest["trials"]:
@@ -208,19 +254,32 @@ def test_opensim_dataset_example_writes_consistent_trials(osim, tmp_path):
         body = ikid.body_model(length_scale=trial["length_scale"])
         placement = np.array([o for *_, o in example.lab_markers(trial["length_scale"])[:6]])
         shift = placement - np.array([m["offset"] for m in body["markers"]])
-        assert np.all((np.linalg.norm(shift, axis=1) >= 0.005 - 1e-12) & (np.linalg.norm(shift, axis=1) <= 0.020 + 1e-12))
-        ours = ikid.forward_markers(q, trial["shoulder_flexion"], trial["length_scale"], trial["mass_scale"], shift)
-        assert np.abs(frames - ours).max() < 1e-8  # the .trc holds mm to 6 decimals, the .mot degrees to 10 digits
+        assert np.all(
+            (np.linalg.norm(shift, axis=1) >= 0.005 - 1e-12)
+            & (np.linalg.norm(shift, axis=1) <= 0.020 + 1e-12)
+        )
+        ours = ikid.forward_markers(
+            q, trial["shoulder_flexion"], trial["length_scale"], trial["mass_scale"], shift
+        )
+        assert (
+            np.abs(frames - ours).max() < 1e-8
+        )  # the .trc holds mm to 6 decimals, the .mot degrees to 10 digits
         # The motion is the manifest's sinusoids; ikid's torques on their analytic derivatives.
         sines = trial["sines"]
         w = [2 * np.pi * np.array(s_["freq_hz"]) for s_ in sines]
         arg = [np.outer(t, w_) + s_["phase"] for w_, s_ in zip(w, sines)]
         q_exact = np.column_stack([s_["offset"] + np.sin(a) @ s_["amplitude"] for a, s_ in zip(arg, sines)])
-        qd = np.column_stack([np.cos(a) @ (np.array(s_["amplitude"]) * w_) for a, w_, s_ in zip(arg, w, sines)])
-        qdd = np.column_stack([-np.sin(a) @ (np.array(s_["amplitude"]) * w_**2) for a, w_, s_ in zip(arg, w, sines)])
+        qd = np.column_stack(
+            [np.cos(a) @ (np.array(s_["amplitude"]) * w_) for a, w_, s_ in zip(arg, w, sines)]
+        )
+        qdd = np.column_stack(
+            [-np.sin(a) @ (np.array(s_["amplitude"]) * w_**2) for a, w_, s_ in zip(arg, w, sines)]
+        )
         assert np.abs(q_exact - q).max() < 1e-9
         _, tau = io.read_sto(out / f"{trial['name']}.sto")
-        ref = ikid.reference_id(q_exact, qd, qdd, trial["shoulder_flexion"], trial["length_scale"], trial["mass_scale"])
+        ref = ikid.reference_id(
+            q_exact, qd, qdd, trial["shoulder_flexion"], trial["length_scale"], trial["mass_scale"]
+        )
         assert np.abs(ref).max() > 0.01
         assert np.abs(tau - ref).max() < 1e-7  # ikid's virtual links; the .sto holds 10 digits
 

@@ -19,7 +19,9 @@ RTOL = 1e-5
 
 def torch_reference(net: nn.Module, windows: np.ndarray, inp: Affine, out: Affine) -> np.ndarray:
     with torch.no_grad():
-        x = torch.as_tensor(windows, dtype=torch.float32) * torch.as_tensor(inp.scale) + torch.as_tensor(inp.shift)
+        x = torch.as_tensor(windows, dtype=torch.float32) * torch.as_tensor(inp.scale) + torch.as_tensor(
+            inp.shift
+        )
         y = net(x) * torch.as_tensor(out.scale) + torch.as_tensor(out.shift)
     return y.numpy()
 
@@ -37,7 +39,14 @@ def spread_frames(n: int, seed: int) -> np.ndarray:
     min-max scaling of coordinates half a metre from the origin."""
     rng = np.random.default_rng(seed)
     base = np.array(
-        [[0, 0.01, 0.03], [-0.01, 0.01, -0.025], [-0.025, 0.18, 0], [-0.01, -0.08, 0.025], [-0.01, -0.075, -0.025], [-0.02, -0.03, 0]]
+        [
+            [0, 0.01, 0.03],
+            [-0.01, 0.01, -0.025],
+            [-0.025, 0.18, 0],
+            [-0.01, -0.08, 0.025],
+            [-0.01, -0.075, -0.025],
+            [-0.02, -0.03, 0],
+        ]
     )
     frames = base[None] + 0.005 * np.cumsum(rng.normal(size=(n, 6, 3)), axis=0)
     return frames.reshape(n, 18).astype(np.float32)

@@ -33,7 +33,9 @@ def test_reference_id_gravity_and_inertia():
     # torque grows linearly with the acceleration.
     qdd = np.array([[0.0, 100.0, 0.0], [0.0, 200.0, 0.0]])
     tau = ikid.reference_id(np.zeros((2, 3)), np.zeros((2, 3)), qdd, shoulder_flexion=np.pi / 2)
-    static = ikid.reference_id(np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)), shoulder_flexion=np.pi / 2)
+    static = ikid.reference_id(
+        np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)), shoulder_flexion=np.pi / 2
+    )
     assert np.isclose(tau[1, 1] - static[0, 1], 2 * (tau[0, 1] - static[0, 1]))
     assert tau[0, 1] - static[0, 1] > 0.1  # about 0.34 N·m for the default hand
 

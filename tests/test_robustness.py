@@ -47,8 +47,10 @@ def test_loader_on_random_bytes(data):
 
 
 @CASES
-@given(st.lists(st.tuples(st.integers(0, len(VALID) - 1), st.integers(0, 255)), min_size=1, max_size=8),
-       st.integers(0, len(VALID)))
+@given(
+    st.lists(st.tuples(st.integers(0, len(VALID) - 1), st.integers(0, 255)), min_size=1, max_size=8),
+    st.integers(0, len(VALID)),
+)
 def test_loader_on_corrupted_files(flips, cut):
     data = bytearray(VALID)
     for at, value in flips:
@@ -57,8 +59,14 @@ def test_loader_on_corrupted_files(flips, cut):
 
 
 @CASES
-@given(hnp.arrays(st.sampled_from([np.float32, np.float64]), hnp.array_shapes(min_dims=1, max_dims=3, max_side=30), elements=floats),
-       st.sampled_from(["refuse", "fill"]))
+@given(
+    hnp.arrays(
+        st.sampled_from([np.float32, np.float64]),
+        hnp.array_shapes(min_dims=1, max_dims=3, max_side=30),
+        elements=floats,
+    ),
+    st.sampled_from(["refuse", "fill"]),
+)
 def test_stream_and_predict_on_any_array(frames, policy):
     stream = MODEL.stream(missing_markers=policy)
     if frames.ndim == 1:
@@ -66,7 +74,13 @@ def test_stream_and_predict_on_any_array(frames, policy):
     elif frames.ndim == 2:
         finite_or_ikid_error(lambda: stream.push_many(frames))
         finite_or_ikid_error(lambda: MODEL.predict(frames))
-        finite_or_ikid_error(lambda: ikid.fill_gaps(frames, unfillable="keep")[0][np.isfinite(frames).all(axis=1)] if frames.shape[1] == 18 else None)
+        finite_or_ikid_error(
+            lambda: (
+                ikid.fill_gaps(frames, unfillable="keep")[0][np.isfinite(frames).all(axis=1)]
+                if frames.shape[1] == 18
+                else None
+            )
+        )
     else:
         with pytest.raises(ikid.InputError):
             stream.push_many(frames)
@@ -103,7 +117,9 @@ def damage(frame: np.ndarray, kind: str, m: int = 4) -> np.ndarray:
         f[3 * m + 1] += 0.03
         f[3 * ((m + 3) % 6) + 2] -= 0.03
     elif kind == "swap":
-        f[[3 * m, 3 * m + 1, 3 * m + 2, other, other + 1, other + 2]] = f[[other, other + 1, other + 2, 3 * m, 3 * m + 1, 3 * m + 2]]
+        f[[3 * m, 3 * m + 1, 3 * m + 2, other, other + 1, other + 2]] = f[
+            [other, other + 1, other + 2, 3 * m, 3 * m + 1, 3 * m + 2]
+        ]
     elif kind == "collapse":  # the segment's markers on one point
         first = 9 * (m // 3)
         f[first : first + 9] = np.tile(f[first : first + 3], 3)
@@ -128,7 +144,12 @@ def outcome(stream, frame, time=None):
         # differs by design between the two streams, the rest of the message may not.
         return ("error", type(e).__name__, re.sub(r"\bframe \d+", "frame #", str(e)))
     assert out is None or np.all(np.isfinite(out))
-    return ("out", None if out is None else (out.dtype.str, out.tobytes()), tuple(stream.filled_markers), stream.gap_restarts)
+    return (
+        "out",
+        None if out is None else (out.dtype.str, out.tobytes()),
+        tuple(stream.filled_markers),
+        stream.gap_restarts,
+    )
 
 
 def refused(result) -> bool:
@@ -155,15 +176,25 @@ def refusals_change_nothing(frames, policy, times=None) -> list[int]:
                 never.push(frames[i], times[i])
         for i in range(k + 1, end + 1):
             assert outcome(never, frames[i], times[i]) == results[i], (
-                f"{policy}: frame {i} differs after refused frame {k} ({results[k][2]})")
+                f"{policy}: frame {i} differs after refused frame {k} ({results[k][2]})"
+            )
     return gone
 
 
 @CASES
-@given(st.lists(st.tuples(st.integers(PRE, len(SHORT) - 1), st.integers(0, 5),
-                          st.sampled_from(["nan", "inf", "nan2", "jump", "jump2", "swap", "collapse", "huge", "short", "long"])),
-                max_size=12),
-       st.sampled_from(["refuse", "fill"]))
+@given(
+    st.lists(
+        st.tuples(
+            st.integers(PRE, len(SHORT) - 1),
+            st.integers(0, 5),
+            st.sampled_from(
+                ["nan", "inf", "nan2", "jump", "jump2", "swap", "collapse", "huge", "short", "long"]
+            ),
+        ),
+        max_size=12,
+    ),
+    st.sampled_from(["refuse", "fill"]),
+)
 def test_a_refused_frame_never_changes_what_the_next_frames_give(damages, policy):
     # Missing markers, jumps, label swaps, collapsed segments and frames of the wrong length
     # after the first second: each frame gives a finite output (filled and flagged) or an ikid
@@ -178,8 +209,10 @@ def test_a_refused_frame_never_changes_what_the_next_frames_give(damages, policy
 # Per policy, garbage each stream must refuse (under "fill" one missing or jumped marker is
 # filled, not refused), followed by frames whose outcome rests on what the gap filler learned:
 # a missing marker and a jump (filled, or refused).
-REFUSED = {"refuse": ["nan", "inf", "nan2", "jump", "jump2", "swap", "collapse", "huge", "short", "long"],
-           "fill": ["nan2", "jump2", "huge", "short", "long"]}
+REFUSED = {
+    "refuse": ["nan", "inf", "nan2", "jump", "jump2", "swap", "collapse", "huge", "short", "long"],
+    "fill": ["nan2", "jump2", "huge", "short", "long"],
+}
 
 
 @pytest.mark.parametrize(("policy", "kind"), [(p, k) for p, kinds in REFUSED.items() for k in kinds])
@@ -221,7 +254,11 @@ def test_a_refused_frame_stamped_ahead_of_the_clock_leaves_the_stream_as_it_was(
 
 # --- file readers (TRC, MOT/STO, marker maps; C3D is in test_io.py: each case is a process) ---
 
-READER_CASES = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+READER_CASES = settings(
+    max_examples=300,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 _SIM = ikid.simulate(seed=32, duration=0.05)
 _MARKERS = _SIM.markers.copy()
 _MARKERS[10:20, 3:6] = np.nan
@@ -244,7 +281,9 @@ def _read(path: Path):
 
     if path.suffix in (".trc", ".csv"):
         data = io.read_markers(path)
-        assert data.positions.shape == (len(data.time), len(data.labels), 3) and np.all(np.diff(data.time) > 0)
+        assert data.positions.shape == (len(data.time), len(data.labels), 3) and np.all(
+            np.diff(data.time) > 0
+        )
         return data.frames() if data.labels == tuple(ikid.marker_names()) else None
     if path.suffix == ".toml":
         return io.MarkerMap.load(path)
@@ -259,8 +298,12 @@ def valid_files(tmp_path_factory):
 
 
 @READER_CASES
-@given(st.sampled_from([".trc", ".csv", ".mot", ".sto", ".toml"]), st.lists(st.tuples(st.floats(0, 1), st.integers(0, 255)), max_size=8),
-       st.floats(0, 1), st.binary(max_size=64))
+@given(
+    st.sampled_from([".trc", ".csv", ".mot", ".sto", ".toml"]),
+    st.lists(st.tuples(st.floats(0, 1), st.integers(0, 255)), max_size=8),
+    st.floats(0, 1),
+    st.binary(max_size=64),
+)
 def test_file_readers_on_corrupted_truncated_and_random_files(valid_files, tmp_path, kind, flips, keep, junk):
     data = bytearray(valid_files[kind])
     for at, value in flips:

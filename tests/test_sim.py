@@ -16,7 +16,9 @@ from ikid.io import write_mot
 
 @pytest.fixture(scope="module")
 def trial():
-    return ikid.simulate("random", seed=11, duration=4.0, shoulder_flexion=math.radians(45), length_scale=1.1, mass_scale=1.2)
+    return ikid.simulate(
+        "random", seed=11, duration=4.0, shoulder_flexion=math.radians(45), length_scale=1.1, mass_scale=1.2
+    )
 
 
 def test_reference_ik_recovers_the_simulated_angles(trial):
@@ -25,7 +27,9 @@ def test_reference_ik_recovers_the_simulated_angles(trial):
 
 
 def test_reference_id_reproduces_the_recorded_torques(trial):
-    tau = ikid.reference_id(trial.q, trial.qd, trial.qdd, shoulder_flexion=math.radians(45), length_scale=1.1, mass_scale=1.2)
+    tau = ikid.reference_id(
+        trial.q, trial.qd, trial.qdd, shoulder_flexion=math.radians(45), length_scale=1.1, mass_scale=1.2
+    )
     span = trial.tau.max(axis=0) - trial.tau.min(axis=0)
     rms = np.sqrt(np.mean((tau - trial.tau) ** 2, axis=0))
     assert np.all(rms <= 0.01 * span), (rms, span)
@@ -41,9 +45,9 @@ def test_same_seed_same_bits_other_seed_other_motion(tmp_path):
     a.save(tmp_path / "a")
     b.save(tmp_path / "b")
     for ext in (".trc", ".mot", ".sto"):
-        assert (tmp_path / f"a{ext}").read_bytes().replace(b"a" + ext.encode(), b"") == (tmp_path / f"b{ext}").read_bytes().replace(
-            b"b" + ext.encode(), b""
-        )
+        assert (tmp_path / f"a{ext}").read_bytes().replace(b"a" + ext.encode(), b"") == (
+            tmp_path / f"b{ext}"
+        ).read_bytes().replace(b"b" + ext.encode(), b"")
 
 
 def test_thesis_protocol_covers_the_thesis_ranges():
@@ -55,7 +59,9 @@ def test_thesis_protocol_covers_the_thesis_ranges():
 
 
 def test_files_open_as_opensim_expects(trial, tmp_path):
-    noisy = trial.with_noise("occlusion", seed=1, bursts_per_second=2.0, min_s=0.05, max_s=0.1, rate_hz=trial.rate_hz)
+    noisy = trial.with_noise(
+        "occlusion", seed=1, bursts_per_second=2.0, min_s=0.05, max_s=0.1, rate_hz=trial.rate_hz
+    )
     paths = noisy.save(tmp_path / "t")
     assert [p.suffix for p in paths] == [".npz", ".trc", ".mot", ".sto"]
     trc = (tmp_path / "t.trc").read_text().splitlines()
@@ -68,7 +74,9 @@ def test_files_open_as_opensim_expects(trial, tmp_path):
     np.testing.assert_allclose(first, trial.markers[0, :3], atol=1e-8)
     mot = (tmp_path / "t.mot").read_text().splitlines()
     assert "inDegrees=yes" in mot and mot[6] == "time\tra_wr_s_p\tra_wr_e_f\tra_wr_ad_ab"
-    np.testing.assert_allclose(np.array(mot[-1].split("\t")[1:], float), np.degrees(trial.q[-1]), rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(
+        np.array(mot[-1].split("\t")[1:], float), np.degrees(trial.q[-1]), rtol=1e-6, atol=1e-9
+    )
     sto = (tmp_path / "t.sto").read_text().splitlines()
     assert sto[6] == "time\tra_wr_s_p_moment\tra_wr_e_f_moment\tra_wr_ad_ab_moment"
     back = ikid.Trial.load(tmp_path / "t.npz")
@@ -115,14 +123,32 @@ def test_bad_parameters_are_named(kwargs, message):
 
 def test_cli_simulate_writes_the_trial(tmp_path):
     out = tmp_path / "cli"
-    cmd = [sys.executable, "-m", "ikid", "simulate", "--seed", "2", "--duration", "1", "--shoulder-deg", "-20",
-           "--noise", "uniform:0.01", "-o", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "ikid",
+        "simulate",
+        "--seed",
+        "2",
+        "--duration",
+        "1",
+        "--shoulder-deg",
+        "-20",
+        "--noise",
+        "uniform:0.01",
+        "-o",
+        str(out),
+    ]
     result = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     t = ikid.Trial.load(out.with_suffix(".npz"))
     assert t.metadata["noise"] == [{"kind": "uniform", "seed": 2001, "fraction": 0.01}]
     assert math.isclose(t.metadata["shoulder_flexion_rad"], math.radians(-20))
-    bad = subprocess.run([sys.executable, "-m", "ikid", "simulate", "--length-scale", "-1", "-o", str(out)], capture_output=True, text=True)
+    bad = subprocess.run(
+        [sys.executable, "-m", "ikid", "simulate", "--length-scale", "-1", "-o", str(out)],
+        capture_output=True,
+        text=True,
+    )
     assert bad.returncode == 2 and "length_scale" in bad.stderr
 
 

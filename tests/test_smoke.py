@@ -15,7 +15,16 @@ def test_import_does_not_pull_in_torch():
 def test_names_come_from_the_core():
     assert ikid.coordinate_names() == ["ra_wr_s_p", "ra_wr_e_f", "ra_wr_ad_ab"]
     assert ikid.marker_names() == ["RSP", "USP", "FAP", "MC2", "MC5", "MCB"]
-    assert ikid.FEATURE_SETS == ["markers", "basis", "relative", "relative_gravity", "angles", "angles_gravity", "joint_state", "tracker_state"]
+    assert ikid.FEATURE_SETS == [
+        "markers",
+        "basis",
+        "relative",
+        "relative_gravity",
+        "angles",
+        "angles_gravity",
+        "joint_state",
+        "tracker_state",
+    ]
     assert ikid.__version__.count(".") == 2
 
 

@@ -12,8 +12,19 @@ from ikid.training import data as D
 @pytest.fixture(scope="module")
 def trial() -> D.Recording:
     # A seed no shipped model trained on, a non-default subject and shoulder pose.
-    return D.simulate_all([{"name": "t", "protocol": "random", "seed": 9701, "duration": 4.0, "shoulder_deg": 30.0,
-                            "length_scale": 1.1, "mass_scale": 1.1**3}])[0]
+    return D.simulate_all(
+        [
+            {
+                "name": "t",
+                "protocol": "random",
+                "seed": 9701,
+                "duration": 4.0,
+                "shoulder_deg": 30.0,
+                "length_scale": 1.1,
+                "mass_scale": 1.1**3,
+            }
+        ]
+    )[0]
 
 
 def subject(rec: D.Recording) -> dict[str, float]:
@@ -30,7 +41,9 @@ def test_clean_markers_give_the_true_state_and_torques(trial: D.Recording) -> No
     assert np.abs(out["q"][late] - trial.q[late]).max() < 2e-3
     assert np.sqrt(np.mean((out["qd"][late] - trial.qd[late]) ** 2)) < 0.05 * np.sqrt(np.mean(trial.qd**2))
     # The torques are Newton–Euler of the tracker's own state, with the fitted forearm's gravity.
-    tau = ikid.reference_id(out["q"], out["qd"], out["qdd"], shoulder_flexion=trial.meta["shoulder_flexion_rad"], **subject(trial))
+    tau = ikid.reference_id(
+        out["q"], out["qd"], out["qdd"], shoulder_flexion=trial.meta["shoulder_flexion_rad"], **subject(trial)
+    )
     np.testing.assert_allclose(out["tau"], tau, atol=1e-9)
     assert np.sqrt(np.mean((out["tau"][late] - trial.tau[late]) ** 2)) < 0.02
 
@@ -100,7 +113,12 @@ def test_bad_input_is_refused_with_its_name(trial: D.Recording) -> None:
 
 def test_reset_forgets_and_settings_are_reported() -> None:
     t = ikid.Tracker(jerk_noise=500.0)
-    assert t.settings == {"rate_hz": 1000.0, "jerk_noise": 500.0, "noise_memory_s": 10.0, "initial_marker_noise": 1e-3}
+    assert t.settings == {
+        "rate_hz": 1000.0,
+        "jerk_noise": 500.0,
+        "noise_memory_s": 10.0,
+        "initial_marker_noise": 1e-3,
+    }
     assert ikid.Tracker().settings["jerk_noise"] == ikid.DEFAULT_JERK_NOISE
     frame = ikid.forward_markers(np.zeros((1, 3)))[0]
     assert t.push(frame) is not None
@@ -126,6 +144,6 @@ def test_the_shipped_refiner_improves_noisy_and_leaves_clean_alone(trial: D.Reco
 
 
 def test_a_model_that_is_not_a_refiner_is_refused() -> None:
-    with pytest.raises(ikid.InputError, match="refiner: model \"wrist-ik\" cannot refine a tracker: it reads"):
+    with pytest.raises(ikid.InputError, match='refiner: model "wrist-ik" cannot refine a tracker: it reads'):
         ikid.Tracker(refiner=ikid.load("wrist-ik"))
     assert ikid.Tracker(refiner=ikid.load("wrist-track")).refiner is not None

@@ -12,9 +12,6 @@ import pytest
 import ikid
 
 torch = pytest.importorskip("torch", reason="training needs the training extra (make test installs it)")
-from safetensors import safe_open  # noqa: E402
-from torch import nn  # noqa: E402
-
 from ikid.training import data as D  # noqa: E402
 from ikid.training.evaluate import errors, noisy  # noqa: E402
 from ikid.training.export import load_torch  # noqa: E402
@@ -36,7 +33,11 @@ def test_windows_are_causal_with_the_newest_frame_last():
 def test_thesis_split_cuts_every_recording_in_order():
     rec = D.simulate_one({"name": "s", "protocol": "random", "seed": 6, "duration": 1.0})
     parts = [rec.part(s) for s in ("train", "val", "test")]
-    assert [len(p) for p in parts] == [round(0.8 * len(rec)), round(0.9 * len(rec)) - round(0.8 * len(rec)), len(rec) - round(0.9 * len(rec))]
+    assert [len(p) for p in parts] == [
+        round(0.8 * len(rec)),
+        round(0.9 * len(rec)) - round(0.8 * len(rec)),
+        len(rec) - round(0.9 * len(rec)),
+    ]
     np.testing.assert_array_equal(np.concatenate([p.q for p in parts]), rec.q)
 
 
@@ -50,14 +51,17 @@ def test_recording_sets_never_share_a_trajectory():
 @pytest.mark.parametrize("offset", [False, True], ids=["plain", "output_offset"])
 def test_a_config_trains_and_exports_a_model_with_its_card(tmp_path, offset):
     cfg_path = tmp_path / "tiny.toml"
-    cfg_path.write_text("""
+    cfg_path.write_text(
+        """
 [model]
 name = "tiny-ik"
 task = "ik"
 feature_set = "angles"
 window = 5
 hidden = [16]
-""" + ('output_offset = "newest_features"\n' if offset else "") + """
+"""
+        + ('output_offset = "newest_features"\n' if offset else "")
+        + """
 [data]
 seeds = [11]
 duration = 3.0
@@ -67,14 +71,21 @@ length_scales = [1.0]
 max_minutes = 0.05
 samples_per_epoch = 2000
 noise_levels = [0.0, 0.01]
-""")
+"""
+    )
     model, path = run(load_config(cfg_path), tmp_path, progress=False)
     assert path.exists() and (tmp_path / "tiny-ik.onnx").exists()
     card = model.card
-    assert card["task"] == "ik" and card["window"] == 5 and card.get("output_offset") == ("newest_features" if offset else None)
+    assert (
+        card["task"] == "ik"
+        and card["window"] == 5
+        and card.get("output_offset") == ("newest_features" if offset else None)
+    )
     assert set(card["metrics"]) == {"test_clean", "test_1%", "test_5%"}
     assert card["provenance"]["data"]["seeds"] == [11] and len(card["provenance"]["data_sha256_16"]) == 16
-    log = [json.loads(line) for line in (tmp_path / "runs" / "tiny-ik" / "log.jsonl").read_text().splitlines()]
+    log = [
+        json.loads(line) for line in (tmp_path / "runs" / "tiny-ik" / "log.jsonl").read_text().splitlines()
+    ]
     assert log and all(math.isfinite(e["val_loss"]) for e in log)
     # ONNX (with its scaling) agrees with the ikid file.
     ort = pytest.importorskip("onnxruntime")
@@ -126,7 +137,13 @@ occlusion_bursts_per_s = 2.0
     model, _ = run(load_config(cfg_path), tmp_path, progress=False, onnx=False)
     assert model.missing_markers == "fill" and model.card["missing_markers"] == "fill"
     assert model.card["provenance"]["train"]["occlusion_bursts_per_s"] == 2.0
-    rec = D.add_occlusion(D.simulate_one({"name": "t", "protocol": "random", "seed": 15, "duration": 5.0}), 2.0, 0.02, 0.3, seed=4)
+    rec = D.add_occlusion(
+        D.simulate_one({"name": "t", "protocol": "random", "seed": 15, "duration": 5.0}),
+        2.0,
+        0.02,
+        0.3,
+        seed=4,
+    )
     assert np.isfinite(model.predict(rec.markers)).all()
 
 
@@ -159,7 +176,14 @@ def test_wrist_track_matches_torch():
     tracker_state windows of a held-out trial = the core's own prediction."""
     model = ikid.load("wrist-track")
     reference = load_torch(ikid._SHIPPED / "wrist-track.safetensors")
-    rec = noisy([D.simulate_one({"name": "p", "protocol": "random", "seed": 9601, "duration": 1.5, "shoulder_deg": 10.0})], 0.02)[0]
+    rec = noisy(
+        [
+            D.simulate_one(
+                {"name": "p", "protocol": "random", "seed": 9601, "duration": 1.5, "shoulder_deg": 10.0}
+            )
+        ],
+        0.02,
+    )[0]
     out = ikid.Tracker().run(rec.markers)
     frames = np.column_stack([out["q"], out["qd"], out["qdd"], np.log10(out["noise"])])
     features = ikid.compute_features(frames, "tracker_state")
@@ -178,7 +202,22 @@ def test_the_refiner_trainer_writes_a_refiner_the_tracker_takes(tmp_path):
     from ikid.training import refine
 
     out = tmp_path / "tiny-track.safetensors"
-    refine.main(["-o", str(out), "--recordings", "3", "--duration", "1.5", "--window", "8", "--hidden", "8", "--minutes", "0.02"])
+    refine.main(
+        [
+            "-o",
+            str(out),
+            "--recordings",
+            "3",
+            "--duration",
+            "1.5",
+            "--window",
+            "8",
+            "--hidden",
+            "8",
+            "--minutes",
+            "0.02",
+        ]
+    )
     model = ikid.load(str(out))
     prov = model.card["provenance"]
     assert model.feature_set == "tracker_state" and model.card["task"] == "refine" and model.window == 8
@@ -192,7 +231,9 @@ def test_the_refiner_trainer_writes_a_refiner_the_tracker_takes(tmp_path):
 def test_shipped_model_matches_torch(name):
     model = ikid.load(name)
     reference = load_torch(ikid._SHIPPED / f"{name}.safetensors")  # safetensors library, not ikid
-    rec = D.simulate_one({"name": "p", "protocol": "random", "seed": 9600, "duration": 1.0, "shoulder_deg": 10.0})
+    rec = D.simulate_one(
+        {"name": "p", "protocol": "random", "seed": 9600, "duration": 1.0, "shoulder_deg": 10.0}
+    )
     rec = noisy([rec], 0.01)[0]
     task = model.task
     x, _ = D.windows(rec, task, model.feature_set, model.window)
@@ -205,8 +246,17 @@ def test_shipped_model_matches_torch(name):
 
 def fresh(seconds: float = 20.0, shoulder: float = 10.0, scale: float = 1.0) -> D.Recording:
     """A recording no shipped model trained on (seed and shoulder pose unseen)."""
-    return D.simulate_one({"name": "fresh", "protocol": "random", "seed": 9700, "duration": seconds,
-                           "shoulder_deg": shoulder, "length_scale": scale, "mass_scale": scale**3})
+    return D.simulate_one(
+        {
+            "name": "fresh",
+            "protocol": "random",
+            "seed": 9700,
+            "duration": seconds,
+            "shoulder_deg": shoulder,
+            "length_scale": scale,
+            "mass_scale": scale**3,
+        }
+    )
 
 
 @pytest.mark.parametrize(("level", "bound"), [(0.0, 2e-5), (0.01, 3e-4), (0.05, 1.5e-3)])
@@ -233,7 +283,11 @@ def test_shipped_ik_with_one_marker_missing_stays_within_2x(level, k):
 
     def second_half_mse(rs) -> float:
         # Row i of the errors is frame i + window - 1.
-        return float(np.mean(np.concatenate([errors(ik, [r], "all")[0][len(r) // 2 - ik.window + 1 :] for r in rs]) ** 2))
+        return float(
+            np.mean(
+                np.concatenate([errors(ik, [r], "all")[0][len(r) // 2 - ik.window + 1 :] for r in rs]) ** 2
+            )
+        )
 
     gone = []
     for r in recs:
@@ -271,4 +325,6 @@ def test_shipped_torque_models_meet_their_targets_on_a_fresh_trial():
     rec0 = fresh(shoulder=0.0)  # the ID model's subject and shoulder pose
     err, true = errors(idm, [rec0], "all")
     assert np.all(np.sqrt((err**2).mean(0)) <= 0.05 * (true.max(0) - true.min(0)))
-    assert np.all((err**2).mean(0) <= 0.05 * true.var(0)), (err**2).mean(0) / true.var(0)  # wrist-id: 0.010, 0.002, 0.003
+    assert np.all((err**2).mean(0) <= 0.05 * true.var(0)), (err**2).mean(0) / true.var(
+        0
+    )  # wrist-id: 0.010, 0.002, 0.003

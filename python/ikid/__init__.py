@@ -20,7 +20,6 @@ import os
 from pathlib import Path
 
 from ikid._native import (
-    Calibration,
     COORDINATES,
     DEFAULT_JERK_NOISE,
     FEATURE_SETS,
@@ -29,6 +28,7 @@ from ikid._native import (
     REFINER_OUTPUTS,
     SIMULATOR,
     ArgumentError,
+    Calibration,
     IkidError,
     InputError,
     Model,
@@ -84,8 +84,8 @@ __all__ = [
     "simulate",
 ]
 
-from ikid.sim import Trial, simulate  # noqa: E402  (needs _native first)
 from ikid.calibration import calibrate, load_calibration, save_calibration  # noqa: E402
+from ikid.sim import Trial, simulate  # noqa: E402  (needs _native first)
 
 _SHIPPED = Path(__file__).with_name("models")
 
@@ -108,7 +108,9 @@ def load(name_or_path: str | os.PathLike[str]) -> Model:
     if isinstance(name_or_path, str) and os.sep not in name_or_path and shipped.exists():
         return Model.load(shipped)
     names = ", ".join(available_models()) or "none in this build"
-    raise FileNotFoundError(f"no model file {str(name_or_path)!r} and no shipped model of that name (shipped: {names})")
+    raise FileNotFoundError(
+        f"no model file {str(name_or_path)!r} and no shipped model of that name (shipped: {names})"
+    )
 
 
 def coordinate_names() -> list[str]:

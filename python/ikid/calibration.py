@@ -27,6 +27,7 @@ def calibrate(static_frames, movements: dict, *, fill: bool = True) -> Calibrati
     """Measure a :class:`Calibration` from a neutral static trial and single-coordinate
     movements ``{coordinate name: frames}`` (``(n, 18)`` metres each). With ``fill``, a
     single missing marker per segment is filled first (``ikid.fill_gaps``)."""
+
     def prepared(frames):
         frames = np.asarray(frames, np.float64)
         if fill and frames.ndim == 2 and not np.isfinite(frames).all():
@@ -57,9 +58,11 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise InputError(f"{path}: not a calibration file ({e})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise InputError(f"{path}: not an ikid calibration (expected \"format\": \"{FORMAT}\")")
+        raise InputError(f'{path}: not an ikid calibration (expected "format": "{FORMAT}")')
     if doc.get("format_version") != FORMAT_VERSION:
-        raise InputError(f"{path}: calibration format_version {doc.get('format_version')!r}; this ikid reads {FORMAT_VERSION}")
+        raise InputError(
+            f"{path}: calibration format_version {doc.get('format_version')!r}; this ikid reads {FORMAT_VERSION}"
+        )
     try:
         return Calibration.from_matrices(doc["forearm"], doc["hand"])
     except KeyError as e:

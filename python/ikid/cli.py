@@ -46,8 +46,12 @@ def _noise(spec: str) -> tuple[str, dict]:
         v = float(value)
     except ValueError:
         raise SystemExit(f"--noise {spec!r}: expected KIND:NUMBER, e.g. uniform:0.01") from None
-    params = {"uniform": {"fraction": v}, "gaussian": {"sigma": v}, "drift": {"amplitude": v, "rate_hz": 0.0},
-              "occlusion": {"bursts_per_second": v, "min_s": 0.05, "max_s": 0.3, "rate_hz": 0.0}}
+    params = {
+        "uniform": {"fraction": v},
+        "gaussian": {"sigma": v},
+        "drift": {"amplitude": v, "rate_hz": 0.0},
+        "occlusion": {"bursts_per_second": v, "min_s": 0.05, "max_s": 0.3, "rate_hz": 0.0},
+    }
     if kind not in params:
         raise SystemExit(f"--noise {spec!r}: unknown kind {kind!r} (uniform, gaussian, drift, occlusion)")
     return kind, params[kind]
@@ -64,24 +68,47 @@ def _with_noise(trial: Trial, specs: list[str], seed: int) -> Trial:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
-    trial = simulate(args.protocol, seed=args.seed, duration=args.duration, shoulder_flexion=math.radians(args.shoulder_deg),
-                     length_scale=args.length_scale, mass_scale=args.mass_scale, dt=1.0 / args.rate)
+    trial = simulate(
+        args.protocol,
+        seed=args.seed,
+        duration=args.duration,
+        shoulder_flexion=math.radians(args.shoulder_deg),
+        length_scale=args.length_scale,
+        mass_scale=args.mass_scale,
+        dt=1.0 / args.rate,
+    )
     trial = _with_noise(trial, args.noise, args.seed)
     paths = trial.save(args.output)
     elapsed = time.perf_counter() - t0
-    print(f"{len(trial.time)} frames ({trial.time[-1]:.1f} s) in {elapsed:.2f} s -> " + ", ".join(map(str, paths)))
+    print(
+        f"{len(trial.time)} frames ({trial.time[-1]:.1f} s) in {elapsed:.2f} s -> "
+        + ", ".join(map(str, paths))
+    )
     return 0
 
 
 def cmd_dataset(args: argparse.Namespace) -> int:
     """The thesis-sized set (3 shoulder poses x 42 movements) and the richer random set."""
-    jobs = [(f"thesis_s{int(s):+d}", dict(protocol="thesis", shoulder_flexion=math.radians(s))) for s in THESIS_SHOULDERS_DEG]
+    jobs = [
+        (f"thesis_s{int(s):+d}", dict(protocol="thesis", shoulder_flexion=math.radians(s)))
+        for s in THESIS_SHOULDERS_DEG
+    ]
     for k in range(args.random_trials):
         shoulder = THESIS_SHOULDERS_DEG[k % 3]
         scale = (0.85, 1.0, 1.15)[(k // 3) % 3]
-        jobs.append((f"random_{k:03d}_s{int(shoulder):+d}_x{scale:.2f}",
-                     dict(protocol="random", seed=1000 + k, duration=args.duration, shoulder_flexion=math.radians(shoulder),
-                          length_scale=scale, mass_scale=scale**3)))
+        jobs.append(
+            (
+                f"random_{k:03d}_s{int(shoulder):+d}_x{scale:.2f}",
+                dict(
+                    protocol="random",
+                    seed=1000 + k,
+                    duration=args.duration,
+                    shoulder_flexion=math.radians(shoulder),
+                    length_scale=scale,
+                    mass_scale=scale**3,
+                ),
+            )
+        )
     out = Path(args.output)
     t0 = time.perf_counter()
 
@@ -99,10 +126,17 @@ def cmd_dataset(args: argparse.Namespace) -> int:
     elapsed = time.perf_counter() - t0
     frames = sum(r[1] for r in results)
     sim_s = sum(r[2] for r in results)
-    summary = {"trials": len(results), "frames": frames, "seconds_simulated": frames / 1000.0, "wall_s": round(elapsed, 2),
-               "simulation_x_real_time_per_core": round(frames / 1000.0 / sim_s, 1),
-               "with_file_writing_x_real_time": round(frames / 1000.0 / elapsed, 1)}
-    (out / "dataset.json").write_text(json.dumps({"summary": summary, "trials": [r[0] for r in results]}, indent=1))
+    summary = {
+        "trials": len(results),
+        "frames": frames,
+        "seconds_simulated": frames / 1000.0,
+        "wall_s": round(elapsed, 2),
+        "simulation_x_real_time_per_core": round(frames / 1000.0 / sim_s, 1),
+        "with_file_writing_x_real_time": round(frames / 1000.0 / elapsed, 1),
+    }
+    (out / "dataset.json").write_text(
+        json.dumps({"summary": summary, "trials": [r[0] for r in results]}, indent=1)
+    )
     print(json.dumps(summary))
     return 0
 
@@ -140,9 +174,17 @@ def _process_one(job: tuple[str, dict]) -> dict:
         runs = {}
         for kind, name in (("angles", opt["ik_model"]), ("torques", opt.get("torque_model"))):
             if name:
-                runs[kind] = run_model(ikid.load(name), frames, data.time, rate_hz=data.rate_hz, resample_to_model=opt["resample"],
-                                       missing_markers=opt["missing_markers"], calibration=calibration, source=path,
-                                       progress=opt["progress"])
+                runs[kind] = run_model(
+                    ikid.load(name),
+                    frames,
+                    data.time,
+                    rate_hz=data.rate_hz,
+                    resample_to_model=opt["resample"],
+                    missing_markers=opt["missing_markers"],
+                    calibration=calibration,
+                    source=path,
+                    progress=opt["progress"],
+                )
         written = []
         for kind, r in runs.items():
             if len(r.time) == 0:
@@ -170,7 +212,9 @@ def cmd_process(args: argparse.Namespace) -> int:
     stems = [p.stem for p in inputs]
     clash = sorted({s for s in stems if stems.count(s) > 1})
     if many and clash:
-        raise SystemExit(f"ikid: error: several inputs are named {', '.join(clash)}; their outputs would overwrite each other")
+        raise SystemExit(
+            f"ikid: error: several inputs are named {', '.join(clash)}; their outputs would overwrite each other"
+        )
     jobs = []
     for path in inputs:
         if many:
@@ -180,9 +224,16 @@ def cmd_process(args: argparse.Namespace) -> int:
             stem = out.with_suffix("") if out.suffix.lower() in (".mot", ".sto") else out
             stem.parent.mkdir(parents=True, exist_ok=True)
         mot = out if (not many and out.suffix.lower() == ".mot") else stem.with_name(stem.name + ".mot")
-        opt = {"map": args.map, "ik_model": args.model, "torque_model": torque_model, "resample": args.resample,
-               "missing_markers": args.missing_markers, "progress": not many, "calibration": args.calibration,
-               "outputs": (mot, stem.with_name(stem.name + ".sto"))}
+        opt = {
+            "map": args.map,
+            "ik_model": args.model,
+            "torque_model": torque_model,
+            "resample": args.resample,
+            "missing_markers": args.missing_markers,
+            "progress": not many,
+            "calibration": args.calibration,
+            "outputs": (mot, stem.with_name(stem.name + ".sto")),
+        }
         jobs.append((str(path), opt))
     if len(jobs) == 1:
         rows = [_process_one(jobs[0])]
@@ -208,8 +259,13 @@ def cmd_track(args: argparse.Namespace) -> int:
     data = read_markers(args.input)
     frames = data.frames(MarkerMap.load(args.map) if args.map else None)
     refiner = None if args.refiner in ("", "none") else ikid.load(args.refiner)
-    tracker = ikid.Tracker(length_scale=args.length_scale, mass_scale=args.mass_scale, rate_hz=data.rate_hz,
-                           jerk_noise=args.jerk_noise, refiner=refiner)
+    tracker = ikid.Tracker(
+        length_scale=args.length_scale,
+        mass_scale=args.mass_scale,
+        rate_hz=data.rate_hz,
+        jerk_noise=args.jerk_noise,
+        refiner=refiner,
+    )
     out = tracker.run(frames)
     k = out["start"]
     stem = Path(args.output)
@@ -220,8 +276,10 @@ def cmd_track(args: argparse.Namespace) -> int:
     gaps = int(np.count_nonzero(out["missing"][k:]))
     noise_mm = ", ".join(f"{v * 1e3:.2f}" for v in tracker.marker_noise)
     how = f"refined by {refiner.name}" if refiner else "not refined"
-    print(f"{args.input}: {len(frames) - k} frames tracked from frame {k} at {data.rate_hz:g} Hz, {how} ({gaps} with a marker missing); "
-          f"hand marker noise learned (mm): {noise_mm} -> {mot}, {sto}")
+    print(
+        f"{args.input}: {len(frames) - k} frames tracked from frame {k} at {data.rate_hz:g} Hz, {how} ({gaps} with a marker missing); "
+        f"hand marker noise learned (mm): {noise_mm} -> {mot}, {sto}"
+    )
     return 0
 
 
@@ -234,12 +292,19 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     for spec in args.movement:
         coord, sep, path = spec.partition("=")
         if not sep or coord not in ikid.coordinate_names():
-            raise SystemExit(f"ikid: error: --movement {spec!r}: expected COORDINATE=FILE, COORDINATE one of {', '.join(ikid.coordinate_names())}")
+            raise SystemExit(
+                f"ikid: error: --movement {spec!r}: expected COORDINATE=FILE, COORDINATE one of {', '.join(ikid.coordinate_names())}"
+            )
         movements[coord] = read_markers(path).frames(mapping)
     cal = ikid.calibrate(read_markers(args.static).frames(mapping), movements)
-    ikid.save_calibration(cal, args.output, static=args.static, movements=dict(s.partition("=")[::2] for s in args.movement))
+    ikid.save_calibration(
+        cal, args.output, static=args.static, movements=dict(s.partition("=")[::2] for s in args.movement)
+    )
     r = cal.report or {}
-    moves = ", ".join(f"{k} {v['range_deg']:.0f}° ({100 * v['single_axis_share']:.1f} % one axis)" for k, v in r.get("movements", {}).items())
+    moves = ", ".join(
+        f"{k} {v['range_deg']:.0f}° ({100 * v['single_axis_share']:.1f} % one axis)"
+        for k, v in r.get("movements", {}).items()
+    )
     print(f"{cal!r}; movements: {moves}; axis skew {r.get('axis_skew_deg', 0):.2f}° -> {args.output}")
     return 0
 
@@ -267,22 +332,40 @@ def cmd_id(args: argparse.Namespace) -> int:
 
     time_s, q = read_mot(args.input)
     if len(time_s) < 3:
-        raise ikid.InputError(f"{args.input}: {len(time_s)} rows; at least 3 are needed for velocities and accelerations")
+        raise ikid.InputError(
+            f"{args.input}: {len(time_s)} rows; at least 3 are needed for velocities and accelerations"
+        )
     rate = 1.0 / float(np.median(np.diff(time_s)))
     if args.reference:
         qd = np.gradient(q, time_s, axis=0)
-        tau = ikid.reference_id(q, qd, np.gradient(qd, time_s, axis=0), shoulder_flexion=math.radians(args.shoulder_deg),
-                                length_scale=args.length_scale, mass_scale=args.mass_scale)
-        out_time, summary = time_s, f"{len(time_s)} frames, exact Newton-Euler (subject ×{args.length_scale:g} length, ×{args.mass_scale:g} mass)"
+        tau = ikid.reference_id(
+            q,
+            qd,
+            np.gradient(qd, time_s, axis=0),
+            shoulder_flexion=math.radians(args.shoulder_deg),
+            length_scale=args.length_scale,
+            mass_scale=args.mass_scale,
+        )
+        out_time, summary = (
+            time_s,
+            f"{len(time_s)} frames, exact Newton-Euler (subject ×{args.length_scale:g} length, ×{args.mass_scale:g} mass)",
+        )
     else:
         model = ikid.load(args.model)
         if model.feature_set != "joint_state":
-            raise ikid.InputError(f"model {model.name!r} reads {model.feature_set} frames, not joint states (q, q̇, q̈); use an id model")
+            raise ikid.InputError(
+                f"model {model.name!r} reads {model.feature_set} frames, not joint states (q, q̇, q̈); use an id model"
+            )
         if check_rate(model, rate, args.input, args.resample):
             time_s, q = resample(time_s, q, model.frame_rate_hz)
         qd = np.gradient(q, time_s, axis=0)
-        run = run_model(model, np.concatenate([q, qd, np.gradient(qd, time_s, axis=0)], axis=1), time_s,
-                        rate_hz=model.frame_rate_hz, source=args.input)
+        run = run_model(
+            model,
+            np.concatenate([q, qd, np.gradient(qd, time_s, axis=0)], axis=1),
+            time_s,
+            rate_hz=model.frame_rate_hz,
+            source=args.input,
+        )
         if len(run.time) == 0:
             raise ikid.InputError(f"{args.input}: no frame gave torques: {run.summary()}")
         out_time, tau, summary = run.time, run.values, run.summary()
@@ -301,7 +384,9 @@ def _parse_frame(line: str, frame_len: int, with_time: bool) -> tuple[float | No
     fields = [f.strip() for f in line.split(",")] if "," in line else line.replace(";", " ").split()
     want = frame_len + (1 if with_time else 0)
     if len(fields) != want:
-        raise ikid.InputError(f"expected {want} values ({'time + ' if with_time else ''}{frame_len} frame values), got {len(fields)}")
+        raise ikid.InputError(
+            f"expected {want} values ({'time + ' if with_time else ''}{frame_len} frame values), got {len(fields)}"
+        )
     try:
         values = np.array([float(f) if f else np.nan for f in fields], np.float64)
     except ValueError as e:
@@ -345,7 +430,8 @@ def cmd_stream(args: argparse.Namespace) -> int:
         if args.rate is not None and not same_rate(args.rate, m.frame_rate_hz):
             raise ikid.InputError(
                 f"the source runs at {args.rate:g} Hz but model {m.name!r} was trained at {m.frame_rate_hz:g} Hz; a live stream "
-                "is not resampled (it would add latency): record at the model's rate or train a model at yours (ikid train)")
+                "is not resampled (it would add latency): record at the model's rate or train a model at yours (ikid train)"
+            )
         if m.frame_len != models[0].frame_len:
             raise ikid.InputError(f"models {models[0].name!r} and {m.name!r} read different frames")
     calibration = ikid.load_calibration(args.calibration) if args.calibration else None
@@ -353,8 +439,11 @@ def cmd_stream(args: argparse.Namespace) -> int:
     names = [n for m in models for n in m.output_names]
     out = sys.stdout
     out.write("frame,status," + ",".join(names) + "\n")
-    lines = _udp_lines(args.udp, args.count, args.idle) if args.udp is not None else (
-        line for k, line in enumerate(sys.stdin) if args.count is None or k < args.count)
+    lines = (
+        _udp_lines(args.udp, args.count, args.idle)
+        if args.udp is not None
+        else (line for k, line in enumerate(sys.stdin) if args.count is None or k < args.count)
+    )
     counts: dict[str, int] = {}
     frame = 0
     for line in lines:
@@ -385,7 +474,10 @@ def cmd_stream(args: argparse.Namespace) -> int:
         counts[key] = counts.get(key, 0) + 1
         frame += 1
     out.flush()
-    print(f"ikid stream: {frame} frames at {rate:g} Hz: " + ", ".join(f"{v} {k}" for k, v in counts.items()), file=sys.stderr)
+    print(
+        f"ikid stream: {frame} frames at {rate:g} Hz: " + ", ".join(f"{v} {k}" for k, v in counts.items()),
+        file=sys.stderr,
+    )
     return 0
 
 
@@ -413,7 +505,9 @@ def _training():
     try:
         from ikid.training import train
     except ImportError as e:
-        raise ikid.InputError(f"ikid train needs the training extra (torch): pip install 'ikid[train]' ({e})") from None
+        raise ikid.InputError(
+            f"ikid train needs the training extra (torch): pip install 'ikid[train]' ({e})"
+        ) from None
     return train
 
 
@@ -426,7 +520,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     except ValueError as e:  # a config problem, named by load_config
         raise ikid.InputError(str(e)) from None
     if args.task is not None and cfg["model"]["task"] != args.task:
-        raise ikid.InputError(f"--task {args.task} but config {args.config!r} trains task {cfg['model']['task']!r}; drop one of them")
+        raise ikid.InputError(
+            f"--task {args.task} but config {args.config!r} trains task {cfg['model']['task']!r}; drop one of them"
+        )
     out = Path(args.output)
     if out.suffix == ".safetensors":
         cfg["model"]["name"], out_dir = out.stem, out.parent
@@ -459,7 +555,9 @@ def cmd_report(args: argparse.Namespace) -> int:
         try:
             from ikid.training import report
         except ImportError as e:
-            raise ikid.InputError(f"the full report needs the training extra (matplotlib): pip install 'ikid[train]' ({e})") from None
+            raise ikid.InputError(
+                f"the full report needs the training extra (matplotlib): pip install 'ikid[train]' ({e})"
+            ) from None
         report.main(["--out", args.output or "docs"])
         return 0
     from ikid.training import data as D
@@ -505,14 +603,18 @@ def cmd_bench(args: argparse.Namespace) -> int:
         push(f)
         ns[i] = clock() - t0
     us = ns[model.window :] / 1e3
-    lines = [f"{model.name}: {model.feature_set} x {model.window}, layers {'-'.join(map(str, model.layer_widths))}, "
-             f"{len(frames)} frames",
-             f"  Stream.push (Python): p50 {np.median(us):.2f} µs, p99 {np.percentile(us, 99):.2f} µs, max {us.max():.1f} µs "
-             f"(budget 2000 µs: {2000 / np.percentile(us, 99):.0f}× headroom at p99)"]
+    lines = [
+        f"{model.name}: {model.feature_set} x {model.window}, layers {'-'.join(map(str, model.layer_widths))}, "
+        f"{len(frames)} frames",
+        f"  Stream.push (Python): p50 {np.median(us):.2f} µs, p99 {np.percentile(us, 99):.2f} µs, max {us.max():.1f} µs "
+        f"(budget 2000 µs: {2000 / np.percentile(us, 99):.0f}× headroom at p99)",
+    ]
     for threads in (1, 2):
         best = min(_timed(lambda: model.predict(frames, threads=threads)) for _ in range(3))
-        lines.append(f"  predict, {threads} thread{'s' if threads > 1 else ''}: {best / len(frames) * 1e6:.3f} µs per frame "
-                     f"({len(frames) / best / 1e6:.2f} M frames/s)")
+        lines.append(
+            f"  predict, {threads} thread{'s' if threads > 1 else ''}: {best / len(frames) * 1e6:.3f} µs per frame "
+            f"({len(frames) / best / 1e6:.2f} M frames/s)"
+        )
     print("\n".join(lines))
     return 0
 
@@ -524,7 +626,9 @@ def _timed(fn) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="ikid", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="ikid", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--version", action="version", version=f"ikid {ikid.__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -536,14 +640,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--length-scale", type=float, default=1.0)
     p.add_argument("--mass-scale", type=float, default=1.0)
     p.add_argument("--rate", type=float, default=1000.0, help="physics and output rate, Hz")
-    p.add_argument("--noise", action="append", default=[], metavar="KIND:VALUE",
-                   help="uniform:0.01 | gaussian:0.002 | drift:0.005 | occlusion:0.5 (repeatable)")
+    p.add_argument(
+        "--noise",
+        action="append",
+        default=[],
+        metavar="KIND:VALUE",
+        help="uniform:0.01 | gaussian:0.002 | drift:0.005 | occlusion:0.5 (repeatable)",
+    )
     p.add_argument("-o", "--output", required=True, help="output stem (writes STEM.npz, .trc, .mot, .sto)")
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("dataset", help="write the thesis-sized and the richer simulated datasets")
     p.add_argument("-o", "--output", required=True)
-    p.add_argument("--random-trials", type=int, default=18, help="random multi-DoF trials (3 poses x 3 sizes x ...)")
+    p.add_argument(
+        "--random-trials", type=int, default=18, help="random multi-DoF trials (3 poses x 3 sizes x ...)"
+    )
     p.add_argument("--duration", type=float, default=60.0, help="seconds per random trial")
     p.add_argument("--jobs", type=int, default=None, help="threads (default: all cores)")
     p.set_defaults(func=cmd_dataset)
@@ -552,51 +663,93 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("inputs", nargs="+", metavar="IN", help="marker files (.c3d, .trc) or folders of them")
         p.add_argument("-o", "--output", required=True, help="output file (one input) or folder (several)")
         p.add_argument("--model", default="wrist-ik", help=model_help)
-        p.add_argument("--map", metavar="TOML", help="marker map: which label is which ikid marker (see map-template)")
-        p.add_argument("--resample", action="store_true",
-                       help="resample markers to the model's rate (cubic Hermite; output rows at the model's rate)")
-        p.add_argument("--missing-markers", choices=["fill", "refuse"], default=None, help="override the model's policy")
-        p.add_argument("--calibration", metavar="JSON", help="the subject's marker placement (see `ikid calibrate`)")
+        p.add_argument(
+            "--map", metavar="TOML", help="marker map: which label is which ikid marker (see map-template)"
+        )
+        p.add_argument(
+            "--resample",
+            action="store_true",
+            help="resample markers to the model's rate (cubic Hermite; output rows at the model's rate)",
+        )
+        p.add_argument(
+            "--missing-markers", choices=["fill", "refuse"], default=None, help="override the model's policy"
+        )
+        p.add_argument(
+            "--calibration", metavar="JSON", help="the subject's marker placement (see `ikid calibrate`)"
+        )
         p.add_argument("--jobs", type=int, default=None, help="parallel files (default: all cores)")
 
-    p = sub.add_parser("ik", help="markers (.c3d/.trc) -> wrist angles (.mot, degrees)",
-                       description="Markers -> wrist angles.\n\n  ikid ik trial.c3d -o trial.mot --map lab.toml\n"
-                                   "  ikid ik sessions/ -o results/ --resample", formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "ik",
+        help="markers (.c3d/.trc) -> wrist angles (.mot, degrees)",
+        description="Markers -> wrist angles.\n\n  ikid ik trial.c3d -o trial.mot --map lab.toml\n"
+        "  ikid ik sessions/ -o results/ --resample",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     processing_options(p, "angle model, shipped name or file (default wrist-ik)")
     p.set_defaults(func=cmd_process)
 
-    p = sub.add_parser("run", help="markers -> wrist angles (.mot) and torques (.sto)",
-                       description="Markers -> angles and torques.\n\n  ikid run trial.c3d -o out/trial   # out/trial.mot, out/trial.sto",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "run",
+        help="markers -> wrist angles (.mot) and torques (.sto)",
+        description="Markers -> angles and torques.\n\n  ikid run trial.c3d -o out/trial   # out/trial.mot, out/trial.sto",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     processing_options(p, "angle model (default wrist-ik)")
-    p.add_argument("--torque-model", default="wrist-chain", help="markers -> torques model (default wrist-chain)")
+    p.add_argument(
+        "--torque-model", default="wrist-chain", help="markers -> torques model (default wrist-chain)"
+    )
     p.set_defaults(func=cmd_process)
 
-    p = sub.add_parser("track", help="markers -> angles (.mot) and torques (.sto) with the Kalman tracker + its refiner",
-                       description="Markers -> wrist angles and torques, causally, with ikid.Tracker: an extended Kalman filter "
-                                   "over the body model that learns each marker coordinate's noise, refined by the shipped "
-                                   "wrist-track network.\n\n"
-                                   "  ikid track trial.c3d -o out/trial --length-scale 1.1 --mass-scale 1.3   # out/trial.mot, out/trial.sto",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "track",
+        help="markers -> angles (.mot) and torques (.sto) with the Kalman tracker + its refiner",
+        description="Markers -> wrist angles and torques, causally, with ikid.Tracker: an extended Kalman filter "
+        "over the body model that learns each marker coordinate's noise, refined by the shipped "
+        "wrist-track network.\n\n"
+        "  ikid track trial.c3d -o out/trial --length-scale 1.1 --mass-scale 1.3   # out/trial.mot, out/trial.sto",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("input", help="marker file (.c3d, .trc, .csv)")
     p.add_argument("-o", "--output", required=True, help="output stem: writes STEM.mot and STEM.sto")
     p.add_argument("--map", help="marker map (TOML) from the file's labels to ikid's")
-    p.add_argument("--length-scale", type=float, default=1.0, help="subject's segment lengths / the default subject's")
-    p.add_argument("--mass-scale", type=float, default=1.0, help="subject's segment masses / the default subject's")
-    p.add_argument("--refiner", default="wrist-track", help="refinement model, shipped name or file; 'none' for the bare filter")
-    p.add_argument("--jerk-noise", type=float, default=ikid.DEFAULT_JERK_NOISE,
-                   help=f"motion model's jerk density, rad²/s⁵ (default {ikid.DEFAULT_JERK_NOISE:g}, tuned in docs/ekf.md)")
+    p.add_argument(
+        "--length-scale", type=float, default=1.0, help="subject's segment lengths / the default subject's"
+    )
+    p.add_argument(
+        "--mass-scale", type=float, default=1.0, help="subject's segment masses / the default subject's"
+    )
+    p.add_argument(
+        "--refiner",
+        default="wrist-track",
+        help="refinement model, shipped name or file; 'none' for the bare filter",
+    )
+    p.add_argument(
+        "--jerk-noise",
+        type=float,
+        default=ikid.DEFAULT_JERK_NOISE,
+        help=f"motion model's jerk density, rad²/s⁵ (default {ikid.DEFAULT_JERK_NOISE:g}, tuned in docs/ekf.md)",
+    )
     p.set_defaults(func=cmd_track)
 
-    p = sub.add_parser("calibrate", help="measure a subject's marker placement (static + single-coordinate movements)",
-                       description="Static neutral trial + movements of one coordinate each -> calibration JSON.\n\n"
-                                   "  ikid calibrate --static s01_static.c3d --movement ra_wr_e_f=s01_flex.c3d \\\n"
-                                   "      --movement ra_wr_s_p=s01_pron.c3d --map lab.toml -o s01.json\n"
-                                   "  ikid ik s01_task.c3d -o s01_task.mot --map lab.toml --calibration s01.json",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "calibrate",
+        help="measure a subject's marker placement (static + single-coordinate movements)",
+        description="Static neutral trial + movements of one coordinate each -> calibration JSON.\n\n"
+        "  ikid calibrate --static s01_static.c3d --movement ra_wr_e_f=s01_flex.c3d \\\n"
+        "      --movement ra_wr_s_p=s01_pron.c3d --map lab.toml -o s01.json\n"
+        "  ikid ik s01_task.c3d -o s01_task.mot --map lab.toml --calibration s01.json",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--static", required=True, help="marker file of the neutral pose held still")
-    p.add_argument("--movement", action="append", default=[], metavar="COORD=FILE", required=True,
-                   help="a movement of that coordinate alone (at least two coordinates)")
+    p.add_argument(
+        "--movement",
+        action="append",
+        default=[],
+        metavar="COORD=FILE",
+        required=True,
+        help="a movement of that coordinate alone (at least two coordinates)",
+    )
     p.add_argument("--map", metavar="TOML", help="marker map (see map-template)")
     p.add_argument("-o", "--output", required=True, help="calibration JSON to write")
     p.set_defaults(func=cmd_calibrate)
@@ -605,52 +758,91 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("input", nargs="?", help="a .c3d/.trc whose labels to list")
     p.set_defaults(func=cmd_map_template)
 
-    p = sub.add_parser("id", help="angles (.mot) -> wrist torques (.sto)",
-                       description="Angles -> torques (velocities, accelerations: central differences).\n\n"
-                                   "  ikid id trial.mot -o trial.sto                 # the wrist-id network\n"
-                                   "  ikid id trial.mot -o trial.sto --reference --length-scale 1.1 --mass-scale 1.33",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "id",
+        help="angles (.mot) -> wrist torques (.sto)",
+        description="Angles -> torques (velocities, accelerations: central differences).\n\n"
+        "  ikid id trial.mot -o trial.sto                 # the wrist-id network\n"
+        "  ikid id trial.mot -o trial.sto --reference --length-scale 1.1 --mass-scale 1.33",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("input", metavar="IN", help="angles, OpenSim .mot")
     p.add_argument("-o", "--output", required=True, help=".sto to write")
     p.add_argument("--model", default="wrist-id", help="joint-state model (default wrist-id)")
-    p.add_argument("--reference", action="store_true", help="exact Newton-Euler for the subject below instead of the network")
+    p.add_argument(
+        "--reference",
+        action="store_true",
+        help="exact Newton-Euler for the subject below instead of the network",
+    )
     p.add_argument("--length-scale", type=float, default=1.0, help="subject size (--reference)")
     p.add_argument("--mass-scale", type=float, default=1.0, help="subject mass factor (--reference)")
     p.add_argument("--shoulder-deg", type=float, default=0.0, help="shoulder flexion, degrees (--reference)")
     p.add_argument("--resample", action="store_true", help="resample the angles to the model's rate")
     p.set_defaults(func=cmd_id)
 
-    p = sub.add_parser("stream", help="live frames (stdin or UDP on 127.0.0.1) -> one CSV line per frame",
-                       description="Frames in, one result line out per frame (CSV: frame,status,outputs).\n\n"
-                                   "  ikid stream < frames.csv                          # 18 numbers per line (m)\n"
-                                   "  ikid stream --time --torque-model wrist-chain < frames.csv   # time first\n"
-                                   "  ikid stream --udp 9870 --count 100000 --idle 5     # datagrams, 'END' stops",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "stream",
+        help="live frames (stdin or UDP on 127.0.0.1) -> one CSV line per frame",
+        description="Frames in, one result line out per frame (CSV: frame,status,outputs).\n\n"
+        "  ikid stream < frames.csv                          # 18 numbers per line (m)\n"
+        "  ikid stream --time --torque-model wrist-chain < frames.csv   # time first\n"
+        "  ikid stream --udp 9870 --count 100000 --idle 5     # datagrams, 'END' stops",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--model", default="wrist-ik", help="model (default wrist-ik)")
-    p.add_argument("--torque-model", default=None, help="a second model on the same frames (e.g. wrist-chain)")
-    p.add_argument("--udp", type=int, default=None, metavar="PORT", help="read datagrams on 127.0.0.1:PORT (0: any free port)")
+    p.add_argument(
+        "--torque-model", default=None, help="a second model on the same frames (e.g. wrist-chain)"
+    )
+    p.add_argument(
+        "--udp",
+        type=int,
+        default=None,
+        metavar="PORT",
+        help="read datagrams on 127.0.0.1:PORT (0: any free port)",
+    )
     p.add_argument("--count", type=int, default=None, help="stop after this many frames")
-    p.add_argument("--idle", type=float, default=10.0, help="UDP: stop after this many seconds without a frame")
-    p.add_argument("--time", action="store_true", help="each line starts with the frame's time (s): gaps restart the window")
-    p.add_argument("--rate", type=float, default=None, help="the source's frame rate (Hz); refused if not the model's")
-    p.add_argument("--missing-markers", choices=["fill", "refuse"], default=None, help="override the model's policy")
-    p.add_argument("--calibration", metavar="JSON", help="the subject's marker placement (see `ikid calibrate`)")
+    p.add_argument(
+        "--idle", type=float, default=10.0, help="UDP: stop after this many seconds without a frame"
+    )
+    p.add_argument(
+        "--time",
+        action="store_true",
+        help="each line starts with the frame's time (s): gaps restart the window",
+    )
+    p.add_argument(
+        "--rate", type=float, default=None, help="the source's frame rate (Hz); refused if not the model's"
+    )
+    p.add_argument(
+        "--missing-markers", choices=["fill", "refuse"], default=None, help="override the model's policy"
+    )
+    p.add_argument(
+        "--calibration", metavar="JSON", help="the subject's marker placement (see `ikid calibrate`)"
+    )
     p.add_argument("--strict", action="store_true", help="stop at the first refused frame (exit 2)")
     p.add_argument("--flush", action="store_true", help="flush stdout after every line (for pipes read live)")
     p.set_defaults(func=cmd_stream)
 
-    p = sub.add_parser("train", help="train a model on a lab's trials (or a config); needs ikid[train]",
-                       description="Train a model: a lab's trials (marker files + same-stem .mot angles [+ .sto torques])\n"
-                                   "through the same pipeline as the shipped models (80/10/10 split per trial, noise and\n"
-                                   "occlusion augmentation, early stopping), exported as .safetensors + .onnx.\n\n"
-                                   "  ikid train --data lab/ --map lab.toml --task ik -o models/lab-ik.safetensors\n"
-                                   "  ikid train --data lab/ --task chain --minutes 10 -o models/lab-chain.safetensors\n"
-                                   "  ikid train --config wrist-ik -o out/models    # a shipped config (simulated data)",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--data", default=None, metavar="DIR", help="a lab's trials: .c3d/.trc with same-stem .mot (and .sto)")
+    p = sub.add_parser(
+        "train",
+        help="train a model on a lab's trials (or a config); needs ikid[train]",
+        description="Train a model: a lab's trials (marker files + same-stem .mot angles [+ .sto torques])\n"
+        "through the same pipeline as the shipped models (80/10/10 split per trial, noise and\n"
+        "occlusion augmentation, early stopping), exported as .safetensors + .onnx.\n\n"
+        "  ikid train --data lab/ --map lab.toml --task ik -o models/lab-ik.safetensors\n"
+        "  ikid train --data lab/ --task chain --minutes 10 -o models/lab-chain.safetensors\n"
+        "  ikid train --config wrist-ik -o out/models    # a shipped config (simulated data)",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--data", default=None, metavar="DIR", help="a lab's trials: .c3d/.trc with same-stem .mot (and .sto)"
+    )
     p.add_argument("--map", metavar="TOML", help="marker map for the trials (see map-template)")
-    p.add_argument("--task", choices=sorted(BASE_CONFIG), default=None,
-                   help="ik: angles (default); chain: markers -> torques; id: joint states -> torques")
+    p.add_argument(
+        "--task",
+        choices=sorted(BASE_CONFIG),
+        default=None,
+        help="ik: angles (default); chain: markers -> torques; id: joint states -> torques",
+    )
     p.add_argument("--config", default=None, help="config name or TOML (default: the shipped one for --task)")
     p.add_argument("--rate", type=float, default=None, help="resample every trial to this rate (Hz) first")
     p.add_argument("--minutes", type=float, default=None, help="training time budget")
@@ -660,19 +852,26 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("-o", "--output", required=True, help="model file (.safetensors) or output folder")
     p.set_defaults(func=cmd_train)
 
-    p = sub.add_parser("report", help="score a model on a lab's trials (or the full report of the shipped models)",
-                       description="Score a model on trials with known angles (or torques): MSE and RMSE per DoF on the\n"
-                                   "last 10 % of each trial and on all frames, clean and with 1 % / 5 % added noise,\n"
-                                   "beside the classical per-frame solution on the same frames.\n\n"
-                                   "  ikid report --model models/lab-ik.safetensors --data lab_test/ --map lab.toml -o lab.md\n"
-                                   "  ikid report -o docs        # the shipped models' report (needs ikid[train])",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "report",
+        help="score a model on a lab's trials (or the full report of the shipped models)",
+        description="Score a model on trials with known angles (or torques): MSE and RMSE per DoF on the\n"
+        "last 10 % of each trial and on all frames, clean and with 1 % / 5 % added noise,\n"
+        "beside the classical per-frame solution on the same frames.\n\n"
+        "  ikid report --model models/lab-ik.safetensors --data lab_test/ --map lab.toml -o lab.md\n"
+        "  ikid report -o docs        # the shipped models' report (needs ikid[train])",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--model", default="wrist-ik")
-    p.add_argument("--data", default=None, metavar="DIR", help="trials: .c3d/.trc with same-stem .mot (and .sto)")
+    p.add_argument(
+        "--data", default=None, metavar="DIR", help="trials: .c3d/.trc with same-stem .mot (and .sto)"
+    )
     p.add_argument("--map", metavar="TOML")
     p.add_argument("--resample", action="store_true", help="resample the trials to the model's rate")
     p.add_argument("--clean-only", action="store_true", help="no added noise levels")
-    p.add_argument("-o", "--output", default=None, help="Markdown file (+ .json beside it); for the full report a folder")
+    p.add_argument(
+        "-o", "--output", default=None, help="Markdown file (+ .json beside it); for the full report a folder"
+    )
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("bench", help="latency and throughput of a model on this machine")
@@ -680,7 +879,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--frames", type=int, default=20000)
     p.set_defaults(func=cmd_bench)
 
-    p = sub.add_parser("demo", help="stream a fresh simulated trial through the shipped models", add_help=False)
+    p = sub.add_parser(
+        "demo", help="stream a fresh simulated trial through the shipped models", add_help=False
+    )
     p.set_defaults(func=None)
 
     if argv is None:

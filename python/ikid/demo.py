@@ -20,24 +20,38 @@ import ikid
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="ikid demo", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seed", type=int, default=424242, help="trial seed (the shipped models trained on seeds 1000-9004)")
+    parser = argparse.ArgumentParser(
+        prog="ikid demo", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--seed", type=int, default=424242, help="trial seed (the shipped models trained on seeds 1000-9004)"
+    )
     parser.add_argument("--seconds", type=float, default=20.0)
-    parser.add_argument("--shoulder-deg", type=float, default=30.0, help="shoulder flexion (training: 0, 45, -20)")
-    parser.add_argument("--noise", type=float, default=0.01, help="uniform marker noise, fraction of each coordinate's range")
+    parser.add_argument(
+        "--shoulder-deg", type=float, default=30.0, help="shoulder flexion (training: 0, 45, -20)"
+    )
+    parser.add_argument(
+        "--noise", type=float, default=0.01, help="uniform marker noise, fraction of each coordinate's range"
+    )
     parser.add_argument("--plot", type=Path, default=Path("out/demo/demo.png"))
     args = parser.parse_args(argv)
 
     ik, chain = ikid.load("wrist-ik"), ikid.load("wrist-chain")
-    print(f"1. simulating {args.seconds:.0f} s of random wrist movement (seed {args.seed}, shoulder {args.shoulder_deg:.0f}°) "
-          f"with {100 * args.noise:g} % marker noise")
+    print(
+        f"1. simulating {args.seconds:.0f} s of random wrist movement (seed {args.seed}, shoulder {args.shoulder_deg:.0f}°) "
+        f"with {100 * args.noise:g} % marker noise"
+    )
     t0 = time.perf_counter()
-    trial = ikid.simulate("random", seed=args.seed, duration=args.seconds, shoulder_flexion=math.radians(args.shoulder_deg))
+    trial = ikid.simulate(
+        "random", seed=args.seed, duration=args.seconds, shoulder_flexion=math.radians(args.shoulder_deg)
+    )
     trial = trial.with_noise("uniform", seed=args.seed, fraction=args.noise) if args.noise > 0 else trial
     print(f"   {len(trial.time)} frames at {trial.rate_hz:.0f} Hz in {time.perf_counter() - t0:.1f} s")
 
-    print(f"2. streaming frame by frame through {ik.name} ({ik.feature_set} × {ik.window}) and {chain.name} "
-          f"({chain.feature_set} × {chain.window})")
+    print(
+        f"2. streaming frame by frame through {ik.name} ({ik.feature_set} × {ik.window}) and {chain.name} "
+        f"({chain.feature_set} × {chain.window})"
+    )
     frames = np.ascontiguousarray(trial.markers, np.float32)
     s_ik, s_chain = ik.stream(), chain.stream()
     angles = np.full((len(frames), 3), np.nan)
@@ -63,13 +77,19 @@ def main(argv: list[str] | None = None) -> None:
     span = trial.tau[ok].max(0) - trial.tau[ok].min(0)
     print(f"   {'':12s} {'angle RMSE':>11s} {'reference IK':>13s} {'torque RMSE':>12s} {'% of range':>11s}")
     for k, name in enumerate(names):
-        print(f"   {name:12s} {rms(ang_err[:, k]):9.3f} °  {rms(ref_err[:, k]):9.3f} °  {rms(tau_err[:, k]):8.4f} N·m  "
-              f"{100 * rms(tau_err[:, k]) / span[k]:8.2f} %")
-    print(f"   angle MSE {np.mean(np.radians(ang_err) ** 2):.2e} rad² (reference IK per frame {np.mean(np.radians(ref_err) ** 2):.2e}); "
-          f"torque MSE {np.mean(tau_err**2):.2e} N·m² (thesis chain: 0.1727)")
+        print(
+            f"   {name:12s} {rms(ang_err[:, k]):9.3f} °  {rms(ref_err[:, k]):9.3f} °  {rms(tau_err[:, k]):8.4f} N·m  "
+            f"{100 * rms(tau_err[:, k]) / span[k]:8.2f} %"
+        )
+    print(
+        f"   angle MSE {np.mean(np.radians(ang_err) ** 2):.2e} rad² (reference IK per frame {np.mean(np.radians(ref_err) ** 2):.2e}); "
+        f"torque MSE {np.mean(tau_err**2):.2e} N·m² (thesis chain: 0.1727)"
+    )
     lat = step_ns[ok] / 1e3
-    print(f"4. one frame → angles + torques from Python: p50 {np.median(lat):.1f} µs, p99 {np.percentile(lat, 99):.1f} µs "
-          f"(budget 2000 µs)")
+    print(
+        f"4. one frame → angles + torques from Python: p50 {np.median(lat):.1f} µs, p99 {np.percentile(lat, 99):.1f} µs "
+        f"(budget 2000 µs)"
+    )
     plot(args.plot, trial, angles, torques, ok)
 
 

@@ -83,15 +83,26 @@ def check_rate(model: _native.Model, rate_hz: float, source: str, allow_resample
     return True
 
 
-def run_model(model: _native.Model, frames, time, *, rate_hz: float | None = None, resample_to_model: bool = False,
-              missing_markers: str | None = None, calibration: _native.Calibration | None = None, source: str = "frames",
-              progress: bool = False) -> Run:
+def run_model(
+    model: _native.Model,
+    frames,
+    time,
+    *,
+    rate_hz: float | None = None,
+    resample_to_model: bool = False,
+    missing_markers: str | None = None,
+    calibration: _native.Calibration | None = None,
+    source: str = "frames",
+    progress: bool = False,
+) -> Run:
     """Run ``model`` over ``frames`` ``(n, frame_len)`` at ``time`` ``(n,)`` seconds; with a
     ``calibration`` (see :func:`ikid.calibrate`), for this subject's marker placement."""
     frames = np.asarray(frames, np.float64)
     time = np.asarray(time, np.float64)
     if frames.ndim != 2 or time.shape != (len(frames),):
-        raise _native.InputError(f"{source}: expected frames (n, {model.frame_len}) and time (n,), got {frames.shape} and {time.shape}")
+        raise _native.InputError(
+            f"{source}: expected frames (n, {model.frame_len}) and time (n,), got {frames.shape} and {time.shape}"
+        )
     if rate_hz is None:
         rate_hz = 1.0 / float(np.median(np.diff(time))) if len(time) > 1 else model.frame_rate_hz
     resampled_from = None
@@ -120,7 +131,17 @@ def run_model(model: _native.Model, frames, time, *, rate_hz: float | None = Non
         bar.close()
     values = np.array(rows, np.float64).reshape(-1, model.n_outputs)
     idx = np.array(index, np.int64)
-    return Run(time[idx], idx, values, np.array(filled, bool), len(frames), refused, rate_hz, resampled_from, stream.gap_restarts)
+    return Run(
+        time[idx],
+        idx,
+        values,
+        np.array(filled, bool),
+        len(frames),
+        refused,
+        rate_hz,
+        resampled_from,
+        stream.gap_restarts,
+    )
 
 
 def _progress(total: int, label: str):

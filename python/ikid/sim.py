@@ -24,8 +24,8 @@ NOISE = {
     "uniform": lambda m, seed, fraction: _native.noise_uniform(m, fraction, seed),
     "gaussian": lambda m, seed, sigma: _native.noise_gaussian(m, sigma, seed),
     "drift": lambda m, seed, amplitude, rate_hz: _native.noise_drift(m, amplitude, rate_hz, seed),
-    "occlusion": lambda m, seed, bursts_per_second, min_s, max_s, rate_hz, markers_affected=(): _native.noise_occlusion(
-        m, bursts_per_second, min_s, max_s, rate_hz, seed, list(markers_affected)
+    "occlusion": lambda m, seed, bursts_per_second, min_s, max_s, rate_hz, markers_affected=(): (
+        _native.noise_occlusion(m, bursts_per_second, min_s, max_s, rate_hz, seed, list(markers_affected))
     ),
 }
 
@@ -52,7 +52,10 @@ class Trial:
         if kind not in NOISE:
             raise _native.InputError(f"unknown noise {kind!r} (known: {', '.join(NOISE)})")
         markers = NOISE[kind](self.markers, seed, **params)
-        meta = {**self.metadata, "noise": [*self.metadata.get("noise", []), {"kind": kind, "seed": seed, **params}]}
+        meta = {
+            **self.metadata,
+            "noise": [*self.metadata.get("noise", []), {"kind": kind, "seed": seed, **params}],
+        }
         return Trial(self.time, self.q, self.qd, self.qdd, self.tau, markers, self.q_ref, meta)
 
     def save(self, stem: str | os.PathLike[str]) -> list[Path]:
@@ -78,7 +81,9 @@ class Trial:
     def load(path: str | os.PathLike[str]) -> Trial:
         with np.load(path) as z:
             meta = json.loads(str(z["metadata"]))
-            return Trial(*(z[k] for k in ("time", "q", "qd", "qdd", "tau", "markers", "q_ref")), metadata=meta)
+            return Trial(
+                *(z[k] for k in ("time", "q", "qd", "qdd", "tau", "markers", "q_ref")), metadata=meta
+            )
 
 
 def simulate(
@@ -100,7 +105,16 @@ def simulate(
     ``octants`` restricts the random protocol's targets to joint-sign octants given as sign
     strings of (s_p, e_f, ad_ab), e.g. ``["+-+"]`` (hold-out movement types)."""
     raw = _native.simulate(
-        protocol, seed, duration, shoulder_flexion, length_scale, mass_scale, dt, substeps, output_every, octants
+        protocol,
+        seed,
+        duration,
+        shoulder_flexion,
+        length_scale,
+        mass_scale,
+        dt,
+        substeps,
+        output_every,
+        octants,
     )
     meta = {
         "simulator": _native.SIMULATOR,

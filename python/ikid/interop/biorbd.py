@@ -54,8 +54,12 @@ def write_biomod(
     import ikid  # the body model is the single source of truth
     from ikid.io._atomic import write_text_atomic
 
-    body = ikid.body_model(length_scale=length_scale, mass_scale=mass_scale, shoulder_flexion=shoulder_flexion,
-                           marker_shift=marker_shift)
+    body = ikid.body_model(
+        length_scale=length_scale,
+        mass_scale=mass_scale,
+        shoulder_flexion=shoulder_flexion,
+        marker_shift=marker_shift,
+    )
     return write_text_atomic(path, biomod_text(body))
 
 
@@ -75,7 +79,9 @@ def biomod_text(body: dict[str, Any]) -> str:
         "",
     ]
     # Forearm: fixed in the lab, frame = ikid's forearm frame (origin at the wrist centre).
-    lines += _segment("forearm", None, pose["rotation"], pose["translation"], None, None, segments["forearm"], _identity())
+    lines += _segment(
+        "forearm", None, pose["rotation"], pose["translation"], None, None, segments["forearm"], _identity()
+    )
 
     parent, turn_prev = "forearm", _identity()
     for i, coord in enumerate(coords):
@@ -106,8 +112,16 @@ def biomod_text(body: dict[str, Any]) -> str:
 # --- helpers -----------------------------------------------------------------------------------
 
 
-def _segment(name: str, parent: str | None, rotation: Matrix, translation: Sequence[float], letter: str | None,
-             q_range: Sequence[float] | None, params: dict[str, Any], turn: Matrix) -> list[str]:
+def _segment(
+    name: str,
+    parent: str | None,
+    rotation: Matrix,
+    translation: Sequence[float],
+    letter: str | None,
+    q_range: Sequence[float] | None,
+    params: dict[str, Any],
+    turn: Matrix,
+) -> list[str]:
     """One ``segment`` block; ``params`` (ikid's segment frame) re-expressed in the frame
     turned by ``turn``: com' = Cᵀ c, inertia' = Cᵀ diag(I) C."""
     com = _matvec(_transpose(turn), params["com"])

@@ -89,17 +89,25 @@ def osim_text(
 ) -> str:
     """The ``.osim`` XML text :func:`write_osim` writes."""
     if markers is not None and marker_shift is not None:
-        raise ValueError("give either marker_shift (moves ikid's six markers) or markers (a marker set of your own), not both")
+        raise ValueError(
+            "give either marker_shift (moves ikid's six markers) or markers (a marker set of your own), not both"
+        )
     _check_name("model name", name)
     body = ikid.body_model(length_scale, mass_scale, shoulder_flexion, marker_shift)
     segments = body["segments"]
-    marker_list = _marker_list(markers, segments) if markers is not None else [
-        (m["name"], m["segment"], m["offset"]) for m in body["markers"]
-    ]
+    marker_list = (
+        _marker_list(markers, segments)
+        if markers is not None
+        else [(m["name"], m["segment"], m["offset"]) for m in body["markers"]]
+    )
 
     doc = ET.Element("OpenSimDocument", Version=DOCUMENT_VERSION)
     model = _sub(doc, "Model", name=name)
-    _sub(model, "credits", text="Written by ikid " + ikid.__version__ + " from ikid.body_model" + _subject_note(body))
+    _sub(
+        model,
+        "credits",
+        text="Written by ikid " + ikid.__version__ + " from ikid.body_model" + _subject_note(body),
+    )
     _sub(model, "length_units", text="meters")
     _sub(model, "force_units", text="N")
     _sub(model, "Ground", name="ground")
@@ -212,7 +220,9 @@ def inverse_dynamics(model_path: str | os.PathLike[str], q: Any, qd: Any, qdd: A
         if a.shape != (len(arrays[0]), nc):
             raise ValueError(f"{what}: expected ({len(arrays[0])}, {nc}) values, got shape {a.shape}")
     if model.getNumSpeeds() != nc:
-        raise ValueError(f"{model_path}: {model.getNumSpeeds()} mobilities for {nc} coordinates (constraints?); not supported")
+        raise ValueError(
+            f"{model_path}: {model.getNumSpeeds()} mobilities for {nc} coordinates (constraints?); not supported"
+        )
     # Coordinates' values and speeds by name; accelerations in mobility order (the state's u).
     u_index = [_speed_index(model, state, coords.get(j)) for j in range(nc)]
     solver = osim.InverseDynamicsSolver(model)
@@ -248,7 +258,9 @@ def inverse_kinematics(
     names = [model.getMarkerSet().get(k).getName() for k in range(model.getMarkerSet().getSize())]
     absent = [n for n in names if n not in data.labels]
     if absent:
-        raise ValueError(f"{marker_file}: no column for model marker(s) {', '.join(absent)}; the file has {', '.join(data.labels)}")
+        raise ValueError(
+            f"{marker_file}: no column for model marker(s) {', '.join(absent)}; the file has {', '.join(data.labels)}"
+        )
     tool = osim.InverseKinematicsTool()
     tool.setModel(model)
     tool.setMarkerDataFileName(str(marker_file))
@@ -280,19 +292,25 @@ def require_opensim() -> Any:
     try:
         import opensim
     except ImportError as e:
-        raise ImportError(f"running OpenSim needs the opensim package (pip install 'ikid[eval]'): {e}") from None
+        raise ImportError(
+            f"running OpenSim needs the opensim package (pip install 'ikid[eval]'): {e}"
+        ) from None
     return opensim
 
 
 # --- helpers -------------------------------------------------------------------------------------
 
 
-def _marker_list(markers: Sequence[MarkerSpec], segments: dict[str, Any]) -> list[tuple[str, str, list[float]]]:
+def _marker_list(
+    markers: Sequence[MarkerSpec], segments: dict[str, Any]
+) -> list[tuple[str, str, list[float]]]:
     """Checked ``(name, segment, offset)`` triples; errors name the marker and the field."""
     out: list[tuple[str, str, list[float]]] = []
     seen: set[str] = set()
     if len(markers) == 0:
-        raise ValueError("markers: the list is empty (give (name, segment, offset) triples, or None for ikid's six)")
+        raise ValueError(
+            "markers: the list is empty (give (name, segment, offset) triples, or None for ikid's six)"
+        )
     for i, entry in enumerate(markers):
         try:
             label, seg, offset = entry
@@ -349,7 +367,9 @@ def _xyz_body_fixed(rows: Sequence[Sequence[float]]) -> list[float]:
     return [math.atan2(-r[1][2], r[2][2]), b, math.atan2(-r[0][1], r[0][0])]
 
 
-def _offset_frame(parent: ET.Element, name: str, socket: str, translation: Sequence[float], orientation: Sequence[float]) -> None:
+def _offset_frame(
+    parent: ET.Element, name: str, socket: str, translation: Sequence[float], orientation: Sequence[float]
+) -> None:
     f = _sub(parent, "PhysicalOffsetFrame", name=name)
     _sub(f, "socket_parent", text=socket)
     _sub(f, "translation", text=_vec(translation))

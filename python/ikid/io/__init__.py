@@ -14,7 +14,7 @@ from ikid.io.csv import read_csv_markers, write_csv, write_csv_markers
 from ikid.io.mapping import MarkerMap
 from ikid.io.markers import FileFormatError, MarkerData
 from ikid.io.resample import resample
-from ikid.io.storage import Storage, read_mot, read_storage, read_sto, write_mot, write_storage, write_sto
+from ikid.io.storage import Storage, read_mot, read_sto, read_storage, write_mot, write_sto, write_storage
 from ikid.io.trc import read_trc, write_trc
 
 #: Marker file readers by suffix.

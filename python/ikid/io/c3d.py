@@ -57,7 +57,9 @@ def _parse_into(path: str, out: str) -> None:
         residuals=np.asarray(c["data"]["meta_points"]["residuals"], np.float64),
         labels=np.array(labels, dtype=str),
         units=np.array(units),
-        rate=np.array(float(point["RATE"]["value"][0]) if len(point["RATE"]["value"]) else float(header["frame_rate"])),
+        rate=np.array(
+            float(point["RATE"]["value"][0]) if len(point["RATE"]["value"]) else float(header["frame_rate"])
+        ),
         first_frame=np.array(int(header["first_frame"])),
     )
 
@@ -94,7 +96,9 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
                 timeout=PARSE_TIMEOUT_S,
             )
         except subprocess.TimeoutExpired:
-            raise FileFormatError(f"{src}: reading it took over {PARSE_TIMEOUT_S:.0f} s; the file is corrupt") from None
+            raise FileFormatError(
+                f"{src}: reading it took over {PARSE_TIMEOUT_S:.0f} s; the file is corrupt"
+            ) from None
         if run.returncode != 0:
             last = (run.stderr.strip().splitlines() or ["no message"])[-1]
             if run.returncode < 0:
@@ -110,7 +114,9 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
     if announced is not None:
         count, saturated = announced
         if n_frames < count or (n_frames > count and not saturated):
-            raise FileFormatError(f"{src}: header says {count} frames, the file holds {n_frames} (truncated?)")
+            raise FileFormatError(
+                f"{src}: header says {count} frames, the file holds {n_frames} (truncated?)"
+            )
     if points.shape[1] != len(labels):
         raise FileFormatError(f"{src}: {points.shape[1]} points but {len(labels)} labels")
     if len(set(labels)) != len(labels):
@@ -121,7 +127,9 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
     scale = unit_scale(units, src)
     positions = np.transpose(points[:3], (2, 1, 0)) * scale
     positions[(residuals[0].T < 0) | ~np.isfinite(positions).all(axis=2)] = np.nan
-    return MarkerData(labels, np.arange(n_frames) / rate, positions, rate, src, units, {"first_frame": first_frame})
+    return MarkerData(
+        labels, np.arange(n_frames) / rate, positions, rate, src, units, {"first_frame": first_frame}
+    )
 
 
 def write_c3d(path: str | os.PathLike[str], data: MarkerData, units: str = "mm") -> Path:

@@ -23,7 +23,14 @@ from pathlib import Path
 import numpy as np
 
 from ikid.io._atomic import write_text_atomic
-from ikid.io.markers import FileFormatError, MarkerData, ikid_marker_names, is_float, read_text_lines, unit_scale
+from ikid.io.markers import (
+    FileFormatError,
+    MarkerData,
+    ikid_marker_names,
+    is_float,
+    read_text_lines,
+    unit_scale,
+)
 
 _AXIS = re.compile(r"^(?P<label>.+?)[._](?P<axis>[xyzXYZ])$")
 
@@ -44,7 +51,9 @@ def read_csv_markers(path: str | os.PathLike[str]) -> MarkerData:
         raise FileFormatError(f"{src}: no header row (expected 'time,<label>.x,<label>.y,<label>.z,...')")
     header = [c.strip() for c in lines[start].split(",")]
     if header[0].lower() != "time":
-        raise FileFormatError(f"{src}:{start + 1}: the first column must be 'time' (seconds), found {header[0]!r}")
+        raise FileFormatError(
+            f"{src}:{start + 1}: the first column must be 'time' (seconds), found {header[0]!r}"
+        )
     labels: list[str] = []
     columns: dict[tuple[str, str], int] = {}
     for j, name in enumerate(header[1:], start=1):
@@ -59,7 +68,9 @@ def read_csv_markers(path: str | os.PathLike[str]) -> MarkerData:
             labels.append(key[0])
     incomplete = [lab for lab in labels if any((lab, a) not in columns for a in "xyz")]
     if incomplete:
-        raise FileFormatError(f"{src}:{start + 1}: marker(s) {', '.join(incomplete)} lack an x, y or z column")
+        raise FileFormatError(
+            f"{src}:{start + 1}: marker(s) {', '.join(incomplete)} lack an x, y or z column"
+        )
     rows: list[list[float]] = []
     for lineno, line in enumerate(lines[start + 1 :], start=start + 2):
         if not line.strip():
@@ -80,7 +91,9 @@ def read_csv_markers(path: str | os.PathLike[str]) -> MarkerData:
         raise FileFormatError(f"{src}: time must be finite and increase from row to row")
     dt = np.diff(time)
     if np.max(np.abs(dt - np.median(dt))) > 0.01 * np.median(dt):
-        raise FileFormatError(f"{src}: frames are not evenly spaced in time (steps {dt.min():.6g}-{dt.max():.6g} s)")
+        raise FileFormatError(
+            f"{src}: frames are not evenly spaced in time (steps {dt.min():.6g}-{dt.max():.6g} s)"
+        )
     order = [columns[(lab, a)] for lab in labels for a in "xyz"]
     positions = (table[:, order] * scale).reshape(len(time), len(labels), 3)
     return MarkerData(tuple(labels), time, positions, 1.0 / float(np.median(dt)), src, file_units=units)
@@ -98,17 +111,23 @@ def write_csv(path: str | os.PathLike[str], time, values, columns: list[str] | t
         raise FileFormatError(f"{name}: non-finite time or value; not written")
     buf = io.StringIO()
     buf.write(",".join(["time", *columns]) + "\n")
-    np.savetxt(buf, np.column_stack([time, values]), fmt=["%.6f"] + ["%.10g"] * values.shape[1], delimiter=",")
+    np.savetxt(
+        buf, np.column_stack([time, values]), fmt=["%.6f"] + ["%.10g"] * values.shape[1], delimiter=","
+    )
     return write_text_atomic(path, buf.getvalue())
 
 
-def write_csv_markers(path: str | os.PathLike[str], time, markers, labels: list[str] | None = None, units: str = "m") -> Path:
+def write_csv_markers(
+    path: str | os.PathLike[str], time, markers, labels: list[str] | None = None, units: str = "m"
+) -> Path:
     """Markers ``(n, 3 · len(labels))`` in metres -> marker ``.csv`` in ``units`` (NaN -> empty cell)."""
     labels = list(labels) if labels is not None else ikid_marker_names()
     time = np.asarray(time, np.float64)
     markers = np.asarray(markers, np.float64).reshape(len(time), -1)
     if markers.shape[1] != 3 * len(labels):
-        raise FileFormatError(f"{Path(path).name}: markers have {markers.shape[1]} columns, {len(labels)} labels need {3 * len(labels)}")
+        raise FileFormatError(
+            f"{Path(path).name}: markers have {markers.shape[1]} columns, {len(labels)} labels need {3 * len(labels)}"
+        )
     values = markers / unit_scale(units, str(path))
     buf = io.StringIO()
     buf.write(f"# units={units}\n")

@@ -51,20 +51,28 @@ class MarkerMap:
         names = ikid_marker_names()
         markers = table.get("markers")
         if not isinstance(markers, dict):
-            raise FileFormatError(f"{source}: expected a [markers] table mapping each of {', '.join(names)} to a label")
+            raise FileFormatError(
+                f"{source}: expected a [markers] table mapping each of {', '.join(names)} to a label"
+            )
         unknown = sorted(set(markers) - set(names))
         if unknown:
-            raise FileFormatError(f"{source}: unknown ikid marker(s) {', '.join(unknown)}; ikid's markers are {', '.join(names)}")
+            raise FileFormatError(
+                f"{source}: unknown ikid marker(s) {', '.join(unknown)}; ikid's markers are {', '.join(names)}"
+            )
         missing = [m for m in names if m not in markers]
         if missing:
-            raise FileFormatError(f"{source}: [markers] does not name {', '.join(missing)} (every one of {', '.join(names)} is needed)")
+            raise FileFormatError(
+                f"{source}: [markers] does not name {', '.join(missing)} (every one of {', '.join(names)} is needed)"
+            )
         bad = [m for m in names if not isinstance(markers[m], str) or not markers[m].strip()]
         if bad:
             raise FileFormatError(f"{source}: the label for {', '.join(bad)} must be a non-empty string")
         seen: dict[str, str] = {}
         for m in names:
             if markers[m] in seen:
-                raise FileFormatError(f"{source}: label {markers[m]!r} is given to both {seen[markers[m]]} and {m}")
+                raise FileFormatError(
+                    f"{source}: label {markers[m]!r} is given to both {seen[markers[m]]} and {m}"
+                )
             seen[markers[m]] = m
         return MarkerMap({m: markers[m].strip() for m in names}, source)
 
@@ -88,7 +96,11 @@ class MarkerMap:
         wanted = [self.labels[m] for m in ikid_marker_names()]
         absent = [f"{lab} ({m})" for m, lab in self.labels.items() if lab not in data.labels]
         if absent:
-            hint = "" if self.source != "identity" else " (give a marker map: --map FILE.toml, see `ikid map-template`)"
+            hint = (
+                ""
+                if self.source != "identity"
+                else " (give a marker map: --map FILE.toml, see `ikid map-template`)"
+            )
             raise _native.InputError(
                 f"{data.source or 'markers'}: label(s) {', '.join(absent)} not found; the file has {', '.join(data.labels) or 'no labels'}{hint}"
             )

@@ -87,7 +87,9 @@ class MarkerData:
                 f"{self.source or 'markers'}: positions {self.positions.shape} do not match {n} frames x {len(self.labels)} labels x 3"
             )
         if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
-            raise FileFormatError(f"{self.source or 'markers'}: frame rate {self.rate_hz} Hz is not a positive number")
+            raise FileFormatError(
+                f"{self.source or 'markers'}: frame rate {self.rate_hz} Hz is not a positive number"
+            )
 
     def __len__(self) -> int:
         return len(self.time)
@@ -97,7 +99,9 @@ class MarkerData:
         try:
             return self.positions[:, self.labels.index(label)]
         except ValueError:
-            raise _native.InputError(f"{self.source}: no marker {label!r}; the file has {', '.join(self.labels)}") from None
+            raise _native.InputError(
+                f"{self.source}: no marker {label!r}; the file has {', '.join(self.labels)}"
+            ) from None
 
     def frames(self, mapping: MarkerMap | None = None) -> np.ndarray:
         """ikid's ``(n, 18)`` frames (metres, float64, NaN = missing). ``mapping`` says which
@@ -116,7 +120,9 @@ class MarkerData:
         complete = np.isfinite(frames).all(axis=1)
         if complete.any():
             xyz = frames[complete].reshape(-1, 6, 3)
-            d = np.median([np.linalg.norm(xyz[:, a] - xyz[:, b], axis=1).mean() for a, b in combinations(range(6), 2)])
+            d = np.median(
+                [np.linalg.norm(xyz[:, a] - xyz[:, b], axis=1).mean() for a, b in combinations(range(6), 2)]
+            )
             lo, hi = PLAUSIBLE_MARKER_DISTANCE_M
             if not lo <= d <= hi:
                 raise _native.InputError(

@@ -22,7 +22,9 @@ def resample(time, values, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
     time = np.asarray(time, np.float64)
     values = np.asarray(values, np.float64)
     if time.ndim != 1 or values.ndim != 2 or len(values) != len(time):
-        raise _native.InputError(f"resample: expected time (n,) and values (n, k), got {time.shape} and {values.shape}")
+        raise _native.InputError(
+            f"resample: expected time (n,) and values (n, k), got {time.shape} and {values.shape}"
+        )
     if len(time) < 3:
         raise _native.InputError(f"resample: needs at least 3 samples, got {len(time)}")
     if not np.all(np.isfinite(time)) or np.any(np.diff(time) <= 0):

@@ -41,13 +41,17 @@ class Storage:
         try:
             return self.values[:, self.columns.index(name)]
         except ValueError:
-            raise _native.InputError(f"{self.source}: no column {name!r}; it has {', '.join(self.columns)}") from None
+            raise _native.InputError(
+                f"{self.source}: no column {name!r}; it has {', '.join(self.columns)}"
+            ) from None
 
     def select(self, names: list[str]) -> np.ndarray:
         """``(n, len(names))`` of the named columns; the error lists every absent one."""
         absent = [n for n in names if n not in self.columns]
         if absent:
-            raise _native.InputError(f"{self.source}: no column(s) {', '.join(absent)}; it has {', '.join(self.columns)}")
+            raise _native.InputError(
+                f"{self.source}: no column(s) {', '.join(absent)}; it has {', '.join(self.columns)}"
+            )
         return np.column_stack([self.column(n) for n in names]) if names else np.empty((len(self.time), 0))
 
 
@@ -79,7 +83,9 @@ def read_storage(path: str | os.PathLike[str]) -> Storage:
     for k, (lineno, line) in enumerate(body[1:]):
         parts = line.split()
         if len(parts) != len(columns):
-            raise FileFormatError(f"{src}:{lineno}: {len(parts)} values, expected {len(columns)} (one per column)")
+            raise FileFormatError(
+                f"{src}:{lineno}: {len(parts)} values, expected {len(columns)} (one per column)"
+            )
         try:
             rows[k] = [float(p) for p in parts]
         except ValueError:
@@ -90,7 +96,9 @@ def read_storage(path: str | os.PathLike[str]) -> Storage:
         except ValueError:
             raise FileFormatError(f"{src}: nRows={header['nRows']!r} is not a number") from None
         if expected != len(rows):
-            raise FileFormatError(f"{src}: header says nRows={expected}, the file has {len(rows)} rows (truncated?)")
+            raise FileFormatError(
+                f"{src}: header says nRows={expected}, the file has {len(rows)} rows (truncated?)"
+            )
     if not np.all(np.isfinite(rows)):
         k = int(np.argwhere(~np.isfinite(rows))[0][0])
         raise FileFormatError(f"{src}:{body[k + 1][0]}: non-finite value")
@@ -117,7 +125,9 @@ def _check_rows(name: str, time, values, cols: int) -> tuple[np.ndarray, np.ndar
     time = np.asarray(time, np.float64)
     values = np.asarray(values, np.float64)
     if time.ndim != 1 or values.shape != (len(time), cols):
-        raise _native.InputError(f"{name}: expected time (n,) and values (n, {cols}), got {time.shape} and {values.shape}")
+        raise _native.InputError(
+            f"{name}: expected time (n,) and values (n, {cols}), got {time.shape} and {values.shape}"
+        )
     if not np.all(np.isfinite(time)) or np.any(np.diff(time) <= 0):
         raise _native.InputError(f"{name}: time must be finite and strictly increasing")
     return time, values
@@ -128,7 +138,9 @@ def write_storage(path: str | os.PathLike[str], time, values, columns: list[str]
     time, values = _check_rows(Path(path).name, time, values, len(columns))
     if not np.all(np.isfinite(values)):
         row, col = np.argwhere(~np.isfinite(values))[0]
-        raise _native.InputError(f"{Path(path).name}: value {columns[col]} at row {row} is {values[row, col]}; not written")
+        raise _native.InputError(
+            f"{Path(path).name}: value {columns[col]} at row {row} is {values[row, col]}; not written"
+        )
     header = [
         Path(path).name,
         "version=1",
@@ -139,13 +151,17 @@ def write_storage(path: str | os.PathLike[str], time, values, columns: list[str]
         "time\t" + "\t".join(columns),
     ]
     buf = io.StringIO()
-    np.savetxt(buf, np.column_stack([time, values]), fmt=["%.6f"] + ["%.10g"] * values.shape[1], delimiter="\t")
+    np.savetxt(
+        buf, np.column_stack([time, values]), fmt=["%.6f"] + ["%.10g"] * values.shape[1], delimiter="\t"
+    )
     return write_text_atomic(path, "\n".join(header) + "\n" + buf.getvalue())
 
 
 def write_mot(path: str | os.PathLike[str], time, q) -> Path:
     """Wrist angles ``(n, 3)`` in radians -> ``.mot`` in degrees (``inDegrees=yes``)."""
-    return write_storage(path, time, np.degrees(np.asarray(q, np.float64)), coordinate_names(), in_degrees=True)
+    return write_storage(
+        path, time, np.degrees(np.asarray(q, np.float64)), coordinate_names(), in_degrees=True
+    )
 
 
 def write_sto(path: str | os.PathLike[str], time, tau) -> Path:

@@ -12,7 +12,14 @@ from pathlib import Path
 import numpy as np
 
 from ikid.io._atomic import write_text_atomic
-from ikid.io.markers import FileFormatError, MarkerData, ikid_marker_names, is_float, read_text_lines, unit_scale
+from ikid.io.markers import (
+    FileFormatError,
+    MarkerData,
+    ikid_marker_names,
+    is_float,
+    read_text_lines,
+    unit_scale,
+)
 
 _HEADER_LINES = 5
 
@@ -39,7 +46,9 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
             f"{src}:3: DataRate/NumFrames/NumMarkers must be numbers, got {header['DataRate']!r}/{header['NumFrames']!r}/{header['NumMarkers']!r}"
         ) from None
     if not (np.isfinite(rate) and rate > 0) or n_frames < 0 or n_markers <= 0:
-        raise FileFormatError(f"{src}:3: DataRate {rate}, NumFrames {n_frames}, NumMarkers {n_markers} are not valid")
+        raise FileFormatError(
+            f"{src}:3: DataRate {rate}, NumFrames {n_frames}, NumMarkers {n_markers} are not valid"
+        )
     scale = unit_scale(header["Units"], src)
     cells = lines[3].split("\t")
     if len(cells) < 2 or cells[0].strip() != "Frame#":
@@ -69,21 +78,25 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
             raise FileFormatError(f"{src}:{lineno}: {bad!r} is not a number") from None
         parsed.append(row + [np.nan] * (width - len(row)))
     if len(parsed) != n_frames:
-        raise FileFormatError(f"{src}: header says {n_frames} frames, the file has {len(parsed)} (truncated?)")
+        raise FileFormatError(
+            f"{src}: header says {n_frames} frames, the file has {len(parsed)} (truncated?)"
+        )
     rows = np.array(parsed, np.float64).reshape(n_frames, width)
     time = rows[:, 1]
     if not np.all(np.isfinite(time)):
-        raise FileFormatError(f"{src}:{_HEADER_LINES + 1 + int(np.argmin(np.isfinite(time)))}: a row has no time")
+        raise FileFormatError(
+            f"{src}:{_HEADER_LINES + 1 + int(np.argmin(np.isfinite(time)))}: a row has no time"
+        )
     if np.any(np.diff(time) <= 0):
         i = int(np.argmax(np.diff(time) <= 0))
-        raise FileFormatError(f"{src}: time goes from {time[i]} to {time[i + 1]} s at frame {i + 2}; it must increase")
+        raise FileFormatError(
+            f"{src}: time goes from {time[i]} to {time[i + 1]} s at frame {i + 2}; it must increase"
+        )
     positions = rows[:, 2:].reshape(n_frames, n_markers, 3) * scale
     positions[~np.isfinite(positions)] = np.nan
     # A marker is seen or not: a frame with a partial xyz is missing.
     positions[~np.isfinite(positions).all(axis=2)] = np.nan
     return MarkerData(labels, time, positions, rate, src, header["Units"], {"header": header})
-
-
 
 
 def write_trc(
@@ -100,7 +113,9 @@ def write_trc(
     time = np.asarray(time, np.float64)
     markers = np.asarray(markers, np.float64).reshape(len(time), -1)
     if time.ndim != 1 or markers.shape[1] != 3 * len(labels):
-        raise FileFormatError(f"{path}: expected time (n,) and markers (n, {3 * len(labels)}), got {time.shape} and {markers.shape}")
+        raise FileFormatError(
+            f"{path}: expected time (n,) and markers (n, {3 * len(labels)}), got {time.shape} and {markers.shape}"
+        )
     if not np.all(np.isfinite(time)) or np.any(np.diff(time) <= 0):
         raise FileFormatError(f"{path}: time must be finite and strictly increasing")
     scale = unit_scale(units, str(path))

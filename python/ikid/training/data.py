@@ -114,7 +114,8 @@ def recording_set(
         for scale in length_scales:
             for seed in seeds if kind == "random" else [0]:
                 spec: dict[str, Any] = {
-                    "name": f"{kind}_s{shoulder:+.0f}_x{scale:.2f}" + (f"_seed{seed + k}" if kind == "random" else ""),
+                    "name": f"{kind}_s{shoulder:+.0f}_x{scale:.2f}"
+                    + (f"_seed{seed + k}" if kind == "random" else ""),
                     "protocol": kind,
                     "shoulder_deg": shoulder,
                     "length_scale": scale,
@@ -155,7 +156,9 @@ def add_noise(rec: Recording, kind: str, level: float, seed: int) -> Recording:
     return rec.with_markers(markers, noise={"kind": kind, "level": level, "seed": seed})
 
 
-def add_occlusion(rec: Recording, bursts_per_s: float, min_s: float, max_s: float, seed: int, warmup_s: float = 3.0) -> Recording:
+def add_occlusion(
+    rec: Recording, bursts_per_s: float, min_s: float, max_s: float, seed: int, warmup_s: float = 3.0
+) -> Recording:
     """``rec`` with bursts in which one marker (drawn per burst) is missing (NaN), never two at
     once, none in the first ``warmup_s`` (the gap filler learns the joint centre there)."""
     rate = float(rec.meta.get("rate_hz", 1000.0))
@@ -174,7 +177,9 @@ def add_occlusion(rec: Recording, bursts_per_s: float, min_s: float, max_s: floa
     _, filled = ikid.fill_gaps(markers, unfillable="keep")
     unfillable = np.isnan(markers).any(axis=1) & (filled == 0)
     markers[unfillable] = rec.markers[unfillable]
-    return rec.with_markers(markers, occlusion={"bursts_per_s": bursts_per_s, "s": [min_s, max_s], "seed": seed})
+    return rec.with_markers(
+        markers, occlusion={"bursts_per_s": bursts_per_s, "s": [min_s, max_s], "seed": seed}
+    )
 
 
 # --- windows -----------------------------------------------------------------------------------
@@ -211,7 +216,9 @@ def windows(rec: Recording, task: str, feature_set: str, window: int, stride: in
     return f[idx].reshape(len(idx), -1), target(rec, task)[idx[:, -1]].astype(np.float32)
 
 
-def stack_windows(recs: Sequence[Recording], task: str, feature_set: str, window: int, stride: int = 1, offset: int = 0):
+def stack_windows(
+    recs: Sequence[Recording], task: str, feature_set: str, window: int, stride: int = 1, offset: int = 0
+):
     parts = [windows(r, task, feature_set, window, stride, offset) for r in recs]
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
@@ -242,7 +249,9 @@ def lab_trials(folder: str | os.PathLike[str]) -> list[Path]:
     return markers
 
 
-def _aligned(name: str, what: str, t_markers: np.ndarray, t: np.ndarray, values: np.ndarray, rate_hz: float) -> np.ndarray:
+def _aligned(
+    name: str, what: str, t_markers: np.ndarray, t: np.ndarray, values: np.ndarray, rate_hz: float
+) -> np.ndarray:
     """``values`` if sampled at the marker frames' times (to a quarter frame), else an error."""
     if len(t) != len(t_markers) or np.max(np.abs(t - t_markers)) > 0.25 / rate_hz:
         raise ikid.InputError(
@@ -252,8 +261,11 @@ def _aligned(name: str, what: str, t_markers: np.ndarray, t: np.ndarray, values:
     return values
 
 
-def load_lab_recordings(folder: str | os.PathLike[str], marker_map: str | os.PathLike[str] | None = None,
-                        rate_hz: float | None = None) -> list[Recording]:
+def load_lab_recordings(
+    folder: str | os.PathLike[str],
+    marker_map: str | os.PathLike[str] | None = None,
+    rate_hz: float | None = None,
+) -> list[Recording]:
     """A lab's trials as recordings: every marker file in ``folder`` with its same-stem ``.mot``
     (angles, required) and ``.sto`` (torques, optional: NaN without), labels mapped by
     ``marker_map`` (TOML, see ``ikid map-template``).
@@ -274,10 +286,15 @@ def load_lab_recordings(folder: str | os.PathLike[str], marker_map: str | os.Pat
         data = read_markers(path)
         markers = data.frames(mapping)
         time = data.time
-        q = _aligned(path.name, path.with_suffix(".mot").name, time, *read_mot(path.with_suffix(".mot")), data.rate_hz)
+        q = _aligned(
+            path.name, path.with_suffix(".mot").name, time, *read_mot(path.with_suffix(".mot")), data.rate_hz
+        )
         sto = path.with_suffix(".sto")
-        tau = (_aligned(path.name, sto.name, time, *read_sto(sto), data.rate_hz) if sto.exists()
-               else np.full_like(q, np.nan))
+        tau = (
+            _aligned(path.name, sto.name, time, *read_sto(sto), data.rate_hz)
+            if sto.exists()
+            else np.full_like(q, np.nan)
+        )
         rate = data.rate_hz
         if rate_hz is not None and not same_rate(rate, rate_hz):
             table = np.concatenate([markers, q, tau], axis=1)
@@ -296,12 +313,25 @@ def load_lab_recordings(folder: str | os.PathLike[str], marker_map: str | os.Pat
             t = time[sl]
             qd = np.gradient(q[sl], t, axis=0)
             name = path.stem if (start, stop) == (0, len(time)) else f"{path.stem}@{start}"
-            meta = {"source": str(path), "rate_hz": rate, "first_frame": int(start), "filled_frames": int((~np.isfinite(markers[sl]).all(axis=1)).sum())}
-            recs.append(Recording(name, filled[sl].astype(np.float64), q[sl], qd, np.gradient(qd, t, axis=0), tau[sl], meta))
+            meta = {
+                "source": str(path),
+                "rate_hz": rate,
+                "first_frame": int(start),
+                "filled_frames": int((~np.isfinite(markers[sl]).all(axis=1)).sum()),
+            }
+            recs.append(
+                Recording(
+                    name, filled[sl].astype(np.float64), q[sl], qd, np.gradient(qd, t, axis=0), tau[sl], meta
+                )
+            )
     first = next(iter(rates.values()))
     if not all(same_rate(r, first) for r in rates.values()):
         listing = ", ".join(f"{k} {v:g} Hz" for k, v in rates.items())
-        raise ikid.InputError(f"{folder}: trials at different frame rates ({listing}); resample them to one (rate_hz / --rate)")
+        raise ikid.InputError(
+            f"{folder}: trials at different frame rates ({listing}); resample them to one (rate_hz / --rate)"
+        )
     if not recs:
-        raise ikid.InputError(f"{folder}: no stretch of {MIN_LAB_FRAMES}+ frames with every marker present or fillable")
+        raise ikid.InputError(
+            f"{folder}: no stretch of {MIN_LAB_FRAMES}+ frames with every marker present or fillable"
+        )
     return recs

@@ -47,7 +47,9 @@ def errors(model: ikid.Model, recs: Sequence[D.Recording], split: str) -> tuple[
     return np.concatenate(errs), np.concatenate(trues)
 
 
-def noisy(recs: Sequence[D.Recording], level: float, kind: str = "uniform", seed: int = EVAL_SEED) -> list[D.Recording]:
+def noisy(
+    recs: Sequence[D.Recording], level: float, kind: str = "uniform", seed: int = EVAL_SEED
+) -> list[D.Recording]:
     return [D.add_noise(r, kind, level, seed + i) for i, r in enumerate(recs)]
 
 
@@ -55,7 +57,12 @@ def summary(err: np.ndarray, true: np.ndarray, unit: str) -> dict[str, Any]:
     """MSE over all outputs, RMSE per output, and RMSE as % of each output's true range."""
     rng = true.max(0) - true.min(0)
     rmse = np.sqrt((err**2).mean(0))
-    out: dict[str, Any] = {"mse": float((err**2).mean()), "rmse": rmse.tolist(), "unit": unit, "frames": len(err)}
+    out: dict[str, Any] = {
+        "mse": float((err**2).mean()),
+        "rmse": rmse.tolist(),
+        "unit": unit,
+        "frames": len(err),
+    }
     if unit == "rad":
         out["rmse_deg"] = np.degrees(rmse).tolist()
     out["nrmse_pct_of_range"] = (100 * rmse / np.where(rng > 0, rng, 1)).tolist()
@@ -67,18 +74,28 @@ def card_metrics(model: ikid.Model, recs: Sequence[D.Recording]) -> dict[str, An
     unit = model.output_units[0]
     if model.feature_set == "joint_state":
         return {"test": summary(*errors(model, recs, "test"), unit)}
-    return {f"test_{name}": summary(*errors(model, noisy(recs, level), "test"), unit) for name, level in NOISE_LEVELS.items()}
+    return {
+        f"test_{name}": summary(*errors(model, noisy(recs, level), "test"), unit)
+        for name, level in NOISE_LEVELS.items()
+    }
 
 
-def evaluate_recordings(model: ikid.Model, recs: Sequence[D.Recording], noise_levels: dict[str, float] | None = None) -> dict[str, Any]:
+def evaluate_recordings(
+    model: ikid.Model, recs: Sequence[D.Recording], noise_levels: dict[str, float] | None = None
+) -> dict[str, Any]:
     """The report of ``model`` on ``recs`` (e.g. a lab's trials): per added noise level (marker
     models only), the last 10 % of each recording (``test``) and all frames (``all``); for angle
     models also the core's per-frame least squares (``ikid.reference_ik``, the body model's
     marker placement) on the same frames."""
     levels = {"clean": 0.0} if model.feature_set == "joint_state" else (noise_levels or NOISE_LEVELS)
     unit = model.output_units[0]
-    out: dict[str, Any] = {"model": model.name, "recordings": len(recs), "frames": int(sum(len(r) for r in recs)),
-                           "rate_hz": model.frame_rate_hz, "levels": {}}
+    out: dict[str, Any] = {
+        "model": model.name,
+        "recordings": len(recs),
+        "frames": int(sum(len(r) for r in recs)),
+        "rate_hz": model.frame_rate_hz,
+        "levels": {},
+    }
     for name, level in levels.items():
         data = noisy(recs, level) if level else list(recs)
         row: dict[str, Any] = {split: summary(*errors(model, data, split), unit) for split in ("test", "all")}
@@ -118,6 +135,8 @@ def markdown(result: dict[str, Any]) -> str:
         rmse = row["all"]["rmse_deg" if deg else "rmse"]
         cls = row.get("classical")
         c = (f"{cls['test']['mse']:.3g} | {cls['all']['mse']:.3g}") if cls else "– | –"
-        lines.append(f"| {name} | {row['all']['frames']} | {row['test']['mse']:.3g} | {row['all']['mse']:.3g} | "
-                     f"{' / '.join(f'{v:.3g}' for v in rmse)} | {c} |")
+        lines.append(
+            f"| {name} | {row['all']['frames']} | {row['test']['mse']:.3g} | {row['all']['mse']:.3g} | "
+            f"{' / '.join(f'{v:.3g}' for v in rmse)} | {c} |"
+        )
     return "\n".join(lines) + "\n"

@@ -94,7 +94,9 @@ def linear_layers(net: nn.Module) -> list[tuple[nn.Linear, str]]:
         elif isinstance(module, (nn.Identity, nn.Dropout)):
             continue
         else:
-            raise ValueError(f"module {name!r} ({type(module).__name__}) is not supported: use Linear and ReLU only")
+            raise ValueError(
+                f"module {name!r} ({type(module).__name__}) is not supported: use Linear and ReLU only"
+            )
     if not chain:
         raise ValueError("the network has no Linear layers")
     return chain
@@ -135,7 +137,11 @@ def export(
     chain = linear_layers(net)
     weights = [lin.weight.detach().cpu().float().numpy() for lin, _ in chain]
     biases = [
-        (lin.bias.detach().cpu().float().numpy() if lin.bias is not None else np.zeros(lin.out_features, np.float32))
+        (
+            lin.bias.detach().cpu().float().numpy()
+            if lin.bias is not None
+            else np.zeros(lin.out_features, np.float32)
+        )
         for lin, _ in chain
     ]
     n_in, n_out = weights[0].shape[1], weights[-1].shape[0]
@@ -157,7 +163,12 @@ class WindowModel(nn.Module):
         self.net = net
         self.offset_features = offset_features
         self.n_out = linear_layers(net)[-1][0].out_features
-        for name, arr in [("in_scale", inp.scale), ("in_shift", inp.shift), ("out_scale", out.scale), ("out_shift", out.shift)]:
+        for name, arr in [
+            ("in_scale", inp.scale),
+            ("in_shift", inp.shift),
+            ("out_scale", out.scale),
+            ("out_shift", out.shift),
+        ]:
             self.register_buffer(name, torch.as_tensor(np.asarray(arr, np.float32)))
 
     @property
@@ -205,4 +216,6 @@ def load_torch(path: str | Path) -> WindowModel:
         raise ValueError(f"{path}: output_offset {card['output_offset']!r} is not known to this exporter")
     offset = len(card["feature_names"]) if card.get("output_offset") else 0
     net = nn.Sequential(*layers).eval()
-    return WindowModel(net, Affine(t["input.scale"], t["input.shift"]), Affine(t["output.scale"], t["output.shift"]), offset).eval()
+    return WindowModel(
+        net, Affine(t["input.scale"], t["input.shift"]), Affine(t["output.scale"], t["output.shift"]), offset
+    ).eval()

@@ -21,11 +21,17 @@ PACKAGE_MODELS = Path("python/ikid/models")
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--out", type=Path, default=Path("out/models"))
-    parser.add_argument("--install", type=Path, default=PACKAGE_MODELS, help="where the shipped .safetensors go")
+    parser.add_argument(
+        "--install", type=Path, default=PACKAGE_MODELS, help="where the shipped .safetensors go"
+    )
     parser.add_argument("--quiet", action="store_true")
-    parser.add_argument("names", nargs="*", metavar="NAME", help=f"retrain only these (default: all of {', '.join(SHIPPED)})")
+    parser.add_argument(
+        "names", nargs="*", metavar="NAME", help=f"retrain only these (default: all of {', '.join(SHIPPED)})"
+    )
     args = parser.parse_args()
     unknown = sorted(set(args.names) - set(SHIPPED))
     if unknown:
@@ -35,7 +41,9 @@ def main() -> None:
     for name in args.names or SHIPPED:
         _, path = run(load_config(CONFIGS / f"{name}.toml"), args.out, progress=not args.quiet)
         shutil.copyfile(path, args.install / path.name)
-    print(f"make models: {len(args.names or SHIPPED)} models in {(time.perf_counter() - start) / 60:.1f} min -> {args.install}")
+    print(
+        f"make models: {len(args.names or SHIPPED)} models in {(time.perf_counter() - start) / 60:.1f} min -> {args.install}"
+    )
 
 
 if __name__ == "__main__":

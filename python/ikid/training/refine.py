@@ -29,7 +29,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from torch import nn
 
 import ikid
 from ikid.training import data as D
@@ -43,16 +42,27 @@ NAME = "wrist-track"
 FIRST_SEED = 2100
 RECORDINGS = 162  # of 15 s; 81 gave 0.34x the EKF's torque MSE at 5 %, 162 0.29x (compare-ekf, last 10 %)
 SHOULDERS_DEG = [0.0, 45.0, -20.0]
-SIZES = [0.9, 0.95, 1.0, 1.05, 1.1]  # length scales, cycled (mass scale = length scale³); compare-ekf tests 0.85 and 1.15
+SIZES = [
+    0.9,
+    0.95,
+    1.0,
+    1.05,
+    1.1,
+]  # length scales, cycled (mass scale = length scale³); compare-ekf tests 0.85 and 1.15
 # Every joint-sign octant but +-+ (s_p > 0, e_f < 0, ad_ab > 0), which compare-ekf tests as unseen.
 OCTANTS = ["+++", "++-", "+--", "-++", "-+-", "--+", "---"]
 DURATION_S = 15.0
 NOISE_LEVELS = [0.002, 0.005, 0.01, 0.02, 0.035, 0.05, 0.07]
 OCCLUSION = {"bursts_per_s": 1.0, "min_s": 0.02, "max_s": 0.5, "warmup_s": 3.0}
 WINDOW = 96  # frames: ~0.1 s of motion at 1 kHz (32 gave twice the validation loss)
-HIDDEN = [80, 80]  # 215 KB of first-layer weights stay in L2: the refined step stays a few µs (256 wide: 17 µs)
+HIDDEN = [
+    80,
+    80,
+]  # 215 KB of first-layer weights stay in L2: the refined step stays a few µs (256 wide: 17 µs)
 STRIDE = 4  # every fourth newest frame: neighbouring windows are nearly the same sample
-SETTLE = 300  # frames after the tracker starts before its states are used (its start-up is not what it refines)
+SETTLE = (
+    300  # frames after the tracker starts before its states are used (its start-up is not what it refines)
+)
 
 
 def recording_specs(count: int, duration: float) -> list[dict[str, Any]]:
@@ -61,25 +71,49 @@ def recording_specs(count: int, duration: float) -> list[dict[str, Any]]:
     specs = []
     for k in range(count):
         seed, sh, x = FIRST_SEED + k, SHOULDERS_DEG[k % len(SHOULDERS_DEG)], SIZES[k % len(SIZES)]
-        specs.append({"name": f"refine_seed{seed}_s{sh:+.0f}_x{x:.2f}", "protocol": "random", "seed": seed, "duration": duration,
-                      "shoulder_deg": sh, "length_scale": x, "mass_scale": x**3, "octants": OCTANTS})
+        specs.append(
+            {
+                "name": f"refine_seed{seed}_s{sh:+.0f}_x{x:.2f}",
+                "protocol": "random",
+                "seed": seed,
+                "duration": duration,
+                "shoulder_deg": sh,
+                "length_scale": x,
+                "mass_scale": x**3,
+                "octants": OCTANTS,
+            }
+        )
     return specs
 
 
-def tracker_run(rec: D.Recording, level: float, seed: int, occluded: bool) -> tuple[np.ndarray, np.ndarray, int]:
+def tracker_run(
+    rec: D.Recording, level: float, seed: int, occluded: bool
+) -> tuple[np.ndarray, np.ndarray, int]:
     """The bare tracker over ``rec`` with noise ``level`` (and occlusion bursts): its
     ``tracker_state`` features ``(n, 7)``, the refiner's targets ``(n, 6)`` and the first frame."""
     noisy = D.add_noise(rec, "uniform", level, seed)
     if occluded:
-        noisy = D.add_occlusion(noisy, OCCLUSION["bursts_per_s"], OCCLUSION["min_s"], OCCLUSION["max_s"], seed=seed + 1,
-                                warmup_s=OCCLUSION["warmup_s"])
-    out = ikid.Tracker(length_scale=rec.meta["length_scale"], mass_scale=rec.meta["mass_scale"]).run(noisy.markers)
+        noisy = D.add_occlusion(
+            noisy,
+            OCCLUSION["bursts_per_s"],
+            OCCLUSION["min_s"],
+            OCCLUSION["max_s"],
+            seed=seed + 1,
+            warmup_s=OCCLUSION["warmup_s"],
+        )
+    out = ikid.Tracker(length_scale=rec.meta["length_scale"], mass_scale=rec.meta["mass_scale"]).run(
+        noisy.markers
+    )
     k = out["start"] + SETTLE
     per_unit = (out["noise"][k:] / (out["noise"][k:] + ikid.REFINER_GATE_NOISE))[:, None]
     # The core's tracker_state features of each frame (q̇, q̈, log10 noise), computed by the core.
-    frames = ikid.compute_features(np.column_stack([out["q"][k:], out["qd"][k:], out["qdd"][k:], np.log10(out["noise"][k:])]),
-                                   "tracker_state")
-    targets = np.column_stack([(rec.q[k:] - out["q"][k:]) / per_unit, (rec.qdd[k:] - out["qdd"][k:]) / per_unit]).astype(np.float32)
+    frames = ikid.compute_features(
+        np.column_stack([out["q"][k:], out["qd"][k:], out["qdd"][k:], np.log10(out["noise"][k:])]),
+        "tracker_state",
+    )
+    targets = np.column_stack(
+        [(rec.q[k:] - out["q"][k:]) / per_unit, (rec.qdd[k:] - out["qdd"][k:]) / per_unit]
+    ).astype(np.float32)
     return frames, targets, k
 
 
@@ -100,8 +134,13 @@ def build(recs: list[D.Recording], seed: int, window: int) -> dict[str, Any]:
                 targets.append(t)
                 levels.append(np.full(n, j, np.int64))
                 offset += n
-    return {"frames": np.concatenate(frames), "targets": np.concatenate(targets), "levels": np.concatenate(levels),
-            "train": np.concatenate(train_idx), "val": np.concatenate(val_idx)}
+    return {
+        "frames": np.concatenate(frames),
+        "targets": np.concatenate(targets),
+        "levels": np.concatenate(levels),
+        "train": np.concatenate(train_idx),
+        "val": np.concatenate(val_idx),
+    }
 
 
 def gather(frames: torch.Tensor, newest: torch.Tensor, window: int) -> torch.Tensor:
@@ -121,13 +160,19 @@ def train(data: dict[str, Any], window: int, hidden: list[int], minutes: float, 
     per_frame = Affine.minmax(used.min(0), used.max(0))
     inp = Affine(np.tile(per_frame.scale, window), np.tile(per_frame.shift, window))
     mean, std = data["targets"][data["train"]].mean(0), data["targets"][data["train"]].std(0) + 1e-12
-    standardise = Affine((1.0 / std).astype(np.float32), (-mean / std).astype(np.float32))  # SI -> network units
+    standardise = Affine(
+        (1.0 / std).astype(np.float32), (-mean / std).astype(np.float32)
+    )  # SI -> network units
     in_scale, in_shift = torch.from_numpy(inp.scale), torch.from_numpy(inp.shift)
     # Every noise level counts alike: each output's squared error is weighed by 1 / its spread at
     # that level (else the noisiest levels' large corrections drown the small ones of 1 %).
     lv = data["levels"]
-    spread = np.stack([data["targets"][data["train"][lv[data["train"]] == j]].std(0) for j in range(len(NOISE_LEVELS))])
-    weight = torch.from_numpy(((std / spread) ** 2).astype(np.float32))  # (levels, outputs), in standardised units
+    spread = np.stack(
+        [data["targets"][data["train"][lv[data["train"]] == j]].std(0) for j in range(len(NOISE_LEVELS))]
+    )
+    weight = torch.from_numpy(
+        ((std / spread) ** 2).astype(np.float32)
+    )  # (levels, outputs), in standardised units
     level_of = torch.from_numpy(lv)
     y_scale, y_shift = torch.from_numpy(standardise.scale), torch.from_numpy(standardise.shift)
     net = mlp(window * frames.shape[1], hidden, targets.shape[1])
@@ -151,7 +196,10 @@ def train(data: dict[str, Any], window: int, hidden: list[int], minutes: float, 
             val = float((weight[level_of[val_idx]] * (net(xv) - yv) ** 2).mean())
         epochs += 1
         log.append({"epoch": epochs, "val": val, "seconds": round(time.perf_counter() - t0, 1)})
-        print(f"epoch {epochs}: validation loss {val:.4f} (per noise level, scaled; 1 = predicting the mean)", flush=True)
+        print(
+            f"epoch {epochs}: validation loss {val:.4f} (per noise level, scaled; 1 = predicting the mean)",
+            flush=True,
+        )
         if val < best - 1e-4:
             best, since = val, 0
             best_state = {k: v.clone() for k, v in net.state_dict().items()}
@@ -164,18 +212,39 @@ def train(data: dict[str, Any], window: int, hidden: list[int], minutes: float, 
                 break
     assert best_state is not None
     net.load_state_dict(best_state)
-    return {"net": net, "input": inp, "output": standardise.inverse(), "epochs": epochs, "best_val": best, "log": log,
-            "seconds": time.perf_counter() - t0}
+    return {
+        "net": net,
+        "input": inp,
+        "output": standardise.inverse(),
+        "epochs": epochs,
+        "best_val": best,
+        "log": log,
+        "seconds": time.perf_counter() - t0,
+    }
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("-o", "--output", type=Path, default=Path(__file__).resolve().parents[1] / "models" / f"{NAME}.safetensors")
-    parser.add_argument("--minutes", type=float, default=8.0, help="training time budget (early stopping may end sooner)")
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        default=Path(__file__).resolve().parents[1] / "models" / f"{NAME}.safetensors",
+    )
+    parser.add_argument(
+        "--minutes", type=float, default=8.0, help="training time budget (early stopping may end sooner)"
+    )
     parser.add_argument("--window", type=int, default=WINDOW)
     parser.add_argument("--hidden", type=int, nargs="+", default=HIDDEN)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--recordings", type=int, default=RECORDINGS, help=f"simulated recordings, seeds {FIRST_SEED} on, one trajectory each")
+    parser.add_argument(
+        "--recordings",
+        type=int,
+        default=RECORDINGS,
+        help=f"simulated recordings, seeds {FIRST_SEED} on, one trajectory each",
+    )
     parser.add_argument("--duration", type=float, default=DURATION_S, help="seconds per recording")
     args = parser.parse_args(argv)
     torch.set_num_threads(2)
@@ -184,24 +253,49 @@ def main(argv: list[str] | None = None) -> None:
     seeds = [s["seed"] for s in specs]
     recs = D.simulate_all(specs)
     data = build(recs, 31_000 + args.seed, args.window)
-    print(f"{len(recs)} recordings x {len(NOISE_LEVELS)} noise levels x 2 (occlusion): {len(data['train'])} training and "
-          f"{len(data['val'])} validation windows ({time.perf_counter() - t0:.0f} s)", flush=True)
+    print(
+        f"{len(recs)} recordings x {len(NOISE_LEVELS)} noise levels x 2 (occlusion): {len(data['train'])} training and "
+        f"{len(data['val'])} validation windows ({time.perf_counter() - t0:.0f} s)",
+        flush=True,
+    )
     trained = train(data, args.window, args.hidden, args.minutes, args.seed)
     spec = ModelSpec(
-        name=NAME, task="refine", feature_set="tracker_state", window=args.window, frame_rate_hz=1000.0,
-        output_names=list(ikid.REFINER_OUTPUTS), output_units=["rad"] * 3 + ["rad/s^2"] * 3,
-        scaling={"input": "minmax(-1,1) per tracker_state feature", "output": "standardised; the core gates it by the learned noise"},
-        provenance={"trainer": "ikid.training.refine", "simulator": ikid.SIMULATOR, "seeds": seeds, "shoulders_deg": SHOULDERS_DEG,
-                    "length_scales": SIZES, "octants": OCTANTS, "duration_s": args.duration, "noise": {"kind": "uniform", "levels": NOISE_LEVELS},
-                    "occlusion": OCCLUSION, "tracker_jerk_noise": ikid.DEFAULT_JERK_NOISE, "hidden": args.hidden,
-                    "seed": args.seed, "epochs": trained["epochs"], "training_s": round(trained["seconds"], 1)},
+        name=NAME,
+        task="refine",
+        feature_set="tracker_state",
+        window=args.window,
+        frame_rate_hz=1000.0,
+        output_names=list(ikid.REFINER_OUTPUTS),
+        output_units=["rad"] * 3 + ["rad/s^2"] * 3,
+        scaling={
+            "input": "minmax(-1,1) per tracker_state feature",
+            "output": "standardised; the core gates it by the learned noise",
+        },
+        provenance={
+            "trainer": "ikid.training.refine",
+            "simulator": ikid.SIMULATOR,
+            "seeds": seeds,
+            "shoulders_deg": SHOULDERS_DEG,
+            "length_scales": SIZES,
+            "octants": OCTANTS,
+            "duration_s": args.duration,
+            "noise": {"kind": "uniform", "levels": NOISE_LEVELS},
+            "occlusion": OCCLUSION,
+            "tracker_jerk_noise": ikid.DEFAULT_JERK_NOISE,
+            "hidden": args.hidden,
+            "seed": args.seed,
+            "epochs": trained["epochs"],
+            "training_s": round(trained["seconds"], 1),
+        },
         metrics={"validation_loss_scaled": trained["best_val"]},
     )
     args.output.parent.mkdir(parents=True, exist_ok=True)
     export(trained["net"], args.output, spec, trained["input"], trained["output"])
     (args.output.with_suffix(".log.json")).write_text(json.dumps(trained["log"], indent=1))
-    print(f"wrote {args.output} ({trained['epochs']} epochs, best validation loss {trained['best_val']:.4f}, "
-          f"{time.perf_counter() - t0:.0f} s in all)")
+    print(
+        f"wrote {args.output} ({trained['epochs']} epochs, best validation loss {trained['best_val']:.4f}, "
+        f"{time.perf_counter() - t0:.0f} s in all)"
+    )
 
 
 if __name__ == "__main__":

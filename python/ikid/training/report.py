@@ -36,7 +36,9 @@ def training_recordings(model: ikid.Model) -> list[D.Recording]:
     prov = model.card["provenance"]
     recs = build_recordings(prov["data"])
     if data_hash(recs) != prov["data_sha256_16"]:
-        raise RuntimeError(f"{model.name}: re-simulated data differ from the training data (simulator changed?)")
+        raise RuntimeError(
+            f"{model.name}: re-simulated data differ from the training data (simulator changed?)"
+        )
     return recs
 
 
@@ -44,13 +46,17 @@ def held_out_sets() -> dict[str, list[D.Recording]]:
     """Recordings no shipped model trained on (seeds 9xxx are never used in training)."""
     sets = {
         "held-out movement type: thesis protocol (42 single-DoF moves), 3 poses": D.recording_set(
-            "thesis", seeds=[0], shoulders_deg=[0.0, 45.0, -20.0], length_scales=[1.0]),
+            "thesis", seeds=[0], shoulders_deg=[0.0, 45.0, -20.0], length_scales=[1.0]
+        ),
         "held-out trajectories: new random seeds, 3 poses": D.recording_set(
-            "random", seeds=[9000], shoulders_deg=[0.0, 45.0, -20.0], length_scales=[1.0], duration=30.0),
+            "random", seeds=[9000], shoulders_deg=[0.0, 45.0, -20.0], length_scales=[1.0], duration=30.0
+        ),
         "held-out shoulder pose: 20°": D.recording_set(
-            "random", seeds=[9100], shoulders_deg=[20.0], length_scales=[1.0], duration=30.0),
+            "random", seeds=[9100], shoulders_deg=[20.0], length_scales=[1.0], duration=30.0
+        ),
         "held-out subject sizes: 0.85× and 1.2×": D.recording_set(
-            "random", seeds=[9200], shoulders_deg=[0.0], length_scales=[0.85, 1.2], duration=30.0),
+            "random", seeds=[9200], shoulders_deg=[0.0], length_scales=[0.85, 1.2], duration=30.0
+        ),
     }
     return {name: D.simulate_all(specs) for name, specs in sets.items()}
 
@@ -59,7 +65,9 @@ def held_out_sets() -> dict[str, list[D.Recording]]:
 
 
 def reference_angles(rec: D.Recording) -> np.ndarray:
-    return ikid.reference_ik(rec.markers, length_scale=rec.meta["length_scale"], mass_scale=rec.meta["mass_scale"])
+    return ikid.reference_ik(
+        rec.markers, length_scale=rec.meta["length_scale"], mass_scale=rec.meta["mass_scale"]
+    )
 
 
 def causal_mean(x: np.ndarray, n: int) -> np.ndarray:
@@ -76,7 +84,14 @@ def classical_chain(rec: D.Recording, q: np.ndarray) -> np.ndarray:
     qd = np.vstack([np.zeros((1, 3)), np.diff(q, axis=0) / DT])
     qdd = np.vstack([np.zeros((1, 3)), np.diff(qd, axis=0) / DT])
     m = rec.meta
-    return ikid.reference_id(q, qd, qdd, shoulder_flexion=m["shoulder_flexion_rad"], length_scale=m["length_scale"], mass_scale=m["mass_scale"])
+    return ikid.reference_id(
+        q,
+        qd,
+        qdd,
+        shoulder_flexion=m["shoulder_flexion_rad"],
+        length_scale=m["length_scale"],
+        mass_scale=m["mass_scale"],
+    )
 
 
 def part(n: int, split: str, skip: int) -> slice:
@@ -133,13 +148,21 @@ def fmt(v: Any) -> str:
     return str(v)
 
 
-def ik_section(rep: Report, model: ikid.Model, train_recs: list[D.Recording], held: dict[str, list[D.Recording]]) -> dict[str, Any]:
+def ik_section(
+    rep: Report, model: ikid.Model, train_recs: list[D.Recording], held: dict[str, list[D.Recording]]
+) -> dict[str, Any]:
     w = model.window
-    rep.add(f"## IK: `{model.name}` ({model.feature_set} features, window {w}, {'-'.join(map(str, model.layer_widths))})", "")
-    rep.add("MSE in rad² over all three angles; the network and the classical reference (Kabsch segment fit with "
-            "the subject's true model, per frame; and its causal 5- and 25-frame mean) on the very same frames. "
-            "Noise: uniform ±p of each marker coordinate's range over the recording (the thesis' definition), "
-            "seeds never used in training.", "")
+    rep.add(
+        f"## IK: `{model.name}` ({model.feature_set} features, window {w}, {'-'.join(map(str, model.layer_widths))})",
+        "",
+    )
+    rep.add(
+        "MSE in rad² over all three angles; the network and the classical reference (Kabsch segment fit with "
+        "the subject's true model, per frame; and its causal 5- and 25-frame mean) on the very same frames. "
+        "Noise: uniform ±p of each marker coordinate's range over the recording (the thesis' definition), "
+        "seeds never used in training.",
+        "",
+    )
     rows, results = [], {}
     sets = {"thesis split: last 10 % of the training recordings (seen movement types)": (train_recs, "test")}
     sets.update({name: (recs, "all") for name, recs in held.items()})
@@ -155,11 +178,34 @@ def ik_section(rep: Report, model: ikid.Model, train_recs: list[D.Recording], he
                 m25.append(part_error(causal_mean(a, 25), r.q, split, w - 1))
             net = float(np.mean(net_err**2))
             thesis = THESIS.get({"clean": "ik_clean", "1%": "ik_1pct", "5%": "ik_5pct"}[label], "")
-            rows.append([set_name if label == "clean" else "", label, net, *np.degrees(np.sqrt((net_err**2).mean(0))).round(3).tolist(),
-                         mse_of(ref), mse_of(m5), mse_of(m25), thesis if split == "test" else ""])
+            rows.append(
+                [
+                    set_name if label == "clean" else "",
+                    label,
+                    net,
+                    *np.degrees(np.sqrt((net_err**2).mean(0))).round(3).tolist(),
+                    mse_of(ref),
+                    mse_of(m5),
+                    mse_of(m25),
+                    thesis if split == "test" else "",
+                ]
+            )
             results[(set_name, label)] = net
-    rep.table(["test set", "noise", "network MSE", "RMSE s_p °", "RMSE e_f °", "RMSE ad_ab °", "reference per frame",
-               "reference, causal mean 5", "reference, causal mean 25", "thesis"], rows)
+    rep.table(
+        [
+            "test set",
+            "noise",
+            "network MSE",
+            "RMSE s_p °",
+            "RMSE e_f °",
+            "RMSE ad_ab °",
+            "reference per frame",
+            "reference, causal mean 5",
+            "reference, causal mean 25",
+            "thesis",
+        ],
+        rows,
+    )
     return results
 
 
@@ -168,13 +214,17 @@ def occlusion_section(rep: Report, model: ikid.Model, recs: list[D.Recording]) -
     random one-marker bursts; the network's stream fills it (card policy), the reference IK
     gets the same filled frames."""
     w = model.window
-    rep.add("### One marker missing", "",
-            f"Held-out trajectories (seeds 9000, 3 poses). *Marker X missing*: X is NaN for the whole second half of "
-            f"every trial; the `{model.missing_markers}` policy of the model card fills it (`ikid.fill_gaps`: the segment's other two "
-            "markers, the wrist joint centre learned from the first half, and X's last position, weighted by how still the "
-            "segment is). *Bursts*: one marker at a time missing in bursts of 20–500 ms, 1 per second. MSE (rad²) over the "
-            "second halves; ratio = to the complete-marker MSE on the same frames (bound: 2). The reference IK is given the "
-            "same filled frames.", "")
+    rep.add(
+        "### One marker missing",
+        "",
+        f"Held-out trajectories (seeds 9000, 3 poses). *Marker X missing*: X is NaN for the whole second half of "
+        f"every trial; the `{model.missing_markers}` policy of the model card fills it (`ikid.fill_gaps`: the segment's other two "
+        "markers, the wrist joint centre learned from the first half, and X's last position, weighted by how still the "
+        "segment is). *Bursts*: one marker at a time missing in bursts of 20–500 ms, 1 per second. MSE (rad²) over the "
+        "second halves; ratio = to the complete-marker MSE on the same frames (bound: 2). The reference IK is given the "
+        "same filled frames.",
+        "",
+    )
     rows, out = [], {}
 
     def second_half(rs: list[D.Recording], est) -> float:
@@ -185,7 +235,11 @@ def occlusion_section(rep: Report, model: ikid.Model, recs: list[D.Recording]) -
         return np.vstack([np.full((w - 1, 3), np.nan), p])
 
     def ref(r: D.Recording) -> np.ndarray:
-        filled = r.with_markers(ikid.fill_gaps(r.markers)[0].astype(np.float64)) if np.isnan(r.markers).any() else r
+        filled = (
+            r.with_markers(ikid.fill_gaps(r.markers)[0].astype(np.float64))
+            if np.isnan(r.markers).any()
+            else r
+        )
         return reference_angles(filled)
 
     refiner = ikid.load("wrist-track")
@@ -193,7 +247,9 @@ def occlusion_section(rep: Report, model: ikid.Model, recs: list[D.Recording]) -
     def tracked(r: D.Recording) -> np.ndarray:
         # The shipped Kalman path, which leaves a missing marker out instead of filling it: how
         # much losing each marker costs an estimator that uses the exact body model.
-        return ikid.Tracker(length_scale=r.meta["length_scale"], mass_scale=r.meta["mass_scale"], refiner=refiner).run(r.markers)["q"]
+        return ikid.Tracker(
+            length_scale=r.meta["length_scale"], mass_scale=r.meta["mass_scale"], refiner=refiner
+        ).run(r.markers)["q"]
 
     for label, level in NOISE_LEVELS.items():
         rs = noisy(recs, level)
@@ -207,23 +263,63 @@ def occlusion_section(rep: Report, model: ikid.Model, recs: list[D.Recording]) -
                 m[len(m) // 2 :, 3 * k : 3 * k + 3] = np.nan
                 gone.append(r.with_markers(m))
             cases[f"{name} missing"] = gone
-        cases["bursts, 1/s"] = [D.add_occlusion(r, 1.0, 0.02, 0.5, seed=EVAL_SEED + i, warmup_s=len(r) / 2000) for i, r in enumerate(rs)]
+        cases["bursts, 1/s"] = [
+            D.add_occlusion(r, 1.0, 0.02, 0.5, seed=EVAL_SEED + i, warmup_s=len(r) / 2000)
+            for i, r in enumerate(rs)
+        ]
         for case, gone in cases.items():
             mse = second_half(gone, net)
             tracked_mse = second_half(gone, tracked)
-            rows.append([label if case.startswith("RSP") else "", case, base, mse, mse / base, second_half(gone, ref),
-                         tracked_base, tracked_mse, tracked_mse / tracked_base])
-            out[f"{label} | {case}"] = {"mse": mse, "complete": base, "ratio": mse / base,
-                                        "tracker": {"mse": tracked_mse, "complete": tracked_base, "ratio": tracked_mse / tracked_base}}
-    rep.table(["noise", "case", "complete markers", "network, one missing", "ratio", "reference IK on filled frames",
-               "Tracker + wrist-track, complete", "one missing", "ratio"], rows)
+            rows.append(
+                [
+                    label if case.startswith("RSP") else "",
+                    case,
+                    base,
+                    mse,
+                    mse / base,
+                    second_half(gone, ref),
+                    tracked_base,
+                    tracked_mse,
+                    tracked_mse / tracked_base,
+                ]
+            )
+            out[f"{label} | {case}"] = {
+                "mse": mse,
+                "complete": base,
+                "ratio": mse / base,
+                "tracker": {
+                    "mse": tracked_mse,
+                    "complete": tracked_base,
+                    "ratio": tracked_mse / tracked_base,
+                },
+            }
+    rep.table(
+        [
+            "noise",
+            "case",
+            "complete markers",
+            "network, one missing",
+            "ratio",
+            "reference IK on filled frames",
+            "Tracker + wrist-track, complete",
+            "one missing",
+            "ratio",
+        ],
+        rows,
+    )
     worst = max(v["ratio"] for v in out.values())
-    noisy_case, noisy_worst = max(((k, v["tracker"]["ratio"]) for k, v in out.items() if not k.startswith("clean")), key=lambda kv: kv[1])
+    noisy_case, noisy_worst = max(
+        ((k, v["tracker"]["ratio"]) for k, v in out.items() if not k.startswith("clean")),
+        key=lambda kv: kv[1],
+    )
     below = max(v["tracker"]["mse"] / v["complete"] for v in out.values())
-    rep.add(f"Worst ratio: **{worst:.2f}** (bound 2). The last three columns are `ikid.Tracker` refined by `wrist-track` on "
-            "the same frames: a Kalman filter over the exact body model, which leaves a missing marker out instead of filling "
-            f"it. Its worst ratio on noisy markers is {noisy_worst:.2f}x ({noisy_case}), "
-            f"but from a lower base: with one marker missing its error is at most {below:.2f}x the network's with every marker.", "")
+    rep.add(
+        f"Worst ratio: **{worst:.2f}** (bound 2). The last three columns are `ikid.Tracker` refined by `wrist-track` on "
+        "the same frames: a Kalman filter over the exact body model, which leaves a missing marker out instead of filling "
+        f"it. Its worst ratio on noisy markers is {noisy_worst:.2f}x ({noisy_case}), "
+        f"but from a lower base: with one marker missing its error is at most {below:.2f}x the network's with every marker.",
+        "",
+    )
     return out
 
 
@@ -239,15 +335,32 @@ def octant_section(rep: Report, ik: ikid.Model) -> dict[str, Any]:
     cfg["data"]["octants"] = octants
     cfg["train"]["max_minutes"] = 2.0
     model, _ = run(cfg, Path("out/models/experiments"), progress=False, onnx=False)
-    rep.add("### Held-out joint-sign octant", "",
-            f"A model with wrist-ik's configuration trained for 2 minutes on random trajectories whose targets avoid the "
-            f"octant {held} (signs of s_p, e_f, ad_ab), tested on new trajectories (seeds 9400, 3 poses) inside {held} "
-            f"(never seen) and inside {seen} (seen). MSE rad²; ratio bound 1.5.", "")
+    rep.add(
+        "### Held-out joint-sign octant",
+        "",
+        f"A model with wrist-ik's configuration trained for 2 minutes on random trajectories whose targets avoid the "
+        f"octant {held} (signs of s_p, e_f, ad_ab), tested on new trajectories (seeds 9400, 3 poses) inside {held} "
+        f"(never seen) and inside {seen} (seen). MSE rad²; ratio bound 1.5.",
+        "",
+    )
     rows, out = [], {}
-    sets = {o: D.simulate_all(D.recording_set("random", seeds=[9400], shoulders_deg=[0.0, 45.0, -20.0], length_scales=[1.0],
-                                                duration=30.0, octants=[o])) for o in (held, seen)}
+    sets = {
+        o: D.simulate_all(
+            D.recording_set(
+                "random",
+                seeds=[9400],
+                shoulders_deg=[0.0, 45.0, -20.0],
+                length_scales=[1.0],
+                duration=30.0,
+                octants=[o],
+            )
+        )
+        for o in (held, seen)
+    }
     for label, level in NOISE_LEVELS.items():
-        mse = {o: float(np.mean(errors(model, noisy(recs, level), "all")[0] ** 2)) for o, recs in sets.items()}
+        mse = {
+            o: float(np.mean(errors(model, noisy(recs, level), "all")[0] ** 2)) for o, recs in sets.items()
+        }
         rows.append([label, mse[seen], mse[held], mse[held] / mse[seen]])
         out[label] = {"seen": mse[seen], "held_out": mse[held], "ratio": mse[held] / mse[seen]}
     rep.table(["noise", f"seen octant {seen}", f"held-out octant {held}", "ratio"], rows)
@@ -262,13 +375,17 @@ def noise_sweep(rep: Report, model: ikid.Model, recs: list[D.Recording]) -> None
         net.append(float(np.mean(errors(model, rs, "test")[0] ** 2)))
         ra = [reference_angles(r) for r in rs]
         ref.append(mse_of([part_error(a, r.q, "test", model.window - 1) for a, r in zip(ra, rs)]))
-        m25.append(mse_of([part_error(causal_mean(a, 25), r.q, "test", model.window - 1) for a, r in zip(ra, rs)]))
+        m25.append(
+            mse_of([part_error(causal_mean(a, 25), r.q, "test", model.window - 1) for a, r in zip(ra, rs)])
+        )
     fig, ax = plt.subplots(figsize=(6, 3.6))
     x = 100 * np.array(levels)
     ax.semilogy(x, net, "o-", label=f"{model.name} (network)")
     ax.semilogy(x, ref, "s--", label="reference IK per frame")
     ax.semilogy(x, m25, "^--", label="reference, causal mean 25")
-    ax.semilogy([0, 1, 5], [THESIS["ik_clean"], THESIS["ik_1pct"], THESIS["ik_5pct"]], "kx", ms=9, label="thesis")
+    ax.semilogy(
+        [0, 1, 5], [THESIS["ik_clean"], THESIS["ik_1pct"], THESIS["ik_5pct"]], "kx", ms=9, label="thesis"
+    )
     ax.set_xlabel("uniform noise, % of each coordinate's range")
     ax.set_ylabel("angle MSE, rad²")
     ax.grid(True, which="both", alpha=0.3)
@@ -276,7 +393,15 @@ def noise_sweep(rep: Report, model: ikid.Model, recs: list[D.Recording]) -> None
     rep.figure(fig, "ik_noise.png", "IK error vs noise level (thesis split test frames)")
 
 
-def traces(rep: Report, model: ikid.Model, rec: D.Recording, name: str, task_target: str, unit_label: str, scale: float = 1.0) -> None:
+def traces(
+    rep: Report,
+    model: ikid.Model,
+    rec: D.Recording,
+    name: str,
+    task_target: str,
+    unit_label: str,
+    scale: float = 1.0,
+) -> None:
     pred = predict(model, rec)
     true = getattr(rec, task_target)[model.window - 1 :]
     t = np.arange(len(true)) * DT + (model.window - 1) * DT
@@ -292,31 +417,68 @@ def traces(rep: Report, model: ikid.Model, rec: D.Recording, name: str, task_tar
     rep.figure(fig, f"{model.name}_traces.png", name)
 
 
-def torque_section(rep: Report, chain: ikid.Model, idm: ikid.Model, chain_recs: list[D.Recording], id_recs: list[D.Recording]) -> dict[str, Any]:
-    rep.add(f"## Torques: `{chain.name}` (markers → torques, one network) and `{idm.name}` (joint state → torques)", "")
-    rep.add("MSE in N·m² over the three torques and normalized RMSE (% of each DoF's true torque range over the "
-            "scored frames). The classical chain on the same frames: reference IK → causal backward differences → "
-            "Newton–Euler with the subject's *true* parameters. The thesis' chain (its IK net → its ID net, clean "
-            "data) had torque MSE 0.1727 with torques up to ±1.8 N·m; ours reach ±0.5 N·m (a lighter de Leva hand), so "
-            "the range-normalized error is the fair comparison and both are given.", "")
+def torque_section(
+    rep: Report, chain: ikid.Model, idm: ikid.Model, chain_recs: list[D.Recording], id_recs: list[D.Recording]
+) -> dict[str, Any]:
+    rep.add(
+        f"## Torques: `{chain.name}` (markers → torques, one network) and `{idm.name}` (joint state → torques)",
+        "",
+    )
+    rep.add(
+        "MSE in N·m² over the three torques and normalized RMSE (% of each DoF's true torque range over the "
+        "scored frames). The classical chain on the same frames: reference IK → causal backward differences → "
+        "Newton–Euler with the subject's *true* parameters. The thesis' chain (its IK net → its ID net, clean "
+        "data) had torque MSE 0.1727 with torques up to ±1.8 N·m; ours reach ±0.5 N·m (a lighter de Leva hand), so "
+        "the range-normalized error is the fair comparison and both are given.",
+        "",
+    )
     rows, out = [], {}
     for label, level in NOISE_LEVELS.items():
         rs = noisy(chain_recs, level)
         err, true = errors(chain, rs, "test")
         s = summary(err, true, "N*m")
-        cl = [part_error(classical_chain(r, reference_angles(r)), r.tau, "test", chain.window - 1) for r in rs]
+        cl = [
+            part_error(classical_chain(r, reference_angles(r)), r.tau, "test", chain.window - 1) for r in rs
+        ]
         cl_true = np.concatenate([r.tau[part(len(r), "test", chain.window - 1)] for r in rs])
         cs = summary(np.concatenate(cl), cl_true, "N*m")
-        rows.append([label, s["mse"], *[round(v, 2) for v in s["nrmse_pct_of_range"]], cs["mse"], *[round(v, 1) for v in cs["nrmse_pct_of_range"]],
-                     THESIS["chain_torque_mse"] if level == 0 else "", round(THESIS["chain_torque_mse"] / s["mse"]) if level == 0 else ""])
+        rows.append(
+            [
+                label,
+                s["mse"],
+                *[round(v, 2) for v in s["nrmse_pct_of_range"]],
+                cs["mse"],
+                *[round(v, 1) for v in cs["nrmse_pct_of_range"]],
+                THESIS["chain_torque_mse"] if level == 0 else "",
+                round(THESIS["chain_torque_mse"] / s["mse"]) if level == 0 else "",
+            ]
+        )
         out[label] = s
-    rep.table(["noise", f"{chain.name} MSE N·m²", "nRMSE s_p %", "nRMSE e_f %", "nRMSE ad_ab %", "classical chain MSE N·m²",
-               "nRMSE s_p %", "nRMSE e_f %", "nRMSE ad_ab %", "thesis chain MSE", "thesis / ours"], rows)
+    rep.table(
+        [
+            "noise",
+            f"{chain.name} MSE N·m²",
+            "nRMSE s_p %",
+            "nRMSE e_f %",
+            "nRMSE ad_ab %",
+            "classical chain MSE N·m²",
+            "nRMSE s_p %",
+            "nRMSE e_f %",
+            "nRMSE ad_ab %",
+            "thesis chain MSE",
+            "thesis / ours",
+        ],
+        rows,
+    )
     err, true = errors(idm, id_recs, "test")
     s = summary(err, true, "N*m")
-    rep.add(f"`{idm.name}` on the thesis split's test frames (default subject, shoulder 0°, exact joint states): "
-            f"MSE {s['mse']:.2e} N·m², nRMSE " + " / ".join(f"{v:.2f} %" for v in s["nrmse_pct_of_range"])
-            + " (s_p / e_f / ad_ab; target ≤ 5 %). Newton–Euler on the same exact joint states is exact to 1e-7 of the range.", "")
+    rep.add(
+        f"`{idm.name}` on the thesis split's test frames (default subject, shoulder 0°, exact joint states): "
+        f"MSE {s['mse']:.2e} N·m², nRMSE "
+        + " / ".join(f"{v:.2f} %" for v in s["nrmse_pct_of_range"])
+        + " (s_p / e_f / ad_ab; target ≤ 5 %). Newton–Euler on the same exact joint states is exact to 1e-7 of the range.",
+        "",
+    )
     out["id"] = s
     return out
 
@@ -333,22 +495,37 @@ def latency(rep: Report, models: list[ikid.Model]) -> None:
             s.push(f)
             ts.append(time.perf_counter_ns() - t0)
         ts = np.array(ts[m.window :]) / 1e3
-        rows.append([m.name, m.feature_set, m.window, "-".join(map(str, m.layer_widths)), f"{np.median(ts):.2f}", f"{np.percentile(ts, 99):.2f}"])
+        rows.append(
+            [
+                m.name,
+                m.feature_set,
+                m.window,
+                "-".join(map(str, m.layer_widths)),
+                f"{np.median(ts):.2f}",
+                f"{np.percentile(ts, 99):.2f}",
+            ]
+        )
     rep.add("## Latency (Python `Stream.push`, one frame, this machine)", "")
     rep.table(["model", "features", "window", "layers", "p50 µs", "p99 µs"], rows)
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--out", type=Path, default=Path("docs"))
     args = parser.parse_args(argv)
     start = time.perf_counter()
     ik, chain, idm = ikid.load("wrist-ik"), ikid.load("wrist-chain"), ikid.load("wrist-id")
     rep = Report(args.out)
-    rep.add("# ikid evaluation report", "",
-            f"Generated by `make report` (`python -m ikid.training.report`) with ikid {ikid.__version__}, simulator `{ikid.SIMULATOR}`, "
-            f"on {platform.processor() or platform.machine()} / Python {platform.python_version()}. "
-            "Models are the shipped files (`ikid.load(name)`), run by the Rust core.", "")
+    rep.add(
+        "# ikid evaluation report",
+        "",
+        f"Generated by `make report` (`python -m ikid.training.report`) with ikid {ikid.__version__}, simulator `{ikid.SIMULATOR}`, "
+        f"on {platform.processor() or platform.machine()} / Python {platform.python_version()}. "
+        "Models are the shipped files (`ikid.load(name)`), run by the Rust core.",
+        "",
+    )
     held = held_out_sets()
     print("IK ...", flush=True)
     ik_recs = training_recordings(ik)
@@ -357,22 +534,47 @@ def main(argv: list[str] | None = None) -> None:
     octs = octant_section(rep, ik)
     noise_sweep(rep, ik, ik_recs)
     thesis_rec = held[next(iter(held))][0]
-    traces(rep, ik, noisy([thesis_rec], 0.01)[0], "wrist-ik on the thesis protocol (never trained on), shoulder 0°, 1 % noise", "q", "°", 180 / math.pi)
+    traces(
+        rep,
+        ik,
+        noisy([thesis_rec], 0.01)[0],
+        "wrist-ik on the thesis protocol (never trained on), shoulder 0°, 1 % noise",
+        "q",
+        "°",
+        180 / math.pi,
+    )
     print("torques ...", flush=True)
     chain_recs, id_recs = training_recordings(chain), training_recordings(idm)
     tq = torque_section(rep, chain, idm, chain_recs, id_recs)
-    traces(rep, chain, chain_recs[0].part("test"), "wrist-chain on test frames (clean), shoulder 0°", "tau", "N·m")
+    traces(
+        rep,
+        chain,
+        chain_recs[0].part("test"),
+        "wrist-chain on test frames (clean), shoulder 0°",
+        "tau",
+        "N·m",
+    )
     latency(rep, [ik, chain, idm])
     rep.add("## Model cards", "")
     for m in (ik, chain, idm):
         prov = m.card["provenance"]
-        rep.add(f"- `{m.name}`: task {m.task}, {m.feature_set} × {m.window}, layers {m.layer_widths}, trained {prov['epochs']} epochs "
-                f"in {prov['train_seconds']} s on {prov['recordings']} recordings ({prov['frames']} frames, data hash {prov['data_sha256_16']}).")
+        rep.add(
+            f"- `{m.name}`: task {m.task}, {m.feature_set} × {m.window}, layers {m.layer_widths}, trained {prov['epochs']} epochs "
+            f"in {prov['train_seconds']} s on {prov['recordings']} recordings ({prov['frames']} frames, data hash {prov['data_sha256_16']})."
+        )
     rep.add("", f"Report computed in {time.perf_counter() - start:.0f} s.")
     path = rep.write()
-    (args.out / "report" / "results.json").write_text(json.dumps(
-        {"ik": {f"{k[0]} | {k[1]}": v for k, v in ik_res.items()}, "one_marker_missing": occ, "octant_holdout": octs, "torques": tq},
-        indent=1))
+    (args.out / "report" / "results.json").write_text(
+        json.dumps(
+            {
+                "ik": {f"{k[0]} | {k[1]}": v for k, v in ik_res.items()},
+                "one_marker_missing": occ,
+                "octant_holdout": octs,
+                "torques": tq,
+            },
+            indent=1,
+        )
+    )
     print(f"wrote {path}")
 
 

@@ -16,9 +16,10 @@ import copy
 import itertools
 import json
 import random
-import tomllib
 from pathlib import Path
 from typing import Any
+
+import tomllib
 
 from ikid.training.train import load_config, run
 
@@ -30,7 +31,7 @@ def combinations(space: dict[str, list[Any]], mode: str, trials: int, seed: int)
         return grid
     if mode == "random":
         return random.Random(seed).sample(grid, min(trials, len(grid)))
-    raise ValueError(f"[search] mode {mode!r}: use \"grid\" or \"random\"")
+    raise ValueError(f'[search] mode {mode!r}: use "grid" or "random"')
 
 
 def with_overrides(cfg: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
@@ -38,13 +39,17 @@ def with_overrides(cfg: dict[str, Any], overrides: dict[str, Any]) -> dict[str, 
     for dotted, value in overrides.items():
         table, _, key = dotted.partition(".")
         if table not in cfg or not key:
-            raise ValueError(f"search key {dotted!r} must be <table>.<key> of the base config (tables: {list(cfg)})")
+            raise ValueError(
+                f"search key {dotted!r} must be <table>.<key> of the base config (tables: {list(cfg)})"
+            )
         cfg[table][key] = value
     return cfg
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("search", type=Path)
     parser.add_argument("--out", type=Path, default=Path("out/search"))
     args = parser.parse_args()
@@ -56,22 +61,32 @@ def main() -> None:
     out = args.out / args.search.stem
     out.mkdir(parents=True, exist_ok=True)
     rows = []
-    for i, overrides in enumerate(combinations(space, s.get("mode", "grid"), s.get("trials", 8), s.get("seed", 0))):
+    for i, overrides in enumerate(
+        combinations(space, s.get("mode", "grid"), s.get("trials", 8), s.get("seed", 0))
+    ):
         cfg = with_overrides(base, overrides)
         cfg["model"]["name"] = f"{base['model']['name']}-{i:02d}"
         if "minutes" in s:
             cfg["train"]["max_minutes"] = s["minutes"]
         model, _ = run(cfg, out, progress=False, onnx=False)
         prov = model.card["provenance"]
-        row = {"trial": i, **overrides, "best_val_loss": prov["best_val_loss_scaled"], "epochs": prov["epochs"],
-               **{k: v["mse"] for k, v in model.card["metrics"].items()}}
+        row = {
+            "trial": i,
+            **overrides,
+            "best_val_loss": prov["best_val_loss_scaled"],
+            "epochs": prov["epochs"],
+            **{k: v["mse"] for k, v in model.card["metrics"].items()},
+        }
         rows.append(row)
         with open(out / "results.jsonl", "a") as f:
             f.write(json.dumps(row) + "\n")
     rows.sort(key=lambda r: r["best_val_loss"])
     header = list(rows[0])
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(f"{r[h]:.3g}" if isinstance(r[h], float) else str(r[h]) for h in header) + " |" for r in rows]
+    lines += [
+        "| " + " | ".join(f"{r[h]:.3g}" if isinstance(r[h], float) else str(r[h]) for h in header) + " |"
+        for r in rows
+    ]
     (out / "results.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     print("\n".join(lines))
 

@@ -17,12 +17,12 @@ import hashlib
 import json
 import math
 import time
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomllib
 import torch
 from torch import nn
 from tqdm import tqdm
@@ -68,9 +68,13 @@ def load_config(path: str | Path) -> dict[str, Any]:
     if policy not in ("refuse", "fill"):
         raise ValueError(f"{path}: [model] missing_markers {policy!r} is not 'refuse' or 'fill'")
     if cfg["model"].get("output_offset") not in (None, "newest_features"):
-        raise ValueError(f"{path}: [model] output_offset {cfg['model']['output_offset']!r} is not 'newest_features' (or absent)")
+        raise ValueError(
+            f"{path}: [model] output_offset {cfg['model']['output_offset']!r} is not 'newest_features' (or absent)"
+        )
     if cfg["train"]["occlusion_bursts_per_s"] > 0 and policy != "fill":
-        raise ValueError(f"{path}: [train] occlusion_bursts_per_s needs [model] missing_markers = 'fill' (occluded frames are filled)")
+        raise ValueError(
+            f"{path}: [train] occlusion_bursts_per_s needs [model] missing_markers = 'fill' (occluded frames are filled)"
+        )
     return cfg
 
 
@@ -84,11 +88,17 @@ def build_recordings(data_cfg: dict[str, Any]) -> list[D.Recording]:
         return D.load_recordings(data_cfg["folder"])
     common = {k: data_cfg[k] for k in ("shoulders_deg", "length_scales")}
     specs = D.recording_set(
-        "random", seeds=data_cfg.get("seeds", [1000]), duration=data_cfg.get("duration", 60.0),
-        octants=data_cfg.get("octants"), mass_follows_length=data_cfg.get("mass_follows_length", True), **common,
+        "random",
+        seeds=data_cfg.get("seeds", [1000]),
+        duration=data_cfg.get("duration", 60.0),
+        octants=data_cfg.get("octants"),
+        mass_follows_length=data_cfg.get("mass_follows_length", True),
+        **common,
     )
     if data_cfg.get("include_thesis", False):
-        specs += D.recording_set("thesis", seeds=[0], mass_follows_length=data_cfg.get("mass_follows_length", True), **common)
+        specs += D.recording_set(
+            "thesis", seeds=[0], mass_follows_length=data_cfg.get("mass_follows_length", True), **common
+        )
     return D.simulate_all(specs)
 
 
@@ -97,7 +107,9 @@ def check_targets(recs: list[D.Recording], task: str) -> None:
     missing = [r.name for r in recs if not np.isfinite(D.target(r, task)).all()]
     if missing:
         what = "torques (a same-stem .sto)" if D.TASKS[task] == "tau" else "angles"
-        raise ikid.InputError(f"task {task!r} learns {what}, missing in {len(missing)} recording(s): {', '.join(missing[:5])}")
+        raise ikid.InputError(
+            f"task {task!r} learns {what}, missing in {len(missing)} recording(s): {', '.join(missing[:5])}"
+        )
 
 
 def data_hash(recs: list[D.Recording]) -> str:
@@ -129,10 +141,14 @@ class Trained:
 def _noisy(recs: list[D.Recording], tcfg: dict[str, Any], rng: np.random.Generator) -> list[D.Recording]:
     """Fresh noise (a level drawn per recording) and, if configured, occlusion bursts."""
     levels = tcfg["noise_levels"]
-    out = [D.add_noise(r, tcfg["noise_kind"], float(rng.choice(levels)), int(rng.integers(2**62))) for r in recs]
+    out = [
+        D.add_noise(r, tcfg["noise_kind"], float(rng.choice(levels)), int(rng.integers(2**62))) for r in recs
+    ]
     if tcfg["occlusion_bursts_per_s"] > 0:
         lo, hi = tcfg["occlusion_s"]
-        out = [D.add_occlusion(r, tcfg["occlusion_bursts_per_s"], lo, hi, int(rng.integers(2**62))) for r in out]
+        out = [
+            D.add_occlusion(r, tcfg["occlusion_bursts_per_s"], lo, hi, int(rng.integers(2**62))) for r in out
+        ]
     return out
 
 
@@ -143,7 +159,9 @@ def newest_features(x: np.ndarray, feature_len: int, n: int) -> np.ndarray:
     return x[:, start : start + n]
 
 
-def train(cfg: dict[str, Any], recs: list[D.Recording], log_path: Path | None = None, progress: bool = True) -> Trained:
+def train(
+    cfg: dict[str, Any], recs: list[D.Recording], log_path: Path | None = None, progress: bool = True
+) -> Trained:
     """Trains the ``[model]`` of ``cfg`` on the train parts of ``recs``; early stopping on the val parts."""
     m, t = cfg["model"], cfg["train"]
     task, fs, window = m["task"], m["feature_set"], int(m.get("window", 5))
@@ -163,12 +181,16 @@ def train(cfg: dict[str, Any], recs: list[D.Recording], log_path: Path | None = 
     x0, y0 = D.stack_windows(train_parts, task, fs, window, stride=7)
     inp = Affine.minmax(x0.min(0), x0.max(0))
     if offset:
-        x0, y0 = D.stack_windows(_noisy(train_parts, t, np.random.default_rng(t["seed"] + 2)), task, fs, window, stride=7)
+        x0, y0 = D.stack_windows(
+            _noisy(train_parts, t, np.random.default_rng(t["seed"] + 2)), task, fs, window, stride=7
+        )
     r0 = targets(x0, y0)
     out_fwd = Affine.minmax(r0.min(0), r0.max(0))
     del x0, y0, r0
     # A fixed validation set with the same noise mixture (seeded), so early stopping compares like with like.
-    xv, yv = D.stack_windows(_noisy(val_parts, t, np.random.default_rng(t["seed"] + 1)), task, fs, window, stride=5)
+    xv, yv = D.stack_windows(
+        _noisy(val_parts, t, np.random.default_rng(t["seed"] + 1)), task, fs, window, stride=5
+    )
     yv = targets(xv, yv)
     xv_t = torch.as_tensor(xv * inp.scale + inp.shift)
     yv_t = torch.as_tensor(yv * out_fwd.scale + out_fwd.shift)
@@ -182,10 +204,18 @@ def train(cfg: dict[str, Any], recs: list[D.Recording], log_path: Path | None = 
     best, best_state, since_best, log = math.inf, copy.deepcopy(net.state_dict()), 0, []
     start = time.perf_counter()
     budget = 60.0 * t["max_minutes"]
-    bar = tqdm(total=int(budget), unit="s", desc=f"{m['name']}", disable=not progress, bar_format="{l_bar}{bar}| {n:.0f}/{total} s {postfix}")
+    bar = tqdm(
+        total=int(budget),
+        unit="s",
+        desc=f"{m['name']}",
+        disable=not progress,
+        bar_format="{l_bar}{bar}| {n:.0f}/{total} s {postfix}",
+    )
     for epoch in range(t["max_epochs"]):
         # Fresh noise and a fresh subsample of windows every epoch.
-        x, y = D.stack_windows(_noisy(train_parts, t, rng), task, fs, window, stride=stride, offset=int(rng.integers(stride)))
+        x, y = D.stack_windows(
+            _noisy(train_parts, t, rng), task, fs, window, stride=stride, offset=int(rng.integers(stride))
+        )
         y = targets(x, y)
         xs = torch.as_tensor(x * inp.scale + inp.shift)
         ys = torch.as_tensor(y * out_fwd.scale + out_fwd.shift)
@@ -204,7 +234,13 @@ def train(cfg: dict[str, Any], recs: list[D.Recording], log_path: Path | None = 
             val = nn.functional.mse_loss(net(xv_t), yv_t).item()
         sched.step(val)
         elapsed = time.perf_counter() - start
-        entry = {"epoch": epoch, "train_loss": total / len(xs), "val_loss": val, "lr": opt.param_groups[0]["lr"], "seconds": elapsed}
+        entry = {
+            "epoch": epoch,
+            "train_loss": total / len(xs),
+            "val_loss": val,
+            "lr": opt.param_groups[0]["lr"],
+            "seconds": elapsed,
+        }
         log.append(entry)
         if log_path:
             with open(log_path, "a") as f:
@@ -222,7 +258,9 @@ def train(cfg: dict[str, Any], recs: list[D.Recording], log_path: Path | None = 
     return Trained(net.eval(), inp, out_fwd.inverse(), log, time.perf_counter() - start, best)
 
 
-def spec_for(cfg: dict[str, Any], recs: list[D.Recording], trained: Trained, metrics: dict[str, Any] | None = None) -> ModelSpec:
+def spec_for(
+    cfg: dict[str, Any], recs: list[D.Recording], trained: Trained, metrics: dict[str, Any] | None = None
+) -> ModelSpec:
     m = cfg["model"]
     return ModelSpec(
         name=m["name"],
@@ -233,7 +271,10 @@ def spec_for(cfg: dict[str, Any], recs: list[D.Recording], trained: Trained, met
         missing_markers=m["missing_markers"],
         output_offset=m.get("output_offset"),
         output_names=ikid.coordinate_names(),
-        scaling={"input": "minmax(-1,1) on clean training windows", "output": "minmax(-1,1) on training targets"},
+        scaling={
+            "input": "minmax(-1,1) on clean training windows",
+            "output": "minmax(-1,1) on training targets",
+        },
         provenance={
             "simulator": None if "lab" in cfg["data"] else ikid.SIMULATOR,
             "data": cfg["data"],
@@ -266,23 +307,42 @@ def run(cfg: dict[str, Any], out: Path, progress: bool = True, onnx: bool = True
     t0 = time.perf_counter()
     recs = build_recordings(cfg["data"])
     check_targets(recs, cfg["model"]["task"])
-    print(f"{name}: {len(recs)} recordings, {sum(len(r) for r in recs)} frames ({time.perf_counter() - t0:.1f} s to build)", flush=True)
+    print(
+        f"{name}: {len(recs)} recordings, {sum(len(r) for r in recs)} frames ({time.perf_counter() - t0:.1f} s to build)",
+        flush=True,
+    )
     trained = train(cfg, recs, log_path, progress)
     path = out / f"{name}.safetensors"
-    model = export(trained.net, path, spec_for(cfg, recs, trained), trained.input_scaling, trained.output_scaling)
+    model = export(
+        trained.net, path, spec_for(cfg, recs, trained), trained.input_scaling, trained.output_scaling
+    )
     metrics = card_metrics(model, recs)
-    model = export(trained.net, path, spec_for(cfg, recs, trained, metrics), trained.input_scaling, trained.output_scaling)
+    model = export(
+        trained.net,
+        path,
+        spec_for(cfg, recs, trained, metrics),
+        trained.input_scaling,
+        trained.output_scaling,
+    )
     if onnx:
         offset = D.feature_len(cfg["model"]["feature_set"]) if cfg["model"].get("output_offset") else 0
-        export_onnx(WindowModel(trained.net, trained.input_scaling, trained.output_scaling, offset), out / f"{name}.onnx")
+        export_onnx(
+            WindowModel(trained.net, trained.input_scaling, trained.output_scaling, offset),
+            out / f"{name}.onnx",
+        )
     result = {"model": str(path), "epochs": len(trained.log), "seconds": trained.seconds, "metrics": metrics}
     (run_dir / "result.json").write_text(json.dumps(result, indent=2))
-    print(f"{name}: {len(trained.log)} epochs in {trained.seconds:.0f} s -> {path}; test metrics {json.dumps(metrics)}", flush=True)
+    print(
+        f"{name}: {len(trained.log)} epochs in {trained.seconds:.0f} s -> {path}; test metrics {json.dumps(metrics)}",
+        flush=True,
+    )
     return model, path
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("config", type=Path, nargs="+", help="TOML config(s), trained one after the other")
     parser.add_argument("--out", type=Path, default=Path("out/models"))
     parser.add_argument("--minutes", type=float, help="override [train] max_minutes")
