@@ -174,7 +174,7 @@ def check_held_out(specs: list[dict[str, Any]]) -> dict[str, Any]:
 def simulate(specs: list[dict[str, Any]]) -> list[D.Recording]:
     clean = [{k: v for k, v in s.items() if k != "family"} for s in specs]
     recs = D.simulate_all(clean)
-    for r, s in zip(recs, specs):
+    for r, s in zip(recs, specs, strict=True):
         r.meta["family"] = s.get("family", "validation")
     return recs
 
@@ -624,7 +624,7 @@ def tune_tracker(val: list[D.Recording], ekf_grid: dict[str, dict[str, Any]]) ->
         row = {}
         for lvl in NOISE:
             eq, et = [], []
-            for rec, r in zip(val, noisy[lvl]):
+            for rec, r in zip(val, noisy[lvl], strict=True):
                 out = run_tracker(r, s)
                 eq.append(out["q"][SKIP:] - rec.q[SKIP:])
                 et.append(out["tau"][SKIP:] - rec.tau[SKIP:])
@@ -894,12 +894,12 @@ def markdown(res: dict[str, Any]) -> str:
     spread = max(
         abs(
             math.log(
-                tun["grid"][f"{nf:g}/{ef:g}"]["levels"][l][k]
-                / tun["grid"][f"{nf:g}/{efs[0]:g}"]["levels"][l][k]
+                tun["grid"][f"{nf:g}/{ef:g}"]["levels"][lvl][k]
+                / tun["grid"][f"{nf:g}/{efs[0]:g}"]["levels"][lvl][k]
             )
         )
         for nf, ef in EKF_GRID
-        for l in NOISE
+        for lvl in NOISE
         for k in ("angle_mse", "torque_mse")
     )
     lines.extend(
@@ -926,9 +926,9 @@ def markdown(res: dict[str, Any]) -> str:
         )
         lines.append(
             f"| {nf:g}{mark} | "
-            + " | ".join(fmt(lv[l]["angle_mse"]) for l in NOISE)
+            + " | ".join(fmt(lv[lvl]["angle_mse"]) for lvl in NOISE)
             + " | "
-            + " | ".join(fmt(lv[l]["torque_mse"]) for l in NOISE)
+            + " | ".join(fmt(lv[lvl]["torque_mse"]) for lvl in NOISE)
             + " |"
         )
     lines.append("")
@@ -945,17 +945,17 @@ def markdown(res: dict[str, Any]) -> str:
         mark = " (chosen)" if float(key) == res["tracker_tuning"]["chosen"] else ""
         lines.append(
             f"| {key}{mark} | "
-            + " | ".join(fmt(lv[l]["angle_mse"]) for l in NOISE)
+            + " | ".join(fmt(lv[lvl]["angle_mse"]) for lvl in NOISE)
             + " | "
-            + " | ".join(fmt(lv[l]["torque_mse"]) for l in NOISE)
+            + " | ".join(fmt(lv[lvl]["torque_mse"]) for lvl in NOISE)
             + f" | {cell['worst_ratio_to_best_ekf']:.2f} |"
         )
     be = res["tracker_tuning"]["best_ekf"]
     lines.append(
         "| best EKF grid point, per entry | "
-        + " | ".join(fmt(be[l]["angle_mse"]) for l in NOISE)
+        + " | ".join(fmt(be[lvl]["angle_mse"]) for lvl in NOISE)
         + " | "
-        + " | ".join(fmt(be[l]["torque_mse"]) for l in NOISE)
+        + " | ".join(fmt(be[lvl]["torque_mse"]) for lvl in NOISE)
         + " | |"
     )
     lines.append("")

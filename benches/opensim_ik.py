@@ -87,7 +87,7 @@ def main() -> None:
         "model": {"name": model.name, "window": model.window, "feature_set": model.feature_set},
         "trials": [
             {"name": r.name, "frames": len(r), "shoulder_deg": s["shoulder_deg"], "seed": s["seed"]}
-            for r, s in zip(clean, specs)
+            for r, s in zip(clean, specs, strict=True)
         ],
         "methods": METHODS,
         "results": results,

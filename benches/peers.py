@@ -17,6 +17,7 @@ Results: a section of docs/performance.md between the `peers` markers, and targe
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import re
@@ -60,7 +61,7 @@ def networks() -> list[tuple[str, ikid.Model, nn.Sequential, Path]]:
         n_in = 5 * ikid.feature_set_info(fs)["feature_len"]
         widths = [n_in, *hidden, 3]
         seq: list[nn.Module] = []
-        for a, b in zip(widths, widths[1:]):
+        for a, b in itertools.pairwise(widths):
             seq += [nn.Linear(a, b), nn.ReLU()]
         net = nn.Sequential(*seq[:-1]).eval()
         task = "id" if fs == "joint_state" else "ik"
@@ -79,7 +80,7 @@ def networks() -> list[tuple[str, ikid.Model, nn.Sequential, Path]]:
         reference = load_torch(path)
         nets.append((name, model, reference.net, reference))
     result = []
-    for label, model, net, whole in nets:
+    for label, model, _net, whole in nets:
         onnx_path = OUT / f"{label}.onnx"
         export_onnx(whole, onnx_path)
         result.append((label, model, whole.eval(), onnx_path))
@@ -187,7 +188,7 @@ def measure(label: str, model: ikid.Model, net: nn.Sequential, onnx_path: Path) 
     r: dict = {
         "network": label,
         "widths": model.layer_widths,
-        "macs": int(sum(a * b for a, b in zip(model.layer_widths, model.layer_widths[1:]))),
+        "macs": int(sum(a * b for a, b in itertools.pairwise(model.layer_widths))),
     }
 
     stream = model.stream()
@@ -258,10 +259,14 @@ def measure(label: str, model: ikid.Model, net: nn.Sequential, onnx_path: Path) 
     )
     for threads in (1, 2):
         r[f"batch_ikid_{threads}t"] = per_sample_us(
-            lambda: model.predict(many_frames, threads=threads), BATCH
+            lambda: model.predict(many_frames, threads=threads),  # noqa: B023 (called before the loop moves on)
+            BATCH,
         )
         s = ort_session(onnx_path, threads)
-        r[f"batch_ort_{threads}t"] = per_sample_us(lambda: s.run(None, {name: xb}), BATCH)
+        r[f"batch_ort_{threads}t"] = per_sample_us(
+            lambda: s.run(None, {name: xb}),  # noqa: B023 (called before the loop moves on)
+            BATCH,
+        )
         torch.set_num_threads(threads)
         with torch.inference_mode():
             r[f"batch_torch_{threads}t"] = per_sample_us(lambda: net(xbt), BATCH)
@@ -295,7 +300,7 @@ def table(results: list[dict], ghz: float) -> list[str]:
         floor = 2 * r["macs"] / peak_1 * 1e6
         base = r["ikid_python_push"]["p50_us"]
 
-        def cell(k: str, ratio: bool = True) -> str:
+        def cell(k: str, ratio: bool = True, r: dict = r, base: float = base) -> str:
             v = r[k]
             s = f"{v['p50_us']:.2f} / {v['p99_us']:.1f}"
             return s + (f" ({v['p50_us'] / base:.1f}×)" if ratio else "")

@@ -38,20 +38,15 @@ def main() -> None:
                     m = ikid.forward_markers(qq, SHOULDER, scale, scale**3, shift)
                     return _native.noise_uniform(m, noise, s) if noise else m
 
-                def mse(frames, cal=None):
+                def mse(frames, cal=None, q=q):
                     run = run_model(model, frames, np.arange(len(frames)) / 1000.0, calibration=cal)
                     return float(np.mean((run.values - q[run.frame]) ** 2))
 
-                def calibration(with_noise):
-                    f = (
-                        markers
-                        if with_noise
-                        else (
-                            lambda qq, s, shift=shift, scale=scale: ikid.forward_markers(
-                                qq, SHOULDER, scale, scale**3, shift
-                            )
-                        )
-                    )
+                def calibration(with_noise, shift=shift, scale=scale):
+                    def exact(qq, s):
+                        return ikid.forward_markers(qq, SHOULDER, scale, scale**3, shift)
+
+                    f = markers if with_noise else exact
                     return ikid.calibrate(
                         f(np.zeros((2000, 3)), 2),
                         {"ra_wr_s_p": f(single(0), 3), "ra_wr_e_f": f(single(1), 4)},

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import sys
 from pathlib import Path
@@ -40,7 +41,9 @@ def make_model(feature_set: str = "markers", window: int = 5, hidden=(32, 32), s
     rng = np.random.default_rng(seed)
     n_in = window * ikid.feature_set_info(feature_set)["feature_len"]
     widths = [n_in, *hidden, 3]
-    weights = [rng.uniform(-1, 1, (o, i)).astype(np.float32) / np.sqrt(i) for i, o in zip(widths, widths[1:])]
+    weights = [
+        rng.uniform(-1, 1, (o, i)).astype(np.float32) / np.sqrt(i) for i, o in itertools.pairwise(widths)
+    ]
     biases = [rng.uniform(-0.1, 0.1, o).astype(np.float32) for o in widths[1:]]
     acts = ["relu"] * len(hidden) + ["identity"]
     card = make_card(feature_set, window, acts)

@@ -51,7 +51,9 @@ def test_forward_kinematics_and_inverse_dynamics_match_ikid(tmp_path, shoulder, 
     ).max()
     assert fk_err <= FK_TOL_M, f"biorbd markers differ from ikid's by {fk_err:.3g} m"
 
-    tau_biorbd = np.array([model.InverseDynamics(a, b, c).to_array() for a, b, c in zip(q, qd, qdd)])
+    tau_biorbd = np.array(
+        [model.InverseDynamics(a, b, c).to_array() for a, b, c in zip(q, qd, qdd, strict=True)]
+    )
     tau_ikid = ikid.reference_id(
         q, qd, qdd, shoulder_flexion=shoulder, length_scale=length_scale, mass_scale=mass_scale
     )
@@ -66,7 +68,7 @@ def test_gravity_only_torques_match(tmp_path):
     model = load(tmp_path, shoulder_flexion=SHOULDERS[1])
     q, _, _ = random_states(seed=5)
     zero = np.zeros_like(q)
-    tau_biorbd = np.array([model.InverseDynamics(a, z, z).to_array() for a, z in zip(q, zero)])
+    tau_biorbd = np.array([model.InverseDynamics(a, z, z).to_array() for a, z in zip(q, zero, strict=True)])
     tau_ikid = ikid.reference_id(q, zero, zero, shoulder_flexion=SHOULDERS[1])
     assert np.abs(tau_ikid).max() > 0.05
     assert np.abs(tau_biorbd - tau_ikid).max() <= ID_TOL_NM

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, make_model, marker_frames
 
 import ikid
+from conftest import ROOT, make_model, marker_frames
 
 BIN = ROOT / "target" / "c"
 VALGRIND = [

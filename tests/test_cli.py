@@ -209,7 +209,7 @@ def lab(tmp_path_factory) -> tuple[Path, Path]:
         write_lab_trial(root / "train", f"s01_t{k}", 9910 + k, 4.0)
     write_lab_trial(root / "test", "s01_t9", 9919, 2.0)
     mapping = root / "lab.toml"
-    mapping.write_text(MarkerMap(dict(zip(ikid.marker_names(), LAB_LABELS))).to_toml())
+    mapping.write_text(MarkerMap(dict(zip(ikid.marker_names(), LAB_LABELS, strict=True))).to_toml())
     return root, mapping
 
 
@@ -413,7 +413,7 @@ def test_bench_prints_latency_and_throughput(capsys, name, frames):
     assert headroom == pytest.approx(2000 / p99, rel=0.01, abs=1), lines[1]  # p99 printed to 0.01 µs
     # One line per thread count, each a time per frame and the rate it implies.
     assert len(lines) == 4
-    for threads, line in zip((1, 2), lines[2:]):
+    for threads, line in zip((1, 2), lines[2:], strict=True):
         m = re.fullmatch(rf"  predict, {threads} threads?: {NUM} µs per frame \({NUM} M frames/s\)", line)
         assert m, line
         us, rate = map(float, m.groups())

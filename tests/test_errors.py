@@ -9,9 +9,9 @@ import os
 
 import numpy as np
 import pytest
-from conftest import ROOT, make_model, marker_frames
 
 import ikid
+from conftest import ROOT, make_model, marker_frames
 
 LIB = ROOT / "target" / "release" / "libikid.so"
 # ikid_status values (include/ikid.h).

@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
-from conftest import marker_frames
 
 import ikid
+from conftest import marker_frames
 
 
 def test_feature_set_info_sizes():

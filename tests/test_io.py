@@ -19,7 +19,9 @@ from ikid.pipeline import run_model
 
 LAB_LABELS = ("R_RSTY", "R_USTY", "R_FA", "R_MCP2", "R_MCP5", "R_MCB3")
 LAB_MAP = (
-    "[markers]\n" + "\n".join(f'{m} = "{lab}"' for m, lab in zip(ikid.marker_names(), LAB_LABELS)) + "\n"
+    "[markers]\n"
+    + "\n".join(f'{m} = "{lab}"' for m, lab in zip(ikid.marker_names(), LAB_LABELS, strict=True))
+    + "\n"
 )
 
 

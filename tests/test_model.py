@@ -6,9 +6,9 @@ import threading
 
 import numpy as np
 import pytest
-from conftest import make_model, marker_frames
 
 import ikid
+from conftest import make_model, marker_frames
 
 
 def test_predict_shape_and_alignment(model, frames):
@@ -204,7 +204,6 @@ def test_input_far_outside_training_range_is_an_error_not_nan(frames):
     import json
 
     from conftest import make_card
-
     from ikid import _native
 
     # A single linear layer summing 90 inputs: 90 x 1e37 overflows float32.

@@ -137,7 +137,8 @@ def test_custom_marker_set_round_trips(osim, tmp_path):
     shift = np.random.default_rng(3).uniform(-0.02, 0.02, (6, 3))
     labels = ["R_RSTY", "R_USTY", "R_FARM", "R_MCP2", "R_MCP5", "R_HAND"]
     custom = [
-        (lab, m["segment"], list(np.add(m["offset"], d))) for lab, m, d in zip(labels, body["markers"], shift)
+        (lab, m["segment"], list(np.add(m["offset"], d)))
+        for lab, m, d in zip(labels, body["markers"], shift, strict=True)
     ]
     path = ios.write_osim(tmp_path / "c.osim", length_scale=0.9, shoulder_flexion=-0.35, markers=custom)
     model = osim.Model(str(path))
@@ -267,13 +268,18 @@ def test_opensim_dataset_example_writes_consistent_trials(osim, tmp_path):
         # The motion is the manifest's sinusoids; ikid's torques on their analytic derivatives.
         sines = trial["sines"]
         w = [2 * np.pi * np.array(s_["freq_hz"]) for s_ in sines]
-        arg = [np.outer(t, w_) + s_["phase"] for w_, s_ in zip(w, sines)]
-        q_exact = np.column_stack([s_["offset"] + np.sin(a) @ s_["amplitude"] for a, s_ in zip(arg, sines)])
+        arg = [np.outer(t, w_) + s_["phase"] for w_, s_ in zip(w, sines, strict=True)]
+        q_exact = np.column_stack(
+            [s_["offset"] + np.sin(a) @ s_["amplitude"] for a, s_ in zip(arg, sines, strict=True)]
+        )
         qd = np.column_stack(
-            [np.cos(a) @ (np.array(s_["amplitude"]) * w_) for a, w_, s_ in zip(arg, w, sines)]
+            [np.cos(a) @ (np.array(s_["amplitude"]) * w_) for a, w_, s_ in zip(arg, w, sines, strict=True)]
         )
         qdd = np.column_stack(
-            [-np.sin(a) @ (np.array(s_["amplitude"]) * w_**2) for a, w_, s_ in zip(arg, w, sines)]
+            [
+                -np.sin(a) @ (np.array(s_["amplitude"]) * w_**2)
+                for a, w_, s_ in zip(arg, w, sines, strict=True)
+            ]
         )
         assert np.abs(q_exact - q).max() < 1e-9
         _, tau = io.read_sto(out / f"{trial['name']}.sto")

@@ -3,6 +3,8 @@ through Python, batch and stream) and in ONNX, to 1e-5 relative on random window
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -69,7 +71,7 @@ def test_exported_model_matches_torch(tmp_path, feature_set, hidden):
     n_in = window * features.shape[1]
     widths = [n_in, *hidden, 3]
     layers: list[nn.Module] = []
-    for i, (a, b) in enumerate(zip(widths, widths[1:])):
+    for i, (a, b) in enumerate(itertools.pairwise(widths)):
         layers.append(nn.Linear(a, b))
         if i < len(hidden):
             layers.append(nn.ReLU())

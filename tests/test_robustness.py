@@ -6,17 +6,18 @@ issue 7 quotes them)."""
 
 from __future__ import annotations
 
+import itertools
 import re
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import make_model
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 import ikid
+from conftest import make_model
 
 CASES = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 MODEL = make_model("angles", window=3, hidden=(8,))
@@ -164,9 +165,9 @@ def refusals_change_nothing(frames, policy, times=None) -> list[int]:
     the first stream (so the next refused frame is refused alike). Returns the refused frames."""
     times = [None] * len(frames) if times is None else times
     seen = MODEL.stream(missing_markers=policy)
-    results = [outcome(seen, f, t) for f, t in zip(frames, times)]
+    results = [outcome(seen, f, t) for f, t in zip(frames, times, strict=True)]
     gone = [i for i, r in enumerate(results) if refused(r)]
-    for k, end in zip(gone, [*gone[1:], len(frames) - 1]):
+    for k, end in itertools.pairwise([*gone, len(frames) - 1]):
         never = MODEL.stream(missing_markers=policy)
         accepted = [i for i in range(k) if i not in gone]
         if times[0] is None:  # the same as pushing them one by one (stream.rs), faster

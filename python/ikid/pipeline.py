@@ -113,7 +113,7 @@ def run_model(
     rows, index, filled = [], [], []
     refused: Counter = Counter()
     bar = _progress(len(frames), source) if progress else None
-    for i, (t, frame) in enumerate(zip(time, frames)):
+    for i, (t, frame) in enumerate(zip(time, frames, strict=True)):
         if bar is not None and i % 1000 == 999:
             bar.update(1000)
         try:

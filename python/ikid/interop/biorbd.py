@@ -156,7 +156,7 @@ def _local_axis(axis: Sequence[float]) -> tuple[str, Matrix]:
         raise ValueError(f"coordinate axis {axis!r} has zero length")
     a = [v / norm for v in a]
     for letter, e in _AXES.items():
-        if all(abs(x - y) < 1e-15 for x, y in zip(a, e)):
+        if all(abs(x - y) < 1e-15 for x, y in zip(a, e, strict=True)):
             return letter, _identity()
     # Otherwise turn local x onto the axis: columns (a, b, a × b) form a proper rotation.
     helper = (0.0, 0.0, 1.0) if abs(a[2]) < 0.9 else (1.0, 0.0, 0.0)

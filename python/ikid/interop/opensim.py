@@ -216,7 +216,7 @@ def inverse_dynamics(model_path: str | os.PathLike[str], q: Any, qd: Any, qdd: A
     coords = model.getCoordinateSet()
     nc = coords.getSize()
     arrays = [np.atleast_2d(np.asarray(a, np.float64)) for a in (q, qd, qdd)]
-    for what, a in zip(("q", "qd", "qdd"), arrays):
+    for what, a in zip(("q", "qd", "qdd"), arrays, strict=True):
         if a.shape != (len(arrays[0]), nc):
             raise ValueError(f"{what}: expected ({len(arrays[0])}, {nc}) values, got shape {a.shape}")
     if model.getNumSpeeds() != nc:
@@ -228,7 +228,7 @@ def inverse_dynamics(model_path: str | os.PathLike[str], q: Any, qd: Any, qdd: A
     solver = osim.InverseDynamicsSolver(model)
     udot = osim.Vector(nc, 0.0)
     out = np.empty((len(arrays[0]), nc))
-    for i, (qi, qdi, qddi) in enumerate(zip(*arrays)):
+    for i, (qi, qdi, qddi) in enumerate(zip(*arrays, strict=True)):
         for j in range(nc):
             coords.get(j).setValue(state, float(qi[j]), False)
             coords.get(j).setSpeedValue(state, float(qdi[j]))

@@ -132,6 +132,6 @@ def write_csv_markers(
     buf = io.StringIO()
     buf.write(f"# units={units}\n")
     buf.write(",".join(["time", *(f"{lab}.{a}" for lab in labels for a in "xyz")]) + "\n")
-    for t, row in zip(time, values):
+    for t, row in zip(time, values, strict=True):
         buf.write(f"{t:.6f}," + ",".join("" if not np.isfinite(v) else f"{v:.10g}" for v in row) + "\n")
     return write_text_atomic(path, buf.getvalue())

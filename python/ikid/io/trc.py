@@ -33,7 +33,7 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
         raise FileFormatError(f"{src}:1: not a TRC file (expected a 'PathFileType' line and a 5-line header)")
     keys = lines[1].split("\t")
     values = lines[2].split("\t")
-    header = {k.strip(): v.strip() for k, v in zip(keys, values) if k.strip()}
+    header = {k.strip(): v.strip() for k, v in zip(keys, values, strict=False) if k.strip()}
     for key in ("DataRate", "NumFrames", "NumMarkers", "Units"):
         if key not in header:
             raise FileFormatError(f"{src}:2: header has no {key} (has {', '.join(header) or 'nothing'})")

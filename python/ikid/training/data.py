@@ -306,7 +306,7 @@ def load_lab_recordings(
         usable = np.isfinite(filled).all(axis=1) & np.isfinite(q).all(axis=1)
         # Contiguous runs of usable frames.
         edges = np.flatnonzero(np.diff(np.concatenate([[0], usable.astype(np.int8), [0]])))
-        for start, stop in zip(edges[::2], edges[1::2]):
+        for start, stop in zip(edges[::2], edges[1::2], strict=True):
             if stop - start < MIN_LAB_FRAMES:
                 continue
             sl = slice(start, stop)

@@ -374,9 +374,16 @@ def noise_sweep(rep: Report, model: ikid.Model, recs: list[D.Recording]) -> None
         rs = noisy(recs, lvl, seed=EVAL_SEED + 500)
         net.append(float(np.mean(errors(model, rs, "test")[0] ** 2)))
         ra = [reference_angles(r) for r in rs]
-        ref.append(mse_of([part_error(a, r.q, "test", model.window - 1) for a, r in zip(ra, rs)]))
+        ref.append(
+            mse_of([part_error(a, r.q, "test", model.window - 1) for a, r in zip(ra, rs, strict=True)])
+        )
         m25.append(
-            mse_of([part_error(causal_mean(a, 25), r.q, "test", model.window - 1) for a, r in zip(ra, rs)])
+            mse_of(
+                [
+                    part_error(causal_mean(a, 25), r.q, "test", model.window - 1)
+                    for a, r in zip(ra, rs, strict=True)
+                ]
+            )
         )
     fig, ax = plt.subplots(figsize=(6, 3.6))
     x = 100 * np.array(levels)

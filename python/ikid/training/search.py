@@ -26,7 +26,7 @@ from ikid.training.train import load_config, run
 
 def combinations(space: dict[str, list[Any]], mode: str, trials: int, seed: int) -> list[dict[str, Any]]:
     keys = list(space)
-    grid = [dict(zip(keys, values)) for values in itertools.product(*(space[k] for k in keys))]
+    grid = [dict(zip(keys, values, strict=True)) for values in itertools.product(*(space[k] for k in keys))]
     if mode == "grid":
         return grid
     if mode == "random":
