@@ -84,29 +84,24 @@ impl Tracker {
         let tracker = &mut self.inner;
         let (out, missing, noise, refined, start, n) =
             with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |values, n| {
+                // The core's `run` does the work; here its per-frame results are laid out as
+                // four (n, 3) blocks and three (n,) arrays.
                 let mut out = vec![f64::NAN; 4 * n * N_COORDINATES];
                 let mut missing = vec![0u8; n];
                 let mut noise = vec![f64::NAN; n];
                 let mut refined = vec![false; n];
-                let mut start = None;
-                py.detach(|| -> ikid::Result<()> {
-                    for (i, frame) in values.chunks_exact(MARKER_FRAME_LEN).enumerate() {
-                        let result = tracker.push(frame).map_err(|e| e.renumbered(i))?;
-                        if let Some(o) = result {
-                            start.get_or_insert(i);
-                            for (k, row) in rows(&o).iter().enumerate() {
+                let start = py
+                    .detach(|| {
+                        tracker.run(values, |i, o, _| {
+                            for (k, row) in rows(o).iter().enumerate() {
                                 out[(k * n + i) * N_COORDINATES..(k * n + i + 1) * N_COORDINATES].copy_from_slice(row);
                             }
                             missing[i] = o.missing;
                             noise[i] = o.noise;
                             refined[i] = o.refined;
-                        } else {
-                            missing[i] = ikid::tracker::missing_markers(frame);
-                        }
-                    }
-                    Ok(())
-                })
-                .py_err()?;
+                        })
+                    })
+                    .py_err()?;
                 Ok((out, missing, noise, refined, start, n))
             })?;
         let Some(start) = start else {

@@ -141,6 +141,31 @@ pub struct TrackerOutput {
     pub noise: f64,
 }
 
+/// Values per frame in [`TrackerOutput::values`]: q, q̇, q̈ and τ, three each.
+pub const TRACKER_VALUES: usize = 4 * N_COORDINATES;
+
+impl TrackerOutput {
+    /// What [`Tracker::run`] reports for a frame without an estimate (before the filter
+    /// started): NaN angles, velocities, accelerations, torques and noise, not refined, and the
+    /// frame's own `missing` markers.
+    pub fn waiting(missing: u8) -> Self {
+        let nan = [f64::NAN; N_COORDINATES];
+        TrackerOutput {
+            state: JointState { q: nan, qd: nan, qdd: nan },
+            tau: nan,
+            missing,
+            refined: false,
+            noise: f64::NAN,
+        }
+    }
+
+    /// q, q̇, q̈ and τ back to back ([`TRACKER_VALUES`] values; rad, rad/s, rad/s², N·m).
+    pub fn values(&self) -> [f64; TRACKER_VALUES] {
+        let rows = [self.state.q, self.state.qd, self.state.qdd, self.tau];
+        std::array::from_fn(|i| rows[i / N_COORDINATES][i % N_COORDINATES])
+    }
+}
+
 /// The filter's memory between frames. See the [module docs](self).
 #[derive(Debug, Clone)]
 pub struct Tracker {
@@ -357,6 +382,37 @@ impl Tracker {
         }
         let tau = reference::inverse_dynamics_at(&self.body, &forearm.rotation.to_rotation_matrix(), &state)?;
         Ok(Some(TrackerOutput { state, tau, missing, refined, noise }))
+    }
+
+    /// Pushes every frame of `frames` ([`MARKER_FRAME_LEN`] values each, back to back) in
+    /// order, exactly as [`push`](Self::push) one at a time, and hands each frame's result to
+    /// `each(i, output, estimated)`: its estimate (`estimated` true), or, before the filter
+    /// started, [`TrackerOutput::waiting`] with the frame's missing markers (`estimated` false).
+    /// Returns the index of the first frame with an estimate: 0 when the filter was already
+    /// running, `None` if no frame of the block started it. Continues from the tracker's state.
+    ///
+    /// A block that is not a whole number of frames is refused before anything is pushed. A
+    /// refused frame (an infinite value, degenerate markers, ...) stops the run with its error,
+    /// numbered by its index in `frames`; the frames before it stay pushed (and were handed to
+    /// `each`). Does not allocate (beyond what `each` does).
+    pub fn run(&mut self, frames: &[f64], mut each: impl FnMut(usize, &TrackerOutput, bool)) -> Result<Option<usize>> {
+        if !frames.len().is_multiple_of(MARKER_FRAME_LEN) {
+            return Err(Error::BadArgument {
+                what: "frames",
+                detail: format!("{} values is not a whole number of {MARKER_FRAME_LEN}-value frames", frames.len()),
+            });
+        }
+        let mut start = None;
+        for (i, frame) in frames.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+            match self.push(frame).map_err(|e| e.renumbered(i))? {
+                Some(out) => {
+                    start.get_or_insert(i);
+                    each(i, &out, true);
+                }
+                None => each(i, &TrackerOutput::waiting(missing_markers(frame)), false),
+            }
+        }
+        Ok(start)
     }
 
     /// Wide enough for any wrist motion: angles within ~0.1 rad of the first frame's fit,
@@ -710,6 +766,114 @@ mod tests {
         assert!(end_short < 1e-3 * noisy_short, "short memory: {end_short} after {noisy_short}");
         // With n samples the running mean halves its variance at most: σ falls by ≤ √2.
         assert!(end_long > noisy_long / 1.5, "long memory: {end_long} after {noisy_long}");
+    }
+
+    /// Bit patterns of an output (NaN compares equal to the same NaN).
+    fn bits(out: &TrackerOutput) -> (Vec<u64>, u8, bool, u64) {
+        (out.values().iter().map(|v| v.to_bits()).collect(), out.missing, out.refined, out.noise.to_bits())
+    }
+
+    #[test]
+    fn run_equals_push_one_by_one_bit_for_bit() {
+        use crate::testing::random_refiner;
+        let body = BodyModel::scaled(1.1, 1.2);
+        let q = trajectory(600, 1000.0);
+        let mut f = frames(&body, &q, 0.2);
+        uniform_range(&mut f, 0.02, 23).unwrap();
+        // The first three frames miss a marker (the filter waits), MCB goes missing later on.
+        for i in 0..3 {
+            f[i * MARKER_FRAME_LEN + 3 * (i + 1)] = f64::NAN;
+        }
+        for i in 300..340 {
+            f[i * MARKER_FRAME_LEN + 15..i * MARKER_FRAME_LEN + 18].fill(f64::NAN);
+        }
+        for refiner in [None, Some(random_refiner(8, &[16], 4))] {
+            let new = || {
+                let mut t =
+                    Tracker::new(body.clone(), TrackerSettings { jerk_noise: 800.0, ..Default::default() }).unwrap();
+                t.set_refiner(refiner.clone()).unwrap();
+                t
+            };
+            let mut one = new();
+            let pushed: Vec<_> = f
+                .chunks_exact(MARKER_FRAME_LEN)
+                .map(|frame| match one.push(frame).unwrap() {
+                    Some(out) => (bits(&out), true),
+                    None => (bits(&TrackerOutput::waiting(missing_markers(frame))), false),
+                })
+                .collect();
+            assert!(pushed.iter().filter(|p| p.0.2).count() > 500 || refiner.is_none());
+            // One block, then the same frames in blocks of 7 and 250 (continuing from the state).
+            for block in [600, 7, 250] {
+                let mut run = new();
+                let mut got = Vec::new();
+                let mut starts = Vec::new();
+                for (b, chunk) in f.chunks(block * MARKER_FRAME_LEN).enumerate() {
+                    let start = run
+                        .run(chunk, |i, out, estimated| {
+                            assert_eq!(got.len(), b * block + i, "frames in order");
+                            got.push((bits(out), estimated));
+                        })
+                        .unwrap();
+                    starts.push(start.map(|s| b * block + s));
+                }
+                assert_eq!(got, pushed, "block {block}");
+                assert_eq!(starts.iter().flatten().next(), Some(&3), "block {block}");
+                assert!(starts.iter().skip(1).all(|s| s.is_some()), "a running filter starts every block at 0");
+                assert_eq!(run.marker_noise().map(f64::to_bits), one.marker_noise().map(f64::to_bits));
+            }
+        }
+    }
+
+    #[test]
+    fn run_refuses_a_partial_frame_before_pushing_and_numbers_a_bad_frame_in_its_block() {
+        let body = BodyModel::default();
+        let q = trajectory(20, 1000.0);
+        let mut f = frames(&body, &q, 0.0);
+        let mut tracker = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut calls = 0;
+        let err = tracker.run(&f[..MARKER_FRAME_LEN * 2 + 5], |_, _, _| calls += 1).unwrap_err();
+        assert!(matches!(err, Error::BadArgument { what: "frames", .. }), "{err}");
+        assert_eq!(calls, 0);
+        assert_eq!(tracker.run(&[], |_, _, _| calls += 1).unwrap(), None);
+        // A block without a complete frame never starts the filter: NaN rows, the masks.
+        let mut holes = f[..3 * MARKER_FRAME_LEN].to_vec();
+        for (i, m) in [0, 2, 5].iter().enumerate() {
+            holes[i * MARKER_FRAME_LEN + 3 * m + 1] = f64::NAN;
+        }
+        let mut seen = Vec::new();
+        assert_eq!(tracker.run(&holes, |i, o, e| seen.push((i, o.missing, e, o.state.q[0].is_nan()))).unwrap(), None);
+        assert_eq!(seen, [(0, 1, false, true), (1, 1 << 2, false, true), (2, 1 << 5, false, true)]);
+        tracker.reset();
+        // An infinite value in frame 4 of the block (frame 14 of the tracker): named frame 4,
+        // the four frames before it pushed, as by push.
+        f[14 * MARKER_FRAME_LEN + 7] = f64::INFINITY;
+        let mut twin = Tracker::new(body, TrackerSettings::default()).unwrap();
+        for frame in f[..14 * MARKER_FRAME_LEN].chunks_exact(MARKER_FRAME_LEN) {
+            twin.push(frame).unwrap();
+        }
+        tracker.run(&f[..10 * MARKER_FRAME_LEN], |_, _, _| ()).unwrap();
+        let mut seen = 0;
+        let err = tracker.run(&f[10 * MARKER_FRAME_LEN..], |_, _, _| seen += 1).unwrap_err();
+        assert_eq!((err.frame(), seen), (Some(4), 4), "{err}");
+        assert!(err.to_string().contains("FAP.y"), "{err}");
+        let next = &f[15 * MARKER_FRAME_LEN..16 * MARKER_FRAME_LEN];
+        assert_eq!(tracker.push(next).unwrap().map(|o| bits(&o)), twin.push(next).unwrap().map(|o| bits(&o)));
+    }
+
+    #[test]
+    fn values_are_q_qd_qdd_tau_in_order() {
+        let out = TrackerOutput {
+            state: JointState { q: [1.0, 2.0, 3.0], qd: [4.0, 5.0, 6.0], qdd: [7.0, 8.0, 9.0] },
+            tau: [10.0, 11.0, 12.0],
+            missing: 0,
+            refined: false,
+            noise: 1e-3,
+        };
+        assert_eq!(out.values(), std::array::from_fn(|i| (i + 1) as f64));
+        let w = TrackerOutput::waiting(0b10_0001);
+        assert!(w.values().iter().all(|v| v.is_nan()) && w.noise.is_nan());
+        assert_eq!((w.missing, w.refined), (0b10_0001, false));
     }
 
     #[test]
