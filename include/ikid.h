@@ -32,6 +32,11 @@ typedef struct ikid_model ikid_model;
 // A causal frame-by-frame stream over a model (opaque). Use from one thread at a time.
 typedef struct ikid_stream ikid_stream;
 
+// A causal tracker of one subject's wrist (opaque): an extended Kalman filter over the body
+// model that learns each marker coordinate's noise as it goes, optionally refined by a
+// network. Use from one thread at a time (give each thread its own).
+typedef struct ikid_tracker ikid_tracker;
+
 // Sizes of a model's inputs and outputs.
 typedef struct ikid_model_info {
   // Floats per input frame (18 for marker models: 6 markers × x, y, z in metres).
@@ -43,6 +48,42 @@ typedef struct ikid_model_info {
   // Frame rate the model was trained at, Hz.
   double frame_rate_hz;
 } ikid_model_info;
+
+// The subject and how the tracker models motion and noise; start from
+// `ikid_tracker_settings_default()` and change what differs. There is no marker calibration
+// or per-marker placement shift here yet: the core's tracker has none (it tracks the scaled
+// default marker layout).
+typedef struct ikid_tracker_settings {
+  // Subject's segment lengths (and marker offsets) relative to the default subject.
+  double length_scale;
+  // Subject's segment masses relative to the default subject.
+  double mass_scale;
+  // Frame rate of the markers, Hz: push frames at this rate.
+  double rate_hz;
+  // Spectral density of the joint jerk the motion model allows, rad²/s⁵: larger follows
+  // faster moves with less lag and passes more noise.
+  double jerk_noise;
+  // How far back the noise estimate looks, seconds (exponential forgetting).
+  double noise_memory_s;
+  // Standard deviation of the marker noise assumed before any has been measured, m.
+  double initial_marker_noise;
+} ikid_tracker_settings;
+
+// Per-frame flags of a tracker's estimate.
+typedef struct ikid_tracker_flags {
+  // Bit `i` set: marker `i` (frame order: RSP, USP, FAP, MC2, MC5, MCB) had a NaN
+  // coordinate in this frame and corrected nothing.
+  uint32_t missing;
+  // True when this frame has an estimate; false before the filter started (it starts on
+  // the first frame with every marker), and then the 12 values are NaN.
+  bool ready;
+  // True when the refiner corrected this estimate (false without one and while its window
+  // fills).
+  bool refined;
+  // Mean noise (standard deviation) of the hand markers measured so far, m; NaN when not
+  // `ready`. What the refiner is told and gated by.
+  double noise;
+} ikid_tracker_flags;
 
 #ifdef __cplusplus
 extern "C" {
@@ -222,6 +263,93 @@ enum ikid_status ikid_stream_reset(struct ikid_stream *stream);
 // # Safety
 // `stream` must be NULL or a handle from `ikid_stream_new` not yet freed.
 void ikid_stream_free(struct ikid_stream *stream);
+
+// The default subject and settings: both scales 1, 1000 Hz, the core's default jerk noise
+// (chosen against biorbd's EKF, see docs/ekf.md), a 10 s noise memory, 1 mm initial noise.
+struct ikid_tracker_settings ikid_tracker_settings_default(void);
+
+// Creates a tracker for the subject and settings in `*settings`, refined by `refiner` (a
+// `refine` model such as the shipped `wrist-track`, trained at `rate_hz`) or unrefined if
+// `refiner` is NULL; on success `*out` receives a handle to release with
+// `ikid_tracker_free`. A setting that is not a positive finite number, or a model that
+// cannot refine a tracker, is refused (`IKID_STATUS_INVALID_ARGUMENT`, the message names
+// it). The tracker holds its own reference to the refiner: the model handle may be freed
+// first. Allocates once, here; pushes and runs never allocate. No calibration: see
+// `ikid_tracker_settings`.
+//
+// # Safety
+// `settings` must point to a readable `ikid_tracker_settings`; `refiner` must be NULL or a
+// live model handle; `out` must point to writable storage.
+enum ikid_status ikid_tracker_new(const struct ikid_tracker_settings *settings,
+                                  const struct ikid_model *refiner,
+                                  struct ikid_tracker **out);
+
+// Pushes one marker frame: `frame_len` (18) doubles, the six markers' x, y, z in metres in
+// the lab frame, NaN for a missing marker (it corrects nothing; an infinite value is an
+// error). On success `*flags` is written and `out` (room for `out_len` doubles, at least 12)
+// receives q, q̇, q̈ and τ (3 each; rad, rad/s, rad/s², N·m, coordinates s_p, e_f, ad_ab) for
+// this frame, or 12 NaN while `flags->ready` is false. Frames must come at the settings'
+// `rate_hz`. On failure nothing is written; a NULL pointer, an `out` shorter than 12, or a
+// frame of the wrong length or with an infinite value (`IKID_STATUS_INPUT`) leaves the
+// tracker as it was.
+//
+// # Safety
+// `tracker` must be a live handle used by no other thread meanwhile; `frame` must point to
+// `frame_len` readable doubles, `out` to `out_len` writable doubles, `flags` to writable
+// storage.
+enum ikid_status ikid_tracker_push(struct ikid_tracker *tracker,
+                                   const double *frame,
+                                   size_t frame_len,
+                                   double *out,
+                                   size_t out_len,
+                                   struct ikid_tracker_flags *flags);
+
+// Pushes a block of frames in order, exactly as `ikid_tracker_push` one at a time: `frames`
+// holds `n_values` doubles, a whole number of 18-value frames back to back. For frame `i`,
+// `out` (room for `out_len` doubles, at least 12 per frame) receives its 12 values at
+// `out + 12 i` and `flags` (room for `flags_len`, at least one per frame) its flags at
+// `flags + i`; `*start` receives the index of the first frame with an estimate (0 when the
+// filter was already running, the frame count if no frame of the block started it).
+// Continues from the tracker's state. A block that is not a whole number of frames, or
+// buffers too small, are refused (`IKID_STATUS_INVALID_ARGUMENT`) before anything is pushed.
+// On a refused frame `ikid_last_error()` names its index in the block, `*start` is not
+// written, the rows before it hold their results (those from it on are unspecified) and the
+// frames before it stay pushed.
+//
+// # Safety
+// As `ikid_tracker_push`, with `frames` holding `n_values` readable doubles, `flags` room
+// for `flags_len` flags and `start` pointing to writable storage.
+enum ikid_status ikid_tracker_run(struct ikid_tracker *tracker,
+                                  const double *frames,
+                                  size_t n_values,
+                                  double *out,
+                                  size_t out_len,
+                                  struct ikid_tracker_flags *flags,
+                                  size_t flags_len,
+                                  size_t *start);
+
+// Forgets everything seen (state, forearm pose, noise estimates, the refiner's window): the
+// next frame with every marker starts the filter again. Keeps the settings and refiner.
+//
+// # Safety
+// `tracker` must be a live handle used by no other thread meanwhile.
+enum ikid_status ikid_tracker_reset(struct ikid_tracker *tracker);
+
+// Writes the current noise estimate (standard deviation, m) of each hand marker coordinate
+// into `out` (room for `out_len` doubles, at least 9), in frame order: MC2.x, MC2.y, MC2.z,
+// MC5.x, ..., MCB.z. The initial guess until frames have been seen.
+//
+// # Safety
+// `tracker` must be a live handle; `out` must point to `out_len` writable doubles.
+enum ikid_status ikid_tracker_marker_noise(const struct ikid_tracker *tracker,
+                                           double *out,
+                                           size_t out_len);
+
+// Releases a tracker handle (NULL is ignored).
+//
+// # Safety
+// `tracker` must be NULL or a handle from `ikid_tracker_new` not yet freed.
+void ikid_tracker_free(struct ikid_tracker *tracker);
 
 #ifdef __cplusplus
 }  // extern "C"

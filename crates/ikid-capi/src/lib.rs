@@ -8,9 +8,9 @@
 //! wrong. No panic crosses the boundary: each body runs behind `catch_unwind` and a panic
 //! becomes `IKID_STATUS_PANIC`.
 //!
-//! Threads: a model may be shared by any number of threads; a stream is used by one thread
-//! at a time (give each thread its own). Streams hold their own reference to the model, so
-//! the model handle may be freed before its streams.
+//! Threads: a model may be shared by any number of threads; a stream or a tracker is used by
+//! one thread at a time (give each thread its own). Streams and trackers hold their own
+//! reference to the model, so the model handle may be freed before them.
 
 #![allow(non_camel_case_types)] // C names in the C header
 #![allow(unsafe_code)] // the ABI is raw pointers; every dereference is checked first
@@ -18,7 +18,9 @@
 mod boundary;
 mod model;
 mod stream;
+mod tracker;
 
 pub use boundary::{ikid_last_error, ikid_status, ikid_status_message, ikid_version};
 pub use model::{ikid_model, ikid_model_info};
 pub use stream::ikid_stream;
+pub use tracker::{ikid_tracker, ikid_tracker_flags, ikid_tracker_settings};
