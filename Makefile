@@ -92,7 +92,9 @@ check-header: $(CBINDGEN)
 c: capi
 	mkdir -p target/c
 	$(CC) $(CFLAGS_C) tests/c/test_capi.c -o target/c/test_capi $(LDLIBS_C)
+	$(CC) $(CFLAGS_C) tests/c/test_tracker.c -o target/c/test_tracker $(LDLIBS_C)
 	$(CC) $(CFLAGS_C) examples/c/stream_csv.c -o target/c/stream_csv $(LDLIBS_C)
+	$(CC) $(CFLAGS_C) examples/c/track_csv.c -o target/c/track_csv $(LDLIBS_C)
 	$(CC) $(CFLAGS_C) benches/c/abi_overhead.c -o target/c/abi_overhead $(LDLIBS_C)
 
 # Installs libikid (shared and static), ikid.h and a pkg-config file under PREFIX.
