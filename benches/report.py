@@ -130,9 +130,9 @@ def soak(pushes: int = 10_000_000) -> list[str]:
     return [
         "## Soak (`cargo run --release -p ikid --example soak`)",
         "",
-        f"{r['pushes']:,} pushes through one stream (150-128-128-3 on `angles` × 50, gap filling on; {r['filled_frames']:,} frames had a "
-        f"marker missing and filled): **{r['allocations']} heap allocations**, resident memory {r['rss_kib_before']:,} → "
-        f"{r['rss_kib_after']:,} KiB.",
+        f"{r['pushes']:,} pushes through one stream (150-128-128-3 on `angles` × 50, gap filling on; "
+        f"{r['filled_frames']:,} frames had a marker missing and filled): **{r['allocations']} heap "
+        f"allocations**, resident memory {r['rss_kib_before']:,} → {r['rss_kib_after']:,} KiB.",
         "",
         "| pushes | p50 | p99 | p99/p50 | max |",
         "|---|---|---|---|---|",
@@ -175,7 +175,8 @@ def main() -> None:
         "",
         "## `Stream::push` (one frame in, one prediction out)",
         "",
-        "| network | MACs | criterion median | Rust p50 | Rust p99 | p99/p50 | Rust max | Python p50 | Python p99 | Python overhead |",
+        "| network | MACs | criterion median | Rust p50 | Rust p99 | p99/p50 | Rust max | Python "
+        "p50 | Python p99 | Python overhead |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     batch_rows = []
@@ -197,13 +198,17 @@ def main() -> None:
         "",
         "p50/p99/max: `cargo run --release -p ikid --example latency` (200k timed pushes after 10k warm-up;",
         "max includes the VM's scheduler hiccups). Python: the same model files, `ikid.Stream.push` timed",
-        "with `time.perf_counter_ns` around each call (the timer pair adds ~0.1 µs). Python overhead: per frame,",
-        "a Python loop of `push` minus one `push_many` call on the same 1000 frames, interleaved, median of 60",
-        "rounds; it includes the Python loop itself and the cache lines the interpreter evicts between frames.",
+        "with `time.perf_counter_ns` around each call (the timer pair adds ~0.1 µs). "
+        "Python overhead: per frame,",
+        "a Python loop of `push` minus one `push_many` call on the same 1000 frames, "
+        "interleaved, median of 60",
+        "rounds; it includes the Python loop itself and the cache lines the interpreter "
+        "evicts between frames.",
         "",
         "## `Model::predict` (whole recordings)",
         "",
-        "| network | Rust per sample, 1 thread | Rust per sample, 2 threads | Python `Model.predict` per sample (10k frames, all cores) |",
+        "| network | Rust per sample, 1 thread | Rust per sample, 2 threads | Python `Model.predict` "
+        "per sample (10k frames, all cores) |",
         "|---|---|---|---|",
     ]
     for label, one, two, py_ps in batch_rows:
@@ -214,19 +219,23 @@ def main() -> None:
         "",
         "## C ABI (`libikid`)",
         "",
-        "| network | `ikid_stream_push` p50 | p99 | per frame, one call each | per frame, one `push_many` call | ABI overhead |",
+        "| network | `ikid_stream_push` p50 | p99 | per frame, one call each | per frame, "
+        "one `push_many` call | ABI overhead |",
         "|---|---|---|---|---|---|",
     ]
     for label in rust:
         c = c_abi(label)
         lines.append(
-            f"| {label} | {c['push_p50_us']:.2f} µs | {c['push_p99_us']:.2f} µs | {c['push_per_frame_ns'] / 1000:.2f} µs | "
-            f"{c['push_many_per_frame_ns'] / 1000:.2f} µs | {c['abi_overhead_ns']:+.0f} ns |"
+            f"| {label} | {c['push_p50_us']:.2f} µs | {c['push_p99_us']:.2f} µs | "
+            f"{c['push_per_frame_ns'] / 1000:.2f} µs | {c['push_many_per_frame_ns'] / 1000:.2f} µs "
+            f"| {c['abi_overhead_ns']:+.0f} ns |"
         )
     lines += [
         "",
-        "`target/c/abi_overhead` (benches/c/abi_overhead.c): 200 interleaved rounds of 1000 frames, median; the",
-        "overhead is the per-frame difference between 1000 `ikid_stream_push` calls and one `ikid_stream_push_many`.",
+        "`target/c/abi_overhead` (benches/c/abi_overhead.c): 200 interleaved rounds "
+        "of 1000 frames, median; the",
+        "overhead is the per-frame difference between 1000 `ikid_stream_push` calls and "
+        "one `ikid_stream_push_many`.",
         "",
         "Zero heap allocations per push: proved by `crates/ikid/tests/allocations.rs` (counting allocator).",
         "",

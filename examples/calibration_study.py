@@ -25,7 +25,8 @@ def main() -> None:
     rng = np.random.default_rng(5)
     model = ikid.load("wrist-ik")
     print(
-        "| trial seed | size | noise | nominal | uncalibrated | calibrated | perfect calibration | calibrated / nominal |"
+        "| trial seed | size | noise | nominal | uncalibrated | calibrated | perfect "
+        "calibration | calibrated / nominal |"
     )
     print("|---|---|---|---|---|---|---|---|")
     for seed in (9100, 9101):
@@ -57,7 +58,8 @@ def main() -> None:
                 moved = markers(q, 1)
                 cal = mse(moved, calibration(True))
                 print(
-                    f"| {seed} | {scale} | {noise:.0%} | {nominal:.3g} | {mse(moved):.3g} | {cal:.3g} | {mse(moved, calibration(False)):.3g} | {cal / nominal:.2f} |",
+                    f"| {seed} | {scale} | {noise:.0%} | {nominal:.3g} | {mse(moved):.3g} | {cal:.3g} | "
+                    f"{mse(moved, calibration(False)):.3g} | {cal / nominal:.2f} |",
                     flush=True,
                 )
 

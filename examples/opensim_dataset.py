@@ -84,7 +84,10 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng(args.seed)
     t = np.arange(n) / args.rate
     manifest: dict = {
-        "generator": "examples/opensim_dataset.py: sums of random sinusoids, OpenSim forward kinematics and inverse dynamics",
+        "generator": (
+            "examples/opensim_dataset.py: sums of random sinusoids, "
+            "OpenSim forward kinematics and inverse dynamics"
+        ),
         "opensim": osim.GetVersionAndDate(),
         "seed": args.seed,
         "rate_hz": args.rate,
@@ -118,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
             {"name": name, **subject, "shoulder_deg": shoulder_deg, "frames": n, "sines": sines}
         )
         print(
-            f"{name}: {n} frames, length x{length_scale:.3f}, shoulder {shoulder_deg:+.0f} deg ({time.perf_counter() - start:.1f} s)"
+            f"{name}: {n} frames, length x{length_scale:.3f}, shoulder {shoulder_deg:+.0f} deg "
+            f"({time.perf_counter() - start:.1f} s)"
         )
     (args.out / "dataset.json").write_text(json.dumps(manifest, indent=1))
     print(f"wrote {args.trials} trials to {args.out} (markers mapped by {args.out / 'map.toml'})")

@@ -71,7 +71,8 @@ def run_checked(cmd: list, check) -> None:
     if shutil.which("valgrind") is None:
         if in_ci():
             pytest.fail(
-                "valgrind is not installed, and CI is set: in CI the C programs must run under valgrind (apt-get install valgrind)"
+                "valgrind is not installed, and CI is set: in CI the C programs must run under "
+                "valgrind (apt-get install valgrind)"
             )
         pytest.skip(
             "valgrind is not installed: the program passed natively, but its memory checks did not run "

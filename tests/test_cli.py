@@ -462,7 +462,10 @@ def test_demo_prints_the_errors_and_latency_of_what_it_streamed(capsys, tmp_path
 
 
 def test_import_ikid_and_the_cli_do_not_import_torch():
-    code = "import sys, ikid, ikid.cli, ikid.training.data, ikid.training.evaluate; print('torch' in sys.modules)"
+    code = (
+        "import sys, ikid, ikid.cli, ikid.training.data, ikid.training.evaluate; "
+        "print('torch' in sys.modules)"
+    )
     assert (
         subprocess.run(
             [sys.executable, "-c", code], capture_output=True, text=True, env={**os.environ}

@@ -61,7 +61,8 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
         raise InputError(f'{path}: not an ikid calibration (expected "format": "{FORMAT}")')
     if doc.get("format_version") != FORMAT_VERSION:
         raise InputError(
-            f"{path}: calibration format_version {doc.get('format_version')!r}; this ikid reads {FORMAT_VERSION}"
+            f"{path}: calibration format_version {doc.get('format_version')!r}; "
+            f"this ikid reads {FORMAT_VERSION}"
         )
     try:
         return Calibration.from_matrices(doc["forearm"], doc["hand"])

@@ -213,7 +213,8 @@ def cmd_process(args: argparse.Namespace) -> int:
     clash = sorted({s for s in stems if stems.count(s) > 1})
     if many and clash:
         raise SystemExit(
-            f"ikid: error: several inputs are named {', '.join(clash)}; their outputs would overwrite each other"
+            f"ikid: error: several inputs are named {', '.join(clash)}; their outputs "
+            "would overwrite each other"
         )
     jobs = []
     for path in inputs:
@@ -277,8 +278,8 @@ def cmd_track(args: argparse.Namespace) -> int:
     noise_mm = ", ".join(f"{v * 1e3:.2f}" for v in tracker.marker_noise)
     how = f"refined by {refiner.name}" if refiner else "not refined"
     print(
-        f"{args.input}: {len(frames) - k} frames tracked from frame {k} at {data.rate_hz:g} Hz, {how} ({gaps} with a marker missing); "
-        f"hand marker noise learned (mm): {noise_mm} -> {mot}, {sto}"
+        f"{args.input}: {len(frames) - k} frames tracked from frame {k} at {data.rate_hz:g} Hz, "
+        f"{how} ({gaps} with a marker missing); hand marker noise learned (mm): {noise_mm} -> {mot}, {sto}"
     )
     return 0
 
@@ -293,7 +294,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         coord, sep, path = spec.partition("=")
         if not sep or coord not in ikid.coordinate_names():
             raise SystemExit(
-                f"ikid: error: --movement {spec!r}: expected COORDINATE=FILE, COORDINATE one of {', '.join(ikid.coordinate_names())}"
+                f"ikid: error: --movement {spec!r}: expected COORDINATE=FILE, COORDINATE one of "
+                f"{', '.join(ikid.coordinate_names())}"
             )
         movements[coord] = read_markers(path).frames(mapping)
     cal = ikid.calibrate(read_markers(args.static).frames(mapping), movements)
@@ -348,13 +350,15 @@ def cmd_id(args: argparse.Namespace) -> int:
         )
         out_time, summary = (
             time_s,
-            f"{len(time_s)} frames, exact Newton-Euler (subject ×{args.length_scale:g} length, ×{args.mass_scale:g} mass)",
+            f"{len(time_s)} frames, exact Newton-Euler (subject ×{args.length_scale:g} length, "
+            f"×{args.mass_scale:g} mass)",
         )
     else:
         model = ikid.load(args.model)
         if model.feature_set != "joint_state":
             raise ikid.InputError(
-                f"model {model.name!r} reads {model.feature_set} frames, not joint states (q, q̇, q̈); use an id model"
+                f"model {model.name!r} reads {model.feature_set} frames, not joint states "
+                "(q, q̇, q̈); use an id model"
             )
         if check_rate(model, rate, args.input, args.resample):
             time_s, q = resample(time_s, q, model.frame_rate_hz)
@@ -385,7 +389,8 @@ def _parse_frame(line: str, frame_len: int, with_time: bool) -> tuple[float | No
     want = frame_len + (1 if with_time else 0)
     if len(fields) != want:
         raise ikid.InputError(
-            f"expected {want} values ({'time + ' if with_time else ''}{frame_len} frame values), got {len(fields)}"
+            f"expected {want} values ({'time + ' if with_time else ''}{frame_len} frame "
+            f"values), got {len(fields)}"
         )
     try:
         values = np.array([float(f) if f else np.nan for f in fields], np.float64)
@@ -429,8 +434,9 @@ def cmd_stream(args: argparse.Namespace) -> int:
     for m in models:
         if args.rate is not None and not same_rate(args.rate, m.frame_rate_hz):
             raise ikid.InputError(
-                f"the source runs at {args.rate:g} Hz but model {m.name!r} was trained at {m.frame_rate_hz:g} Hz; a live stream "
-                "is not resampled (it would add latency): record at the model's rate or train a model at yours (ikid train)"
+                f"the source runs at {args.rate:g} Hz but model {m.name!r} was trained at "
+                f"{m.frame_rate_hz:g} Hz; a live stream is not resampled (it would add latency): "
+                "record at the model's rate or train a model at yours (ikid train)"
             )
         if m.frame_len != models[0].frame_len:
             raise ikid.InputError(f"models {models[0].name!r} and {m.name!r} read different frames")
@@ -521,7 +527,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise ikid.InputError(str(e)) from None
     if args.task is not None and cfg["model"]["task"] != args.task:
         raise ikid.InputError(
-            f"--task {args.task} but config {args.config!r} trains task {cfg['model']['task']!r}; drop one of them"
+            f"--task {args.task} but config {args.config!r} trains task {cfg['model']['task']!r}; "
+            "drop one of them"
         )
     out = Path(args.output)
     if out.suffix == ".safetensors":
@@ -604,17 +611,17 @@ def cmd_bench(args: argparse.Namespace) -> int:
         ns[i] = clock() - t0
     us = ns[model.window :] / 1e3
     lines = [
-        f"{model.name}: {model.feature_set} x {model.window}, layers {'-'.join(map(str, model.layer_widths))}, "
-        f"{len(frames)} frames",
-        f"  Stream.push (Python): p50 {np.median(us):.2f} µs, p99 {np.percentile(us, 99):.2f} µs, max {us.max():.1f} µs "
-        f"(budget 2000 µs: {2000 / np.percentile(us, 99):.0f}× headroom at p99)",
+        f"{model.name}: {model.feature_set} x {model.window}, layers "
+        f"{'-'.join(map(str, model.layer_widths))}, {len(frames)} frames",
+        f"  Stream.push (Python): p50 {np.median(us):.2f} µs, p99 {np.percentile(us, 99):.2f} µs, "
+        f"max {us.max():.1f} µs (budget 2000 µs: {2000 / np.percentile(us, 99):.0f}× headroom at p99)",
     ]
     for threads in (1, 2):
         # The lambda runs before the loop moves on.
         best = min(_timed(lambda: model.predict(frames, threads=threads)) for _ in range(3))  # noqa: B023
         lines.append(
-            f"  predict, {threads} thread{'s' if threads > 1 else ''}: {best / len(frames) * 1e6:.3f} µs per frame "
-            f"({len(frames) / best / 1e6:.2f} M frames/s)"
+            f"  predict, {threads} thread{'s' if threads > 1 else ''}: {best / len(frames) * 1e6:.3f} µs per "
+            f"frame ({len(frames) / best / 1e6:.2f} M frames/s)"
         )
     print("\n".join(lines))
     return 0
@@ -693,7 +700,8 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser(
         "run",
         help="markers -> wrist angles (.mot) and torques (.sto)",
-        description="Markers -> angles and torques.\n\n  ikid run trial.c3d -o out/trial   # out/trial.mot, out/trial.sto",
+        description="Markers -> angles and torques.\n\n"
+        "  ikid run trial.c3d -o out/trial   # out/trial.mot, out/trial.sto",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     processing_options(p, "angle model (default wrist-ik)")
@@ -705,10 +713,11 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser(
         "track",
         help="markers -> angles (.mot) and torques (.sto) with the Kalman tracker + its refiner",
-        description="Markers -> wrist angles and torques, causally, with ikid.Tracker: an extended Kalman filter "
-        "over the body model that learns each marker coordinate's noise, refined by the shipped "
+        description="Markers -> wrist angles and torques, causally, with ikid.Tracker: an extended Kalman "
+        "filter over the body model that learns each marker coordinate's noise, refined by the shipped "
         "wrist-track network.\n\n"
-        "  ikid track trial.c3d -o out/trial --length-scale 1.1 --mass-scale 1.3   # out/trial.mot, out/trial.sto",
+        "  ikid track trial.c3d -o out/trial --length-scale 1.1 --mass-scale 1.3"
+        "   # out/trial.mot, out/trial.sto",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", help="marker file (.c3d, .trc, .csv)")
@@ -729,7 +738,8 @@ def main(argv: list[str] | None = None) -> int:
         "--jerk-noise",
         type=float,
         default=ikid.DEFAULT_JERK_NOISE,
-        help=f"motion model's jerk density, rad²/s⁵ (default {ikid.DEFAULT_JERK_NOISE:g}, tuned in docs/ekf.md)",
+        help=f"motion model's jerk density, rad²/s⁵ (default {ikid.DEFAULT_JERK_NOISE:g}, "
+        "tuned in docs/ekf.md)",
     )
     p.set_defaults(func=cmd_track)
 

@@ -38,8 +38,8 @@ def main(argv: list[str] | None = None) -> None:
 
     ik, chain = ikid.load("wrist-ik"), ikid.load("wrist-chain")
     print(
-        f"1. simulating {args.seconds:.0f} s of random wrist movement (seed {args.seed}, shoulder {args.shoulder_deg:.0f}°) "
-        f"with {100 * args.noise:g} % marker noise"
+        f"1. simulating {args.seconds:.0f} s of random wrist movement (seed {args.seed}, shoulder "
+        f"{args.shoulder_deg:.0f}°) with {100 * args.noise:g} % marker noise"
     )
     t0 = time.perf_counter()
     trial = ikid.simulate(
@@ -78,17 +78,18 @@ def main(argv: list[str] | None = None) -> None:
     print(f"   {'':12s} {'angle RMSE':>11s} {'reference IK':>13s} {'torque RMSE':>12s} {'% of range':>11s}")
     for k, name in enumerate(names):
         print(
-            f"   {name:12s} {rms(ang_err[:, k]):9.3f} °  {rms(ref_err[:, k]):9.3f} °  {rms(tau_err[:, k]):8.4f} N·m  "
-            f"{100 * rms(tau_err[:, k]) / span[k]:8.2f} %"
+            f"   {name:12s} {rms(ang_err[:, k]):9.3f} °  {rms(ref_err[:, k]):9.3f} °  "
+            f"{rms(tau_err[:, k]):8.4f} N·m  {100 * rms(tau_err[:, k]) / span[k]:8.2f} %"
         )
     print(
-        f"   angle MSE {np.mean(np.radians(ang_err) ** 2):.2e} rad² (reference IK per frame {np.mean(np.radians(ref_err) ** 2):.2e}); "
-        f"torque MSE {np.mean(tau_err**2):.2e} N·m² (thesis chain: 0.1727)"
+        f"   angle MSE {np.mean(np.radians(ang_err) ** 2):.2e} rad² (reference IK per frame "
+        f"{np.mean(np.radians(ref_err) ** 2):.2e}); torque MSE {np.mean(tau_err**2):.2e} N·m² "
+        "(thesis chain: 0.1727)"
     )
     lat = step_ns[ok] / 1e3
     print(
-        f"4. one frame → angles + torques from Python: p50 {np.median(lat):.1f} µs, p99 {np.percentile(lat, 99):.1f} µs "
-        f"(budget 2000 µs)"
+        f"4. one frame → angles + torques from Python: p50 {np.median(lat):.1f} µs, p99 "
+        f"{np.percentile(lat, 99):.1f} µs (budget 2000 µs)"
     )
     plot(args.plot, trial, angles, torques, ok)
 

@@ -76,9 +76,9 @@ def check_rate(model: _native.Model, rate_hz: float, source: str, allow_resample
         return False
     if not allow_resample:
         raise _native.InputError(
-            f"{source} is sampled at {rate_hz:g} Hz but model {model.name!r} was trained at {model.frame_rate_hz:g} Hz; "
-            f"resample it (--resample, or ikid.io.resample: cubic Hermite to {model.frame_rate_hz:g} Hz) — a windowed "
-            "model run at another rate would be silently mis-timed"
+            f"{source} is sampled at {rate_hz:g} Hz but model {model.name!r} was trained at "
+            f"{model.frame_rate_hz:g} Hz; resample it (--resample, or ikid.io.resample: cubic Hermite to "
+            f"{model.frame_rate_hz:g} Hz) — a windowed model run at another rate would be silently mis-timed"
         )
     return True
 
@@ -101,7 +101,8 @@ def run_model(
     time = np.asarray(time, np.float64)
     if frames.ndim != 2 or time.shape != (len(frames),):
         raise _native.InputError(
-            f"{source}: expected frames (n, {model.frame_len}) and time (n,), got {frames.shape} and {time.shape}"
+            f"{source}: expected frames (n, {model.frame_len}) and time (n,), "
+            f"got {frames.shape} and {time.shape}"
         )
     if rate_hz is None:
         rate_hz = 1.0 / float(np.median(np.diff(time))) if len(time) > 1 else model.frame_rate_hz

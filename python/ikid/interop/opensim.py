@@ -90,7 +90,8 @@ def osim_text(
     """The ``.osim`` XML text :func:`write_osim` writes."""
     if markers is not None and marker_shift is not None:
         raise ValueError(
-            "give either marker_shift (moves ikid's six markers) or markers (a marker set of your own), not both"
+            "give either marker_shift (moves ikid's six markers) or markers (a marker "
+            "set of your own), not both"
         )
     _check_name("model name", name)
     body = ikid.body_model(length_scale, mass_scale, shoulder_flexion, marker_shift)
@@ -221,7 +222,8 @@ def inverse_dynamics(model_path: str | os.PathLike[str], q: Any, qd: Any, qdd: A
             raise ValueError(f"{what}: expected ({len(arrays[0])}, {nc}) values, got shape {a.shape}")
     if model.getNumSpeeds() != nc:
         raise ValueError(
-            f"{model_path}: {model.getNumSpeeds()} mobilities for {nc} coordinates (constraints?); not supported"
+            f"{model_path}: {model.getNumSpeeds()} mobilities for {nc} coordinates "
+            "(constraints?); not supported"
         )
     # Coordinates' values and speeds by name; accelerations in mobility order (the state's u).
     u_index = [_speed_index(model, state, coords.get(j)) for j in range(nc)]
@@ -259,7 +261,8 @@ def inverse_kinematics(
     absent = [n for n in names if n not in data.labels]
     if absent:
         raise ValueError(
-            f"{marker_file}: no column for model marker(s) {', '.join(absent)}; the file has {', '.join(data.labels)}"
+            f"{marker_file}: no column for model marker(s) {', '.join(absent)}; the file "
+            f"has {', '.join(data.labels)}"
         )
     tool = osim.InverseKinematicsTool()
     tool.setModel(model)

@@ -126,7 +126,8 @@ def write_csv_markers(
     markers = np.asarray(markers, np.float64).reshape(len(time), -1)
     if markers.shape[1] != 3 * len(labels):
         raise FileFormatError(
-            f"{Path(path).name}: markers have {markers.shape[1]} columns, {len(labels)} labels need {3 * len(labels)}"
+            f"{Path(path).name}: markers have {markers.shape[1]} columns, {len(labels)} labels "
+            f"need {3 * len(labels)}"
         )
     values = markers / unit_scale(units, str(path))
     buf = io.StringIO()

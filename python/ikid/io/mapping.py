@@ -57,12 +57,14 @@ class MarkerMap:
         unknown = sorted(set(markers) - set(names))
         if unknown:
             raise FileFormatError(
-                f"{source}: unknown ikid marker(s) {', '.join(unknown)}; ikid's markers are {', '.join(names)}"
+                f"{source}: unknown ikid marker(s) {', '.join(unknown)}; ikid's "
+                f"markers are {', '.join(names)}"
             )
         missing = [m for m in names if m not in markers]
         if missing:
             raise FileFormatError(
-                f"{source}: [markers] does not name {', '.join(missing)} (every one of {', '.join(names)} is needed)"
+                f"{source}: [markers] does not name {', '.join(missing)} (every one of "
+                f"{', '.join(names)} is needed)"
             )
         bad = [m for m in names if not isinstance(markers[m], str) or not markers[m].strip()]
         if bad:
@@ -102,7 +104,8 @@ class MarkerMap:
                 else " (give a marker map: --map FILE.toml, see `ikid map-template`)"
             )
             raise _native.InputError(
-                f"{data.source or 'markers'}: label(s) {', '.join(absent)} not found; the file has {', '.join(data.labels) or 'no labels'}{hint}"
+                f"{data.source or 'markers'}: label(s) {', '.join(absent)} not found; the file has "
+                f"{', '.join(data.labels) or 'no labels'}{hint}"
             )
         return wanted
 

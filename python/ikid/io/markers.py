@@ -84,7 +84,8 @@ class MarkerData:
         n = len(self.time)
         if self.positions.shape != (n, len(self.labels), 3):
             raise FileFormatError(
-                f"{self.source or 'markers'}: positions {self.positions.shape} do not match {n} frames x {len(self.labels)} labels x 3"
+                f"{self.source or 'markers'}: positions {self.positions.shape} do not match {n} frames "
+                f"x {len(self.labels)} labels x 3"
             )
         if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise FileFormatError(
@@ -115,7 +116,8 @@ class MarkerData:
             seen = np.isfinite(frames[:, 3 * j : 3 * j + 3]).all(axis=1)
             if not seen.any():
                 raise _native.InputError(
-                    f"{source}: marker {name} (label {mapping.label_of(name)!r}) is missing in every frame; ikid needs each marker in at least some frames"
+                    f"{source}: marker {name} (label {mapping.label_of(name)!r}) is missing in every frame; "
+                    "ikid needs each marker in at least some frames"
                 )
         complete = np.isfinite(frames).all(axis=1)
         if complete.any():
@@ -126,8 +128,8 @@ class MarkerData:
             lo, hi = PLAUSIBLE_MARKER_DISTANCE_M
             if not lo <= d <= hi:
                 raise _native.InputError(
-                    f"{source}: the wrist markers are {d:.4g} m apart (median over pairs), outside {lo}-{hi} m; "
-                    f"the file says its units are {self.file_units!r} — are they?"
+                    f"{source}: the wrist markers are {d:.4g} m apart (median over pairs), outside "
+                    f"{lo}-{hi} m; the file says its units are {self.file_units!r} — are they?"
                 )
         return frames
 

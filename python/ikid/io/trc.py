@@ -43,7 +43,8 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
         n_markers = int(header["NumMarkers"])
     except ValueError:
         raise FileFormatError(
-            f"{src}:3: DataRate/NumFrames/NumMarkers must be numbers, got {header['DataRate']!r}/{header['NumFrames']!r}/{header['NumMarkers']!r}"
+            f"{src}:3: DataRate/NumFrames/NumMarkers must be numbers, got "
+            f"{header['DataRate']!r}/{header['NumFrames']!r}/{header['NumMarkers']!r}"
         ) from None
     if not (np.isfinite(rate) and rate > 0) or n_frames < 0 or n_markers <= 0:
         raise FileFormatError(
@@ -114,7 +115,8 @@ def write_trc(
     markers = np.asarray(markers, np.float64).reshape(len(time), -1)
     if time.ndim != 1 or markers.shape[1] != 3 * len(labels):
         raise FileFormatError(
-            f"{path}: expected time (n,) and markers (n, {3 * len(labels)}), got {time.shape} and {markers.shape}"
+            f"{path}: expected time (n,) and markers (n, {3 * len(labels)}), "
+            f"got {time.shape} and {markers.shape}"
         )
     if not np.all(np.isfinite(time)) or np.any(np.diff(time) <= 0):
         raise FileFormatError(f"{path}: time must be finite and strictly increasing")

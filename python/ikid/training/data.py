@@ -243,8 +243,9 @@ def lab_trials(folder: str | os.PathLike[str]) -> list[Path]:
     without = [p.name for p in markers if not p.with_suffix(".mot").exists()]
     if without:
         raise ikid.InputError(
-            f"{folder}: {', '.join(without[:5])}{' ...' if len(without) > 5 else ''} ha{'s' if len(without) == 1 else 've'} "
-            "no same-stem .mot beside it (the angles to learn); every trial needs one"
+            f"{folder}: {', '.join(without[:5])}{' ...' if len(without) > 5 else ''} "
+            f"ha{'s' if len(without) == 1 else 've'} no same-stem .mot beside it (the angles "
+            "to learn); every trial needs one"
         )
     return markers
 
@@ -255,8 +256,9 @@ def _aligned(
     """``values`` if sampled at the marker frames' times (to a quarter frame), else an error."""
     if len(t) != len(t_markers) or np.max(np.abs(t - t_markers)) > 0.25 / rate_hz:
         raise ikid.InputError(
-            f"{name}: {what} has {len(t)} rows ({t[0]:.4g}-{t[-1]:.4g} s) but the marker file has {len(t_markers)} frames "
-            f"({t_markers[0]:.4g}-{t_markers[-1]:.4g} s at {rate_hz:g} Hz); write them at the marker frames' times"
+            f"{name}: {what} has {len(t)} rows ({t[0]:.4g}-{t[-1]:.4g} s) but the marker file has "
+            f"{len(t_markers)} frames ({t_markers[0]:.4g}-{t_markers[-1]:.4g} s at {rate_hz:g} Hz); "
+            "write them at the marker frames' times"
         )
     return values
 

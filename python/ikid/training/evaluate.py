@@ -125,10 +125,13 @@ def markdown(result: dict[str, Any]) -> str:
     deg = "rmse_deg" in next(iter(result["levels"].values()))["all"]
     per = "RMSE per DoF (°)" if deg else "RMSE per DoF"
     lines = [
-        f"Model `{result['model']}` on {result['recordings']} recordings ({result['frames']} frames, {result['rate_hz']:g} Hz).",
-        "Noise: uniform ±p of each marker coordinate's range, added here (seeded). MSE in rad² (angles) or N·m² (torques).",
+        f"Model `{result['model']}` on {result['recordings']} recordings ({result['frames']} frames, "
+        f"{result['rate_hz']:g} Hz).",
+        "Noise: uniform ±p of each marker coordinate's range, added here (seeded). MSE in "
+        "rad² (angles) or N·m² (torques).",
         "",
-        f"| noise | frames | MSE last 10 % | MSE all | {per}, all | classical MSE last 10 % | classical MSE all |",
+        f"| noise | frames | MSE last 10 % | MSE all | {per}, all | classical MSE last "
+        "10 % | classical MSE all |",
         "|---|---|---|---|---|---|---|",
     ]
     for name, row in result["levels"].items():

@@ -47,7 +47,8 @@ class Affine:
 
     @staticmethod
     def minmax(lo: np.ndarray, hi: np.ndarray, target: tuple[float, float] = (-1.0, 1.0)) -> Affine:
-        """Maps ``[lo, hi]`` onto ``target`` (sklearn's MinMaxScaler); constant columns map to the midpoint."""
+        """Maps ``[lo, hi]`` onto ``target`` (sklearn's MinMaxScaler); constant columns map to the
+        midpoint."""
         lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
         span = np.where(hi > lo, hi - lo, 1.0)
         scale = (target[1] - target[0]) / span

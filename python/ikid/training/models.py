@@ -42,7 +42,8 @@ def main() -> None:
         _, path = run(load_config(CONFIGS / f"{name}.toml"), args.out, progress=not args.quiet)
         shutil.copyfile(path, args.install / path.name)
     print(
-        f"make models: {len(args.names or SHIPPED)} models in {(time.perf_counter() - start) / 60:.1f} min -> {args.install}"
+        f"make models: {len(args.names or SHIPPED)} models in {(time.perf_counter() - start) / 60:.1f} min "
+        f"-> {args.install}"
     )
 
 

@@ -254,8 +254,8 @@ def main(argv: list[str] | None = None) -> None:
     recs = D.simulate_all(specs)
     data = build(recs, 31_000 + args.seed, args.window)
     print(
-        f"{len(recs)} recordings x {len(NOISE_LEVELS)} noise levels x 2 (occlusion): {len(data['train'])} training and "
-        f"{len(data['val'])} validation windows ({time.perf_counter() - t0:.0f} s)",
+        f"{len(recs)} recordings x {len(NOISE_LEVELS)} noise levels x 2 (occlusion): {len(data['train'])} "
+        f"training and {len(data['val'])} validation windows ({time.perf_counter() - t0:.0f} s)",
         flush=True,
     )
     trained = train(data, args.window, args.hidden, args.minutes, args.seed)

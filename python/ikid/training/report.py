@@ -153,7 +153,8 @@ def ik_section(
 ) -> dict[str, Any]:
     w = model.window
     rep.add(
-        f"## IK: `{model.name}` ({model.feature_set} features, window {w}, {'-'.join(map(str, model.layer_widths))})",
+        f"## IK: `{model.name}` ({model.feature_set} features, window {w}, "
+        f"{'-'.join(map(str, model.layer_widths))})",
         "",
     )
     rep.add(
@@ -217,12 +218,12 @@ def occlusion_section(rep: Report, model: ikid.Model, recs: list[D.Recording]) -
     rep.add(
         "### One marker missing",
         "",
-        f"Held-out trajectories (seeds 9000, 3 poses). *Marker X missing*: X is NaN for the whole second half of "
-        f"every trial; the `{model.missing_markers}` policy of the model card fills it (`ikid.fill_gaps`: the segment's other two "
-        "markers, the wrist joint centre learned from the first half, and X's last position, weighted by how still the "
-        "segment is). *Bursts*: one marker at a time missing in bursts of 20–500 ms, 1 per second. MSE (rad²) over the "
-        "second halves; ratio = to the complete-marker MSE on the same frames (bound: 2). The reference IK is given the "
-        "same filled frames.",
+        "Held-out trajectories (seeds 9000, 3 poses). *Marker X missing*: X is NaN for the whole second half "
+        f"of every trial; the `{model.missing_markers}` policy of the model card fills it (`ikid.fill_gaps`: "
+        "the segment's other two markers, the wrist joint centre learned from the first half, and X's last "
+        "position, weighted by how still the segment is). *Bursts*: one marker at a time missing in bursts "
+        "of 20–500 ms, 1 per second. MSE (rad²) over the second halves; ratio = to the complete-marker MSE "
+        "on the same frames (bound: 2). The reference IK is given the same filled frames.",
         "",
     )
     rows, out = [], {}
@@ -314,10 +315,11 @@ def occlusion_section(rep: Report, model: ikid.Model, recs: list[D.Recording]) -
     )
     below = max(v["tracker"]["mse"] / v["complete"] for v in out.values())
     rep.add(
-        f"Worst ratio: **{worst:.2f}** (bound 2). The last three columns are `ikid.Tracker` refined by `wrist-track` on "
-        "the same frames: a Kalman filter over the exact body model, which leaves a missing marker out instead of filling "
-        f"it. Its worst ratio on noisy markers is {noisy_worst:.2f}x ({noisy_case}), "
-        f"but from a lower base: with one marker missing its error is at most {below:.2f}x the network's with every marker.",
+        f"Worst ratio: **{worst:.2f}** (bound 2). The last three columns are `ikid.Tracker` refined by "
+        "`wrist-track` on the same frames: a Kalman filter over the exact body model, which leaves a "
+        f"missing marker out instead of filling it. Its worst ratio on noisy markers is {noisy_worst:.2f}x "
+        f"({noisy_case}), but from a lower base: with one marker missing its error is at most {below:.2f}x "
+        "the network's with every marker.",
         "",
     )
     return out
@@ -338,9 +340,9 @@ def octant_section(rep: Report, ik: ikid.Model) -> dict[str, Any]:
     rep.add(
         "### Held-out joint-sign octant",
         "",
-        f"A model with wrist-ik's configuration trained for 2 minutes on random trajectories whose targets avoid the "
-        f"octant {held} (signs of s_p, e_f, ad_ab), tested on new trajectories (seeds 9400, 3 poses) inside {held} "
-        f"(never seen) and inside {seen} (seen). MSE rad²; ratio bound 1.5.",
+        "A model with wrist-ik's configuration trained for 2 minutes on random trajectories whose targets "
+        f"avoid the octant {held} (signs of s_p, e_f, ad_ab), tested on new trajectories (seeds 9400, "
+        f"3 poses) inside {held} (never seen) and inside {seen} (seen). MSE rad²; ratio bound 1.5.",
         "",
     )
     rows, out = [], {}
@@ -428,15 +430,16 @@ def torque_section(
     rep: Report, chain: ikid.Model, idm: ikid.Model, chain_recs: list[D.Recording], id_recs: list[D.Recording]
 ) -> dict[str, Any]:
     rep.add(
-        f"## Torques: `{chain.name}` (markers → torques, one network) and `{idm.name}` (joint state → torques)",
+        f"## Torques: `{chain.name}` (markers → torques, one network) and `{idm.name}` "
+        "(joint state → torques)",
         "",
     )
     rep.add(
         "MSE in N·m² over the three torques and normalized RMSE (% of each DoF's true torque range over the "
-        "scored frames). The classical chain on the same frames: reference IK → causal backward differences → "
-        "Newton–Euler with the subject's *true* parameters. The thesis' chain (its IK net → its ID net, clean "
-        "data) had torque MSE 0.1727 with torques up to ±1.8 N·m; ours reach ±0.5 N·m (a lighter de Leva hand), so "
-        "the range-normalized error is the fair comparison and both are given.",
+        "scored frames). The classical chain on the same frames: reference IK → causal backward differences "
+        "→ Newton–Euler with the subject's *true* parameters. The thesis' chain (its IK net → its ID net, "
+        "clean data) had torque MSE 0.1727 with torques up to ±1.8 N·m; ours reach ±0.5 N·m (a lighter de "
+        "Leva hand), so the range-normalized error is the fair comparison and both are given.",
         "",
     )
     rows, out = [], {}
@@ -483,7 +486,8 @@ def torque_section(
         f"`{idm.name}` on the thesis split's test frames (default subject, shoulder 0°, exact joint states): "
         f"MSE {s['mse']:.2e} N·m², nRMSE "
         + " / ".join(f"{v:.2f} %" for v in s["nrmse_pct_of_range"])
-        + " (s_p / e_f / ad_ab; target ≤ 5 %). Newton–Euler on the same exact joint states is exact to 1e-7 of the range.",
+        + " (s_p / e_f / ad_ab; target ≤ 5 %). Newton–Euler on the same exact joint states "
+        "is exact to 1e-7 of the range.",
         "",
     )
     out["id"] = s
@@ -528,9 +532,10 @@ def main(argv: list[str] | None = None) -> None:
     rep.add(
         "# ikid evaluation report",
         "",
-        f"Generated by `make report` (`python -m ikid.training.report`) with ikid {ikid.__version__}, simulator `{ikid.SIMULATOR}`, "
-        f"on {platform.processor() or platform.machine()} / Python {platform.python_version()}. "
-        "Models are the shipped files (`ikid.load(name)`), run by the Rust core.",
+        f"Generated by `make report` (`python -m ikid.training.report`) with ikid {ikid.__version__}, "
+        f"simulator `{ikid.SIMULATOR}`, on {platform.processor() or platform.machine()} / "
+        f"Python {platform.python_version()}. Models are the shipped files (`ikid.load(name)`), "
+        "run by the Rust core.",
         "",
     )
     held = held_out_sets()
@@ -566,8 +571,9 @@ def main(argv: list[str] | None = None) -> None:
     for m in (ik, chain, idm):
         prov = m.card["provenance"]
         rep.add(
-            f"- `{m.name}`: task {m.task}, {m.feature_set} × {m.window}, layers {m.layer_widths}, trained {prov['epochs']} epochs "
-            f"in {prov['train_seconds']} s on {prov['recordings']} recordings ({prov['frames']} frames, data hash {prov['data_sha256_16']})."
+            f"- `{m.name}`: task {m.task}, {m.feature_set} × {m.window}, layers {m.layer_widths}, trained "
+            f"{prov['epochs']} epochs in {prov['train_seconds']} s on {prov['recordings']} recordings "
+            f"({prov['frames']} frames, data hash {prov['data_sha256_16']})."
         )
     rep.add("", f"Report computed in {time.perf_counter() - start:.0f} s.")
     path = rep.write()

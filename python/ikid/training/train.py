@@ -69,11 +69,13 @@ def load_config(path: str | Path) -> dict[str, Any]:
         raise ValueError(f"{path}: [model] missing_markers {policy!r} is not 'refuse' or 'fill'")
     if cfg["model"].get("output_offset") not in (None, "newest_features"):
         raise ValueError(
-            f"{path}: [model] output_offset {cfg['model']['output_offset']!r} is not 'newest_features' (or absent)"
+            f"{path}: [model] output_offset {cfg['model']['output_offset']!r} is not "
+            "'newest_features' (or absent)"
         )
     if cfg["train"]["occlusion_bursts_per_s"] > 0 and policy != "fill":
         raise ValueError(
-            f"{path}: [train] occlusion_bursts_per_s needs [model] missing_markers = 'fill' (occluded frames are filled)"
+            f"{path}: [train] occlusion_bursts_per_s needs [model] missing_markers = 'fill' "
+            "(occluded frames are filled)"
         )
     return cfg
 
@@ -308,7 +310,8 @@ def run(cfg: dict[str, Any], out: Path, progress: bool = True, onnx: bool = True
     recs = build_recordings(cfg["data"])
     check_targets(recs, cfg["model"]["task"])
     print(
-        f"{name}: {len(recs)} recordings, {sum(len(r) for r in recs)} frames ({time.perf_counter() - t0:.1f} s to build)",
+        f"{name}: {len(recs)} recordings, {sum(len(r) for r in recs)} frames "
+        f"({time.perf_counter() - t0:.1f} s to build)",
         flush=True,
     )
     trained = train(cfg, recs, log_path, progress)
@@ -333,7 +336,8 @@ def run(cfg: dict[str, Any], out: Path, progress: bool = True, onnx: bool = True
     result = {"model": str(path), "epochs": len(trained.log), "seconds": trained.seconds, "metrics": metrics}
     (run_dir / "result.json").write_text(json.dumps(result, indent=2))
     print(
-        f"{name}: {len(trained.log)} epochs in {trained.seconds:.0f} s -> {path}; test metrics {json.dumps(metrics)}",
+        f"{name}: {len(trained.log)} epochs in {trained.seconds:.0f} s -> {path}; "
+        f"test metrics {json.dumps(metrics)}",
         flush=True,
     )
     return model, path
