@@ -75,7 +75,7 @@ fn fill_gaps<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>, unfillable: &str)
                 ikid::body::MARKER_FRAME_LEN
             )));
         }
-        let (filled, masks) = py.detach(|| ikid::model::fill_gaps(values, keep)).py_err()?;
+        let (filled, masks) = py.detach(|| ikid::gaps::fill_gaps(values, keep)).py_err()?;
         Ok((filled.into_pyarray(py).reshape([shape[0], shape[1]])?, masks.into_pyarray(py)))
     })
 }

@@ -160,7 +160,7 @@ pub enum Error {
     },
 }
 
-/// What kind of failure an [`Error`] is; each binding maps every kind (exhaustively) to its
+/// What kind of failure an [`Error`](enum@Error) is; each binding maps every kind (exhaustively) to its
 /// own notion: a Python exception class, a C status code.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum ErrorKind {

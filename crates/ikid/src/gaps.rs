@@ -468,6 +468,41 @@ impl GapFiller {
     }
 }
 
+/// Runs a fresh [`GapFiller`] over a whole recording of marker frames: the frames with each
+/// fillable missing marker filled, and per frame the bit mask of markers filled. A frame that
+/// cannot be filled stops the run with its error, or with `keep_unfillable` stays missing
+/// (mask 0; markers found to have jumped are set missing).
+pub fn fill_gaps(frames: &[f32], keep_unfillable: bool) -> Result<(Vec<f32>, Vec<u8>)> {
+    if !frames.len().is_multiple_of(MARKER_FRAME_LEN) {
+        return Err(Error::BadArgument {
+            what: "frames",
+            detail: format!("{} values is not a whole number of {MARKER_FRAME_LEN}-value marker frames", frames.len()),
+        });
+    }
+    let mut filled = frames.to_vec();
+    let mut filler = GapFiller::new();
+    let masks = filled
+        .chunks_exact_mut(MARKER_FRAME_LEN)
+        .enumerate()
+        .map(|(i, f)| {
+            match filler.fill(f, i) {
+                Err(Error::MissingMarkers { .. }) if keep_unfillable => Ok(0),
+                // Markers that jumped and could not be replaced become missing, never kept (a
+                // refused frame leaves the filler as it was, so it names the same markers).
+                Err(Error::OutlierMarker { .. }) if keep_unfillable => {
+                    let outliers = filler.outliers(f);
+                    for m in (0..6).filter(|m| outliers & (1 << m) != 0) {
+                        f[3 * m..3 * m + 3].fill(f32::NAN);
+                    }
+                    Ok(0)
+                }
+                other => other,
+            }
+        })
+        .collect::<Result<_>>()?;
+    Ok((filled, masks))
+}
+
 /// Bit mask of the markers with any non-finite coordinate (bit `i` = [`MARKERS`]`[i]`).
 pub fn missing_mask(frame: &[f32]) -> u8 {
     frame

@@ -48,6 +48,13 @@ pub struct Stream {
     pushed: usize,
 }
 
+impl Model {
+    /// A new stream over this model (allocates its buffers once, here).
+    pub fn stream(&self) -> Stream {
+        Stream::new(self.clone())
+    }
+}
+
 impl Stream {
     pub(crate) fn new(model: Model) -> Self {
         let nf = model.feature_set().feature_len();

@@ -3,10 +3,10 @@
 //!
 //! A single frame is bound by streaming the weights (see `kernel.rs`); a whole recording
 //! need not be. Layers wider than [`SMALL_BLOCK`](super::kernel::SMALL_BLOCK) keep a second
-//! copy of their weights as panels of [`PANEL`] outputs, `[panel][input][PANEL]`, read back to
-//! back. For every input a panel's two weight vectors are multiplied into six samples'
-//! accumulators (12 of the 16 AVX registers), so the loop is bound by FMA throughput, not by
-//! loads; only `ceil(n_out / PANEL)` panels are computed. Narrower layers (the output layer)
+//! copy of their weights (packed with the first, in `kernel.rs`) as panels of [`PANEL`]
+//! outputs, `[panel][input][PANEL]`, read back to back. For every input a panel's two weight
+//! vectors are multiplied into six samples' accumulators (12 of the 16 AVX registers), so the
+//! loop is bound by FMA throughput, not by loads; only `ceil(n_out / PANEL)` panels are computed. Narrower layers (the output layer)
 //! run the single-sample kernel per sample: it sums over each sample's own list of nonzero
 //! inputs in four interleaved lanes, an order a batch cannot share.
 //!
@@ -21,27 +21,7 @@
 //! inputs in ascending order); that kernel merely skips inputs that are exactly zero, which
 //! leaves a finite sum unchanged. So `Model::predict` gives bit for bit what a `Stream` gives.
 
-use super::kernel::{BLOCK, PackedLayer, PackedMlp, Scratch, forward_portable};
-
-/// Outputs per panel of the batch kernel's weight copy (two AVX vectors).
-pub(super) const PANEL: usize = 16;
-
-/// A wide layer's weights as panels of [`PANEL`] outputs, `[panel][input][PANEL]`, so the
-/// batch kernel reads one panel's rows back to back; and its bias per panel. Zero-padded.
-pub(super) fn pack_panels(layer: &PackedLayer) -> (Vec<f32>, Vec<f32>) {
-    let (n_in, n_out) = (layer.n_in, layer.n_out);
-    let n_panels = n_out.div_ceil(PANEL);
-    let mut panels = vec![0f32; n_panels * n_in * PANEL];
-    let mut bias = vec![0f32; n_panels * PANEL];
-    bias[..n_out].copy_from_slice(&layer.bias[..n_out]);
-    for o in 0..n_out {
-        let (p, lane) = (o / PANEL, o % PANEL);
-        for j in 0..n_in {
-            panels[(p * n_in + j) * PANEL + lane] = layer.weights[((o / BLOCK) * n_in + j) * BLOCK + o % BLOCK];
-        }
-    }
-    (panels, bias)
-}
+use super::kernel::{PANEL, PackedLayer, PackedMlp, Scratch, forward_portable};
 
 /// Samples per batched forward pass: four register-blocked groups of six, so a weight panel
 /// read from L2 for the first group is reused from L1 by the others.

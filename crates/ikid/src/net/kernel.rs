@@ -1,4 +1,5 @@
 //! The fast forward pass: weights packed for streaming, scaling folded in, no allocation.
+//! This file owns both packed layouts (the blocks read here and the panels `batch.rs` reads).
 //!
 //! A batch-1 MLP is a chain of matrix-vector products, bound by how fast the weights stream
 //! from cache. Each layer's outputs are cut into blocks of `B` (64, or 8 for tiny layers);
@@ -134,7 +135,7 @@ impl PackedMlp {
                     panel_bias: vec![],
                 };
                 if block == BLOCK {
-                    (layer.panels, layer.panel_bias) = super::batch::pack_panels(&layer);
+                    (layer.panels, layer.panel_bias) = pack_panels(&layer);
                 }
                 layer
             })
@@ -193,6 +194,26 @@ impl PackedMlp {
         }
         forward_portable(self, x, scratch, out);
     }
+}
+
+/// Outputs per panel of the batch kernel's (`batch.rs`)'s weight copy (two AVX vectors).
+pub(super) const PANEL: usize = 16;
+
+/// A wide layer's weights as panels of [`PANEL`] outputs, `[panel][input][PANEL]`, so the
+/// batch kernel reads one panel's rows back to back; and its bias per panel. Zero-padded.
+pub(super) fn pack_panels(layer: &PackedLayer) -> (Vec<f32>, Vec<f32>) {
+    let (n_in, n_out) = (layer.n_in, layer.n_out);
+    let n_panels = n_out.div_ceil(PANEL);
+    let mut panels = vec![0f32; n_panels * n_in * PANEL];
+    let mut bias = vec![0f32; n_panels * PANEL];
+    bias[..n_out].copy_from_slice(&layer.bias[..n_out]);
+    for o in 0..n_out {
+        let (p, lane) = (o / PANEL, o % PANEL);
+        for j in 0..n_in {
+            panels[(p * n_in + j) * PANEL + lane] = layer.weights[((o / BLOCK) * n_in + j) * BLOCK + o % BLOCK];
+        }
+    }
+    (panels, bias)
 }
 
 pub(super) fn fma_available() -> bool {

@@ -1,5 +1,6 @@
 //! Multilayer perceptrons: the plain nalgebra form (the oracle) and the packed fast form,
-//! one sample at a time (`kernel`) or six (`batch`).
+//! one sample at a time (`kernel`, which also packs both weight layouts) or [`BATCH`] at once
+//! (`batch`).
 
 mod batch;
 mod kernel;

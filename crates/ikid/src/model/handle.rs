@@ -1,0 +1,139 @@
+//! The loaded model: its card, the network in both forms (the nalgebra oracle and the packed
+//! kernel), shared cheaply between streams and threads.
+
+use super::card::ModelCard;
+use super::file;
+use crate::error::{Error, Result};
+use crate::features::FeatureSet;
+use crate::gaps::MissingMarkers;
+use crate::net::{Mlp, PackedMlp};
+use std::path::Path;
+use std::sync::Arc;
+
+/// A loaded, validated model. Cheap to clone (shared); `Send + Sync`: many threads may
+/// share one model, each with its own [`Stream`](crate::Stream).
+#[derive(Debug, Clone)]
+pub struct Model {
+    inner: Arc<Inner>,
+}
+
+#[derive(Debug)]
+struct Inner {
+    card: ModelCard,
+    feature_set: FeatureSet,
+    mlp: Mlp,
+    packed: PackedMlp,
+}
+
+impl Model {
+    /// Loads and validates a `.safetensors` model file. Reads only a regular file of at most
+    /// [`MAX_MODEL_FILE_BYTES`](file::MAX_MODEL_FILE_BYTES): a directory, a named pipe or a device (`/dev/zero`) is refused
+    /// before it is opened, so a wrong path never hangs or fills memory.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let name = || path.display().to_string();
+        let bytes = file::read_bounded(path, file::MAX_MODEL_FILE_BYTES)
+            .map_err(|source| Error::Io { path: name(), source })?;
+        Self::from_bytes(&bytes).map_err(|e| Error::InModelFile { path: name(), source: Box::new(e) })
+    }
+
+    /// Validates a model held in memory (the bytes of a `.safetensors` file).
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self> {
+        let (card, set, mlp) = file::parse(bytes)?;
+        Self::assemble(card, set, mlp)
+    }
+
+    /// Builds a model from a card and a network (e.g. random weights for benchmarks),
+    /// checking that they fit each other.
+    pub fn from_parts(card: ModelCard, mlp: Mlp) -> Result<Self> {
+        // One validation path: write and re-read.
+        Self::from_bytes(&file::to_bytes(&card, &mlp)?)
+    }
+
+    fn assemble(card: ModelCard, feature_set: FeatureSet, mlp: Mlp) -> Result<Self> {
+        let packed = PackedMlp::new(&mlp);
+        // Finite tensors can still overflow once the scaling is folded in.
+        if let Some((layer, value)) = packed.first_non_finite() {
+            return Err(Error::NonFiniteWeight {
+                name: format!("layers.{layer}.weight (scaling folded in)"),
+                index: 0,
+                value,
+            });
+        }
+        Ok(Model { inner: Arc::new(Inner { card, feature_set, mlp, packed }) })
+    }
+
+    /// The model as the bytes of a `.safetensors` file.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        file::to_bytes(&self.inner.card, &self.inner.mlp).expect("a loaded model always serialises")
+    }
+
+    /// Writes the model file atomically (a temporary file renamed into place), so a failure
+    /// never leaves a partial file at `path`.
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
+        let path = path.as_ref();
+        let io = |source| Error::Io { path: path.display().to_string(), source };
+        let tmp = path.with_extension("safetensors.partial");
+        std::fs::write(&tmp, self.to_bytes()).map_err(io)?;
+        std::fs::rename(&tmp, path).map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            io(e)
+        })
+    }
+
+    /// The model card.
+    pub fn card(&self) -> &ModelCard {
+        &self.inner.card
+    }
+
+    /// The network (plain nalgebra form, scaling not folded).
+    pub fn mlp(&self) -> &Mlp {
+        &self.inner.mlp
+    }
+
+    pub(crate) fn packed(&self) -> &PackedMlp {
+        &self.inner.packed
+    }
+
+    /// How frames are turned into network inputs.
+    pub fn feature_set(&self) -> FeatureSet {
+        self.inner.feature_set
+    }
+
+    /// Frames per window.
+    pub fn window(&self) -> usize {
+        self.inner.card.window
+    }
+
+    /// Values per input frame.
+    pub fn frame_len(&self) -> usize {
+        self.inner.feature_set.frame_len()
+    }
+
+    /// Values per prediction.
+    pub fn n_outputs(&self) -> usize {
+        self.inner.card.outputs.len()
+    }
+
+    /// What a stream of this model does with a missing marker (the card's `missing_markers`).
+    pub fn missing_markers(&self) -> MissingMarkers {
+        MissingMarkers::from_name(&self.inner.card.missing_markers).expect("validated with the card")
+    }
+
+    /// True if each output adds the newest frame's same-named feature (the card's
+    /// `output_offset`; see [`NEWEST_FEATURES`](super::NEWEST_FEATURES)).
+    pub fn adds_newest_features(&self) -> bool {
+        self.inner.card.output_offset.is_some()
+    }
+
+    /// Adds the newest frame's features of `window` (whole frames' features, oldest first) to
+    /// `out` when the card asks for it (see [`adds_newest_features`](Self::adds_newest_features)).
+    pub(crate) fn add_offset(&self, window: &[f32], out: &mut [f32]) {
+        if self.adds_newest_features() {
+            let newest = &window[window.len() - self.feature_set().feature_len()..];
+            for (o, f) in out.iter_mut().zip(newest) {
+                *o += f;
+            }
+        }
+    }
+}
