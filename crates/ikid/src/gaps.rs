@@ -579,6 +579,7 @@ mod tests {
         // from the forearm's technical frame must be that point.
         let body = BodyModel::scaled(1.1, 1.0);
         let (mut filler, frames) = calibrated(&body, 0.3);
+        assert!(filler.is_calibrated(), "300 frames of motion about every axis locate the centre");
         let (c_f, c_h) = filler.joint_centre().expect("calibrated after 300 moving frames");
         let wrist = body.forearm_pose(0.3).translation.vector;
         for f in &frames[300..310] {
@@ -844,6 +845,53 @@ mod tests {
             filler.fill(&mut f.clone(), i).unwrap();
         }
         panic!("never reached {MIN_CALIBRATION_FRAMES} complete frames");
+    }
+
+    #[test]
+    fn the_motion_limit_is_eight_times_the_segments_rms_step() {
+        // The whole arm glides 1 mm per frame along x (the wrist still): every marker steps
+        // 1 mm, so the limit is 8 mm. A hand stepping 12 mm at once is flagged, 6 mm is not.
+        let body = BodyModel::default();
+        let pose = body.forearm_pose(0.0);
+        let frame = |i: usize| {
+            let mut f = body.marker_frame(&[0.2, -0.1, 0.05], &pose).map(|v| v as f32);
+            for m in 0..N_MARKERS {
+                f[3 * m] += 0.001 * i as f32;
+            }
+            f
+        };
+        let mut filler = GapFiller::new();
+        for i in 0..100 {
+            assert_eq!(filler.fill(&mut frame(i), i).unwrap(), 0);
+        }
+        for (extra, flagged) in [(0.011f32, true), (0.005, false)] {
+            let mut f = frame(100);
+            for m in 3..6 {
+                f[3 * m] += extra;
+            }
+            let expect = if flagged { 0b111_000 } else { 0 };
+            assert_eq!(filler.outliers(&f), expect, "hand stepping {} mm", 1e3 * (0.001 + extra));
+        }
+    }
+
+    #[test]
+    fn a_refused_jump_says_how_far_apart_the_pair_is() {
+        // Checked, not filled (the refusing policy): the message gives the pair's distance in
+        // this frame and on average, both by hand.
+        let body = BodyModel::default();
+        let (mut filler, frames) = calibrated(&body, 0.0);
+        let truth = frames[300];
+        let mut f = truth;
+        let centroid = (marker(&truth, 3) + marker(&truth, 4) + marker(&truth, 5)) / 3.0;
+        let out = (marker(&truth, 4) - centroid).normalize() * 0.03;
+        for a in 0..3 {
+            f[12 + a] += out[a] as f32;
+        }
+        let err = filler.check(&f, 3).unwrap_err().to_string();
+        // MC5's first pair is MC2–MC5.
+        let now = 1e3 * (marker(&f, 3) - marker(&f, 4)).norm();
+        let usual = 1e3 * (marker(&truth, 3) - marker(&truth, 4)).norm();
+        assert!(err.contains(&format!("MC2–MC5 is {now:.1} mm apart, {usual:.1} mm on average")), "{err}");
     }
 
     #[test]
