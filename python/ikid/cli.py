@@ -459,10 +459,11 @@ def cmd_stream(args: argparse.Namespace) -> int:
         try:
             t, x = _parse_frame(line, models[0].frame_len, args.time)
             results = [s.push(x, time=t) for s in streams]
-            if any(r is None for r in results):
+            ready = [r for r in results if r is not None]
+            if len(ready) < len(results):
                 status = "filling"
             else:
-                values = ",".join(f"{v:.7g}" for r in results for v in r)  # type: ignore[union-attr]
+                values = ",".join(f"{v:.7g}" for r in ready for v in r)
                 filled = streams[0].filled_markers
                 if filled:
                     status = "filled:" + "+".join(filled)

@@ -148,7 +148,7 @@ def run_model(
 def _progress(total: int, label: str):
     """A tqdm bar on stderr when it is a terminal (tqdm decides), else nothing."""
     try:
-        from tqdm import tqdm  # type: ignore[import-untyped]
+        from tqdm import tqdm
     except ImportError:  # pragma: no cover - tqdm is a dependency of the wheel
         return None
     return tqdm(total=total, desc=label, unit="frame", unit_scale=True, leave=False, disable=None)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,7 +21,7 @@ from ikid.io import write_mot, write_sto, write_trc
 from ikid.io._atomic import atomic_output
 
 #: Noise models by name, each ``fn(markers, seed, **params) -> markers``.
-NOISE = {
+NOISE: dict[str, Callable[..., np.ndarray]] = {
     "uniform": lambda m, seed, fraction: _native.noise_uniform(m, fraction, seed),
     "gaussian": lambda m, seed, sigma: _native.noise_gaussian(m, sigma, seed),
     "drift": lambda m, seed, amplitude, rate_hz: _native.noise_drift(m, amplitude, rate_hz, seed),
@@ -82,7 +83,7 @@ class Trial:
         with np.load(path) as z:
             meta = json.loads(str(z["metadata"]))
             return Trial(
-                *(z[k] for k in ("time", "q", "qd", "qdd", "tau", "markers", "q_ref")), metadata=meta
+                z["time"], z["q"], z["qd"], z["qdd"], z["tau"], z["markers"], z["q_ref"], metadata=meta
             )
 
 

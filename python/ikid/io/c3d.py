@@ -32,7 +32,7 @@ _CHILD = "import sys; from ikid.io.c3d import _parse_into; _parse_into(sys.argv[
 
 def _ezc3d():
     try:
-        import ezc3d  # type: ignore[import-untyped]
+        import ezc3d
     except ImportError:  # pragma: no cover - ezc3d is a dependency of the wheel
         raise ImportError("reading C3D needs ezc3d: pip install ezc3d") from None
     return ezc3d

@@ -58,7 +58,8 @@ class Recording:
             return self
         lo, hi = SPLIT_FRACTIONS[split]
         a, b = int(round(lo * len(self))), int(round(hi * len(self)))
-        return Recording(f"{self.name}[{split}]", *(x[a:b] for x in self.arrays()), meta=self.meta)
+        markers, q, qd, qdd, tau = (x[a:b] for x in self.arrays())
+        return Recording(f"{self.name}[{split}]", markers, q, qd, qdd, tau, meta=self.meta)
 
     def frames(self, feature_set: str) -> np.ndarray:
         """The raw frames a model on ``feature_set`` reads: joint states (q, q̇, q̈) or markers."""

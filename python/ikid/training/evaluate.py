@@ -7,7 +7,7 @@ Only ``ikid`` and NumPy: shipped model files are evaluated exactly as users run 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -21,16 +21,28 @@ NOISE_LEVELS = {"clean": 0.0, "1%": 0.01, "5%": 0.05}
 EVAL_SEED = 7_000_000  # evaluation noise seeds, never used in training
 
 
-def truth(model: ikid.Model, rec: D.Recording) -> np.ndarray:
+class Predictor(Protocol):
+    """What scoring needs of a model: an ``ikid.Model``, or :class:`ClassicalIk`."""
+
+    @property
+    def task(self) -> str: ...
+    @property
+    def feature_set(self) -> str: ...
+    @property
+    def window(self) -> int: ...
+    def predict(self, frames: np.ndarray) -> np.ndarray: ...
+
+
+def truth(model: Predictor, rec: D.Recording) -> np.ndarray:
     return D.target(rec, model.task)[model.window - 1 :]
 
 
-def predict(model: ikid.Model, rec: D.Recording) -> np.ndarray:
+def predict(model: Predictor, rec: D.Recording) -> np.ndarray:
     """Predictions for every frame with a full window (row ``i`` is frame ``i + window - 1``)."""
     return model.predict(rec.frames(model.feature_set)).astype(np.float64)
 
 
-def errors(model: ikid.Model, recs: Sequence[D.Recording], split: str) -> tuple[np.ndarray, np.ndarray]:
+def errors(model: Predictor, recs: Sequence[D.Recording], split: str) -> tuple[np.ndarray, np.ndarray]:
     """Stacked (prediction − truth, truth) over the ``split`` part of each recording.
 
     The part is cut *after* predicting the whole recording, so the first test frames use the
@@ -102,7 +114,7 @@ def evaluate_recordings(
         if model.task == "ik":
             # The classical per-frame solution on the very frames the model scored (same skip).
             ref = ClassicalIk(model.window)
-            row["classical"] = {split: summary(*errors(ref, data, split), unit) for split in ("test", "all")}  # type: ignore[arg-type]
+            row["classical"] = {split: summary(*errors(ref, data, split), unit) for split in ("test", "all")}
         out["levels"][name] = row
     return out
 

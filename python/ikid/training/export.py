@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import torch
 from torch import nn
 
@@ -136,8 +137,9 @@ def export(
 ) -> ikid.Model:
     """Write ``net`` as an ikid model file at ``path`` and return it loaded from there."""
     chain = linear_layers(net)
-    weights = [lin.weight.detach().cpu().float().numpy() for lin, _ in chain]
-    biases = [
+    # Typed as what build_model takes (its stub's list[ArrayLike]; a list is invariant).
+    weights: list[npt.ArrayLike] = [lin.weight.detach().cpu().float().numpy() for lin, _ in chain]
+    biases: list[npt.ArrayLike] = [
         (
             lin.bias.detach().cpu().float().numpy()
             if lin.bias is not None
@@ -145,7 +147,7 @@ def export(
         )
         for lin, _ in chain
     ]
-    n_in, n_out = weights[0].shape[1], weights[-1].shape[0]
+    n_in, n_out = chain[0][0].in_features, chain[-1][0].out_features
     inp = input_scaling or Affine.identity(n_in)
     out = output_scaling or Affine.identity(n_out)
     card = card_for(spec, [act for _, act in chain])
@@ -158,6 +160,12 @@ class WindowModel(nn.Module):
     """A model file's whole function in torch: raw feature window ``[batch, window × F]`` ->
     SI outputs, i.e. ``net`` with its scaling and, with ``offset_features = F``, the newest
     frame's first outputs-many features added (the card's ``output_offset``)."""
+
+    # Buffers (register_buffer): typed here, as nn.Module's __getattr__ cannot tell them from submodules.
+    in_scale: torch.Tensor
+    in_shift: torch.Tensor
+    out_scale: torch.Tensor
+    out_shift: torch.Tensor
 
     def __init__(self, net: nn.Module, inp: Affine, out: Affine, offset_features: int = 0):
         super().__init__()

@@ -116,7 +116,8 @@ def mse_of(parts: list[np.ndarray]) -> float:
 
 class Report:
     def __init__(self, out: Path):
-        self.out, self.lines = out, []
+        self.out = out
+        self.lines: list[str] = []
         (out / "report").mkdir(parents=True, exist_ok=True)
 
     def add(self, *lines: str) -> None:
@@ -150,7 +151,7 @@ def fmt(v: Any) -> str:
 
 def ik_section(
     rep: Report, model: ikid.Model, train_recs: list[D.Recording], held: dict[str, list[D.Recording]]
-) -> dict[str, Any]:
+) -> dict[tuple[str, str], float]:
     w = model.window
     rep.add(
         f"## IK: `{model.name}` ({model.feature_set} features, window {w}, "
@@ -164,7 +165,8 @@ def ik_section(
         "seeds never used in training.",
         "",
     )
-    rows, results = [], {}
+    rows: list[list[Any]] = []
+    results: dict[tuple[str, str], float] = {}
     sets = {"thesis split: last 10 % of the training recordings (seen movement types)": (train_recs, "test")}
     sets.update({name: (recs, "all") for name, recs in held.items()})
     for set_name, (recs, split) in sets.items():
@@ -226,7 +228,8 @@ def occlusion_section(rep: Report, model: ikid.Model, recs: list[D.Recording]) -
         "on the same frames (bound: 2). The reference IK is given the same filled frames.",
         "",
     )
-    rows, out = [], {}
+    rows: list[list[Any]] = []
+    out: dict[str, dict[str, Any]] = {}
 
     def second_half(rs: list[D.Recording], est) -> float:
         return mse_of([est(r)[len(r) // 2 :] - r.q[len(r) // 2 :] for r in rs])
@@ -505,15 +508,15 @@ def latency(rep: Report, models: list[ikid.Model]) -> None:
             t0 = time.perf_counter_ns()
             s.push(f)
             ts.append(time.perf_counter_ns() - t0)
-        ts = np.array(ts[m.window :]) / 1e3
+        us = np.array(ts[m.window :]) / 1e3
         rows.append(
             [
                 m.name,
                 m.feature_set,
                 m.window,
                 "-".join(map(str, m.layer_widths)),
-                f"{np.median(ts):.2f}",
-                f"{np.percentile(ts, 99):.2f}",
+                f"{np.median(us):.2f}",
+                f"{np.percentile(us, 99):.2f}",
             ]
         )
     rep.add("## Latency (Python `Stream.push`, one frame, this machine)", "")

@@ -16,12 +16,16 @@ import copy
 import itertools
 import json
 import random
+import sys
 from pathlib import Path
 from typing import Any
 
-import tomllib
-
 from ikid.training.train import load_config, run
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
 
 
 def combinations(space: dict[str, list[Any]], mode: str, trials: int, seed: int) -> list[dict[str, Any]]:

@@ -16,13 +16,13 @@ import copy
 import hashlib
 import json
 import math
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomllib
 import torch
 from torch import nn
 from tqdm import tqdm
@@ -30,6 +30,11 @@ from tqdm import tqdm
 import ikid
 from ikid.training import data as D
 from ikid.training.export import Affine, ModelSpec, WindowModel, export, export_onnx
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
 
 TRAIN_DEFAULTS: dict[str, Any] = {
     "seed": 0,
