@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo data models models-track report test test-rust test-python test-c lint bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf
+.PHONY: all venv wheel demo data models models-track report check test test-rust test-python test-python-slow test-c lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf
 
 all: wheel
 
@@ -30,12 +30,18 @@ $(VENV)/.created:
 venv: $(VENV)/.created
 
 # Build the abi3 wheel in release mode and install it (with extras) into the venv: tests
-# run against the same wheel a user would pip install.
-wheel: $(VENV)/.created
+# run against the same wheel a user would pip install. Rebuilt only when a tracked source
+# of it changed (the stamp is newer than every one of them).
+WHEEL_STAMP := $(VENV)/.wheel-installed
+WHEEL_SOURCES := $(shell git ls-files crates python Cargo.toml Cargo.lock pyproject.toml README.md 2>/dev/null)
+$(WHEEL_STAMP): $(VENV)/.created $(WHEEL_SOURCES)
 	rm -f $(WHEELS)/ikid-*.whl
 	$(VENV)/bin/maturin build --release --quiet -o $(WHEELS)
 	$(PIP) install --quiet --force-reinstall --no-deps $(WHEELS)/ikid-*.whl
 	$(PIP) install --quiet "$$(ls $(WHEELS)/ikid-*.whl)[train,test,eval]"
+	touch $@
+
+wheel: $(WHEEL_STAMP)
 
 demo: wheel
 	$(PY) -m ikid.demo
@@ -59,15 +65,46 @@ models-track: wheel
 report: wheel
 	$(PY) -m ikid.training.report
 
-test: test-rust wheel c test-python check-header lint fuzz
+# Two tiers. `make check` (a few minutes once built): lint first (rustfmt, clippy, ruff, mypy,
+# the C header), then the Rust tests, the fast Python tests and the stub check. `make test`
+# (what CI runs): check, then the slow tier: shipped-model accuracy, training end to end,
+# torch/OpenSim/biorbd peers, the C programs under valgrind (a failure, not a skip, in CI when
+# valgrind is missing), and 60 s of fuzzing.
+check: lint test-rust test-python stubtest
+	@echo "make check: all passed"
+
+test: check test-python-slow fuzz
 	@echo "make test: all suites passed"
 
-test-rust:
-	$(CARGO) test --workspace --exclude ikid-py
+lint: fmt-check clippy ruff mypy check-header
 
-# Python tests, including the C ABI tests (tests/test_capi.py runs target/c/* under valgrind).
+fmt-check:
+	$(CARGO) fmt --all --check
+	cd fuzz && $(CARGO) fmt --check
+
+clippy:
+	$(CARGO) clippy --workspace --all-targets -- -D warnings
+
+PY_SOURCES := python tests benches examples
+ruff: wheel
+	$(VENV)/bin/ruff check $(PY_SOURCES)
+	$(VENV)/bin/ruff format --check $(PY_SOURCES)
+
+mypy: wheel
+	$(VENV)/bin/mypy python/ikid
+
+test-rust:
+	$(CARGO) test --workspace --exclude ikid-py --profile quick
+
+# Python tests against the installed wheel; those marked `slow` (tests/conftest.py) run in
+# `make test` only. The C ABI tests need the C programs (`make c`).
 test-python: wheel c
-	cd tests && ../$(PY) -m pytest -q -p no:cacheprovider .
+	cd tests && ../$(PY) -m pytest -q -p no:cacheprovider -m "not slow" .
+
+test-python-slow: wheel c
+	cd tests && ../$(PY) -m pytest -q -p no:cacheprovider -m slow .
+
+stubtest: wheel
 	$(PY) -m mypy.stubtest ikid._native
 
 test-c: c wheel
@@ -105,9 +142,6 @@ install: capi
 	install -m 644 include/ikid.h $(PREFIX)/include/
 	sed -e 's|@PREFIX@|$(abspath $(PREFIX))|' -e 's|@VERSION@|$(VERSION)|' crates/ikid-capi/ikid.pc.in > $(PREFIX)/lib/pkgconfig/ikid.pc
 
-lint:
-	$(CARGO) clippy --workspace --all-targets -- -D warnings
-
 # cargo-fuzz on the model loader for FUZZ_SECONDS (bounded; part of `make test`). Starts from
 # the committed seeds (valid small models) and keeps its corpus in fuzz/corpus (ignored).
 # cargo-fuzz needs the nightly toolchain (sanitizer flags); it is built once into .tools.
@@ -126,7 +160,7 @@ fuzz: $(CARGO_FUZZ)
 
 # Mutation testing of the core: the check to run on changes to crates/ikid (not part of
 # `make test`). cargo-mutants mutates MUTANTS_FILES and runs `cargo test -p ikid` on each
-# mutant in the `mutants` profile (no LTO: ~7 s a mutant here). MUTANTS_SHARD=k/n takes every
+# mutant in the `quick` profile (no LTO: ~7 s a mutant here). MUTANTS_SHARD=k/n takes every
 # n-th mutant (round robin, so every file and kind is sampled): 0/6 is ~250 mutants, ~30 min on
 # 2 cores; run k = 0..5 for all of them. Mutants no test can tell from the original are listed,
 # each with its reason, in .cargo/mutants.toml. Fails below MUTANTS_MIN_SCORE; the last line
@@ -140,7 +174,7 @@ $(CARGO_MUTANTS):
 
 mutants: $(CARGO_MUTANTS)
 	PATH="$(abspath .tools/bin):$$PATH" $(CARGO) mutants -p ikid $(foreach f,$(MUTANTS_FILES),-f crates/ikid/src/$(f).rs) \
-		--shard $(MUTANTS_SHARD) --sharding round-robin --profile mutants -o target/mutants > target/mutants.log 2>&1 \
+		--shard $(MUTANTS_SHARD) --sharding round-robin --profile quick -o target/mutants > target/mutants.log 2>&1 \
 		|| test -f target/mutants/mutants.out/outcomes.json || (tail -30 target/mutants.log; exit 1)
 	$(PYTHON) tools/mutants_summary.py target/mutants/mutants.out --min-score $(MUTANTS_MIN_SCORE)
 

@@ -16,6 +16,28 @@ from ikid import _native
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # for `training`
 
+# The slow tier (`make test` only; `make check` runs the rest): the C programs under valgrind,
+# training end to end and the shipped models' accuracy, the torch/OpenSim/biorbd peers, and
+# the C3D corruption sweep (a process per case).
+SLOW_MODULES = {
+    "test_capi.py",
+    "test_capi_tracker.py",
+    "test_training.py",
+    "test_parity.py",
+    "test_opensim.py",
+    "test_biorbd.py",
+}
+SLOW_TESTS = {
+    "test_train_and_report_on_a_lab_folder_through_the_cli",
+    "test_corrupted_c3d_files_are_read_or_refused_never_a_crash",
+}
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if item.path.name in SLOW_MODULES or getattr(item, "originalname", item.name) in SLOW_TESTS:
+            item.add_marker(pytest.mark.slow)
+
 
 def make_card(
     feature_set: str = "markers", window: int = 5, activations=("relu", "relu", "identity"), **extra

@@ -661,6 +661,77 @@ mod tests {
     }
 
     #[test]
+    fn a_refiner_that_overreaches_is_held_to_three_standard_deviations() {
+        // A refiner whose corrections are 10⁴ times too large: every correction it makes is cut
+        // to ±3 standard deviations of the filter's own estimate (the bare filter's here).
+        use crate::net::{Affine, Mlp};
+        use crate::testing::random_refiner;
+        let base = random_refiner(4, &[8], 9);
+        let mlp = base.mlp();
+        let loud = Affine { scale: mlp.output.scale.map(|s| s * 1e4), shift: mlp.output.shift.map(|s| s * 1e4 + 1e3) };
+        let loud = Mlp::new(mlp.input.clone(), mlp.layers.clone(), loud).unwrap();
+        let refiner = Model::from_parts(base.card().clone(), loud).unwrap();
+        let body = BodyModel::default();
+        let mut f = frames(&body, &trajectory(300, 1000.0), 0.1);
+        uniform_range(&mut f, 0.02, 8).unwrap();
+        let mut bare = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut refined = Tracker::new(body, TrackerSettings::default()).unwrap();
+        refined.set_refiner(Some(refiner)).unwrap();
+        let mut clamped = 0;
+        for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+            let a = bare.push(frame).unwrap().unwrap();
+            let b = refined.push(frame).unwrap().unwrap();
+            // From frame 100 the learned noise (2 %) opens the gate: the corrections are huge.
+            if i < 100 {
+                continue;
+            }
+            assert!(b.refined);
+            let (sd_q, sd_qdd) = bare.state_std();
+            for k in 0..3 {
+                let (dq, dqdd) = ((b.state.q[k] - a.state.q[k]).abs(), (b.state.qdd[k] - a.state.qdd[k]).abs());
+                assert!((dq / (3.0 * sd_q[k]) - 1.0).abs() < 1e-9, "q {k}: {dq} vs 3 × {}", sd_q[k]);
+                assert!((dqdd / (3.0 * sd_qdd[k]) - 1.0).abs() < 1e-9, "q̈ {k}: {dqdd} vs 3 × {}", sd_qdd[k]);
+                clamped += 1;
+            }
+        }
+        assert_eq!(clamped, 600);
+    }
+
+    #[test]
+    fn a_refiner_at_the_trackers_rate_to_a_millionth_is_accepted() {
+        use crate::testing::random_refiner;
+        let refiner = random_refiner(4, &[8], 2); // 1000 Hz
+        for (rate, ok) in [(1000.0005, true), (999.9995, true), (1000.002, false), (999.998, false)] {
+            let mut t =
+                Tracker::new(BodyModel::default(), TrackerSettings { rate_hz: rate, ..Default::default() }).unwrap();
+            assert_eq!(t.set_refiner(Some(refiner.clone())).is_ok(), ok, "{rate} Hz");
+        }
+    }
+
+    #[test]
+    fn the_filter_starts_open_to_any_velocity_and_acceleration() {
+        // Started mid-movement (every coordinate turning at 1–2 rad/s): the documented initial
+        // uncertainty (velocities to ~30 rad/s, accelerations to ~300 rad/s²) lets the filter
+        // find the velocity within 20 ms on clean markers; the accelerations' uncertainty is
+        // untouched by the first frame (markers see angles only): √1e5 rad/s².
+        let body = BodyModel::default();
+        let v = [1.5, -1.0, 2.0];
+        let q: Vec<[f64; 3]> = (0..40).map(|i| std::array::from_fn(|c| 0.1 + v[c] * i as f64 * 1e-3)).collect();
+        let f = frames(&body, &q, 0.2);
+        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        tracker.push(&f[..MARKER_FRAME_LEN]).unwrap().unwrap();
+        assert_eq!(tracker.state_std().1, [1e5f64.sqrt(); 3]);
+        let mut last = None;
+        for frame in f.chunks_exact(MARKER_FRAME_LEN).skip(1).take(20) {
+            last = tracker.push(frame).unwrap();
+        }
+        let qd = last.unwrap().state.qd;
+        for c in 0..3 {
+            assert!((qd[c] - v[c]).abs() < 0.05, "coordinate {c}: {} vs {}", qd[c], v[c]);
+        }
+    }
+
+    #[test]
     fn the_refiner_gate_is_half_open_at_its_noise_and_closed_on_clean_markers() {
         // By hand: σ / (σ + 0.1 mm).
         assert_eq!(refiner_gate(0.0), 0.0);

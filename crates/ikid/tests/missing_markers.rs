@@ -118,10 +118,31 @@ fn frames_from_a_faster_source_are_refused_not_mistimed() {
     stream.push_at(0.0, &frames[..18]).unwrap();
     // A 2.5 kHz source: the next frame 0.4 ms later.
     let err = stream.push_at(0.0004, &frames[18..36]).unwrap_err().to_string();
-    assert!(err.contains("1000 Hz") && err.contains("resample"), "{err}");
+    assert!(
+        err.contains("1000 Hz") && err.contains("resample") && err.contains("0.400 ms after the previous"),
+        "{err}"
+    );
     // Jitter within half a period is accepted.
     assert!(stream.push_at(0.0009, &frames[18..36]).is_ok());
     assert!(stream.push_at(0.0021, &frames[36..54]).is_ok());
+    assert_eq!(stream.gap_restarts(), 0, "1.2 periods is jitter, not a gap");
+}
+
+#[test]
+fn a_gap_in_time_restarts_the_window_once() {
+    let model = random_model(FeatureSet::Angles, 5, &[16], 3, 4); // 1000 Hz, window 5
+    let frames = random_frames(FeatureSet::Angles, 20, 13);
+    let mut stream = model.stream();
+    let mut outputs = vec![];
+    for (i, frame) in frames.chunks_exact(18).enumerate() {
+        // Frames 8.. come after a 6 ms gap (5 frames dropped).
+        let t = if i < 8 { i as f64 * 1e-3 } else { (i + 5) as f64 * 1e-3 };
+        outputs.push(stream.push_at(t, frame).unwrap().is_some());
+    }
+    assert_eq!(stream.gap_restarts(), 1);
+    // Outputs from frame 4; none while the window refills after the gap (frames 8-11).
+    let expect: Vec<bool> = (0..20).map(|i| (4..8).contains(&i) || i >= 12).collect();
+    assert_eq!(outputs, expect);
 }
 
 #[test]
