@@ -137,3 +137,55 @@ def test_errors_raised_by_python_code_have_the_class_defaults():
     assert (e.kind, e.code, e.frame, tuple(e.markers), e.reason) == (None, None, None, (), None)
     assert issubclass(ikid.ArgumentError, ikid.InputError) and issubclass(ikid.InputError, ValueError)
     assert issubclass(ikid.NotFoundError, FileNotFoundError) and issubclass(ikid.ReadError, OSError)
+
+
+READERS = {
+    "model": ikid.load,
+    "trc": ikid.io.read_trc,
+    "csv": ikid.io.read_csv_markers,
+    "c3d": ikid.io.read_c3d,
+    "mot": ikid.io.read_mot,
+    "sto": ikid.io.read_sto,
+    "map": ikid.io.MarkerMap.load,
+    "calibration": ikid.load_calibration,
+}
+
+
+@pytest.fixture(scope="module")
+def unbounded(tmp_path_factory):
+    """A directory, /dev/zero, a named pipe (nothing writes to it: reading would block) and
+    a 4 GB sparse file (4 GB of zeros to read)."""
+    root = tmp_path_factory.mktemp("unbounded")
+    fifo = root / "fifo.trc"
+    os.mkfifo(fifo)
+    sparse = root / "huge.trc"
+    with open(sparse, "wb") as f:
+        f.truncate(4 << 30)
+    return {
+        "directory": root / "dir.trc",
+        "dev_zero": "/dev/zero",
+        "fifo": fifo,
+        "sparse_4gb": sparse,
+        "root": root,
+    }
+
+
+@pytest.mark.parametrize("reader", sorted(READERS))
+@pytest.mark.parametrize("case", ["directory", "dev_zero", "fifo", "sparse_4gb"])
+def test_every_reader_refuses_what_it_cannot_bound_at_once(unbounded, reader, case):
+    import resource
+    import time
+
+    path = unbounded[case]
+    if case == "directory":
+        path.mkdir(exist_ok=True)
+    peak_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    started = time.monotonic()
+    with pytest.raises(ikid.ReadError) as caught:
+        READERS[reader](path)
+    assert time.monotonic() - started < 1.0
+    growth_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - peak_before) / 1024
+    assert growth_mb < 50, f"peak memory grew {growth_mb:.0f} MB"
+    message = str(caught.value)
+    assert str(path) in message
+    assert "directory" in message or "not a regular file" in message or "4294967296 bytes" in message, message

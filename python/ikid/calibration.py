@@ -18,6 +18,7 @@ import numpy as np
 
 from ikid._native import Calibration, InputError, fill_gaps
 from ikid.io._atomic import write_text_atomic
+from ikid.io.markers import FileFormatError, read_text
 
 FORMAT = "ikid-calibration"
 FORMAT_VERSION = 1
@@ -54,8 +55,8 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
     """Read a calibration written by :func:`save_calibration`; the matrices are checked."""
     path = Path(path)
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        doc = json.loads(read_text(path, "a calibration file is JSON text"))
+    except (json.JSONDecodeError, FileFormatError) as e:
         raise InputError(f"{path}: not a calibration file ({e})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise InputError(f'{path}: not an ikid calibration (expected "format": "{FORMAT}")')

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ikid.io._atomic import atomic_output
-from ikid.io.markers import FileFormatError, MarkerData, unit_scale
+from ikid.io.markers import FileFormatError, MarkerData, check_readable, unit_scale
 
 #: Wall-clock limit of the child that parses one file, seconds (a corrupt header can make a
 #: parser loop or allocate without end).
@@ -84,8 +84,9 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
     """Read the 3D points of a ``.c3d`` file; positions in metres, NaN where not seen."""
     path = Path(path)
     src = str(path)
-    if not path.is_file():
+    if not path.exists():
         raise FileNotFoundError(f"{src}: no such file")
+    check_readable(path, "a C3D file")
     with tempfile.TemporaryDirectory(prefix="ikid-c3d-") as tmp:
         out = os.path.join(tmp, "points.npz")
         try:

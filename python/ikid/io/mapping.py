@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ikid import _native
-from ikid.io.markers import FileFormatError, ikid_marker_names
+from ikid.io.markers import FileFormatError, ikid_marker_names, read_text
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -82,11 +82,9 @@ class MarkerMap:
     def load(path: str | os.PathLike[str]) -> MarkerMap:
         path = Path(path)
         try:
-            table = tomllib.loads(path.read_text(encoding="utf-8"))
+            table = tomllib.loads(read_text(path, "a marker map is TOML text"))
         except tomllib.TOMLDecodeError as e:
             raise FileFormatError(f"{path}: not valid TOML: {e}") from None
-        except UnicodeDecodeError:
-            raise FileFormatError(f"{path}: not a UTF-8 text file") from None
         return MarkerMap.from_dict(table, str(path))
 
     def label_of(self, name: str) -> str:
