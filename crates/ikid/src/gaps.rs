@@ -298,6 +298,15 @@ impl GapFiller {
         (3 * segment..3 * segment + 3).map(|k| self.pair_m2[k]).sum::<f64>() / (3.0 * self.complete_frames as f64)
     }
 
+    /// Mean squared frame-to-frame displacement of a segment's marker centroid (m²) over the
+    /// consecutive complete frames seen; 0 before any.
+    fn mean_square_step(&self, segment: usize) -> f64 {
+        if self.motion_frames == 0 {
+            return 0.0;
+        }
+        self.motion_sum[segment] / self.motion_frames as f64
+    }
+
     fn pair_threshold(&self, k: usize) -> f64 {
         let sd = (self.pair_m2[k] / self.complete_frames as f64).sqrt();
         (OUTLIER_SIGMAS * sd).max(OUTLIER_FLOOR)
@@ -363,8 +372,7 @@ impl GapFiller {
             None => weight[3] = 0.0,
         }
         let seg = occluded as usize;
-        let motion = if self.motion_frames > 0 { self.motion_sum[seg] / self.motion_frames as f64 } else { 0.0 };
-        weight[3] *= PRIOR_WEIGHT / (1.0 + motion / (STILL_SPEED * STILL_SPEED));
+        weight[3] *= PRIOR_WEIGHT / (1.0 + self.mean_square_step(seg) / (STILL_SPEED * STILL_SPEED));
         // The joint centre, by inverse variance: it comes from the whole segment, the visible
         // markers from the occluded one (marker noise estimated from each segment's pair
         // distances; the centre's doubled for its lever).
@@ -402,8 +410,7 @@ impl GapFiller {
         // constant of up to CENTRE_SMOOTHING_FRAMES as its noise rises above the floor.
         let mut smoothed = [0.0; MARKER_FRAME_LEN];
         for (s, segment) in SEGMENTS.into_iter().enumerate() {
-            let var = self.noise_variance(s);
-            let frames = 1.0 + (CENTRE_SMOOTHING_FRAMES - 1.0) * var / (var + NOISE_FLOOR);
+            let frames = centre_smoothing_frames(self.noise_variance(s));
             let first = 3 * first_marker(segment);
             for i in first..first + 9 {
                 let x = frame[i] as f64;
@@ -519,6 +526,13 @@ pub fn mask_names(mask: u8) -> String {
 
 fn marker(frame: &[f32], i: usize) -> Vector3<f64> {
     Vector3::new(frame[3 * i] as f64, frame[3 * i + 1] as f64, frame[3 * i + 2] as f64)
+}
+
+/// Time constant (frames) of the running mean the joint-centre fit reads, for a segment whose
+/// marker noise variance is `noise_variance` (m²): 1 (markers as they are) when clean, rising
+/// to [`CENTRE_SMOOTHING_FRAMES`] as the noise passes [`NOISE_FLOOR`] (halfway at it).
+fn centre_smoothing_frames(noise_variance: f64) -> f64 {
+    1.0 + (CENTRE_SMOOTHING_FRAMES - 1.0) * noise_variance / (noise_variance + NOISE_FLOOR)
 }
 
 /// Rotation and translation taking the `local` points onto the `lab` ones in the weighted
@@ -886,6 +900,50 @@ mod tests {
         // Measured: 0.06 µm still, 3.5 mm moving (6.6 mm if the still forearm were not held).
         assert!(still < 1e-5, "still forearm: FAP {:.3} mm off", 1e3 * still);
         assert!(moving > 1e-3, "moving forearm: FAP {:.3} mm off, expected the fit's mm", 1e3 * moving);
+    }
+
+    #[test]
+    fn the_centre_smoothing_runs_from_one_frame_clean_to_ten_noisy() {
+        // By hand: 1 + 9 v / (v + 1e-8).
+        assert_eq!(centre_smoothing_frames(0.0), 1.0);
+        assert!((centre_smoothing_frames(NOISE_FLOOR) - 5.5).abs() < 1e-12);
+        assert!((centre_smoothing_frames(3.0 * NOISE_FLOOR) - 7.75).abs() < 1e-12);
+        assert!((centre_smoothing_frames(1.0) - 10.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn each_segments_step_is_learned_from_consecutive_complete_frames() {
+        // The arm glides 1 mm per frame along x while the wrist turns slowly: the forearm's
+        // centroid steps exactly 1 mm, the hand's 1 mm plus its turn (checked by hand below).
+        let body = BodyModel::default();
+        let pose = body.forearm_pose(0.0);
+        let q = |i: usize| [0.3 * (i as f64 * 0.01).sin(), 0.0, 0.0];
+        let frame = |i: usize| {
+            let mut f = body.marker_frame(&q(i), &pose);
+            for m in 0..N_MARKERS {
+                f[3 * m] += 0.001 * i as f64;
+            }
+            f
+        };
+        let centroid = |f: &[f64; 18], s: usize| {
+            (0..3)
+                .map(|k| Vector3::new(f[9 * s + 3 * k], f[9 * s + 3 * k + 1], f[9 * s + 3 * k + 2]))
+                .sum::<Vector3<f64>>()
+                / 3.0
+        };
+        let mut filler = GapFiller::new();
+        assert_eq!(filler.mean_square_step(0), 0.0);
+        let mut hand_sum = 0.0;
+        for i in 0..100 {
+            filler.fill(&mut frame(i).map(|v| v as f32), i).unwrap();
+            if i > 0 {
+                hand_sum += (centroid(&frame(i), 1) - centroid(&frame(i - 1), 1)).norm_squared();
+            }
+        }
+        assert!((filler.mean_square_step(0) / 1e-6 - 1.0).abs() < 1e-3, "{}", filler.mean_square_step(0));
+        let hand = hand_sum / 99.0;
+        assert!((hand / 1e-6 - 1.0).abs() > 0.01, "the hand turns too: {hand}");
+        assert!((filler.mean_square_step(1) / hand - 1.0).abs() < 1e-3, "{} vs {hand}", filler.mean_square_step(1));
     }
 
     #[test]

@@ -961,7 +961,8 @@ mod tests {
         let mut bad = f[..MARKER_FRAME_LEN].to_vec();
         bad[13] = f64::INFINITY;
         let err = tracker.push(&bad).unwrap_err().to_string();
-        assert!(err.contains("MC5.y"), "{err}");
+        // Two frames were taken before it (the first waited for MC2): this one is frame 2.
+        assert!(err.contains("MC5.y") && err.starts_with("frame 2:"), "{err}");
         let err =
             Tracker::new(BodyModel::default(), TrackerSettings { jerk_noise: -1.0, ..Default::default() }).unwrap_err();
         assert!(err.to_string().contains("jerk_noise"), "{err}");
