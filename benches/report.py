@@ -90,13 +90,20 @@ def python_push(model: ikid.Model, n: int) -> dict[str, float]:
     }
 
 
+#: The shipped refiner, timed with `ikid_tracker_push` beside the stream (marker models only).
+REFINER = ROOT / "python" / "ikid" / "models" / "wrist-track.safetensors"
+
+
 def c_abi(label: str) -> dict[str, float]:
-    """The C ABI's cost over the Rust push (benches/c/abi_overhead.c, built by `make c`)."""
+    """The C ABI's cost over the Rust push, and the tracker's push from C beside the stream's
+    (benches/c/abi_overhead.c, built by `make c`)."""
     model = ikid.load(MODELS / f"{label}.safetensors")
     csv = MODELS / f"{label}.frames.csv"
     np.savetxt(csv, frames_for(model, 1000), fmt="%.9g", delimiter=",")
+    refiner = [str(REFINER)] if model.frame_len == 18 else []
+    bench = ROOT / "target" / "c" / "abi_overhead"
     out = subprocess.run(
-        [str(ROOT / "target" / "c" / "abi_overhead"), str(MODELS / f"{label}.safetensors"), str(csv)],
+        [str(bench), str(MODELS / f"{label}.safetensors"), str(csv), *refiner],
         check=True,
         capture_output=True,
         text=True,
@@ -223,6 +230,7 @@ def main() -> None:
         "one `push_many` call | ABI overhead |",
         "|---|---|---|---|---|---|",
     ]
+    tracker_lines = []
     for label in rust:
         c = c_abi(label)
         lines.append(
@@ -230,6 +238,23 @@ def main() -> None:
             f"{c['push_per_frame_ns'] / 1000:.2f} µs | {c['push_many_per_frame_ns'] / 1000:.2f} µs "
             f"| {c['abi_overhead_ns']:+.0f} ns |"
         )
+        if "tracker_push_p50_us" in c:
+            tracker_lines.append(
+                f"| `ikid_tracker_push` (same frames as {label}) | {c['tracker_push_p50_us']:.2f} µs | "
+                f"{c['tracker_push_p99_us']:.2f} µs | {c['push_p50_us']:.2f} µs |"
+            )
+            tracker_lines.append(
+                f"| `ikid_tracker_push` + `wrist-track` refiner | "
+                f"{c['tracker_refined_push_p50_us']:.2f} µs | {c['tracker_refined_push_p99_us']:.2f} µs | "
+                f"{c['push_p50_us']:.2f} µs |"
+            )
+    if tracker_lines:
+        lines += [
+            "",
+            "| the Kalman tracker from C | p50 | p99 | `ikid_stream_push` p50, same run |",
+            "|---|---|---|---|",
+            *tracker_lines,
+        ]
     lines += [
         "",
         "`target/c/abi_overhead` (benches/c/abi_overhead.c): 200 interleaved rounds "
