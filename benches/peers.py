@@ -64,7 +64,7 @@ def networks() -> list[tuple[str, ikid.Model, nn.Sequential, Path]]:
         for a, b in itertools.pairwise(widths):
             seq += [nn.Linear(a, b), nn.ReLU()]
         net = nn.Sequential(*seq[:-1]).eval()
-        task = "id" if fs == "joint_state" else "ik"
+        task = "id" if ikid.feature_set_info(fs)["frame_kind"] == "joint_state" else "ik"
         model = export(
             net,
             OUT / f"{label}.safetensors",
@@ -177,9 +177,7 @@ def clock_ghz() -> float:
 def measure(label: str, model: ikid.Model, net: nn.Sequential, onnx_path: Path) -> dict:
     frames = frames_for(model, 1024)
     n_in = model.layer_widths[0]
-    windows = (
-        ikid.compute_features(frames, model.feature_set) if model.feature_set != "joint_state" else frames
-    )
+    windows = ikid.compute_features(frames, model.feature_set)
     x1 = np.ascontiguousarray(
         np.lib.stride_tricks.sliding_window_view(windows, (model.window, windows.shape[1]))[:, 0]
         .reshape(-1, n_in)[:1]
@@ -240,11 +238,7 @@ def measure(label: str, model: ikid.Model, net: nn.Sequential, onnx_path: Path) 
 
     # Batch: BATCH windows (ikid gets the BATCH + window - 1 frames they come from).
     many_frames = frames_for(model, BATCH + model.window - 1)
-    feats = (
-        ikid.compute_features(many_frames, model.feature_set)
-        if model.feature_set != "joint_state"
-        else many_frames
-    )
+    feats = ikid.compute_features(many_frames, model.feature_set)
     xb = np.ascontiguousarray(
         np.lib.stride_tricks.sliding_window_view(feats, (model.window, feats.shape[1]))[:, 0].reshape(
             -1, n_in
@@ -254,7 +248,7 @@ def measure(label: str, model: ikid.Model, net: nn.Sequential, onnx_path: Path) 
     # The features alone (one thread), which ikid's predict includes and the peers get for free.
     r["batch_ikid_features_1t"] = (
         per_sample_us(lambda: ikid.compute_features(many_frames, model.feature_set), len(many_frames))
-        if model.feature_set != "joint_state"
+        if model.frame_kind == "markers"
         else 0.0
     )
     for threads in (1, 2):

@@ -49,7 +49,7 @@ def rust_latency() -> dict[str, dict]:
 
 def frames_for(model: ikid.Model, n: int) -> np.ndarray:
     rng = np.random.default_rng(2)
-    if model.feature_set == "joint_state":
+    if model.frame_kind != "markers":  # joint or tracker states
         return rng.uniform(-1, 1, (n, model.frame_len)).astype(np.float32)
     q = np.stack([rng.uniform(lo, hi, n) for _, _, (lo, hi) in ikid.COORDINATES], axis=1)
     return ikid.forward_markers(q, 0.3).astype(np.float32)

@@ -355,7 +355,7 @@ def cmd_id(args: argparse.Namespace) -> int:
         )
     else:
         model = ikid.load(args.model)
-        if model.feature_set != "joint_state":
+        if model.frame_kind != "joint_state":
             raise ikid.InputError(
                 f"model {model.name!r} reads {model.feature_set} frames, not joint states "
                 "(q, q̇, q̈); use an id model"
@@ -596,9 +596,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
     """Per-push latency (p50/p99/max) of ``Stream.push`` from Python and ``predict``
     throughput (1 and 2 threads) of a model on a fresh simulated trial, on this machine."""
     model = ikid.load(args.model)
-    if model.feature_set == "joint_state":
+    if model.frame_kind != "markers":
         t = simulate("random", seed=424242, duration=args.frames / 1000.0 + 0.1)
         frames = np.concatenate([t.q, t.qd, t.qdd], axis=1)[: args.frames]
+        if model.frame_kind == "tracker_state":  # plus the tracker's log10 marker noise (1 mm)
+            frames = np.concatenate([frames, np.full((len(frames), 1), -3.0)], axis=1)
     else:
         frames = simulate("random", seed=424242, duration=args.frames / 1000.0 + 0.1).markers[: args.frames]
     frames = np.ascontiguousarray(frames, np.float32)

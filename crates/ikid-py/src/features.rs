@@ -22,6 +22,7 @@ fn feature_set_info<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyD
     let set = feature_set(name)?;
     let d = PyDict::new(py);
     d.set_item("name", set.name())?;
+    d.set_item("frame_kind", set.frame_kind().name())?;
     d.set_item("frame_len", set.frame_len())?;
     d.set_item("feature_len", set.feature_len())?;
     d.set_item("frame_names", set.frame_names())?;

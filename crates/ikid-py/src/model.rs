@@ -60,6 +60,12 @@ impl Model {
         self.inner.feature_set().name()
     }
 
+    /// What one input frame holds: "markers", "joint_state" or "tracker_state".
+    #[getter]
+    fn frame_kind(&self) -> &'static str {
+        self.inner.feature_set().frame_kind().name()
+    }
+
     #[getter]
     fn window(&self) -> usize {
         self.inner.window()

@@ -43,6 +43,29 @@ pub enum FeatureSet {
     TrackerState,
 }
 
+/// What one raw input frame of a feature set holds: the one answer to "does this model read
+/// markers?" for every caller (file readers, CLI, training, benches).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum FrameKind {
+    /// A marker frame: six markers × xyz, metres ([`MARKER_FRAME_LEN`] values).
+    Markers,
+    /// A joint state: q, q̇, q̈ in coordinate order.
+    JointState,
+    /// A [`Tracker`](crate::Tracker)'s state and its marker noise (a refiner's input).
+    TrackerState,
+}
+
+impl FrameKind {
+    /// The kind's name (`"markers"`, `"joint_state"`, `"tracker_state"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            FrameKind::Markers => "markers",
+            FrameKind::JointState => "joint_state",
+            FrameKind::TrackerState => "tracker_state",
+        }
+    }
+}
+
 /// Every feature set, in the order they are listed to users.
 pub const FEATURE_SETS: [FeatureSet; 8] = [
     FeatureSet::Markers,
@@ -78,17 +101,26 @@ impl FeatureSet {
         })
     }
 
-    /// Values in one raw input frame.
-    pub fn frame_len(self) -> usize {
+    /// What one raw input frame holds.
+    pub fn frame_kind(self) -> FrameKind {
         match self {
             FeatureSet::Markers
             | FeatureSet::Basis
             | FeatureSet::Relative
             | FeatureSet::RelativeGravity
             | FeatureSet::Angles
-            | FeatureSet::AnglesGravity => MARKER_FRAME_LEN,
-            FeatureSet::JointState => 3 * N_COORDINATES,
-            FeatureSet::TrackerState => 3 * N_COORDINATES + 1,
+            | FeatureSet::AnglesGravity => FrameKind::Markers,
+            FeatureSet::JointState => FrameKind::JointState,
+            FeatureSet::TrackerState => FrameKind::TrackerState,
+        }
+    }
+
+    /// Values in one raw input frame.
+    pub fn frame_len(self) -> usize {
+        match self.frame_kind() {
+            FrameKind::Markers => MARKER_FRAME_LEN,
+            FrameKind::JointState => 3 * N_COORDINATES,
+            FrameKind::TrackerState => 3 * N_COORDINATES + 1,
         }
     }
 
@@ -305,6 +337,11 @@ mod tests {
 
     #[test]
     fn every_set_names_every_value() {
+        let kinds = FEATURE_SETS.map(|f| f.frame_kind().name());
+        assert_eq!(
+            kinds,
+            ["markers", "markers", "markers", "markers", "markers", "markers", "joint_state", "tracker_state"]
+        );
         for set in FEATURE_SETS {
             assert_eq!(set.frame_names().len(), set.frame_len(), "{set:?}");
             assert_eq!(set.feature_names().len(), set.feature_len(), "{set:?}");

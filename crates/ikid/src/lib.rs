@@ -39,7 +39,7 @@ pub mod tracker;
 
 pub use calibration::Calibration;
 pub use error::{Error, ErrorKind, Result};
-pub use features::FeatureSet;
+pub use features::{FeatureSet, FrameKind};
 pub use gaps::{GapFiller, MissingMarkers};
 pub use model::{Model, ModelCard, OutputSpec};
 pub use stream::Stream;

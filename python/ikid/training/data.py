@@ -63,7 +63,7 @@ class Recording:
 
     def frames(self, feature_set: str) -> np.ndarray:
         """The raw frames a model on ``feature_set`` reads: joint states (q, q̇, q̈) or markers."""
-        if feature_set == "joint_state":
+        if ikid.feature_set_info(feature_set)["frame_kind"] == "joint_state":
             return np.concatenate([self.q, self.qd, self.qdd], axis=1)
         return self.markers
 
@@ -190,7 +190,7 @@ def features(rec: Recording, task: str, feature_set: str) -> np.ndarray:
     """Per-frame features ``(n, F)`` float32, computed by the core; missing markers are
     first filled by the core's gap filler, as a ``"fill"`` stream does."""
     frames = rec.frames(feature_set)
-    if feature_set != "joint_state" and np.isnan(frames).any():
+    if ikid.feature_set_info(feature_set)["frame_kind"] == "markers" and np.isnan(frames).any():
         frames = ikid.fill_gaps(frames)[0]
     return ikid.compute_features(frames, feature_set)
 

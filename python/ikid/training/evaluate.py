@@ -84,7 +84,7 @@ def summary(err: np.ndarray, true: np.ndarray, unit: str) -> dict[str, Any]:
 def card_metrics(model: ikid.Model, recs: Sequence[D.Recording]) -> dict[str, Any]:
     """Test-split metrics stored in the model card (thesis split; noise seeds not used in training)."""
     unit = model.output_units[0]
-    if model.feature_set == "joint_state":
+    if model.frame_kind == "joint_state":
         return {"test": summary(*errors(model, recs, "test"), unit)}
     return {
         f"test_{name}": summary(*errors(model, noisy(recs, level), "test"), unit)
@@ -99,7 +99,7 @@ def evaluate_recordings(
     models only), the last 10 % of each recording (``test``) and all frames (``all``); for angle
     models also the core's per-frame least squares (``ikid.reference_ik``, the body model's
     marker placement) on the same frames."""
-    levels = {"clean": 0.0} if model.feature_set == "joint_state" else (noise_levels or NOISE_LEVELS)
+    levels = {"clean": 0.0} if model.frame_kind == "joint_state" else (noise_levels or NOISE_LEVELS)
     unit = model.output_units[0]
     out: dict[str, Any] = {
         "model": model.name,
