@@ -384,6 +384,29 @@ mod tests {
     }
 
     #[test]
+    fn a_movement_is_measured_by_its_range_and_its_share_about_one_axis() {
+        let statics = frames(&[[0.0; 3]; 20], &SHIFT, 1.0, 0.0);
+        let flex = frames(&single(1, 400, 0.6), &SHIFT, 1.0, 0.0);
+        let pron = frames(&single(0, 400, 0.5), &SHIFT, 1.0, 0.0);
+        let (_, report) = Calibration::from_trials(&statics, &[(1, &flex), (0, &pron)]).unwrap();
+        // By hand: a sine of amplitude a spans 2a; a single coordinate is all about its axis.
+        for (&(j, range, purity), amplitude) in report.movements.iter().zip([0.6f64, 0.5]) {
+            assert!((range - 2.0 * amplitude.to_degrees()).abs() < 0.5, "coordinate {j}: {range}°");
+            assert!(purity > 0.999 && purity <= 1.0, "coordinate {j}: {purity}");
+        }
+        // A circle (s_p as a sine, e_f as a cosine) turns about two axes equally: about 50 %.
+        let circle: Vec<[f64; 3]> = (0..400)
+            .map(|i| {
+                let t = i as f64 / 400.0 * std::f64::consts::TAU;
+                [0.4 * t.sin(), 0.4 * t.cos(), 0.0]
+            })
+            .collect();
+        let circle = frames(&circle, &SHIFT, 1.0, 0.0);
+        let err = Calibration::from_trials(&statics, &[(1, &flex), (0, &circle)]).unwrap_err().to_string();
+        assert!(err.contains("ra_wr_s_p movement is 5") && err.contains("% about one axis (at least 90 %)"), "{err}");
+    }
+
+    #[test]
     fn a_static_trial_needs_its_documented_number_of_frames() {
         let flex = frames(&single(1, 100, 0.6), &SHIFT, 1.0, 0.0);
         let pron = frames(&single(0, 100, 0.6), &SHIFT, 1.0, 0.0);
