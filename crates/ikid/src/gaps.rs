@@ -124,7 +124,18 @@ pub struct GapFiller {
     /// Running mean of the markers over consecutive complete frames, which the joint-centre
     /// sums read ([`CENTRE_SMOOTHING_FRAMES`]); `None` after a gap.
     smoothed: Option<[f64; MARKER_FRAME_LEN]>,
+    /// The last frame refused only for having moved too far, and how many such frames in a
+    /// row agree with each other ([`REANCHOR_FRAMES`]).
+    candidate: Option<[f32; MARKER_FRAME_LEN]>,
+    candidate_frames: u32,
+    reanchors: u64,
 }
+
+/// Consecutive frames, each rigid and within the motion limit of the one before, that must all
+/// sit too far from the last accepted frame before the filler takes their place as real: what
+/// a stall or lost frames look like when no time stamps say so. A glitch of fewer frames is
+/// still refused.
+pub const REANCHOR_FRAMES: u32 = 3;
 
 /// Marker pairs within each segment (indices into [`MARKERS`]): their distances are fixed
 /// by the rigid body, so a marker that jumps or swaps labels changes them.
@@ -160,6 +171,9 @@ impl GapFiller {
             pair_mean: [0.0; 6],
             pair_m2: [0.0; 6],
             smoothed: None,
+            candidate: None,
+            candidate_frames: 0,
+            reanchors: 0,
         }
     }
 
@@ -193,11 +207,7 @@ impl GapFiller {
         if missing == 0 {
             let outliers = self.outliers(frame);
             if outliers == 0 {
-                // A degenerate frame teaches nothing; whether it is usable is the feature
-                // set's call (raw markers need no segment frames).
-                if self.learn(frame, frame_index).is_ok() {
-                    self.last = Some(frame.try_into().expect("length checked"));
-                }
+                self.accept_complete(frame, frame_index);
                 return Ok(0);
             }
             // A marker that jumped (or swapped labels) is dropped and filled like a missing one.
@@ -205,15 +215,57 @@ impl GapFiller {
             for i in (0..N_MARKERS).filter(|i| outliers & (1 << i) != 0) {
                 frame[3 * i..3 * i + 3].fill(f32::NAN);
             }
-            return self
-                .fill_missing(frame, outliers, frame_index)
-                .inspect_err(|_| frame.copy_from_slice(&original))
-                .map_err(|e| match e {
-                    Error::MissingMarkers { .. } => self.outlier_error(&original, outliers, frame_index),
-                    other => other,
-                });
+            return match self.fill_missing(frame, outliers, frame_index) {
+                Ok(mask) => Ok(mask),
+                Err(e) => {
+                    frame.copy_from_slice(&original);
+                    if self.reanchor(frame) {
+                        self.accept_complete(frame, frame_index);
+                        return Ok(0);
+                    }
+                    Err(match e {
+                        Error::MissingMarkers { .. } => self.outlier_error(&original, outliers, frame_index),
+                        other => other,
+                    })
+                }
+            };
         }
         self.fill_missing(frame, missing, frame_index)
+    }
+
+    /// Learns from a complete, consistent frame and makes it the prior for the next fill.
+    fn accept_complete(&mut self, frame: &[f32], frame_index: usize) {
+        // A degenerate frame teaches nothing; whether it is usable is the feature set's call
+        // (raw markers need no segment frames).
+        if self.learn(frame, frame_index).is_ok() {
+            self.last = Some(frame.try_into().expect("length checked"));
+        }
+        self.candidate = None;
+        self.candidate_frames = 0;
+    }
+
+    /// Whether `frame`, refused for having moved too far, completes [`REANCHOR_FRAMES`] such
+    /// frames in a row that are rigid and follow each other: then the filler forgets the last
+    /// accepted frame and goes on from this one. Otherwise it is remembered as the candidate.
+    fn reanchor(&mut self, frame: &[f32]) -> bool {
+        if self.pair_outliers(frame) != 0 {
+            return false;
+        }
+        let follows = self.candidate.as_ref().is_some_and(|c| self.motion_outliers(frame, c) == 0);
+        self.candidate_frames = if follows { self.candidate_frames + 1 } else { 1 };
+        self.candidate = Some(frame.try_into().expect("length checked"));
+        if self.candidate_frames < REANCHOR_FRAMES {
+            return false;
+        }
+        self.forget_last_frame();
+        self.reanchors += 1;
+        true
+    }
+
+    /// Times the filler took a new place as real after frames that moved too far (see
+    /// [`REANCHOR_FRAMES`]); each cost the frames refused before it.
+    pub fn reanchors(&self) -> u64 {
+        self.reanchors
     }
 
     /// Checks a frame without changing it (what a stream that refuses missing markers
@@ -225,9 +277,11 @@ impl GapFiller {
         }
         match self.outliers(frame) {
             0 => {
-                if self.learn(frame, frame_index).is_ok() {
-                    self.last = Some(frame.try_into().expect("length checked"));
-                }
+                self.accept_complete(frame, frame_index);
+                Ok(())
+            }
+            _ if self.reanchor(frame) => {
+                self.accept_complete(frame, frame_index);
                 Ok(())
             }
             outliers => Err(self.outlier_error(frame, outliers, frame_index)),
@@ -242,6 +296,15 @@ impl GapFiller {
         if self.complete_frames < MIN_CALIBRATION_FRAMES {
             return 0;
         }
+        let moved = match (&self.last, self.motion_frames > 0) {
+            (Some(last), true) => self.motion_outliers(frame, last),
+            _ => 0,
+        };
+        self.pair_outliers(frame) | moved
+    }
+
+    /// Markers whose distances to the other two of their segment break the rigid body.
+    fn pair_outliers(&self, frame: &[f32]) -> u8 {
         let mut mask = 0u8;
         for (s, pairs) in PAIRS.chunks_exact(3).enumerate() {
             let dev = |p: usize| {
@@ -268,13 +331,19 @@ impl GapFiller {
                 [false, true, false] => 0b101 << first,
                 [false, false, true] => 0b110 << first,
             };
-            if let (Some(last), true) = (&self.last, self.motion_frames > 0) {
-                let rms = (self.marker_motion_sum[s] / self.motion_frames as f64).sqrt();
-                let limit = (OUTLIER_SIGMAS * rms).max(OUTLIER_FLOOR);
-                for i in first..first + 3 {
-                    if (marker(frame, i) - marker(last, i)).norm() > limit {
-                        mask |= 1 << i;
-                    }
+        }
+        mask
+    }
+
+    /// Markers that moved from `reference` far more than their segment does between frames.
+    fn motion_outliers(&self, frame: &[f32], reference: &[f32]) -> u8 {
+        let mut mask = 0u8;
+        for s in 0..2 {
+            let rms = (self.marker_motion_sum[s] / self.motion_frames.max(1) as f64).sqrt();
+            let limit = (OUTLIER_SIGMAS * rms).max(OUTLIER_FLOOR);
+            for i in 3 * s..3 * s + 3 {
+                if (marker(frame, i) - marker(reference, i)).norm() > limit {
+                    mask |= 1 << i;
                 }
             }
         }
@@ -287,6 +356,8 @@ impl GapFiller {
         self.last = None;
         self.last_complete_origin = None;
         self.smoothed = None;
+        self.candidate = None;
+        self.candidate_frames = 0;
     }
 
     /// A segment's marker noise variance (m²), from the spread of its pair distances over the
@@ -399,6 +470,8 @@ impl GapFiller {
         }
         self.last = Some(frame.try_into().expect("length checked"));
         self.smoothed = None; // the running mean is of consecutive complete frames only
+        self.candidate = None;
+        self.candidate_frames = 0;
         Ok(missing)
     }
 
@@ -1010,6 +1083,64 @@ mod tests {
             assert_eq!(broken_pairs(&truth, &f, first), [false; 3]);
             assert_eq!(filler.outliers(&f), 0b111 << first, "segment {segment}");
         }
+    }
+
+    /// 1-kHz frames of a wrist moving fast enough that 100 ms move its markers centimetres.
+    fn fast_frame(body: &BodyModel, i: usize) -> [f32; 18] {
+        let t = i as f64 * 0.001;
+        let q = [0.8 * (5.3 * t).sin(), 0.6 * (3.7 * t + 1.0).sin(), 0.3 * (7.1 * t + 0.5).sin()];
+        body.marker_frame(&q, &body.forearm_pose(0.1)).map(|v| v as f32)
+    }
+
+    #[test]
+    fn lost_frames_without_time_stamps_cost_a_few_refusals_not_the_rest() {
+        // 100 frames lost (a network stall) and nothing says so: the first frames after it are
+        // too far from the last accepted one; the third in a row that agrees re-anchors.
+        let body = BodyModel::default();
+        for check_only in [false, true] {
+            let mut filler = GapFiller::new();
+            let mut refused = vec![];
+            for i in (0..1500).chain(1600..3000) {
+                let mut f = fast_frame(&body, i);
+                let result = if check_only { filler.check(&f, i) } else { filler.fill(&mut f, i).map(|_| ()) };
+                if result.is_err() {
+                    refused.push(i);
+                }
+            }
+            assert_eq!(refused, [1600, 1601], "check only: {check_only}");
+            assert_eq!(filler.reanchors(), 1);
+        }
+    }
+
+    #[test]
+    fn a_short_glitch_is_still_refused_and_forgotten() {
+        // The whole hand 3 cm off for two frames (labels on the other arm's markers, say):
+        // refused both times; the true hand after it is accepted, as if the glitch never was.
+        let body = BodyModel::default();
+        let mut filler = GapFiller::new();
+        let mut twin = GapFiller::new();
+        for i in 0..1500 {
+            filler.fill(&mut fast_frame(&body, i), i).unwrap();
+            twin.fill(&mut fast_frame(&body, i), i).unwrap();
+        }
+        for i in 1500..1502 {
+            let mut f = fast_frame(&body, i);
+            for m in 3..6 {
+                f[3 * m + 1] += 0.03;
+            }
+            assert!(filler.fill(&mut f, i).is_err(), "frame {i}");
+        }
+        for i in 1502..1600 {
+            let (mut a, mut b) = (fast_frame(&body, i), fast_frame(&body, i));
+            if i % 10 == 0 {
+                // A fill reads what the filler learned (placement, centre, steps, last frame).
+                a[12..15].fill(f32::NAN);
+                b[12..15].fill(f32::NAN);
+            }
+            assert_eq!(filler.fill(&mut a, i).unwrap(), twin.fill(&mut b, i).unwrap());
+            assert_eq!(a.map(f32::to_bits), b.map(f32::to_bits), "frame {i}");
+        }
+        assert_eq!(filler.reanchors(), 0);
     }
 
     #[test]
