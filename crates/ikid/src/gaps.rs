@@ -1144,6 +1144,37 @@ mod tests {
     }
 
     #[test]
+    fn fill_gaps_fills_a_recording_or_keeps_what_it_cannot_fill_missing() {
+        let body = BodyModel::default();
+        let truth: Vec<f32> = (0..1600).flat_map(|i| fast_frame(&body, i)).collect();
+        let mut frames = truth.clone();
+        frames[10 * 18 + 4] = f32::NAN; // USP before the joint centre is known: not fillable
+        frames[1500 * 18 + 13] = f32::NAN; // MC5: fillable
+        frames[1501 * 18 + 10] = f32::NAN; // MC2 and MC5: not
+        frames[1501 * 18 + 13] = f32::NAN;
+        for k in 0..3 {
+            frames.swap(1502 * 18 + 9 + k, 1502 * 18 + 12 + k); // MC2 and MC5 swap labels: not
+        }
+        let err = fill_gaps(&frames, false).unwrap_err();
+        assert!(matches!(err, Error::MissingMarkers { frame: 10, .. }), "{err}");
+        let (filled, masks) = fill_gaps(&frames, true).unwrap();
+        assert_eq!(masks.len(), 1600);
+        for (i, &m) in masks.iter().enumerate() {
+            assert_eq!(m, if i == 1500 { 1 << 4 } else { 0 }, "frame {i}");
+        }
+        assert!((filled[1500 * 18 + 13] - truth[1500 * 18 + 13]).abs() < 1e-4);
+        // Kept missing: exactly the markers that were (or jumped), and none other.
+        for (i, gone) in [(10, vec![1]), (1501, vec![3, 4]), (1502, vec![3, 4])] {
+            for m in 0..6 {
+                let nan = filled[i * 18 + 3 * m..i * 18 + 3 * m + 3].iter().any(|v| v.is_nan());
+                assert_eq!(nan, gone.contains(&m), "frame {i} marker {m}");
+            }
+        }
+        let err = fill_gaps(&frames[..17], true).unwrap_err().to_string();
+        assert!(err.contains("17 values"), "{err}");
+    }
+
+    #[test]
     fn noise_is_not_mistaken_for_a_jump() {
         // ±5 mm uniform noise on every coordinate (the thesis' 5 % on the hand): never flagged.
         let body = BodyModel::default();

@@ -698,6 +698,49 @@ mod tests {
     }
 
     #[test]
+    fn a_quiet_refiner_is_applied_times_the_gate_without_clamping() {
+        // Corrections of ~10 µrad, well inside 3 sd of the estimate: each applied exactly as
+        // the network's output times σ / (σ + 0.1 mm).
+        use crate::net::{Affine, Mlp};
+        use crate::testing::random_refiner;
+        let base = random_refiner(4, &[8], 11);
+        let mlp = base.mlp();
+        let quiet = Affine { scale: mlp.output.scale.map(|s| s * 1e-5), shift: mlp.output.shift.map(|s| s * 1e-5) };
+        let refiner =
+            Model::from_parts(base.card().clone(), Mlp::new(mlp.input.clone(), mlp.layers.clone(), quiet).unwrap())
+                .unwrap();
+        let body = BodyModel::default();
+        let mut f = frames(&body, &trajectory(300, 1000.0), 0.1);
+        uniform_range(&mut f, 0.002, 3).unwrap();
+        let mut bare = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut refined = Tracker::new(body, TrackerSettings::default()).unwrap();
+        refined.set_refiner(Some(refiner.clone())).unwrap();
+        let mut stream = refiner.stream();
+        let mut checked = 0;
+        for frame in f.chunks_exact(MARKER_FRAME_LEN) {
+            let a = bare.push(frame).unwrap().unwrap();
+            let b = refined.push(frame).unwrap().unwrap();
+            let input: Vec<f32> = a
+                .state
+                .q
+                .iter()
+                .chain(&a.state.qd)
+                .chain(&a.state.qdd)
+                .map(|&v| v as f32)
+                .chain([a.noise.log10() as f32])
+                .collect();
+            let Some(out) = stream.push(&input).unwrap() else { continue };
+            let gate = a.noise / (a.noise + 1e-4);
+            for k in 0..3 {
+                assert_eq!(b.state.q[k], a.state.q[k] + f64::from(out[k]) * gate);
+                assert_eq!(b.state.qdd[k], a.state.qdd[k] + f64::from(out[3 + k]) * gate);
+            }
+            checked += 1;
+        }
+        assert_eq!(checked, 297);
+    }
+
+    #[test]
     fn a_refiner_at_the_trackers_rate_to_a_millionth_is_accepted() {
         use crate::testing::random_refiner;
         let refiner = random_refiner(4, &[8], 2); // 1000 Hz
@@ -729,6 +772,21 @@ mod tests {
         for c in 0..3 {
             assert!((qd[c] - v[c]).abs() < 0.05, "coordinate {c}: {} vs {}", qd[c], v[c]);
         }
+    }
+
+    #[test]
+    fn values_are_q_qd_qdd_tau_in_that_order() {
+        let out = TrackerOutput {
+            state: JointState { q: [1.0, 2.0, 3.0], qd: [4.0, 5.0, 6.0], qdd: [7.0, 8.0, 9.0] },
+            tau: [10.0, 11.0, 12.0],
+            missing: 0,
+            refined: false,
+            noise: 1e-3,
+        };
+        assert_eq!(TRACKER_VALUES, 12);
+        assert_eq!(out.values(), [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0]);
+        let waiting = TrackerOutput::waiting(0b100);
+        assert!(waiting.values().iter().all(|v| v.is_nan()) && waiting.missing == 0b100 && !waiting.refined);
     }
 
     #[test]
