@@ -1172,6 +1172,13 @@ mod tests {
         }
         let err = fill_gaps(&frames[..17], true).unwrap_err().to_string();
         assert!(err.contains("17 values"), "{err}");
+        // Without keep_unfillable the label swap alone stops the run too, naming it.
+        let mut swapped = truth.clone();
+        for k in 0..3 {
+            swapped.swap(1502 * 18 + 9 + k, 1502 * 18 + 12 + k);
+        }
+        let stopped = fill_gaps(&swapped, false).map(|(_, masks)| masks.len());
+        assert!(matches!(stopped, Err(Error::OutlierMarker { frame: 1502, .. })), "{stopped:?}");
     }
 
     #[test]
