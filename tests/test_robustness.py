@@ -150,6 +150,7 @@ def outcome(stream, frame, time=None):
         None if out is None else (out.dtype.str, out.tobytes()),
         tuple(stream.filled_markers),
         stream.gap_restarts,
+        stream.reanchors,
     )
 
 
@@ -167,7 +168,22 @@ def refusals_change_nothing(frames, policy, times=None) -> list[int]:
     seen = MODEL.stream(missing_markers=policy)
     results = [outcome(seen, f, t) for f, t in zip(frames, times, strict=True)]
     gone = [i for i, r in enumerate(results) if refused(r)]
+    reanchors = 0  # the stream's count after the last accepted frame
+    reanchored_after = set()  # refused frames whose run ended in a re-anchor
+    for i, r in enumerate(results):
+        if refused(r):
+            continue
+        if r[4] > reanchors:
+            # By design the one exception: REANCHOR_FRAMES (3) frames in a row refused only for
+            # moving too far, agreeing with each other, are a new place (a stall without time
+            # stamps): the third is taken. The refusals of that run do count; nothing else may.
+            run = list(itertools.takewhile(lambda j: j in gone, range(i - 1, -1, -1)))
+            assert len(run) >= 2, f"frame {i} re-anchored after {len(run)} refused frames"
+            reanchored_after.update(run)
+            reanchors = r[4]
     for k, end in itertools.pairwise([*gone, len(frames) - 1]):
+        if k in reanchored_after:
+            continue
         never = MODEL.stream(missing_markers=policy)
         accepted = [i for i in range(k) if i not in gone]
         if times[0] is None:  # the same as pushing them one by one (stream.rs), faster

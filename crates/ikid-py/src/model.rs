@@ -221,6 +221,13 @@ impl Stream {
         self.inner.gap_restarts()
     }
 
+    /// Times the gap filler took a new place as real after three frames in a row that were
+    /// refused for moving too far (a stall, or frames lost without time stamps).
+    #[getter]
+    fn reanchors(&self) -> u64 {
+        self.inner.gap_filler().reanchors()
+    }
+
     /// Pushes a block of frames `(n, frame_len)`; returns the predictions of the frames that
     /// completed a window, `(k, n_outputs)`. Stops at the first refused frame (its error is
     /// raised; the frames before it stay pushed). Releases the GIL.
