@@ -12,9 +12,12 @@ use crate::net::Scratch;
 ///
 /// All buffers are allocated in [`Model::stream`]; [`push`](Stream::push) never allocates
 /// (proved by `tests/allocations.rs`). A frame that is refused (wrong length, NaN,
-/// degenerate markers) leaves the window exactly as it was. A non-finite prediction (input
-/// far outside the training range) is an error too, never an output; that frame stays in
-/// the window.
+/// degenerate markers) leaves the window exactly as it was, and what follows gives what it
+/// would have without it, with one designed exception: frames refused only for having moved
+/// too far are remembered, and [`REANCHOR_FRAMES`](crate::gaps::REANCHOR_FRAMES) of them in a
+/// row that agree are a new place (a stall without time stamps), so the last is taken. A
+/// non-finite prediction (input far outside the training range) is an error too, never an
+/// output; that frame stays in the window.
 ///
 /// A missing marker (non-finite value) is handled by the stream's [`MissingMarkers`] policy,
 /// the model card's unless [`set_missing_markers`](Stream::set_missing_markers) says
