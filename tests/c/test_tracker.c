@@ -15,19 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-static int passed = 0, failed = 0;
-
-#define CHECK(cond, ...)                                       \
-    do {                                                       \
-        if (cond) {                                            \
-            passed++;                                          \
-        } else {                                               \
-            failed++;                                          \
-            fprintf(stderr, "FAIL %s:%d: ", __FILE__, __LINE__); \
-            fprintf(stderr, __VA_ARGS__);                      \
-            fprintf(stderr, " (last error: %s)\n", ikid_last_error()); \
-        }                                                      \
-    } while (0)
+#include "check.h"
 
 enum { FRAME = 18, VALUES = 12, EXPECTED_COLS = 15 };
 
