@@ -185,12 +185,17 @@ def refusals_change_nothing(frames, policy, times=None) -> list[int]:
         if k in reanchored_after:
             continue
         never = MODEL.stream(missing_markers=policy)
-        accepted = [i for i in range(k) if i not in gone]
-        if times[0] is None:  # the same as pushing them one by one (stream.rs), faster
-            never.push_many(np.asarray([frames[i] for i in accepted]))
+        # The frames the first stream accepted, and the runs of refusals that re-anchored it
+        # (they count: the second stream is refused them alike, and re-anchors alike).
+        prefix = [i for i in range(k) if i not in gone or i in reanchored_after]
+        if times[0] is None and not reanchored_after.intersection(prefix):
+            never.push_many(np.asarray([frames[i] for i in prefix]))  # = one by one (stream.rs)
         else:
-            for i in accepted:
-                never.push(frames[i], times[i])
+            for i in prefix:
+                if i in reanchored_after:
+                    assert outcome(never, frames[i], times[i]) == results[i], f"{policy}: run frame {i}"
+                else:
+                    never.push(frames[i], times[i])
         for i in range(k + 1, end + 1):
             assert outcome(never, frames[i], times[i]) == results[i], (
                 f"{policy}: frame {i} differs after refused frame {k} ({results[k][2]})"
