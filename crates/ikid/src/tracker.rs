@@ -660,17 +660,21 @@ mod tests {
         assert!(refined.refiner().is_none());
     }
 
+    /// A random refiner whose outputs are multiplied by `gain` and shifted by `offset`.
+    fn rescaled_refiner(seed: u64, gain: f32, offset: f32) -> Model {
+        use crate::net::{Affine, Mlp};
+        let base = crate::testing::random_refiner(4, &[8], seed);
+        let mlp = base.mlp();
+        let out =
+            Affine { scale: mlp.output.scale.map(|s| s * gain), shift: mlp.output.shift.map(|s| s * gain + offset) };
+        Model::from_parts(base.card().clone(), Mlp::new(mlp.input.clone(), mlp.layers.clone(), out).unwrap()).unwrap()
+    }
+
     #[test]
     fn a_refiner_that_overreaches_is_held_to_three_standard_deviations() {
         // A refiner whose corrections are 10⁴ times too large: every correction it makes is cut
         // to ±3 standard deviations of the filter's own estimate (the bare filter's here).
-        use crate::net::{Affine, Mlp};
-        use crate::testing::random_refiner;
-        let base = random_refiner(4, &[8], 9);
-        let mlp = base.mlp();
-        let loud = Affine { scale: mlp.output.scale.map(|s| s * 1e4), shift: mlp.output.shift.map(|s| s * 1e4 + 1e3) };
-        let loud = Mlp::new(mlp.input.clone(), mlp.layers.clone(), loud).unwrap();
-        let refiner = Model::from_parts(base.card().clone(), loud).unwrap();
+        let refiner = rescaled_refiner(9, 1e4, 1e3);
         let body = BodyModel::default();
         let mut f = frames(&body, &trajectory(300, 1000.0), 0.1);
         uniform_range(&mut f, 0.02, 8).unwrap();
@@ -701,14 +705,7 @@ mod tests {
     fn a_quiet_refiner_is_applied_times_the_gate_without_clamping() {
         // Corrections of ~10 µrad, well inside 3 sd of the estimate: each applied exactly as
         // the network's output times σ / (σ + 0.1 mm).
-        use crate::net::{Affine, Mlp};
-        use crate::testing::random_refiner;
-        let base = random_refiner(4, &[8], 11);
-        let mlp = base.mlp();
-        let quiet = Affine { scale: mlp.output.scale.map(|s| s * 1e-5), shift: mlp.output.shift.map(|s| s * 1e-5) };
-        let refiner =
-            Model::from_parts(base.card().clone(), Mlp::new(mlp.input.clone(), mlp.layers.clone(), quiet).unwrap())
-                .unwrap();
+        let refiner = rescaled_refiner(11, 1e-5, 0.0);
         let body = BodyModel::default();
         let mut f = frames(&body, &trajectory(300, 1000.0), 0.1);
         uniform_range(&mut f, 0.002, 3).unwrap();
@@ -772,21 +769,6 @@ mod tests {
         for c in 0..3 {
             assert!((qd[c] - v[c]).abs() < 0.05, "coordinate {c}: {} vs {}", qd[c], v[c]);
         }
-    }
-
-    #[test]
-    fn values_are_q_qd_qdd_tau_in_that_order() {
-        let out = TrackerOutput {
-            state: JointState { q: [1.0, 2.0, 3.0], qd: [4.0, 5.0, 6.0], qdd: [7.0, 8.0, 9.0] },
-            tau: [10.0, 11.0, 12.0],
-            missing: 0,
-            refined: false,
-            noise: 1e-3,
-        };
-        assert_eq!(TRACKER_VALUES, 12);
-        assert_eq!(out.values(), [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0]);
-        let waiting = TrackerOutput::waiting(0b100);
-        assert!(waiting.values().iter().all(|v| v.is_nan()) && waiting.missing == 0b100 && !waiting.refined);
     }
 
     #[test]
@@ -999,6 +981,7 @@ mod tests {
             refined: false,
             noise: 1e-3,
         };
+        assert_eq!(TRACKER_VALUES, 12);
         assert_eq!(out.values(), std::array::from_fn(|i| (i + 1) as f64));
         let w = TrackerOutput::waiting(0b10_0001);
         assert!(w.values().iter().all(|v| v.is_nan()) && w.noise.is_nan());
