@@ -8,16 +8,40 @@
 //! the body model would put them on a segment in the same anatomical pose, so everything
 //! downstream (gap filler aside, which runs before) sees placement-normalised input.
 //!
-//! It is measured from a static trial in the neutral pose (all wrist angles zero) and at
-//! least two movements of a single coordinate each (e.g. flexion–extension only, then
-//! pronation–supination only), the clinical functional-axis protocol:
-//! - static: the hand's technical frame in the forearm's, `S = B_fᵀB_h`, at neutral;
-//! - each movement of coordinate `j`: the hand's rotation away from neutral, seen in the
-//!   forearm's technical frame, turns about one fixed axis — coordinate `j`'s axis `a_j`
-//!   expressed in technical coordinates, `t_j = T_fᵀ a_j` (principal axis of the rotation
-//!   vectors, sign taken from the body model's placement);
-//! - `T_f` is the rotation that best maps the measured `t_j` onto the model's `a_j`
-//!   (orthogonal Procrustes, SVD), and `T_h = T_f S` makes the neutral pose read zero.
+//! Three ways to measure it ([`Method`]), from what a session has:
+//! - **landmarks** ([`Calibration::from_neutral`] with landmarks): the epicondyles and the
+//!   styloids (markers, or virtual points from a probing file), averaged in the forearm's
+//!   technical frame over the frames where each is seen, give the forearm's anatomical frame as
+//!   the ISB recommends (Wu et al. 2005): `y` from the mid-styloids to the mid-epicondyles
+//!   (proximal), `x = y × (ulnar → radial styloid)` (volar), `z = x × y` (radial). These are
+//!   the body model's forearm axes (x volar, y proximal, z radial; see [`crate::body`]), so
+//!   the ISB frame is ikid's forearm frame as it is. The hand's anatomical frame is the
+//!   forearm's at the neutral posture (the chosen frames): the neutral posture reads zero.
+//! - **neutral** ([`Calibration::from_neutral`] without landmarks): the same for the hand; the
+//!   forearm keeps the body model's placement (its markers are assumed where the model puts
+//!   RSP, USP and FAP).
+//! - **movements** ([`Calibration::from_trials`]): a static trial in the neutral pose and at
+//!   least two movements of a single coordinate each, the clinical functional-axis protocol:
+//!   - static: the hand's technical frame in the forearm's, `S = B_fᵀB_h`, at neutral;
+//!   - each movement of coordinate `j`: the hand's rotation away from neutral, seen in the
+//!     forearm's technical frame, turns about one fixed axis — coordinate `j`'s axis `a_j`
+//!     expressed in technical coordinates, `t_j = T_fᵀ a_j` (principal axis of the rotation
+//!     vectors, sign taken from the body model's placement);
+//!   - `T_f` is the rotation that best maps the measured `t_j` onto the model's `a_j`
+//!     (orthogonal Procrustes, SVD), and `T_h = T_f S` makes the neutral pose read zero.
+//!
+//! The movements method takes its axis signs from the body model's placement, so it refuses a
+//! placement more than [`MAX_PLACEMENT_DEG`] from it; landmarks and neutral frames define the
+//! frames themselves and take clusters mounted at any orientation.
+//!
+//! **Left arms** ([`Side::Left`]) are mirrored into right arms: every point's lab `z` is
+//! negated (a reflection; ikid's lab has Z to the subject's right, so it is the sagittal
+//! mirror and keeps gravity, −Y, as it is), both when the calibration is measured and in
+//! [`apply`](Calibration::apply). The mirrored arm is a right arm, measured and read with the
+//! right arm's conventions, so every angle keeps its anatomical sign on either side
+//! (supination, flexion and ulnar deviation positive) and the networks, trained on right
+//! arms, see a right arm. Which lab plane mirrors does not matter for the angles (two mirrors
+//! differ by a rotation of the whole arm).
 //!
 //! Segment lengths need no calibration: angles do not depend on them.
 
@@ -43,24 +67,161 @@ pub const MAX_AXIS_SKEW_DEG: f64 = 10.0;
 /// more likely mislabelled than misplaced.
 pub const MAX_PLACEMENT_DEG: f64 = 60.0;
 
-/// Each segment's technical frame in its anatomical frame: `v_anatomical = T · v_technical`.
+/// Shortest distance from the mid-styloids to the mid-epicondyles, metres: less is not a
+/// forearm (landmarks mislabelled, or all taken at one end).
+pub const MIN_FOREARM_AXIS_M: f64 = 0.05;
+/// Shortest distance between the radial and the ulnar styloid, metres.
+pub const MIN_STYLOID_SPAN_M: f64 = 0.01;
+/// Smallest angle between the styloid line and the forearm's long axis, degrees: below it the
+/// four landmarks are too close to one line to say which way is volar.
+pub const MIN_LANDMARK_ANGLE_DEG: f64 = 30.0;
+
+/// Which arm. A left arm is mirrored into a right arm (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Side {
+    /// The body model's own side.
+    #[default]
+    Right,
+    /// Mirrored (lab `z` negated) into a right arm.
+    Left,
+}
+
+impl Side {
+    /// `"right"` or `"left"`, as files and the command line write it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Side::Right => "right",
+            Side::Left => "left",
+        }
+    }
+
+    /// The side named `name` (`"right"` or `"left"`).
+    pub fn from_name(name: &str) -> Result<Self> {
+        match name {
+            "right" => Ok(Side::Right),
+            "left" => Ok(Side::Left),
+            _ => {
+                Err(Error::BadArgument { what: "side", detail: format!("is {name:?}, expected \"right\" or \"left\"") })
+            }
+        }
+    }
+
+    /// Mirrors points (`x, y, z` triples back to back, lab frame) of this side's arm into a
+    /// right arm's, in place: a left arm's `z` is negated, a right arm's left as it is.
+    pub fn to_right(self, points: &mut [f32]) {
+        if self == Side::Left {
+            for z in points.iter_mut().skip(2).step_by(3) {
+                *z = -*z;
+            }
+        }
+    }
+}
+
+/// How a calibration was measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// The body model's own placement (nothing measured).
+    BodyModel,
+    /// Given as matrices (e.g. read back from a file).
+    Matrices,
+    /// Static trial plus single-coordinate movements ([`Calibration::from_trials`]).
+    Movements,
+    /// Epicondyles and styloids, hand at the neutral posture ([`Calibration::from_neutral`]).
+    Landmarks,
+    /// Neutral posture only; forearm at the body model's placement ([`Calibration::from_neutral`]).
+    Neutral,
+}
+
+impl Method {
+    /// Lower-case name, as the calibration file records it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::BodyModel => "body_model",
+            Method::Matrices => "matrices",
+            Method::Movements => "movements",
+            Method::Landmarks => "landmarks",
+            Method::Neutral => "neutral",
+        }
+    }
+}
+
+/// One anatomical landmark of the forearm calibration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Landmark {
+    /// Name used in marker maps and reports.
+    pub name: &'static str,
+    /// Where it is.
+    pub description: &'static str,
+}
+
+/// The landmarks in the order of a landmark frame: `x, y, z` of each, 12 values (NaN = not
+/// seen in that frame).
+pub const LANDMARKS: [Landmark; 4] = [
+    Landmark { name: "lateral_epicondyle", description: "lateral epicondyle of the humerus" },
+    Landmark { name: "medial_epicondyle", description: "medial epicondyle of the humerus" },
+    Landmark { name: "radial_styloid", description: "radial styloid process" },
+    Landmark { name: "ulnar_styloid", description: "ulnar styloid process" },
+];
+/// Values in one landmark frame.
+pub const LANDMARK_FRAME_LEN: usize = 3 * LANDMARKS.len();
+
+/// Landmarks seen beside the forearm's markers: `markers` are marker frames (only the
+/// forearm's three are read), `landmarks` the landmark frames of the same instants
+/// ([`LANDMARK_FRAME_LEN`] values each). NaN = not seen in that frame.
+#[derive(Debug, Clone, Copy)]
+pub struct LandmarkTrial<'a> {
+    /// Marker frames, [`MARKER_FRAME_LEN`] values each.
+    pub markers: &'a [f32],
+    /// Landmark frames, [`LANDMARK_FRAME_LEN`] values each, one per marker frame.
+    pub landmarks: &'a [f32],
+}
+
+/// Each segment's technical frame in its anatomical frame: `v_anatomical = T · v_technical`
+/// (for a left arm, of the arm mirrored into a right one).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Calibration {
     /// `T_f`, forearm.
     pub forearm: Rotation3<f64>,
     /// `T_h`, hand.
     pub hand: Rotation3<f64>,
+    /// The arm: [`apply`](Self::apply) mirrors a left arm's frames into a right arm's.
+    pub side: Side,
 }
 
 /// What the calibration learned besides the rotations, for the user to judge it by.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CalibrationReport {
+    /// How it was measured.
+    pub method: Method,
+    /// The arm.
+    pub side: Side,
     /// Per coordinate given: range of the movement (degrees) and share along its axis.
     pub movements: Vec<(usize, f64, f64)>,
     /// Angle between the measured and the body model's placement, forearm and hand, degrees.
     pub placement_deg: [f64; 2],
     /// Angle between measured axes that should be perpendicular and 90°, largest, degrees.
     pub axis_skew_deg: f64,
+    /// Neutral (or static) frames used: those with all six markers.
+    pub neutral_frames: usize,
+    /// Largest rotation of the hand (in the forearm) from their mean, degrees.
+    pub neutral_spread_deg: f64,
+    /// What the landmarks measured, for [`Method::Landmarks`].
+    pub landmarks: Option<LandmarkReport>,
+}
+
+/// The forearm's landmarks as the calibration saw them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LandmarkReport {
+    /// Frames each landmark was averaged over ([`LANDMARKS`] order).
+    pub frames: [usize; 4],
+    /// Mid-styloids to mid-epicondyles, mm.
+    pub long_axis_mm: f64,
+    /// Radial to ulnar styloid, mm.
+    pub styloid_span_mm: f64,
+    /// Lateral to medial epicondyle, mm.
+    pub epicondyle_span_mm: f64,
+    /// Angle between the styloid line and the long axis, degrees (90 for ideal landmarks).
+    pub styloid_axis_deg: f64,
 }
 
 impl Default for Calibration {
@@ -73,12 +234,21 @@ impl Calibration {
     /// The body model's own placement (what an uncalibrated stream assumes).
     pub fn body_model() -> Self {
         let (t_f, t_h) = technical_in_anatomical();
-        Calibration { forearm: Rotation3::from_matrix_unchecked(*t_f), hand: Rotation3::from_matrix_unchecked(*t_h) }
+        Calibration {
+            forearm: Rotation3::from_matrix_unchecked(*t_f),
+            hand: Rotation3::from_matrix_unchecked(*t_h),
+            side: Side::Right,
+        }
     }
 
-    /// A calibration from its two rotation matrices (e.g. read back from a file); refuses
-    /// matrices that are not rotations to 1e-6.
+    /// A right arm's calibration from its two rotation matrices (e.g. read back from a file);
+    /// refuses matrices that are not rotations to 1e-6.
     pub fn from_matrices(forearm: Matrix3<f64>, hand: Matrix3<f64>) -> Result<Self> {
+        Self::from_matrices_for(forearm, hand, Side::Right)
+    }
+
+    /// [`from_matrices`](Self::from_matrices) for either arm.
+    pub fn from_matrices_for(forearm: Matrix3<f64>, hand: Matrix3<f64>, side: Side) -> Result<Self> {
         for (name, m) in [("forearm", &forearm), ("hand", &hand)] {
             let off = (m.transpose() * m - Matrix3::identity()).abs().max();
             if !m.iter().all(|v| v.is_finite()) || off > 1e-6 || m.determinant() < 0.0 {
@@ -88,7 +258,7 @@ impl Calibration {
                 )));
             }
         }
-        Ok(Calibration { forearm: Rotation3::from_matrix(&forearm), hand: Rotation3::from_matrix(&hand) })
+        Ok(Calibration { forearm: Rotation3::from_matrix(&forearm), hand: Rotation3::from_matrix(&hand), side })
     }
 
     /// Measures the calibration from a static neutral trial and single-coordinate movements
@@ -119,7 +289,16 @@ impl Calibration {
             )));
         }
         let default = Self::body_model();
-        let mut report = CalibrationReport { movements: Vec::new(), placement_deg: [0.0; 2], axis_skew_deg: 0.0 };
+        let mut report = CalibrationReport {
+            method: Method::Movements,
+            side: Side::Right,
+            movements: Vec::new(),
+            placement_deg: [0.0; 2],
+            axis_skew_deg: 0.0,
+            neutral_frames: statics.len(),
+            neutral_spread_deg: spread,
+            landmarks: None,
+        };
         let mut measured = Vec::new();
         for &(j, frames) in movements {
             let name = COORDINATES[j].name;
@@ -185,15 +364,100 @@ impl Calibration {
                 "the markers sit {worst:.0}° from the body model's placement (at most {MAX_PLACEMENT_DEG}°): are they labelled right?"
             )));
         }
-        Ok((Calibration { forearm, hand }, report))
+        Ok((Calibration { forearm, hand, side: Side::Right }, report))
+    }
+
+    /// Measures the calibration from frames of the neutral posture (a static trial, or chosen
+    /// frames of any trial; all wrist angles read zero there) and, when given, the forearm's
+    /// landmarks ([`Method::Landmarks`]); without them the forearm keeps the body model's
+    /// placement ([`Method::Neutral`]). Frames may miss markers (NaN): the hand's neutral
+    /// posture is averaged over the frames with all six markers, each landmark over the
+    /// frames where it and the forearm's three markers are seen. Clusters may sit at any
+    /// orientation. `side` is the arm the frames show (a left one is mirrored, see the module
+    /// documentation).
+    pub fn from_neutral(
+        neutral: &[f32],
+        landmarks: Option<LandmarkTrial<'_>>,
+        side: Side,
+    ) -> Result<(Self, CalibrationReport)> {
+        let mut frames = whole_frames(neutral, MARKER_FRAME_LEN, "neutral frames")?.to_vec();
+        side.to_right(&mut frames);
+        let n = frames.len() / MARKER_FRAME_LEN;
+        let mut relative = Vec::new();
+        let mut unseen = [0usize; 6];
+        for (i, f) in frames.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+            let mut complete = true;
+            for (m, count) in unseen.iter_mut().enumerate() {
+                if !f[3 * m..3 * m + 3].iter().all(|v| v.is_finite()) {
+                    *count += 1;
+                    complete = false;
+                }
+            }
+            if complete {
+                let (_, b_f) = technical_frame(f, Segment::Forearm, i)?;
+                let (_, b_h) = technical_frame(f, Segment::Hand, i)?;
+                relative.push(Rotation3::from_matrix_unchecked(b_f.transpose() * b_h));
+            }
+        }
+        if relative.is_empty() {
+            let missing: Vec<String> = unseen
+                .iter()
+                .enumerate()
+                .filter(|&(_, &c)| c > 0)
+                .map(|(m, c)| format!("{} in {c}", body::MARKERS[m].name))
+                .collect();
+            return Err(bad(format!(
+                "no usable neutral frame: none of the {n} has all six markers (missing: {}); choose frames of \
+                 the neutral posture where every marker is seen, or record a static trial with all six",
+                if missing.is_empty() { "none, but there are no frames".to_string() } else { missing.join(", ") }
+            )));
+        }
+        let neutral = mean_rotation(&relative);
+        let spread = relative.iter().map(|s| angle_deg(&(s * neutral.inverse()))).fold(0.0, f64::max);
+        if spread > MAX_STATIC_SPREAD_DEG {
+            return Err(bad(format!(
+                "the hand moves {spread:.1}° within the neutral frames (at most {MAX_STATIC_SPREAD_DEG}°): choose \
+                 frames where the wrist holds one posture"
+            )));
+        }
+        let default = Self::body_model();
+        let (method, forearm, landmark_report) = match landmarks {
+            None => (Method::Neutral, default.forearm, None),
+            Some(trial) => {
+                let (forearm, report) = forearm_from_landmarks(trial, side)?;
+                (Method::Landmarks, forearm, Some(report))
+            }
+        };
+        let hand = forearm * neutral;
+        let report = CalibrationReport {
+            method,
+            side,
+            movements: Vec::new(),
+            placement_deg: [
+                angle_deg(&(forearm * default.forearm.inverse())),
+                angle_deg(&(hand * default.hand.inverse())),
+            ],
+            axis_skew_deg: 0.0,
+            neutral_frames: relative.len(),
+            neutral_spread_deg: spread,
+            landmarks: landmark_report,
+        };
+        Ok((Calibration { forearm, hand, side }, report))
     }
 
     /// Moves each segment's markers, in place, to where the body model puts them on a
-    /// segment in the same anatomical pose (origin: the segment's marker centroid). Refuses
-    /// frames whose segments have no orientation; does not allocate.
+    /// segment in the same anatomical pose (origin: the segment's marker centroid; a left
+    /// arm's first mirrored into a right arm's). Refuses frames whose segments have no
+    /// orientation (the frame is then left as it was); does not allocate.
     pub fn apply(&self, frame: &mut [f32], frame_index: usize) -> Result<()> {
         if frame.len() != MARKER_FRAME_LEN {
             return Err(bad(format!("a frame has {} values, a marker frame {MARKER_FRAME_LEN}", frame.len())));
+        }
+        if self.side == Side::Left {
+            // Checked before mirroring so that a refused frame is left as it came.
+            technical_frame(frame, Segment::Forearm, frame_index)?;
+            technical_frame(frame, Segment::Hand, frame_index)?;
+            self.side.to_right(frame);
         }
         let (t0_f, t0_h) = technical_in_anatomical();
         let local = default_local_markers();
@@ -220,6 +484,102 @@ pub fn angle_deg(r: &Rotation3<f64>) -> f64 {
 
 fn bad(detail: String) -> Error {
     Error::BadArgument { what: "calibration", detail }
+}
+
+fn whole_frames<'a>(values: &'a [f32], len: usize, what: &str) -> Result<&'a [f32]> {
+    if values.is_empty() || !values.len().is_multiple_of(len) {
+        return Err(bad(format!("{what}: {} values is not a whole number (≥ 1) of {len}-value frames", values.len())));
+    }
+    Ok(values)
+}
+
+/// The forearm's ISB anatomical frame from its landmarks (mirrored into a right arm's for a
+/// left one): `T_f`, and what the landmarks measured.
+fn forearm_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Result<(Rotation3<f64>, LandmarkReport)> {
+    let mut markers = whole_frames(trial.markers, MARKER_FRAME_LEN, "landmark trial markers")?.to_vec();
+    let mut landmarks = whole_frames(trial.landmarks, LANDMARK_FRAME_LEN, "landmarks")?.to_vec();
+    let n = markers.len() / MARKER_FRAME_LEN;
+    if landmarks.len() / LANDMARK_FRAME_LEN != n {
+        return Err(bad(format!(
+            "{} landmark frames for {n} marker frames: give one landmark frame per marker frame",
+            landmarks.len() / LANDMARK_FRAME_LEN
+        )));
+    }
+    side.to_right(&mut markers);
+    side.to_right(&mut landmarks);
+    let mut sums = [Vector3::zeros(); 4];
+    let mut counts = [0usize; 4];
+    let mut seen_anywhere = [0usize; 4];
+    for (i, (f, l)) in
+        markers.chunks_exact(MARKER_FRAME_LEN).zip(landmarks.chunks_exact(LANDMARK_FRAME_LEN)).enumerate()
+    {
+        let seen: [bool; 4] = std::array::from_fn(|k| l[3 * k..3 * k + 3].iter().all(|v| v.is_finite()));
+        for k in 0..4 {
+            seen_anywhere[k] += seen[k] as usize;
+        }
+        if !f[..9].iter().all(|v| v.is_finite()) || !seen.iter().any(|&s| s) {
+            continue;
+        }
+        let (origin, b) = technical_frame(f, Segment::Forearm, i)?;
+        for k in (0..4).filter(|&k| seen[k]) {
+            let p = Vector3::new(l[3 * k] as f64, l[3 * k + 1] as f64, l[3 * k + 2] as f64);
+            sums[k] += b.transpose() * (p - origin);
+            counts[k] += 1;
+        }
+    }
+    if let Some(k) = (0..4).find(|&k| counts[k] == 0) {
+        let how = if seen_anywhere[k] == 0 {
+            "is missing in every one".to_string()
+        } else {
+            format!("is seen in {} but never with the forearm's three markers", seen_anywhere[k])
+        };
+        return Err(bad(format!(
+            "landmark {} ({}) {how} of the {n} calibration frames: record it (a marker on it in the static \
+             trial, or a point probed relative to the forearm cluster) in frames where the forearm's \
+             markers are seen, or calibrate from the neutral posture alone",
+            LANDMARKS[k].name, LANDMARKS[k].description
+        )));
+    }
+    let [le, me, rs, us]: [Vector3<f64>; 4] = std::array::from_fn(|k| sums[k] / counts[k] as f64);
+    let long = (le + me) / 2.0 - (rs + us) / 2.0;
+    let across = rs - us;
+    let what_to_record = "record the epicondyles at the elbow and the styloids either side of the wrist, each \
+                          labelled as the marker map says";
+    if long.norm() < MIN_FOREARM_AXIS_M {
+        return Err(bad(format!(
+            "the mid-styloids are {:.0} mm from the mid-epicondyles (at least {:.0}): the landmarks do not \
+             span the forearm; {what_to_record}",
+            1e3 * long.norm(),
+            1e3 * MIN_FOREARM_AXIS_M
+        )));
+    }
+    if across.norm() < MIN_STYLOID_SPAN_M {
+        return Err(bad(format!(
+            "the radial and ulnar styloids are {:.1} mm apart (at least {:.0}); {what_to_record}",
+            1e3 * across.norm(),
+            1e3 * MIN_STYLOID_SPAN_M
+        )));
+    }
+    let styloid_axis_deg = long.angle(&across).to_degrees();
+    if styloid_axis_deg.min(180.0 - styloid_axis_deg) < MIN_LANDMARK_ANGLE_DEG {
+        return Err(bad(format!(
+            "the landmarks are nearly collinear: the styloid line is {styloid_axis_deg:.0}° from the forearm's \
+             long axis (at least {MIN_LANDMARK_ANGLE_DEG}° from it); {what_to_record}"
+        )));
+    }
+    let y = long.normalize();
+    let x = y.cross(&across).normalize();
+    let z = x.cross(&y);
+    // Columns: the anatomical axes in technical coordinates, A; T_f = Aᵀ.
+    let axes = Matrix3::from_columns(&[x, y, z]);
+    let report = LandmarkReport {
+        frames: counts,
+        long_axis_mm: 1e3 * long.norm(),
+        styloid_span_mm: 1e3 * across.norm(),
+        epicondyle_span_mm: 1e3 * (le - me).norm(),
+        styloid_axis_deg,
+    };
+    Ok((Rotation3::from_matrix_unchecked(axes.transpose()), report))
 }
 
 /// `B_fᵀ B_h` of every frame.
@@ -451,6 +811,178 @@ mod tests {
         for (a, b) in frame.iter().zip(&before) {
             assert!((a - b).abs() < 1e-6);
         }
+    }
+
+    /// Landmarks of the default forearm (scaled), in its anatomical frame: symmetric about
+    /// the long axis, so that the ISB frame they give is the body model's forearm frame.
+    fn landmark_offsets(scale: f64) -> [[f64; 3]; 4] {
+        [[0.0, 0.26, 0.035], [0.0, 0.26, -0.035], [0.0, 0.005, 0.03], [0.0, 0.005, -0.03]]
+            .map(|p: [f64; 3]| p.map(|c| c * scale))
+    }
+
+    /// Neutral marker frames of a subject whose markers are shifted by `shift` and whose
+    /// hand cluster is turned by `turn` about the hand's long axis, with its landmark frames.
+    fn neutral_session(n: usize, shift: &[[f64; 3]; 6], turn_deg: f64, q: [f64; 3]) -> (Vec<f32>, Vec<f32>) {
+        let mut body = body::BodyModel::scaled(1.1, 1.1);
+        let turn = Rotation3::from_axis_angle(&Vector3::y_axis(), turn_deg.to_radians());
+        for (m, (o, s)) in body.marker_offsets.iter_mut().zip(shift).enumerate() {
+            let moved = Vector3::from(*o) + Vector3::from(*s);
+            let moved = if m >= 3 { turn * moved } else { moved };
+            *o = [moved.x, moved.y, moved.z];
+        }
+        let pose = body.forearm_pose(0.5);
+        let markers: Vec<f32> = (0..n).flat_map(|_| body.marker_frame(&q, &pose).map(|v| v as f32)).collect();
+        let landmarks: Vec<f32> = (0..n)
+            .flat_map(|_| {
+                landmark_offsets(1.1).into_iter().flat_map(|p| {
+                    let p = pose * nalgebra::Point3::from(p);
+                    [p.x as f32, p.y as f32, p.z as f32]
+                })
+            })
+            .collect();
+        (markers, landmarks)
+    }
+
+    fn angles_after(cal: &Calibration, frame: &[f32]) -> [f32; 3] {
+        let mut frame = frame.to_vec();
+        cal.apply(&mut frame, 0).unwrap();
+        let mut out = [0.0f32; 3];
+        FeatureSet::Angles.compute(&frame, &mut out, 0).unwrap();
+        out
+    }
+
+    fn mirrored(frames: &[f32]) -> Vec<f32> {
+        let mut m = frames.to_vec();
+        Side::Left.to_right(&mut m);
+        m
+    }
+
+    #[test]
+    fn landmarks_calibrate_misplaced_clusters_at_any_orientation_through_gaps() {
+        // The hand cluster turned 120° about the hand's long axis: far beyond the 60° the
+        // movements method allows, and no matter here.
+        let (mut markers, mut landmarks) = neutral_session(12, &SHIFT, 120.0, [0.0; 3]);
+        markers[3 * 18 + 10] = f32::NAN; // MC2 missing in frame 3
+        markers[5 * 18 + 1] = f32::NAN; // USP missing in frame 5
+        for i in 0..6 {
+            landmarks[i * 12 + 6] = f32::NAN; // the radial styloid seen in half the frames only
+        }
+        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks };
+        let (cal, report) = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap();
+        assert_eq!(report.method, Method::Landmarks);
+        assert_eq!(report.neutral_frames, 10, "two frames miss a marker");
+        let lm = report.landmarks.as_ref().unwrap();
+        assert_eq!(lm.frames, [11, 11, 6, 11], "frame 5 has no forearm frame; frames 0-5 no radial styloid");
+        assert!((lm.styloid_span_mm - 66.0).abs() < 1e-3 && (lm.styloid_axis_deg - 90.0).abs() < 1e-3, "{lm:?}");
+        assert!(report.placement_deg[1] > MAX_PLACEMENT_DEG, "{report:?}");
+        let q = [0.5, -0.6, 0.25];
+        let (frame, _) = neutral_session(1, &SHIFT, 120.0, q);
+        let out = angles_after(&cal, &frame);
+        for k in 0..3 {
+            assert!((out[k] as f64 - q[k]).abs() < 1e-4, "{out:?} vs {q:?}");
+        }
+    }
+
+    #[test]
+    fn a_left_arm_is_its_mirror_image_and_reads_the_same_anatomical_angles() {
+        // A left arm in the same anatomical pose as a right one is the right one's mirror image.
+        let (markers, landmarks) = neutral_session(10, &SHIFT, 40.0, [0.0; 3]);
+        let (markers, landmarks) = (mirrored(&markers), mirrored(&landmarks));
+        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks };
+        let (cal, report) = Calibration::from_neutral(&markers, Some(trial), Side::Left).unwrap();
+        assert_eq!((cal.side, report.side), (Side::Left, Side::Left));
+        let q = [-0.4, 0.5, -0.2];
+        let (frame, _) = neutral_session(1, &SHIFT, 40.0, q);
+        let out = angles_after(&cal, &mirrored(&frame));
+        for k in 0..3 {
+            assert!((out[k] as f64 - q[k]).abs() < 1e-4, "left: {out:?} vs {q:?}");
+        }
+        // Read as a right arm, the mirror image's supination and adduction change sign.
+        let as_right = Calibration { side: Side::Right, ..cal };
+        let out = angles_after(&as_right, &frame);
+        assert!((out[0] as f64 + q[0]).abs() > 0.1, "{out:?}");
+        let back = Calibration::from_matrices_for(*cal.forearm.matrix(), *cal.hand.matrix(), Side::Left).unwrap();
+        assert_eq!(back.side, Side::Left);
+        assert_eq!(Side::from_name("left").unwrap(), Side::Left);
+        assert!(Side::from_name("both").unwrap_err().to_string().contains("expected \"right\" or \"left\""));
+    }
+
+    #[test]
+    fn neutral_frames_alone_calibrate_the_hand_to_the_forearm() {
+        // Forearm markers where the body model puts them, the hand's anywhere.
+        let mut shift = SHIFT;
+        shift[..3].copy_from_slice(&[[0.0; 3]; 3]);
+        let (markers, _) = neutral_session(10, &shift, -75.0, [0.0; 3]);
+        let (cal, report) = Calibration::from_neutral(&markers, None, Side::Right).unwrap();
+        assert_eq!(report.method, Method::Neutral);
+        assert!(report.placement_deg[0] < 1e-9 && report.landmarks.is_none(), "{report:?}");
+        let q = [0.3, 0.4, -0.15];
+        let (frame, _) = neutral_session(1, &shift, -75.0, q);
+        let out = angles_after(&cal, &frame);
+        for k in 0..3 {
+            assert!((out[k] as f64 - q[k]).abs() < 1e-4, "{out:?} vs {q:?}");
+        }
+    }
+
+    #[test]
+    fn bad_landmarks_and_neutral_frames_say_what_to_record() {
+        let (markers, landmarks) = neutral_session(10, &SHIFT, 0.0, [0.0; 3]);
+        let run = |m: &[f32], l: &[f32]| {
+            let trial = LandmarkTrial { markers: m, landmarks: l };
+            Calibration::from_neutral(m, Some(trial), Side::Right).unwrap_err().to_string()
+        };
+        let mut gone = landmarks.clone();
+        gone.iter_mut().skip(9).step_by(12).for_each(|v| *v = f32::NAN);
+        let err = run(&markers, &gone);
+        assert!(
+            err.contains("landmark ulnar_styloid (ulnar styloid process) is missing in every one of the 10"),
+            "{err}"
+        );
+        assert!(err.contains("record it"), "{err}");
+        // The styloids on the long axis: collinear.
+        let mut collinear = landmarks.clone();
+        for f in collinear.chunks_exact_mut(12) {
+            let (le, me) = (Vector3::new(f[0], f[1], f[2]), Vector3::new(f[3], f[4], f[5]));
+            let mid = (le + me) / 2.0;
+            let (rs, us) = (Vector3::new(f[6], f[7], f[8]), Vector3::new(f[9], f[10], f[11]));
+            let axis = mid - (rs + us) / 2.0;
+            let (a, b) = ((rs + us) / 2.0 + 0.1 * axis, (rs + us) / 2.0 - 0.1 * axis);
+            f[6..9].copy_from_slice(a.as_slice());
+            f[9..12].copy_from_slice(b.as_slice());
+        }
+        let err = run(&markers, &collinear);
+        assert!(err.contains("the landmarks are nearly collinear: the styloid line is 0° from"), "{err}");
+        let mut one_point = landmarks.clone();
+        for f in one_point.chunks_exact_mut(12) {
+            let rs: [f32; 3] = f[6..9].try_into().unwrap();
+            f[9..12].copy_from_slice(&rs);
+        }
+        assert!(run(&markers, &one_point).contains("styloids are 0.0 mm apart (at least 10)"));
+        let err = run(&markers, &landmarks[..12 * 9]);
+        assert!(err.contains("9 landmark frames for 10 marker frames"), "{err}");
+        // A glove marker missing in every neutral frame (as in a static trial gone wrong).
+        let mut no_hand = markers.clone();
+        no_hand.iter_mut().skip(9).step_by(18).for_each(|v| *v = f32::NAN);
+        let err = Calibration::from_neutral(&no_hand, None, Side::Right).unwrap_err().to_string();
+        assert!(
+            err.contains("no usable neutral frame: none of the 10 has all six markers (missing: MC2 in 10)"),
+            "{err}"
+        );
+        let mut moving = markers.clone();
+        let (far, _) = neutral_session(1, &SHIFT, 0.0, [0.0, 0.3, 0.0]);
+        moving[..18].copy_from_slice(&far);
+        let err = Calibration::from_neutral(&moving, None, Side::Right).unwrap_err().to_string();
+        assert!(err.contains("within the neutral frames (at most 5°)"), "{err}");
+        assert!(Calibration::from_neutral(&[], None, Side::Right).unwrap_err().to_string().contains("whole number"));
+    }
+
+    #[test]
+    fn a_refused_left_frame_is_left_as_it_came() {
+        let cal = Calibration { side: Side::Left, ..Calibration::body_model() };
+        let mut frame = vec![0.0f32; MARKER_FRAME_LEN];
+        frame[2] = 1.0;
+        assert!(cal.apply(&mut frame, 4).is_err());
+        assert_eq!(frame[2], 1.0);
     }
 
     #[test]
