@@ -83,6 +83,9 @@ typedef struct ikid_tracker_flags {
   // Mean noise (standard deviation) of the hand markers measured so far, m; NaN when not
   // `ready`. What the refiner is told and gated by.
   double noise;
+  // `IKID_FRAME_*` bits: markers rejected as implausible, a segment's pose held, a restart
+  // after the tracker lost the hand, an angle no wrist reaches (write it as missing).
+  uint32_t status;
 } ikid_tracker_flags;
 
 #ifdef __cplusplus

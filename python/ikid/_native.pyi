@@ -41,6 +41,7 @@ __all__ = [
 ]
 
 __version__: str
+FRAME_STATUS: dict[str, int]
 COORDINATES: list[tuple[str, str, tuple[float, float]]]
 MARKERS: list[tuple[str, str, str]]
 FEATURE_SETS: list[str]
@@ -177,6 +178,8 @@ class Tracker:
     def push(self, frame: _Floats) -> npt.NDArray[np.float64] | None: ...
     def run(self, frames: _Floats) -> dict[str, Any]: ...
     def reset(self) -> None: ...
+    @property
+    def restarts(self) -> int: ...
     @property
     def marker_noise(self) -> npt.NDArray[np.float64]: ...
     @property

@@ -24,3 +24,17 @@ pub use boundary::{ikid_last_error, ikid_status, ikid_status_message, ikid_versi
 pub use model::{ikid_model, ikid_model_info};
 pub use stream::ikid_stream;
 pub use tracker::{ikid_tracker, ikid_tracker_flags, ikid_tracker_settings};
+
+/// Frame status bit (`ikid_tracker_flags.status`): a missing marker was filled, or the
+/// estimate was made without it.
+pub const IKID_FRAME_FILLED: u32 = ikid_core::status::FILLED as u32;
+/// Frame status bit: a present marker was rejected as implausible and not used.
+pub const IKID_FRAME_REJECTED_MARKER: u32 = ikid_core::status::REJECTED_MARKER as u32;
+/// Frame status bit: the tracker lost the hand and restarted from this frame's own solution.
+pub const IKID_FRAME_RESTARTED: u32 = ikid_core::status::RESTARTED as u32;
+/// Frame status bit: a segment was not measured in this frame; its pose was held.
+pub const IKID_FRAME_HELD: u32 = ikid_core::status::HELD as u32;
+/// Frame status bit: the inputs lie outside the model's training envelope.
+pub const IKID_FRAME_OUTSIDE_TRAINING: u32 = ikid_core::status::OUTSIDE_TRAINING as u32;
+/// Frame status bit: an output no wrist can give; write it as missing, not as a number.
+pub const IKID_FRAME_IMPLAUSIBLE: u32 = ikid_core::status::IMPLAUSIBLE as u32;

@@ -53,11 +53,20 @@ pub struct ikid_tracker_flags {
     /// Mean noise (standard deviation) of the hand markers measured so far, m; NaN when not
     /// `ready`. What the refiner is told and gated by.
     pub noise: f64,
+    /// `IKID_FRAME_*` bits: markers rejected as implausible, a segment's pose held, a restart
+    /// after the tracker lost the hand, an angle no wrist reaches (write it as missing).
+    pub status: u32,
 }
 
 impl ikid_tracker_flags {
     fn new(out: &TrackerOutput, ready: bool) -> Self {
-        ikid_tracker_flags { missing: u32::from(out.missing), ready, refined: out.refined, noise: out.noise }
+        ikid_tracker_flags {
+            missing: u32::from(out.missing),
+            ready,
+            refined: out.refined,
+            noise: out.noise,
+            status: u32::from(out.status),
+        }
     }
 }
 

@@ -32,5 +32,11 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     reference::register(m)?;
     sim::register(m)?;
     tracker::register(m)?;
+    // Per-frame status bits, by name (`ikid.FRAME_STATUS`): one table, the core's.
+    let bits = pyo3::types::PyDict::new(m.py());
+    for (bit, name) in ikid::status::ALL {
+        bits.set_item(name, bit)?;
+    }
+    m.add("FRAME_STATUS", bits)?;
     Ok(())
 }

@@ -77,12 +77,14 @@ impl Tracker {
 
     /// Every frame of `frames` `(n, 18)` in order; returns a dict of `(n, 3)` float64 arrays
     /// `q`, `qd`, `qdd`, `tau`, the `(n,)` uint8 `missing` (bit i: marker i missing), `(n,)`
-    /// `noise` (mean learned hand-marker noise, m; NaN before the start) and `refined` (bool), and `start`,
+    /// `noise` (mean learned hand-marker noise, m; NaN before the start), `refined` (bool) and
+    /// `status` (uint8 bits, ``ikid.STATUS``: markers rejected, poses held, restarts,
+    /// implausible angles), and `start`,
     /// the first frame with an estimate (rows before it are NaN: the filter waits for a frame
     /// with every marker). Continues from the tracker's state. Releases the GIL.
     fn run<'py>(&mut self, py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
         let tracker = &mut self.inner;
-        let (out, missing, noise, refined, start, n) =
+        let (out, missing, noise, refined, status, start, n) =
             with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |values, n| {
                 // The core's `run` does the work; here its per-frame results are laid out as
                 // four (n, 3) blocks and three (n,) arrays.
@@ -90,6 +92,7 @@ impl Tracker {
                 let mut missing = vec![0u8; n];
                 let mut noise = vec![f64::NAN; n];
                 let mut refined = vec![false; n];
+                let mut status = vec![0u8; n];
                 let start = py
                     .detach(|| {
                         tracker.run(values, |i, o, _| {
@@ -99,10 +102,11 @@ impl Tracker {
                             missing[i] = o.missing;
                             noise[i] = o.noise;
                             refined[i] = o.refined;
+                            status[i] = o.status;
                         })
                     })
                     .py_err()?;
-                Ok((out, missing, noise, refined, start, n))
+                Ok((out, missing, noise, refined, status, start, n))
             })?;
         let Some(start) = start else {
             return Err(input(format!(
@@ -117,8 +121,16 @@ impl Tracker {
         d.set_item("missing", missing.into_pyarray(py))?;
         d.set_item("noise", noise.into_pyarray(py))?;
         d.set_item("refined", refined.into_pyarray(py))?;
+        d.set_item("status", status.into_pyarray(py))?;
         d.set_item("start", start)?;
         Ok(d)
+    }
+
+    /// How many times the tracker lost the hand (every usable marker rejected for a while) and
+    /// restarted from a frame's own solution.
+    #[getter]
+    fn restarts(&self) -> usize {
+        self.inner.restarts()
     }
 
     /// Forget everything seen (state, forearm pose, noise estimates).

@@ -33,6 +33,7 @@ pub mod net;
 pub mod noise;
 pub mod reference;
 pub mod rng;
+pub mod status;
 pub mod stream;
 pub mod testing;
 pub mod tracker;

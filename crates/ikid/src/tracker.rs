@@ -32,6 +32,14 @@
 //! and the noise the filter leaves (`make models-track`; measured in `docs/ekf.md`). It is
 //! applied after the filter and never fed back into it.
 //!
+//! Never diverging silently: every marker is checked before it is used — a segment whose
+//! markers break the rigid shape learned for it, a forearm that jumped faster than a forearm
+//! moves, a hand marker too far from the prediction for the filter's own uncertainty — and a
+//! rejected marker corrects nothing and teaches no noise. When every usable hand marker has been
+//! rejected for [`LOST_S`], the tracker decides it, not the markers, is wrong and restarts from
+//! the frame's own solution. Angles stay within one turn. Each output's [`status`] bits say
+//! what happened (tests: "a frame shifted by a kilometre", "garbage frames", "a lost hand").
+//!
 //! Allocation-free: the state is fixed-size, so a push costs a few microseconds and no heap.
 
 use nalgebra::{Isometry3, Matrix3, SMatrix, SVector, Vector3};
@@ -41,6 +49,7 @@ use crate::error::{Error, Result};
 use crate::features::FeatureSet;
 use crate::model::Model;
 use crate::reference::{self, JointState};
+use crate::status;
 use crate::stream::Stream;
 
 /// State size: angle, velocity and acceleration of each coordinate.
@@ -56,6 +65,30 @@ const THIRD_DIFFERENCE_GAIN: f64 = 20.0;
 const PRIOR_FRAMES: f64 = 10.0;
 /// Smallest noise [`TrackerOutput::noise`] reports, m (before any third difference is seen).
 pub const MIN_REPORTED_NOISE: f64 = 1e-9;
+/// Largest noise sample taken, in current noise variances (a 5σ clip): one glitch cannot
+/// inflate the noise estimate (a frame 1 km off made it 18 m), while a real rise in noise is
+/// still learned, at most ×25 per memory length.
+const NOISE_CLIP: f64 = 25.0;
+
+/// How far a distance between two markers of one segment may stray from what the tracker
+/// learned it to be, m, plus [`RIGID_TOLERANCE_REL`] of it: more and a marker is not where
+/// that segment could put it (a glitch, a swapped label, another object's marker).
+pub const RIGID_TOLERANCE_M: f64 = 0.015;
+/// Relative part of the rigid tolerance ([`RIGID_TOLERANCE_M`]): skin markers stretch.
+pub const RIGID_TOLERANCE_REL: f64 = 0.15;
+/// Fastest a forearm moves, m/s, plus [`JUMP_TOLERANCE_M`]: a faster jump is a glitch.
+pub const MAX_SEGMENT_SPEED: f64 = 20.0;
+/// Slack on the forearm's jump check, m.
+pub const JUMP_TOLERANCE_M: f64 = 0.05;
+/// Hand marker innovations beyond this squared Mahalanobis distance (3 dof: p ≈ 1e-6) ...
+pub const GATE_CHI2: f64 = 30.0;
+/// ... and longer than this, m, are rejected as implausible for one frame.
+pub const GATE_FLOOR_M: f64 = 0.02;
+/// How long every usable marker of a segment may be rejected, s (at least 3 frames), before
+/// the tracker decides it, not the markers, is wrong: it then re-learns the segment's shape or
+/// position, or restarts the hand from the frame's own solution ([`status::RESTARTED`]), and a
+/// state carried forward without correction stops extrapolating.
+pub const LOST_S: f64 = 0.03;
 
 /// The refiner's corrections are scaled by `σ / (σ + REFINER_GATE_NOISE)`, σ the mean learned
 /// hand-marker noise (m): ~1 on noisy markers, → 0 on clean ones, which the filter already
@@ -136,6 +169,8 @@ pub struct TrackerOutput {
     pub missing: u8,
     /// Whether a refiner corrected this estimate (false without one, and while its window fills).
     pub refined: bool,
+    /// [`status`] bits: markers rejected, poses held, a restart, an implausible angle.
+    pub status: u8,
     /// Mean of the hand markers' noise (standard deviation) measured so far from the data
     /// alone, m (at least [`MIN_REPORTED_NOISE`]); what the refiner is told and gated by.
     pub noise: f64,
@@ -155,6 +190,7 @@ impl TrackerOutput {
             tau: nan,
             missing,
             refined: false,
+            status: 0,
             noise: f64::NAN,
         }
     }
@@ -185,6 +221,18 @@ pub struct Tracker {
     noise_samples: [f64; N_HAND],
     frames: usize,
     refiner: Option<Stream>,
+    /// Per segment: the learned distances between its markers (01, 02, 12), how many frames
+    /// shaped them, and how many frames in a row broke them.
+    rigid: [Option<[f64; 3]>; 2],
+    rigid_samples: [f64; 2],
+    rigid_breaks: [usize; 2],
+    /// Frame index of the forearm's last measured pose, and frames in a row its jump check failed.
+    forearm_frame: usize,
+    forearm_jumps: usize,
+    /// Frames in a row whose present hand markers were all gated, and without any correction.
+    gated_streak: usize,
+    coast_streak: usize,
+    restarts: usize,
 }
 
 impl Tracker {
@@ -221,6 +269,14 @@ impl Tracker {
             noise_samples: [0.0; N_HAND],
             frames: 0,
             refiner: None,
+            rigid: [None; 2],
+            rigid_samples: [0.0; 2],
+            rigid_breaks: [0; 2],
+            forearm_frame: 0,
+            forearm_jumps: 0,
+            gated_streak: 0,
+            coast_streak: 0,
+            restarts: 0,
         };
         tracker.reset();
         Ok(tracker)
@@ -235,6 +291,14 @@ impl Tracker {
         self.data_variance = [0.0; N_HAND];
         self.noise_samples = [0.0; N_HAND];
         self.frames = 0;
+        self.rigid = [None; 2];
+        self.rigid_samples = [0.0; 2];
+        self.rigid_breaks = [0; 2];
+        self.forearm_frame = 0;
+        self.forearm_jumps = 0;
+        self.gated_streak = 0;
+        self.coast_streak = 0;
+        self.restarts = 0;
         if let Some(r) = self.refiner.as_mut() {
             r.reset();
         }
@@ -310,6 +374,14 @@ impl Tracker {
     /// Take one marker frame ([`MARKER_FRAME_LEN`] values, metres, lab frame; NaN = missing)
     /// and return the estimate for it, or `None` while the filter has not started (it starts on
     /// the first frame with every marker). Frames must come at [`TrackerSettings::rate_hz`].
+    ///
+    /// Markers are checked before they are used (see [`status`]): a segment whose markers break
+    /// its learned rigid shape, a forearm that jumped faster than [`MAX_SEGMENT_SPEED`], a hand
+    /// marker too far from the prediction ([`GATE_CHI2`], [`GATE_FLOOR_M`]) are rejected for
+    /// that frame and learn no noise. When every usable hand marker has been rejected for
+    /// [`LOST_S`], the tracker restarts from the frame's own solution; a segment whose shape or
+    /// position is broken that long is re-learned. An infinite value is an error (NaN means
+    /// missing); nothing else a frame holds stops the tracker.
     pub fn push(&mut self, frame: &[f64]) -> Result<Option<TrackerOutput>> {
         let index = self.frames;
         if frame.len() != MARKER_FRAME_LEN {
@@ -323,31 +395,107 @@ impl Tracker {
             });
         }
         self.frames += 1;
+        let lost = self.lost_frames();
         let missing = missing_markers(frame);
-        let forearm_mask = 0b000_111;
-        if missing & forearm_mask == 0 {
-            self.forearm = Some(reference::fit_segment(&self.body, frame, Segment::Forearm, index)?);
-        }
-        let hand: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i]);
-        self.learn_noise(&hand);
-        let Some(forearm) = self.forearm else { return Ok(None) };
+        let mut flags = 0u8;
 
+        // 1. The forearm: measured if its markers are present, rigid as learned and not jumped.
+        let mut forearm_measured = false;
+        if missing & FOREARM_MARKERS == 0 {
+            let (rejected, relearned) = self.check_rigid(Segment::Forearm, frame, lost);
+            if relearned {
+                flags |= status::RESTARTED;
+            }
+            if rejected == 0
+                && let Ok(pose) = reference::fit_segment(&self.body, frame, Segment::Forearm, index)
+                && self.forearm_plausible(&pose, index, lost)
+            {
+                self.forearm = Some(pose);
+                self.forearm_frame = index;
+                forearm_measured = true;
+            }
+            if !forearm_measured {
+                flags |= status::REJECTED_MARKER;
+            }
+        }
+        if !forearm_measured && self.forearm.is_some() {
+            flags |= status::HELD;
+        }
+
+        // 2. The hand's markers: NaN where missing or breaking the hand's rigid shape.
+        let mut hand: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i]);
+        let (rejected, relearned) = self.check_rigid(Segment::Hand, frame, lost);
+        if relearned {
+            flags |= status::RESTARTED;
+        }
+        reject_hand_markers(&mut hand, rejected >> 3);
+        if rejected != 0 {
+            flags |= status::REJECTED_MARKER;
+        }
+        let hand_complete = hand.iter().all(|v| !v.is_nan());
+
+        let Some(forearm) = self.forearm else {
+            self.learn_noise(&hand);
+            return Ok(None);
+        };
         let (mut x, mut p) = match self.state {
             Some((x, p)) => {
                 (self.transition * x, self.transition * p * self.transition.transpose() + self.process_noise)
             }
             None => {
-                if missing != 0 {
+                let start =
+                    if forearm_measured && hand_complete { self.frame_solution(&forearm, frame, index) } else { None };
+                let Some(x) = start else {
+                    self.learn_noise(&hand);
                     return Ok(None);
-                }
-                let hand_pose = reference::fit_segment(&self.body, frame, Segment::Hand, index)?;
-                let q0 = body::wrist_angles(&(forearm.rotation.inverse() * hand_pose.rotation).to_rotation_matrix());
-                let mut x = StateVector::zeros();
-                x.fixed_rows_mut::<3>(0).copy_from(&Vector3::from(q0));
+                };
                 (x, self.initial_covariance())
             }
         };
+
+        // 3. Gate the hand markers on the prediction; restart when the wrist is lost.
+        let present = hand_markers_present(&hand);
+        let gated = self.gate(&forearm, &hand, &x, &p);
+        reject_hand_markers(&mut hand, gated);
+        if gated != 0 {
+            flags |= status::REJECTED_MARKER;
+        }
+        let used = hand_markers_present(&hand);
+        self.gated_streak = if present != 0 && used == 0 { self.gated_streak + 1 } else { 0 };
+        if self.gated_streak >= lost && forearm_measured && present == 0b111 {
+            let raw: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i]);
+            if let Some(restart) = self.frame_solution(&forearm, frame, index) {
+                (x, p) = (restart, self.initial_covariance());
+                hand = raw;
+                self.gated_streak = 0;
+                self.restarts += 1;
+                flags |= status::RESTARTED;
+                if let Some(r) = self.refiner.as_mut() {
+                    r.reset();
+                }
+            }
+        }
+        self.coast_streak = if hand_markers_present(&hand) == 0 { self.coast_streak + 1 } else { 0 };
+        if self.coast_streak > 0 {
+            flags |= status::HELD;
+        }
+        if self.coast_streak >= lost {
+            // Carried forward this long without a correction: hold the angles rather than
+            // extrapolate a velocity and acceleration nothing confirms.
+            for v in x.fixed_rows_mut::<6>(3).iter_mut() {
+                *v = 0.0;
+            }
+        }
+        if missing != 0 {
+            flags |= status::FILLED;
+        }
+        self.learn_noise(&hand);
         self.correct(&forearm, &hand, &mut x, &mut p);
+        // One turn is one posture: keep each angle in (−π, π] so that a restart or a long
+        // gap can never leave the estimate a whole turn off.
+        for c in 0..N_COORDINATES {
+            x[c] = wrap_angle(x[c]);
+        }
         if x.iter().any(|v| !v.is_finite()) {
             self.reset();
             let value = x.iter().find(|v| !v.is_finite()).copied().unwrap_or(f64::NAN) as f32;
@@ -380,8 +528,160 @@ impl Tracker {
                 refined = true;
             }
         }
+        if (0..N_COORDINATES).any(|c| status::angle_implausible(c, state.q[c])) {
+            flags |= status::IMPLAUSIBLE;
+        }
         let tau = reference::inverse_dynamics_at(&self.body, &forearm.rotation.to_rotation_matrix(), &state)?;
-        Ok(Some(TrackerOutput { state, tau, missing, refined, noise }))
+        Ok(Some(TrackerOutput { state, tau, missing, refined, status: flags, noise }))
+    }
+
+    /// How many times the tracker lost the hand and restarted from a frame's own solution.
+    pub fn restarts(&self) -> usize {
+        self.restarts
+    }
+
+    /// [`LOST_S`] in frames at the tracker's rate, at least 3.
+    fn lost_frames(&self) -> usize {
+        ((LOST_S * self.settings.rate_hz).ceil() as usize).max(3)
+    }
+
+    /// The state at this frame's own solution (the hand's fitted pose in the forearm's; at
+    /// rest), or `None` if the hand's markers do not give one.
+    fn frame_solution(&self, forearm: &Isometry3<f64>, frame: &[f64], index: usize) -> Option<StateVector> {
+        let hand_pose = reference::fit_segment(&self.body, frame, Segment::Hand, index).ok()?;
+        let q0 = body::wrist_angles(&(forearm.rotation.inverse() * hand_pose.rotation).to_rotation_matrix());
+        let mut x = StateVector::zeros();
+        x.fixed_rows_mut::<3>(0).copy_from(&Vector3::from(q0));
+        Some(x)
+    }
+
+    /// Checks a segment's present markers against the distances between them learned so far
+    /// (learning them on the first complete frame, then following them slowly). Returns the
+    /// frame-marker bits of the markers rejected, and whether the shape was re-learned because
+    /// it had been broken for `lost` frames in a row (the first frames were the odd ones).
+    fn check_rigid(&mut self, segment: Segment, frame: &[f64], lost: usize) -> (u8, bool) {
+        let s = segment as usize;
+        let first = body::first_marker(segment);
+        let point =
+            |k: usize| Vector3::new(frame[3 * (first + k)], frame[3 * (first + k) + 1], frame[3 * (first + k) + 2]);
+        let pairs = [(0, 1), (0, 2), (1, 2)];
+        let distances: [f64; 3] = pairs.map(|(a, b)| (point(a) - point(b)).norm());
+        let complete = distances.iter().all(|d| !d.is_nan());
+        let Some(learned) = self.rigid[s] else {
+            if complete && distances.iter().all(|&d| d > 0.0) {
+                self.rigid[s] = Some(distances);
+                self.rigid_samples[s] = 1.0;
+            }
+            return (0, false);
+        };
+        let broken: [bool; 3] = std::array::from_fn(|i| {
+            let (d, l) = (distances[i], learned[i]);
+            !d.is_nan() && (d - l).abs() > RIGID_TOLERANCE_M + RIGID_TOLERANCE_REL * l
+        });
+        let n_broken = broken.iter().filter(|&&b| b).count();
+        if n_broken == 0 {
+            self.rigid_breaks[s] = 0;
+            let forget = 1.0 / self.settings.rate_hz; // a one-second memory
+            let w = (1.0 / (self.rigid_samples[s] + 1.0)).max(forget);
+            let mut shape = learned;
+            for (l, d) in shape.iter_mut().zip(distances) {
+                if !d.is_nan() {
+                    *l += w * (d - *l);
+                }
+            }
+            self.rigid[s] = Some(shape);
+            self.rigid_samples[s] += 1.0;
+            return (0, false);
+        }
+        self.rigid_breaks[s] += 1;
+        if self.rigid_breaks[s] >= lost && complete && distances.iter().all(|&d| d > 0.0) {
+            self.rigid[s] = Some(distances);
+            self.rigid_samples[s] = 1.0;
+            self.rigid_breaks[s] = 0;
+            return (0, true);
+        }
+        // One broken distance: either of its markers; two: the marker they share; three: all.
+        let mut bad = 0u8;
+        for (i, &(a, b)) in pairs.iter().enumerate() {
+            if broken[i] {
+                bad |= 1 << a | 1 << b;
+            }
+        }
+        if n_broken == 2 {
+            let shared = (0..3).find(|&k| pairs.iter().zip(broken).all(|(&(a, b), br)| !br || a == k || b == k));
+            if let Some(k) = shared {
+                bad = 1 << k;
+            }
+        }
+        (bad << first, false)
+    }
+
+    /// Whether the forearm's newly fitted pose is one it could have reached since its last
+    /// measured one (accepting it anyway once the jump has persisted `lost` frames).
+    fn forearm_plausible(&mut self, pose: &Isometry3<f64>, index: usize, lost: usize) -> bool {
+        let Some(last) = self.forearm else { return true };
+        let elapsed = (index - self.forearm_frame) as f64 / self.settings.rate_hz;
+        let jump = (pose.translation.vector - last.translation.vector).norm();
+        if jump <= MAX_SEGMENT_SPEED * elapsed + JUMP_TOLERANCE_M {
+            self.forearm_jumps = 0;
+            return true;
+        }
+        self.forearm_jumps += 1;
+        if self.forearm_jumps >= lost {
+            self.forearm_jumps = 0;
+            return true;
+        }
+        false
+    }
+
+    /// Hand markers (bits 0–2) whose innovation at the prediction is implausible: beyond
+    /// [`GATE_CHI2`] of its predicted covariance and longer than [`GATE_FLOOR_M`].
+    fn gate(&self, forearm: &Isometry3<f64>, hand: &[f64; N_HAND], x: &StateVector, p: &StateMatrix) -> u8 {
+        let (predicted, jac) = self.hand_prediction(forearm, x);
+        let p_q = p.fixed_view::<3, 3>(0, 0).into_owned();
+        let mut gated = 0u8;
+        for m in 0..3 {
+            let z = Vector3::new(hand[3 * m], hand[3 * m + 1], hand[3 * m + 2]);
+            if z.iter().any(|v| v.is_nan()) {
+                continue;
+            }
+            let nu = z - predicted[m];
+            if nu.norm() <= GATE_FLOOR_M {
+                continue;
+            }
+            let j = Matrix3::from_columns(&jac[m]);
+            let r = Matrix3::from_diagonal(&Vector3::from_fn(|k, _| self.noise_variance[3 * m + k]));
+            let s = j * p_q * j.transpose() + r;
+            let d2 = s.try_inverse().map_or(f64::INFINITY, |inv| (nu.transpose() * inv * nu)[0]);
+            // A NaN distance (a singular covariance) gates too.
+            if d2.is_nan() || d2 > GATE_CHI2 {
+                gated |= 1 << m;
+            }
+        }
+        gated
+    }
+
+    /// The hand markers' predicted positions at the state `x`, and each one's Jacobian columns
+    /// (its motion per radian of each coordinate).
+    fn hand_prediction(
+        &self,
+        forearm: &Isometry3<f64>,
+        x: &StateVector,
+    ) -> ([Vector3<f64>; 3], [[Vector3<f64>; N_COORDINATES]; 3]) {
+        let centre = forearm.translation.vector;
+        // World axes of the three joints at the prediction: a point p of the hand moves by
+        // w_i × (p − centre) per radian of coordinate i. The chain's product is the hand's
+        // orientation in the lab (the forearm's times `body::wrist_rotation`).
+        let mut rotation = forearm.rotation.to_rotation_matrix();
+        let mut axes = [Vector3::zeros(); N_COORDINATES];
+        for (i, axis) in axes.iter_mut().enumerate() {
+            let local = Vector3::from(COORDINATES[i].axis);
+            *axis = rotation * local;
+            rotation *= nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(local), x[i]);
+        }
+        let arms: [Vector3<f64>; 3] =
+            std::array::from_fn(|m| rotation * Vector3::from(self.body.marker_offsets[3 + m]));
+        (arms.map(|a| centre + a), arms.map(|a| axes.map(|w| w.cross(&a))))
     }
 
     /// Pushes every frame of `frames` ([`MARKER_FRAME_LEN`] values each, back to back) in
@@ -436,7 +736,8 @@ impl Tracker {
                 let [a, b, c] = [self.history[0][i], self.history[1][i], self.history[2][i]];
                 let d3 = now - 3.0 * a + 3.0 * b - c;
                 if d3.is_finite() {
-                    let sample = d3 * d3 / THIRD_DIFFERENCE_GAIN;
+                    let sample = (d3 * d3 / THIRD_DIFFERENCE_GAIN)
+                        .min(NOISE_CLIP * self.noise_variance[i].max(self.data_variance[i]));
                     let w = (1.0 / (self.noise_samples[i] + PRIOR_FRAMES)).max(forget);
                     self.noise_variance[i] += w * (sample - self.noise_variance[i]);
                     let w = (1.0 / (self.noise_samples[i] + 1.0)).max(forget);
@@ -453,31 +754,17 @@ impl Tracker {
     /// noise is independent between coordinates), linearised at the prediction.
     fn correct(&self, forearm: &Isometry3<f64>, hand: &[f64; N_HAND], x: &mut StateVector, p: &mut StateMatrix) {
         let prior_q = Vector3::new(x[0], x[1], x[2]);
-        let centre = forearm.translation.vector;
-        // World axes of the three joints at the prediction: a point p of the hand moves by
-        // w_i × (p − centre) per radian of coordinate i. The chain's product is the hand's
-        // orientation in the lab (the forearm's times `body::wrist_rotation`).
-        let mut rotation = forearm.rotation.to_rotation_matrix();
-        let mut axes = [Vector3::zeros(); N_COORDINATES];
-        for (i, axis) in axes.iter_mut().enumerate() {
-            let local = Vector3::from(COORDINATES[i].axis);
-            *axis = rotation * local;
-            rotation *= nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(local), x[i]);
-        }
+        let (predicted, jac) = self.hand_prediction(forearm, x);
         for m in 0..3 {
-            let offset = Vector3::from(self.body.marker_offsets[3 + m]);
-            let arm = rotation * offset;
-            let predicted = centre + arm;
-            let jac: [Vector3<f64>; N_COORDINATES] = axes.map(|w| w.cross(&arm));
             for k in 0..3 {
                 let z = hand[3 * m + k];
                 if z.is_nan() {
                     continue;
                 }
                 // h_row · (x − prior) accounts for the corrections already made this frame.
-                let h = [jac[0][k], jac[1][k], jac[2][k]];
+                let h = [jac[m][0][k], jac[m][1][k], jac[m][2][k]];
                 let moved: f64 = (0..3).map(|i| h[i] * (x[i] - prior_q[i])).sum();
-                let innovation = z - predicted[k] - moved;
+                let innovation = z - predicted[m][k] - moved;
                 // ph = P hᵀ (h touches only the angles).
                 let ph: StateVector = p.column(0) * h[0] + p.column(1) * h[1] + p.column(2) * h[2];
                 let s = h[0] * ph[0] + h[1] * ph[1] + h[2] * ph[2] + self.noise_variance[3 * m + k];
@@ -489,6 +776,29 @@ impl Tracker {
         // Keep P symmetric against rounding.
         *p = (*p + p.transpose()) * 0.5;
     }
+}
+
+/// Frame-marker bits of the forearm's markers.
+const FOREARM_MARKERS: u8 = 0b000_111;
+
+/// Sets hand markers `bits` (0–2) of `hand` to NaN: not used.
+fn reject_hand_markers(hand: &mut [f64; N_HAND], bits: u8) {
+    for m in 0..3 {
+        if bits & (1 << m) != 0 {
+            hand[3 * m..3 * m + 3].fill(f64::NAN);
+        }
+    }
+}
+
+/// Bits 0–2: hand markers with all three coordinates present.
+fn hand_markers_present(hand: &[f64; N_HAND]) -> u8 {
+    (0..3).filter(|&m| hand[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())).fold(0, |b, m| b | 1 << m)
+}
+
+/// `a` (rad) moved by whole turns into (−π, π].
+fn wrap_angle(a: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    if a > -PI && a <= PI { a } else { a - TAU * ((a - PI) / TAU).ceil() }
 }
 
 /// Bit `i` set: marker `i` of `frame` ([`MARKERS`] order) has a NaN coordinate.
@@ -506,6 +816,7 @@ mod tests {
     use super::*;
     use crate::body::BodyModel;
     use crate::noise::uniform_range;
+    use std::f64::consts::{PI, TAU};
 
     fn trajectory(n: usize, rate: f64) -> Vec<[f64; 3]> {
         (0..n)
@@ -518,6 +829,123 @@ mod tests {
 
     fn frames(body: &BodyModel, q: &[[f64; 3]], shoulder: f64) -> Vec<f64> {
         body.marker_frames(&q.concat(), shoulder).unwrap()
+    }
+
+    /// Runs `f` through a fresh tracker; per frame, the angles (NaN before the start) and status.
+    fn track(f: &[f64], rate: f64) -> (Vec<[f64; 3]>, Vec<u8>, Tracker) {
+        let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+        let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
+        let (mut q, mut st) = (vec![], vec![]);
+        tracker
+            .run(f, |_, o, _| {
+                q.push(o.state.q);
+                st.push(o.status);
+            })
+            .unwrap();
+        (q, st, tracker)
+    }
+
+    fn worst_deg(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+        a.iter().zip(b).flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).abs().to_degrees())).fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn a_frame_shifted_by_a_kilometre_is_rejected_and_poisons_nothing() {
+        // Issue #22 case 1: it used to teach the tracker 18 m of noise and leave it 871° off.
+        let body = BodyModel::default();
+        let q = trajectory(3000, 1000.0);
+        let clean = frames(&body, &q, 0.2);
+        let mut glitched = clean.clone();
+        for v in &mut glitched[1000 * MARKER_FRAME_LEN..1001 * MARKER_FRAME_LEN] {
+            *v += 1000.0;
+        }
+        let (good, _, clean_tracker) = track(&clean, 1000.0);
+        let (bad, status, tracker) = track(&glitched, 1000.0);
+        assert!(status[1000] & status::REJECTED_MARKER != 0 && status[1000] & status::HELD != 0, "{}", status[1000]);
+        assert_eq!(status[999] & status::REJECTED_MARKER, 0);
+        assert!(worst_deg(&good[1001..], &bad[1001..]) < 0.01, "{}", worst_deg(&good[1001..], &bad[1001..]));
+        // The noise learned is the clean run's, not the glitch's.
+        let (a, b) = (tracker.marker_noise(), clean_tracker.marker_noise());
+        assert!(a.iter().zip(b).all(|(x, y)| *x < 2.0 * y + 1e-6), "{a:?} vs {b:?}");
+        assert_eq!(tracker.restarts(), 0);
+    }
+
+    #[test]
+    fn garbage_frames_are_flagged_and_tracking_recovers_within_100_ms() {
+        let body = BodyModel::default();
+        let q = trajectory(2000, 1000.0);
+        let clean = frames(&body, &q, 0.0);
+        let mut rng = crate::rng::SplitMix::new(7);
+        for scale in [1.0, 0.05] {
+            let mut f = clean.clone();
+            // 50 ms of random frames: metres apart, or hand-sized (5 cm) noise.
+            for v in &mut f[500 * MARKER_FRAME_LEN..550 * MARKER_FRAME_LEN] {
+                *v = scale * rng.normal();
+            }
+            let (est, status, _) = track(&f, 1000.0);
+            assert!(status[500..550].iter().all(|s| s & (status::REJECTED_MARKER | status::HELD) != 0), "{scale}");
+            let after = worst_deg(&q[650..], &est[650..]);
+            assert!(after < 0.1, "scale {scale}: {after}° off 100 ms after the garbage");
+            assert!(status[700..].iter().all(|&s| s == 0), "scale {scale}");
+        }
+    }
+
+    #[test]
+    fn one_hand_marker_off_its_segment_is_rejected_alone() {
+        let body = BodyModel::default();
+        let q = trajectory(1000, 1000.0);
+        let mut f = frames(&body, &q, 0.0);
+        let mc5_x = 3 * 4;
+        for frame in 600..650 {
+            f[frame * MARKER_FRAME_LEN + mc5_x] += 0.08; // MC5 8 cm off: a swapped or ghost marker
+        }
+        let (est, status, tracker) = track(&f, 1000.0);
+        assert!(status[600..650].iter().all(|s| s & status::REJECTED_MARKER != 0));
+        // MC2 and MCB alone keep the estimate on the wrist.
+        assert!(worst_deg(&q[600..], &est[600..]) < 0.05, "{}", worst_deg(&q[600..], &est[600..]));
+        assert_eq!(tracker.restarts(), 0);
+    }
+
+    #[test]
+    fn a_lost_hand_is_restarted_from_its_own_solution_and_flagged() {
+        // The hand jumps by 60° of flexion for good (a relabelling, or a tracker thrown off): the
+        // gate rejects it at first, then the tracker restarts on the new posture.
+        let body = BodyModel::default();
+        let mut q = trajectory(1000, 1000.0);
+        for qi in &mut q[400..] {
+            qi[1] += 60f64.to_radians();
+        }
+        let f = frames(&body, &q, 0.0);
+        let (est, status, tracker) = track(&f, 1000.0);
+        assert_eq!(tracker.restarts(), 1);
+        let restart = status.iter().position(|s| s & status::RESTARTED != 0).unwrap();
+        assert!((400..400 + 3 * 30).contains(&restart), "{restart}");
+        assert!(worst_deg(&q[restart + 50..], &est[restart + 50..]) < 0.05);
+    }
+
+    #[test]
+    fn angles_stay_within_one_turn() {
+        for (a, wrapped) in [(3.5, 3.5 - TAU), (-3.5, TAU - 3.5), (PI, PI), (-PI, PI), (7.0 * PI, PI), (0.3, 0.3)] {
+            assert!((wrap_angle(a) - wrapped).abs() < 1e-12, "{a}");
+        }
+        // A pronation past ±180° (absurd, but what a lost filter reports) comes back as the
+        // same posture, never a whole turn off.
+        assert!(status::angle_implausible(0, wrap_angle(4.0)));
+    }
+
+    #[test]
+    fn the_tracker_runs_at_100_hz_through_a_gap_of_a_forearm_marker() {
+        let body = BodyModel::default();
+        let q = trajectory(1000, 100.0);
+        let mut f = frames(&body, &q, 0.0);
+        for frame in 300..320 {
+            f[frame * MARKER_FRAME_LEN] = f64::NAN; // RSP gone for 200 ms
+        }
+        let (est, status, tracker) = track(&f, 100.0);
+        assert!(status[300..320].iter().all(|s| s & status::HELD != 0 && s & status::FILLED != 0));
+        assert!(worst_deg(&q[330..], &est[330..]) < 0.5, "{}", worst_deg(&q[330..], &est[330..]));
+        assert!(est.iter().flatten().all(|v| v.is_finite()));
+        assert_eq!(tracker.restarts(), 0);
     }
 
     #[test]
@@ -979,6 +1407,7 @@ mod tests {
             tau: [10.0, 11.0, 12.0],
             missing: 0,
             refined: false,
+            status: 0,
             noise: 1e-3,
         };
         assert_eq!(TRACKER_VALUES, 12);

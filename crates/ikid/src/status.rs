@@ -1,0 +1,82 @@
+//! Per-frame status bits: what was unusual about an output that is still written.
+//!
+//! Every path that gives outputs frame by frame (the [`Stream`](crate::Stream), the
+//! [`Tracker`](crate::Tracker), their C and Python bindings, the CLI's `status` column) reports
+//! the same bits, defined once here. Zero means nothing unusual. A frame that could not be given
+//! an output at all is not a status: it is an error (or, for the tracker, no estimate).
+//!
+//! What the bits promise (docs/RELIABILITY.md): an output is either plausible or carries a bit
+//! saying why it may not be; [`IMPLAUSIBLE`] marks one no wrist can give, which writers put
+//! down as NaN rather than as a number.
+
+/// A missing marker was filled (stream) or the estimate was made without it (tracker).
+pub const FILLED: u8 = 1;
+/// A present marker was rejected as implausible (it broke its segment's rigid shape, or it
+/// was too far from where the wrist could have moved it) and was not used.
+pub const REJECTED_MARKER: u8 = 2;
+/// The tracker lost the wrist (every marker it could use was rejected for a while) and
+/// restarted from this frame's own solution.
+pub const RESTARTED: u8 = 4;
+/// A segment was not measured in this frame (its markers missing or rejected): its last pose
+/// was held, or the estimate was carried forward without a correction.
+pub const HELD: u8 = 8;
+/// The model's inputs for this frame lie outside the range it was trained on (its card's
+/// envelope): the output is an extrapolation.
+pub const OUTSIDE_TRAINING: u8 = 16;
+/// An output no wrist can give (an angle beyond its coordinate's range by more than
+/// [`RANGE_MARGIN_RAD`], or outside the model's output envelope by more than its own width).
+pub const IMPLAUSIBLE: u8 = 32;
+
+/// Every bit with its name (the CLI's legend and the bindings' constant tables).
+pub const ALL: [(u8, &str); 6] = [
+    (FILLED, "filled"),
+    (REJECTED_MARKER, "rejected_marker"),
+    (RESTARTED, "restarted"),
+    (HELD, "held"),
+    (OUTSIDE_TRAINING, "outside_training"),
+    (IMPLAUSIBLE, "implausible"),
+];
+
+/// How far beyond a coordinate's anatomical range ([`crate::body::COORDINATES`]) an angle may
+/// go before it is [`IMPLAUSIBLE`], rad (45°: ranges are typical active ones; passive motion
+/// and marker error go past them, a wrist does not go 45° past them).
+pub const RANGE_MARGIN_RAD: f64 = std::f64::consts::FRAC_PI_4;
+
+/// True if the angle `q` (rad) of coordinate `c` is beyond its range by more than
+/// [`RANGE_MARGIN_RAD`] (or not finite).
+pub fn angle_implausible(c: usize, q: f64) -> bool {
+    let (lo, hi) = crate::body::COORDINATES[c].range;
+    !(q >= lo - RANGE_MARGIN_RAD && q <= hi + RANGE_MARGIN_RAD)
+}
+
+/// The names of the bits set in `status`, comma-separated ("" for 0).
+pub fn describe(status: u8) -> String {
+    ALL.iter().filter(|(bit, _)| status & bit != 0).map(|(_, name)| *name).collect::<Vec<_>>().join(",")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bits_are_distinct_single_bits_and_named() {
+        let mut seen = 0u8;
+        for (bit, name) in ALL {
+            assert_eq!(bit.count_ones(), 1, "{name}");
+            assert_eq!(seen & bit, 0, "{name} reuses a bit");
+            seen |= bit;
+        }
+        assert_eq!(describe(FILLED | HELD), "filled,held");
+        assert_eq!(describe(0), "");
+    }
+
+    #[test]
+    fn angles_are_implausible_only_well_beyond_their_range() {
+        // s_p's range is ±80°: 120° is within the 45° margin, 130° is not.
+        assert!(!angle_implausible(0, 120f64.to_radians()));
+        assert!(angle_implausible(0, 130f64.to_radians()));
+        assert!(angle_implausible(0, -130f64.to_radians()));
+        assert!(angle_implausible(1, f64::NAN));
+        assert!(!angle_implausible(2, 0.0));
+    }
+}
