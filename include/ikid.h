@@ -7,6 +7,25 @@
 #include <stddef.h>
 #include <stdint.h>
 
+// Frame status bit (`ikid_tracker_flags.status`): a missing marker was filled, or the
+// estimate was made without it.
+#define IKID_FRAME_FILLED 1
+
+// Frame status bit: a present marker was rejected as implausible and not used.
+#define IKID_FRAME_REJECTED_MARKER 2
+
+// Frame status bit: the tracker lost the hand and restarted from this frame's own solution.
+#define IKID_FRAME_RESTARTED 4
+
+// Frame status bit: a segment was not measured in this frame; its pose was held.
+#define IKID_FRAME_HELD 8
+
+// Frame status bit: the inputs lie outside the model's training envelope.
+#define IKID_FRAME_OUTSIDE_TRAINING 16
+
+// Frame status bit: an output no wrist can give; write it as missing, not as a number.
+#define IKID_FRAME_IMPLAUSIBLE 32
+
 // Result of every fallible libikid call.
 typedef enum ikid_status {
   // Success.

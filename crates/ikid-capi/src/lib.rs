@@ -27,14 +27,26 @@ pub use tracker::{ikid_tracker, ikid_tracker_flags, ikid_tracker_settings};
 
 /// Frame status bit (`ikid_tracker_flags.status`): a missing marker was filled, or the
 /// estimate was made without it.
-pub const IKID_FRAME_FILLED: u32 = ikid_core::status::FILLED as u32;
+pub const IKID_FRAME_FILLED: u32 = 1;
 /// Frame status bit: a present marker was rejected as implausible and not used.
-pub const IKID_FRAME_REJECTED_MARKER: u32 = ikid_core::status::REJECTED_MARKER as u32;
+pub const IKID_FRAME_REJECTED_MARKER: u32 = 2;
 /// Frame status bit: the tracker lost the hand and restarted from this frame's own solution.
-pub const IKID_FRAME_RESTARTED: u32 = ikid_core::status::RESTARTED as u32;
+pub const IKID_FRAME_RESTARTED: u32 = 4;
 /// Frame status bit: a segment was not measured in this frame; its pose was held.
-pub const IKID_FRAME_HELD: u32 = ikid_core::status::HELD as u32;
+pub const IKID_FRAME_HELD: u32 = 8;
 /// Frame status bit: the inputs lie outside the model's training envelope.
-pub const IKID_FRAME_OUTSIDE_TRAINING: u32 = ikid_core::status::OUTSIDE_TRAINING as u32;
+pub const IKID_FRAME_OUTSIDE_TRAINING: u32 = 16;
 /// Frame status bit: an output no wrist can give; write it as missing, not as a number.
-pub const IKID_FRAME_IMPLAUSIBLE: u32 = ikid_core::status::IMPLAUSIBLE as u32;
+pub const IKID_FRAME_IMPLAUSIBLE: u32 = 32;
+
+// cbindgen writes literals only: the values above are the core's (ikid::status), checked here.
+const _: () = {
+    use ikid_core::status;
+    assert!(IKID_FRAME_FILLED == status::FILLED as u32);
+    assert!(IKID_FRAME_REJECTED_MARKER == status::REJECTED_MARKER as u32);
+    assert!(IKID_FRAME_RESTARTED == status::RESTARTED as u32);
+    assert!(IKID_FRAME_HELD == status::HELD as u32);
+    assert!(IKID_FRAME_OUTSIDE_TRAINING == status::OUTSIDE_TRAINING as u32);
+    assert!(IKID_FRAME_IMPLAUSIBLE == status::IMPLAUSIBLE as u32);
+    assert!(status::ALL.len() == 6);
+};
