@@ -3,6 +3,7 @@
 use crate::conv::{with_f64_rows, with_floats};
 use crate::errors::{IntoPy, input};
 use ikid::body::{COORDINATES, MARKER_FRAME_LEN};
+use ikid::calibration::{LANDMARK_FRAME_LEN, LANDMARKS, LandmarkTrial, Method, Side};
 use nalgebra::Matrix3;
 use numpy::{IntoPyArray, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
@@ -13,12 +14,18 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 }
 
 /// The subject's marker placement: each segment's technical frame (from its markers) in its
-/// anatomical frame. Measure it with `Calibration.from_trials`; give it to `Model.stream`.
+/// anatomical frame, and the arm's side. Measure it with `Calibration.from_neutral`
+/// (landmarks and/or neutral frames) or `Calibration.from_trials`; give it to `Model.stream`.
 #[pyclass(module = "ikid", frozen, skip_from_py_object)]
 #[derive(Clone)]
 pub struct Calibration {
     pub inner: ikid::Calibration,
     report: Option<ikid::calibration::CalibrationReport>,
+    method: Method,
+}
+
+fn side_of(name: &str) -> PyResult<Side> {
+    Side::from_name(name).py_err()
 }
 
 fn matrix<'py>(py: Python<'py>, m: &Matrix3<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
@@ -56,21 +63,92 @@ impl Calibration {
         }
         let refs: Vec<(usize, &[f32])> = moves.iter().map(|(j, f)| (*j, f.as_slice())).collect();
         let (inner, report) = py.detach(|| ikid::Calibration::from_trials(&statics, &refs)).py_err()?;
-        Ok(Calibration { inner, report: Some(report) })
+        Ok(Calibration { inner, report: Some(report), method: Method::Movements })
+    }
+
+    /// Measures the calibration from frames of the neutral posture `(n, 18)` (a static trial
+    /// or chosen frames of any trial; NaN = missing) and, when given, the forearm's landmarks
+    /// `(m, 12)` (`Calibration.LANDMARKS` order, NaN = not seen) seen with the marker frames
+    /// `landmark_frames` `(m, 18)` (default: the neutral frames): the ISB forearm frame, the
+    /// hand equal to the forearm at neutral. Without landmarks the forearm keeps the body
+    /// model's placement. `side`: "right" or "left" (mirrored). Releases the GIL.
+    #[staticmethod]
+    #[pyo3(signature = (neutral_frames, landmarks = None, landmark_frames = None, side = "right"))]
+    fn from_neutral(
+        py: Python<'_>,
+        neutral_frames: &Bound<'_, PyAny>,
+        landmarks: Option<&Bound<'_, PyAny>>,
+        landmark_frames: Option<&Bound<'_, PyAny>>,
+        side: &str,
+    ) -> PyResult<Self> {
+        let side = side_of(side)?;
+        let neutral = frames_of(neutral_frames, "neutral_frames")?;
+        let points = match landmarks {
+            Some(l) => Some(with_floats(l, "landmarks", 2, |values, shape| {
+                if shape[1] != LANDMARK_FRAME_LEN {
+                    return Err(input(format!(
+                        "landmarks: {} columns, a landmark frame has {LANDMARK_FRAME_LEN} (x, y, z of {})",
+                        shape[1],
+                        LANDMARKS.map(|l| l.name).join(", ")
+                    )));
+                }
+                Ok(values.to_vec())
+            })?),
+            None => None,
+        };
+        let beside = match (landmark_frames, &points) {
+            (Some(f), Some(_)) => Some(frames_of(f, "landmark_frames")?),
+            (Some(_), None) => return Err(input("landmark_frames given without landmarks")),
+            (None, _) => None,
+        };
+        let (inner, report) = py
+            .detach(|| {
+                let trial = points
+                    .as_ref()
+                    .map(|l| LandmarkTrial { markers: beside.as_deref().unwrap_or(&neutral), landmarks: l });
+                ikid::Calibration::from_neutral(&neutral, trial, side)
+            })
+            .py_err()?;
+        Ok(Calibration { inner, method: report.method, report: Some(report) })
     }
 
     /// The body model's own placement (what an uncalibrated stream assumes).
     #[staticmethod]
     fn body_model() -> Self {
-        Calibration { inner: ikid::Calibration::body_model(), report: None }
+        Calibration { inner: ikid::Calibration::body_model(), report: None, method: Method::BodyModel }
     }
 
-    /// From its two 3×3 rotation matrices (as `forearm` and `hand` give them).
+    /// From its two 3×3 rotation matrices (as `forearm` and `hand` give them) and the arm.
     #[staticmethod]
-    fn from_matrices(forearm: &Bound<'_, PyAny>, hand: &Bound<'_, PyAny>) -> PyResult<Self> {
-        let inner =
-            ikid::Calibration::from_matrices(read_matrix(forearm, "forearm")?, read_matrix(hand, "hand")?).py_err()?;
-        Ok(Calibration { inner, report: None })
+    #[pyo3(signature = (forearm, hand, side = "right"))]
+    fn from_matrices(forearm: &Bound<'_, PyAny>, hand: &Bound<'_, PyAny>, side: &str) -> PyResult<Self> {
+        let inner = ikid::Calibration::from_matrices_for(
+            read_matrix(forearm, "forearm")?,
+            read_matrix(hand, "hand")?,
+            side_of(side)?,
+        )
+        .py_err()?;
+        Ok(Calibration { inner, report: None, method: Method::Matrices })
+    }
+
+    /// The landmarks `from_neutral` reads, in the order of a landmark frame: (name, where).
+    #[classattr]
+    #[allow(non_snake_case)]
+    fn LANDMARKS() -> Vec<(&'static str, &'static str)> {
+        LANDMARKS.iter().map(|l| (l.name, l.description)).collect()
+    }
+
+    /// "right" or "left": a left arm's frames are mirrored into a right arm's.
+    #[getter]
+    fn side(&self) -> &'static str {
+        self.inner.side.name()
+    }
+
+    /// How it was measured: "landmarks", "neutral", "movements", "matrices" (given, e.g. read
+    /// from a file: the file records how it was measured) or "body_model".
+    #[getter]
+    fn method(&self) -> &'static str {
+        self.method.name()
     }
 
     /// `T_f`: the forearm's technical frame in its anatomical frame (3×3).
@@ -85,13 +163,35 @@ impl Calibration {
         matrix(py, self.inner.hand.matrix())
     }
 
-    /// What `from_trials` measured: per movement its range (degrees) and the share of it
-    /// about one axis; the placement's difference from the body model's (degrees); the
-    /// largest skew between measured axes (degrees). `None` for other calibrations.
+    /// What `from_trials`/`from_neutral` measured: method and side; per movement its range
+    /// (degrees) and the share of it about one axis; the placement's difference from the body
+    /// model's (degrees); the largest skew between measured axes (degrees); the neutral frames
+    /// used and their spread (degrees); the landmarks (frames each was seen in, distances in
+    /// mm, styloid line to long axis in degrees) or None. `None` for other calibrations.
     #[getter]
     fn report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let Some(r) = &self.report else { return Ok(None) };
         let d = PyDict::new(py);
+        d.set_item("method", r.method.name())?;
+        d.set_item("side", r.side.name())?;
+        d.set_item("neutral_frames", r.neutral_frames)?;
+        d.set_item("neutral_spread_deg", r.neutral_spread_deg)?;
+        match &r.landmarks {
+            Some(l) => {
+                let ld = PyDict::new(py);
+                let frames = PyDict::new(py);
+                for (lm, n) in LANDMARKS.iter().zip(l.frames) {
+                    frames.set_item(lm.name, n)?;
+                }
+                ld.set_item("frames", frames)?;
+                ld.set_item("long_axis_mm", l.long_axis_mm)?;
+                ld.set_item("styloid_span_mm", l.styloid_span_mm)?;
+                ld.set_item("epicondyle_span_mm", l.epicondyle_span_mm)?;
+                ld.set_item("styloid_axis_deg", l.styloid_axis_deg)?;
+                d.set_item("landmarks", ld)?;
+            }
+            None => d.set_item("landmarks", py.None())?,
+        }
         let moves = PyDict::new(py);
         for (j, range, purity) in &r.movements {
             let m = PyDict::new(py);
@@ -123,7 +223,9 @@ impl Calibration {
     fn __repr__(&self) -> String {
         let b = ikid::Calibration::body_model();
         format!(
-            "Calibration(forearm {:.1}°, hand {:.1}° from the body model's placement)",
+            "Calibration({}, {} arm; forearm {:.1}°, hand {:.1}° from the body model's placement)",
+            self.method.name(),
+            self.inner.side.name(),
             ikid::calibration::angle_deg(&(self.inner.forearm * b.forearm.inverse())),
             ikid::calibration::angle_deg(&(self.inner.hand * b.hand.inverse()))
         )
