@@ -1,11 +1,22 @@
 """Calibration to a subject's marker placement, measured once per session and saved as JSON.
 
+    from ikid.calibration import calibrate_neutral, check_calibration_map
+    cal = calibrate_neutral(frames[:10], landmarks[:10])          # landmarks + neutral frames
     cal = ikid.calibrate(static_frames, {"ra_wr_e_f": flexion_frames, "ra_wr_s_p": pronation_frames})
-    ikid.save_calibration(cal, "subject01.json")
+    ikid.save_calibration(cal, "subject01.json", marker_map=lab_map)
+    check_calibration_map("subject01.json", lab_map)             # the trial's map: refused if another
     stream = model.stream(calibration=ikid.load_calibration("subject01.json"))
 
-The measurement itself (static neutral trial + single-coordinate movements, functional axes,
-Procrustes) is the core's: see :class:`ikid.Calibration` and ``crates/ikid/src/calibration.rs``.
+The measurement itself is the core's (``crates/ikid/src/calibration.rs``, :class:`ikid.Calibration`):
+
+- **landmarks**: the epicondyles and styloids give the forearm's ISB frame, the hand's equals
+  the forearm's at the neutral posture (chosen frames of any trial);
+- **neutral**: the neutral posture alone (the forearm keeps the body model's placement);
+- **movements**: a static trial and single-coordinate movements (functional axes).
+
+A left arm is mirrored into a right arm (lab z negated) when measured and when applied, so its
+angles keep their anatomical signs. The file records the method, the side and the marker map;
+:func:`check_calibration_map` refuses a trial read with another map.
 """
 
 from __future__ import annotations
@@ -13,6 +24,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,8 +32,13 @@ from ikid._native import Calibration, InputError, fill_gaps
 from ikid.io._atomic import write_text_atomic
 from ikid.io.markers import FileFormatError, read_text
 
+if TYPE_CHECKING:
+    from ikid.io.mapping import MarkerMap
+
 FORMAT = "ikid-calibration"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: Versions this ikid reads (1: no method, side or marker map recorded: a right arm).
+READABLE_VERSIONS = (1, 2)
 
 
 def calibrate(static_frames, movements: dict, *, fill: bool = True) -> Calibration:
@@ -38,11 +55,44 @@ def calibrate(static_frames, movements: dict, *, fill: bool = True) -> Calibrati
     return Calibration.from_trials(prepared(static_frames), {k: prepared(v) for k, v in movements.items()})
 
 
-def save_calibration(calibration: Calibration, path: str | os.PathLike[str], **provenance) -> Path:
-    """Write ``calibration`` (and its report, and any ``provenance`` given) as JSON, atomically."""
+def calibrate_neutral(
+    neutral_frames, landmarks=None, *, landmark_frames=None, side: str = "right"
+) -> Calibration:
+    """Measure a :class:`Calibration` from frames of the neutral posture ``(n, 18)`` (a static
+    trial, or chosen frames of any trial; NaN = missing, no filling needed) and, when given,
+    the forearm's landmarks ``(m, 12)`` (lateral and medial epicondyle, radial and ulnar
+    styloid, x y z each, metres, NaN = not seen) seen with ``landmark_frames`` ``(m, 18)``
+    (default: the neutral frames). ``side``: "right" or "left"."""
+    return Calibration.from_neutral(
+        np.asarray(neutral_frames, np.float64),
+        None if landmarks is None else np.asarray(landmarks, np.float64),
+        None if landmark_frames is None else np.asarray(landmark_frames, np.float64),
+        side,
+    )
+
+
+def save_calibration(
+    calibration: Calibration,
+    path: str | os.PathLike[str],
+    *,
+    marker_map: MarkerMap | None = None,
+    **provenance,
+) -> Path:
+    """Write ``calibration`` (its method, side and report, the marker map it was measured
+    with — the identity map when None — and any ``provenance`` given) as JSON, atomically."""
+    from ikid.io.mapping import MarkerMap
+
+    marker_map = marker_map or MarkerMap.identity()
     doc = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
+        "method": calibration.method,
+        "side": calibration.side,
+        "marker_map": {
+            "source": marker_map.source,
+            "markers": dict(marker_map.labels),
+            "landmarks": dict(marker_map.landmarks),
+        },
         "forearm": np.asarray(calibration.forearm).tolist(),
         "hand": np.asarray(calibration.hand).tolist(),
         "report": calibration.report,
@@ -51,8 +101,10 @@ def save_calibration(calibration: Calibration, path: str | os.PathLike[str], **p
     return write_text_atomic(path, json.dumps(doc, indent=1) + "\n")
 
 
-def load_calibration(path: str | os.PathLike[str]) -> Calibration:
-    """Read a calibration written by :func:`save_calibration`; the matrices are checked."""
+def calibration_info(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The calibration file's contents (checked to be an ikid calibration of a version this
+    ikid reads): ``method``, ``side``, ``marker_map`` (None for version 1), ``report``,
+    ``provenance``, the matrices."""
     path = Path(path)
     try:
         doc = json.loads(read_text(path, "a calibration file is JSON text"))
@@ -60,14 +112,48 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
         raise InputError(f"{path}: not a calibration file ({e})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise InputError(f'{path}: not an ikid calibration (expected "format": "{FORMAT}")')
-    if doc.get("format_version") != FORMAT_VERSION:
+    if doc.get("format_version") not in READABLE_VERSIONS:
         raise InputError(
             f"{path}: calibration format_version {doc.get('format_version')!r}; "
-            f"this ikid reads {FORMAT_VERSION}"
+            f"this ikid reads {', '.join(map(str, READABLE_VERSIONS))}"
         )
+    doc.setdefault("method", "movements")
+    doc.setdefault("side", "right")
+    doc.setdefault("marker_map", None)
+    return doc
+
+
+def check_calibration_map(path: str | os.PathLike[str], marker_map: MarkerMap | None) -> None:
+    """Refuse (``ikid.InputError``) a trial read with ``marker_map`` (None: the identity map,
+    ikid's own labels) when the calibration in ``path`` was measured with another map: each
+    ikid marker must have the same label. A version-1 file (no map recorded) passes."""
+    from ikid.io.mapping import MarkerMap
+
+    recorded = calibration_info(path)["marker_map"]
+    if recorded is None:
+        return
+    marker_map = marker_map or MarkerMap.identity()
+    theirs = recorded.get("markers", {})
+    differ = [
+        f"{m} is {lab!r} here, {theirs.get(m)!r} in the calibration"
+        for m, lab in marker_map.labels.items()
+        if theirs.get(m) != lab
+    ]
+    if differ:
+        raise InputError(
+            f"{path}: measured with another marker map ({recorded.get('source')}): {'; '.join(differ)}. "
+            "Give the marker map `ikid calibrate` was given (--map), or calibrate again with this one"
+        )
+
+
+def load_calibration(path: str | os.PathLike[str]) -> Calibration:
+    """Read a calibration written by :func:`save_calibration` (matrices checked, side as
+    recorded). Check the trial's marker map against it with :func:`check_calibration_map`."""
+    path = Path(path)
+    doc = calibration_info(path)
     try:
-        return Calibration.from_matrices(doc["forearm"], doc["hand"])
+        return Calibration.from_matrices(doc["forearm"], doc["hand"], side=doc["side"])
     except KeyError as e:
         raise InputError(f"{path}: no {e.args[0]!r} matrix") from None
-    except InputError as e:
+    except (InputError, TypeError) as e:
         raise InputError(f"{path}: {e}") from None

@@ -13,13 +13,27 @@ Example (``ikid map-template`` prints one)::
 
 Every ikid marker must be named, each by a different label; the file may have more labels
 than these (they are ignored).
+
+Optionally, for ``ikid calibrate`` (see ``ikid.calibration``): the arm, and the labels of
+the forearm's anatomical landmarks (markers, or virtual points from a probing file), any of
+lateral_epicondyle, medial_epicondyle, radial_styloid, ulnar_styloid (all four for the
+landmark method)::
+
+    side = "right"       # or "left" (mirrored into a right arm); before the tables
+    [markers]
+    ...
+    [landmarks]
+    lateral_epicondyle = "EPICl"
+    medial_epicondyle = "EPICm"
+    radial_styloid = "STYLr"
+    ulnar_styloid = "STYLu"
 """
 
 from __future__ import annotations
 
 import os
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -37,10 +51,13 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class MarkerMap:
-    """ikid marker name -> the label a lab's files use for it."""
+    """ikid marker name -> the label a lab's files use for it; optionally the arm's side and
+    landmark name -> label (see the module docstring)."""
 
     labels: dict[str, str]
     source: str = "identity"
+    landmarks: dict[str, str] = field(default_factory=dict)
+    side: str = "right"
 
     @staticmethod
     def identity() -> MarkerMap:
@@ -76,7 +93,32 @@ class MarkerMap:
                     f"{source}: label {markers[m]!r} is given to both {seen[markers[m]]} and {m}"
                 )
             seen[markers[m]] = m
-        return MarkerMap({m: markers[m].strip() for m in names}, source)
+        side = table.get("side", "right")
+        if side not in ("right", "left"):
+            raise FileFormatError(f'{source}: side = {side!r}; expected "right" or "left"')
+        landmarks = table.get("landmarks", {})
+        known = landmark_names()
+        if not isinstance(landmarks, dict):
+            raise FileFormatError(f"{source}: [landmarks] must be a table of landmark = label")
+        unknown = sorted(set(landmarks) - set(known))
+        if unknown:
+            raise FileFormatError(
+                f"{source}: unknown landmark(s) {', '.join(unknown)}; the landmarks are {', '.join(known)}"
+            )
+        bad = [k for k, v in landmarks.items() if not isinstance(v, str) or not v.strip()]
+        if bad:
+            raise FileFormatError(f"{source}: the label for landmark {', '.join(bad)} must be a non-empty string")
+        for k, v in landmarks.items():
+            if v.strip() in seen:
+                raise FileFormatError(
+                    f"{source}: label {v!r} is given to both marker {seen[v.strip()]} and landmark {k}"
+                )
+        return MarkerMap(
+            {m: markers[m].strip() for m in names},
+            source,
+            {k: landmarks[k].strip() for k in known if k in landmarks},
+            side,
+        )
 
     @staticmethod
     def load(path: str | os.PathLike[str]) -> MarkerMap:
@@ -107,8 +149,42 @@ class MarkerMap:
             )
         return wanted
 
+    def landmark_labels_in_order(self, data: MarkerData) -> list[str]:
+        """The file's labels for the four landmarks, in ``ikid.Calibration.LANDMARKS`` order;
+        an error names what the map or the file lacks."""
+        missing = [k for k in landmark_names() if k not in self.landmarks]
+        if missing:
+            raise _native.InputError(
+                f"{self.source}: [landmarks] does not name {', '.join(missing)}; the landmark method "
+                f"needs all of {', '.join(landmark_names())} (or calibrate from the neutral posture alone)"
+            )
+        labels = [self.landmarks[k] for k in landmark_names()]
+        absent = [f"{lab} ({k})" for k, lab in zip(landmark_names(), labels, strict=True) if lab not in data.labels]
+        if absent:
+            raise _native.InputError(
+                f"{data.source or 'markers'}: landmark label(s) {', '.join(absent)} not found; the file has "
+                f"{', '.join(data.labels) or 'no labels'}"
+            )
+        return labels
+
     def to_toml(self) -> str:
         descr = {m[0]: m[2] for m in _native.MARKERS}
-        lines = ["# ikid marker = the label in your C3D/TRC files", "[markers]"]
+        lines = [
+            "# ikid marker = the label in your C3D/TRC files",
+            f'side = "{self.side}"  # or "left": the arm these markers are on',
+            "[markers]",
+        ]
         lines += [f'{m} = "{lab}"  # {descr[m]}' for m, lab in self.labels.items()]
+        lm_descr = dict(_native.Calibration.LANDMARKS)
+        lines += ["", "# optional, for `ikid calibrate` from anatomical landmarks: their labels", "[landmarks]"]
+        for k in landmark_names():
+            if k in self.landmarks:
+                lines.append(f'{k} = "{self.landmarks[k]}"  # {lm_descr[k]}')
+            else:
+                lines.append(f'# {k} = "LABEL"  # {lm_descr[k]}')
         return "\n".join(lines) + "\n"
+
+
+def landmark_names() -> list[str]:
+    """The landmarks a marker map may name, in ``ikid.Calibration.LANDMARKS`` order."""
+    return [name for name, _ in _native.Calibration.LANDMARKS]
