@@ -69,6 +69,7 @@ __all__ = [
     "Stream",
     "Tracker",
     "Trial",
+    "WriteError",
     "__version__",
     "available_models",
     "body_model",
@@ -77,6 +78,7 @@ __all__ = [
     "feature_set_info",
     "fill_gaps",
     "forward_markers",
+    "is_model_name",
     "load",
     "marker_names",
     "reference_id",
@@ -85,6 +87,7 @@ __all__ = [
 ]
 
 from ikid.calibration import calibrate, load_calibration, save_calibration  # noqa: E402
+from ikid.io._atomic import WriteError  # noqa: E402
 from ikid.sim import Trial, simulate  # noqa: E402  (needs _native first)
 
 _SHIPPED = Path(__file__).with_name("models")
@@ -96,21 +99,45 @@ def available_models() -> list[str]:
 
 
 def load(name_or_path: str | os.PathLike[str]) -> Model:
-    """Load a model by shipped name (see :func:`available_models`) or from a file path.
+    """Load a shipped model by name (see :func:`available_models`) or a model file.
 
-    Raises ``FileNotFoundError`` (listing the shipped names) if neither exists, and
-    :class:`ModelFileError` if the file is not a valid ikid model.
+    The rule, the same for every command that takes a model: a string with no path separator
+    and no ``.safetensors`` suffix is a shipped model's name — ``"wrist-ik"`` is always the
+    shipped model, even if a file or folder of that name is in the working directory; anything
+    else (a string with a separator or the suffix, or a ``pathlib.Path``) is a file path:
+    ``"./wrist-ik"``, ``"lab-ik.safetensors"``.
+
+    Raises :class:`NotFoundError` (a ``FileNotFoundError``, listing the shipped names) for a
+    name that is not shipped or a path that does not exist, and :class:`ModelFileError` if the
+    file is not a valid ikid model.
     """
+    if is_model_name(name_or_path):
+        name = str(name_or_path)
+        shipped = _SHIPPED / f"{name}.safetensors"
+        if shipped.is_file():
+            return Model.load(shipped)
+        names = ", ".join(available_models()) or "none in this build"
+        hint = (
+            f"; a file of that name is here: give it as a path, ./{name}"
+            if os.path.lexists(name)
+            else "; a model file is given by a path (with a folder or the .safetensors suffix)"
+        )
+        raise NotFoundError(
+            f"no model file {name!r} and no shipped model of that name (shipped: {names}){hint}"
+        )
     path = Path(name_or_path)
-    if path.exists():
-        return Model.load(path)
-    shipped = _SHIPPED / f"{name_or_path}.safetensors"
-    if isinstance(name_or_path, str) and os.sep not in name_or_path and shipped.exists():
-        return Model.load(shipped)
-    names = ", ".join(available_models()) or "none in this build"
-    raise FileNotFoundError(
-        f"no model file {str(name_or_path)!r} and no shipped model of that name (shipped: {names})"
-    )
+    if not os.path.lexists(path):
+        raise NotFoundError(f"no model file {str(name_or_path)!r}: {path} does not exist")
+    return Model.load(path)
+
+
+def is_model_name(name_or_path: str | os.PathLike[str]) -> bool:
+    """True if :func:`load` reads ``name_or_path`` as a shipped model's name, not a path: a
+    string with no path separator and no ``.safetensors`` suffix."""
+    if not isinstance(name_or_path, str):
+        return False
+    separators = {"/", os.sep, *([os.altsep] if os.altsep else [])}
+    return not any(s in name_or_path for s in separators) and not name_or_path.endswith(".safetensors")
 
 
 def coordinate_names() -> list[str]:

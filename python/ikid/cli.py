@@ -25,35 +25,119 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
+import traceback
+from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
 import ikid
+from ikid.io._atomic import atomic_outputs, write_text_atomic
 from ikid.sim import Trial, simulate
 
 #: The thesis' shoulder flexion angles, degrees.
 THESIS_SHOULDERS_DEG = (0.0, 45.0, -20.0)
 
+#: Exit status of `ikid stream` when it ran to the end but frames were lost or refused.
+EXIT_FRAMES_LOST = 3
 
-def _noise(spec: str) -> tuple[str, dict]:
-    """``uniform:0.01``, ``gaussian:0.002`` (m), ``drift:0.005`` (m), ``occlusion:0.5`` (bursts/s)."""
+
+# --- numeric options: checked by argparse, the message names the option ------------------------
+
+
+def _number(
+    cast: type = float,
+    *,
+    gt: float | None = None,
+    ge: float | None = None,
+    le: float | None = None,
+    lt: float | None = None,
+    name: str = "",
+    unit: str = "",
+):
+    """An argparse ``type`` for a number: finite, within the bounds given; a bad value is
+    refused by argparse as ``argument --OPTION: VALUE: ...`` (exit 2), never a traceback later.
+    ``name`` is what the value is called in the API, for the message."""
+    what = f"{name} " if name else ""
+    bounds = [
+        (gt, lambda v, b: v > b, "greater than"),
+        (ge, lambda v, b: v >= b, "at least"),
+        (le, lambda v, b: v <= b, "at most"),
+        (lt, lambda v, b: v < b, "less than"),
+    ]
+
+    def parse(text: str):
+        try:
+            value = cast(text)
+        except ValueError:
+            kind = "an integer" if cast is int else "a number"
+            raise argparse.ArgumentTypeError(f"{text!r}: {what}must be {kind}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text!r}: {what}must be a finite number")
+        for bound, ok, words in bounds:
+            if bound is not None and not ok(value, bound):
+                raise argparse.ArgumentTypeError(f"{text}: {what}must be {words} {bound:g}{unit}")
+        return value
+
+    parse.__name__ = "integer" if cast is int else "number"
+    return parse
+
+
+POSITIVE = _number(gt=0)
+POSITIVE_INT = _number(int, ge=1)
+COUNT = _number(int, ge=0)
+FINITE = _number()
+SUBJECT_LENGTH = _number(gt=0, name="length_scale (the subject's segment lengths / the default's)")
+SUBJECT_MASS = _number(gt=0, name="mass_scale (the subject's segment masses / the default's)")
+SHOULDER_DEG = _number(ge=-180, le=180, unit=" degrees")
+SEED = _number(int, ge=0, lt=2**32)
+SIM_RATE = _number(gt=0, le=100_000, unit=" Hz")
+PORT = _number(int, ge=0, le=65535)
+
+
+def _widths(text: str) -> str:
+    """``--hidden``: layer widths like ``128,128``, each a positive integer."""
+    try:
+        widths = [int(w) for w in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected widths like 128,128") from None
+    if not widths or min(widths) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: every width must be a positive integer")
+    return text
+
+
+#: Noise kinds of ``--noise KIND:VALUE``, and the parameters each VALUE fills.
+NOISE_KINDS = ("uniform", "gaussian", "drift", "occlusion")
+
+
+def _noise_spec(spec: str) -> str:
+    """``--noise``: checked here (argparse type), parsed by :func:`_noise`."""
     kind, _, value = spec.partition(":")
+    if kind not in NOISE_KINDS:
+        raise argparse.ArgumentTypeError(f"{spec!r}: unknown kind {kind!r} ({', '.join(NOISE_KINDS)})")
     try:
         v = float(value)
     except ValueError:
-        raise SystemExit(f"--noise {spec!r}: expected KIND:NUMBER, e.g. uniform:0.01") from None
+        raise argparse.ArgumentTypeError(f"{spec!r}: expected KIND:NUMBER, e.g. uniform:0.01") from None
+    if not (math.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(f"{spec!r}: the value must be a finite number >= 0")
+    return spec
+
+
+def _noise(spec: str) -> tuple[str, dict]:
+    """``uniform:0.01``, ``gaussian:0.002`` (m), ``drift:0.005`` (m), ``occlusion:0.5`` (bursts/s)."""
+    kind, _, value = _noise_spec(spec).partition(":")
+    v = float(value)
     params = {
         "uniform": {"fraction": v},
         "gaussian": {"sigma": v},
         "drift": {"amplitude": v, "rate_hz": 0.0},
         "occlusion": {"bursts_per_second": v, "min_s": 0.05, "max_s": 0.3, "rate_hz": 0.0},
     }
-    if kind not in params:
-        raise SystemExit(f"--noise {spec!r}: unknown kind {kind!r} (uniform, gaussian, drift, occlusion)")
     return kind, params[kind]
 
 
@@ -64,6 +148,66 @@ def _with_noise(trial: Trial, specs: list[str], seed: int) -> Trial:
             params["rate_hz"] = trial.rate_hz
         trial = trial.with_noise(kind, seed * 1000 + k + 1, **params)
     return trial
+
+
+# --- outputs and models: the rules every command follows -----------------------------------------
+
+
+def _is_folder(output: str) -> bool:
+    """``-o`` names a folder when it ends with a path separator or is an existing directory:
+    outputs then go inside it, named after their input."""
+    return output.endswith(("/", os.sep)) or Path(output).is_dir()
+
+
+def _stem(output: str, name: str, suffixes: tuple[str, ...] = (".mot", ".sto")) -> Path:
+    """The output stem for ``-o OUTPUT``: ``OUTPUT/name`` when it names a folder (created if
+    need be), else ``OUTPUT`` without one of ``suffixes`` (its folder created)."""
+    out = Path(output)
+    if _is_folder(output):
+        out.mkdir(parents=True, exist_ok=True)
+        return out / name
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return out.with_suffix("") if out.suffix.lower() in suffixes else out
+
+
+def _named(stem: Path, ext: str) -> Path:
+    """``stem`` + ``ext``, even if the stem holds a dot (``trial.v2``)."""
+    return stem.with_name(stem.name + ext)
+
+
+#: What a model of each task gives, the frames it reads and the unit of its outputs.
+TASKS = {
+    "ik": ("markers -> angles", "markers", "rad"),
+    "chain": ("markers -> torques", "markers", "N*m"),
+    "id": ("joint states -> torques", "joint_state", "N*m"),
+    "refine": ("the Kalman tracker's refiner", "tracker_state", None),
+}
+
+
+def _model_for(name: str, use: str, tasks: tuple[str, ...]) -> ikid.Model:
+    """``ikid.load(name)`` for ``use`` (e.g. ``"ikid ik --model"``), refused with an
+    :class:`ikid.ArgumentError` naming the model, its task and what ``use`` needs unless its
+    card's task is one of ``tasks`` and its frames and output units are that task's."""
+    model = ikid.load(name)
+    need = " or ".join(f"{t!r} ({TASKS[t][0]})" for t in tasks)
+    if model.task not in tasks:
+        gives = TASKS.get(model.task, ("an unknown task",))[0]
+        raise ikid.ArgumentError(
+            f"{use} {name}: model {model.name!r} has task {model.task!r} ({gives}); "
+            f"{use} needs a model of task {need}"
+        )
+    _, frames, unit = TASKS[model.task]
+    if model.frame_kind != frames:
+        raise ikid.ArgumentError(
+            f"{use} {name}: model {model.name!r} (task {model.task!r}) reads {model.frame_kind} frames; "
+            f"a {model.task!r} model reads {frames} frames"
+        )
+    if unit is not None and (model.n_outputs != 3 or set(model.output_units) != {unit}):
+        raise ikid.ArgumentError(
+            f"{use} {name}: model {model.name!r} gives {model.n_outputs} outputs in "
+            f"{', '.join(sorted(set(model.output_units)))}; {use} writes the 3 wrist coordinates in {unit}"
+        )
+    return model
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -78,7 +222,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         dt=1.0 / args.rate,
     )
     trial = _with_noise(trial, args.noise, args.seed)
-    paths = trial.save(args.output)
+    # The four files replace any old ones together (Trial.save), or none does.
+    paths = trial.save(_stem(args.output, f"{args.protocol}_{args.seed}", (".npz", ".trc", ".mot", ".sto")))
     elapsed = time.perf_counter() - t0
     print(
         f"{len(trial.time)} frames ({trial.time[-1]:.1f} s) in {elapsed:.2f} s -> "
@@ -134,32 +279,35 @@ def cmd_dataset(args: argparse.Namespace) -> int:
         "simulation_x_real_time_per_core": round(frames / 1000.0 / sim_s, 1),
         "with_file_writing_x_real_time": round(frames / 1000.0 / elapsed, 1),
     }
-    (out / "dataset.json").write_text(
-        json.dumps({"summary": summary, "trials": [r[0] for r in results]}, indent=1)
+    write_text_atomic(
+        out / "dataset.json", json.dumps({"summary": summary, "trials": [r[0] for r in results]}, indent=1)
     )
     print(json.dumps(summary))
     return 0
 
 
 def _inputs(paths: list[str]) -> list[Path]:
-    """Marker files named, or found (by suffix) in named folders."""
+    """Marker files named, or found (by suffix) in named folders. An entry of a folder named
+    like a marker file but not one (a folder ``x.trc/``, a pipe) is kept: it fails as that
+    file, named in the summary, instead of vanishing from the count."""
     from ikid.io import MARKER_READERS
 
     found: list[Path] = []
     for p in map(Path, paths):
         if p.is_dir():
-            found += sorted(f for f in p.iterdir() if f.suffix.lower() in MARKER_READERS and f.is_file())
-        elif p.exists():
+            found += sorted(f for f in p.iterdir() if f.suffix.lower() in MARKER_READERS)
+        elif os.path.lexists(p):
             found.append(p)
         else:
-            raise SystemExit(f"ikid: error: {p}: no such file or folder")
+            raise ikid.NotFoundError(f"{p}: no such file or folder")
     if not found:
-        raise SystemExit(f"ikid: error: no marker files ({', '.join(MARKER_READERS)}) in {', '.join(paths)}")
+        raise ikid.ArgumentError(f"no marker files ({', '.join(MARKER_READERS)}) in {', '.join(paths)}")
     return found
 
 
 def _process_one(job: tuple[str, dict]) -> dict:
-    """One marker file -> .mot (and .sto): read, map, check the rate, run, write. In a worker."""
+    """One marker file -> .mot (and .sto): read, map, check the rate, run, write. In a worker.
+    The outputs of one file replace the old ones together, or none does."""
     from ikid.io import MarkerMap, read_markers, write_mot, write_sto
     from ikid.pipeline import run_model
 
@@ -185,20 +333,40 @@ def _process_one(job: tuple[str, dict]) -> dict:
                     source=path,
                     progress=opt["progress"],
                 )
-        written = []
         for kind, r in runs.items():
             if len(r.time) == 0:
                 raise ikid.InputError(f"{path}: no frame gave {kind}: {r.summary()}")
-        if "angles" in runs:
-            written.append(str(write_mot(opt["outputs"][0], runs["angles"].time, runs["angles"].values)))
-        if "torques" in runs:
-            written.append(str(write_sto(opt["outputs"][1], runs["torques"].time, runs["torques"].values)))
+        with atomic_outputs() as written:
+            if "angles" in runs:
+                write_mot(opt["outputs"][0], runs["angles"].time, runs["angles"].values)
+            if "torques" in runs:
+                write_sto(opt["outputs"][1], runs["torques"].time, runs["torques"].values)
         first = next(iter(runs.values()))
-        row.update(ok=True, frames=len(data), rate_hz=data.rate_hz, summary=first.summary(), written=written)
+        row.update(
+            ok=True,
+            frames=len(data),
+            rate_hz=data.rate_hz,
+            summary=first.summary(),
+            written=list(map(str, written)),
+        )
     except (ikid.IkidError, OSError) as e:
         row.update(ok=False, error=str(e))
+    except Exception as e:  # a bug: named with its traceback, and the batch goes on
+        row.update(
+            ok=False, error=f"{path}: unexpected {type(e).__name__} (a bug in ikid: please report it): {e}"
+        )
+        row["traceback"] = traceback.format_exc()
     row["seconds"] = round(time.perf_counter() - t0, 3)
     return row
+
+
+def _cause(file: str, error: str) -> str:
+    """An error message without the file name it starts with (the summary names the file)."""
+    if error.startswith(file + ":"):
+        rest = error[len(file) + 1 :].lstrip()
+        head, sep, tail = rest.partition(": ")
+        return f"line {head}: {tail}" if sep and head.isdigit() else rest
+    return error
 
 
 def cmd_process(args: argparse.Namespace) -> int:
@@ -206,25 +374,27 @@ def cmd_process(args: argparse.Namespace) -> int:
     from concurrent.futures import ProcessPoolExecutor
 
     inputs = _inputs(args.inputs)
-    out = Path(args.output)
     many = len(inputs) > 1 or any(Path(p).is_dir() for p in args.inputs)
     torque_model = getattr(args, "torque_model", None)
+    # The models' cards against what the command writes, once, before any file is read.
+    _model_for(args.model, f"ikid {args.command} --model", ("ik",))
+    if torque_model:
+        _model_for(torque_model, f"ikid {args.command} --torque-model", ("chain",))
     stems = [p.stem for p in inputs]
     clash = sorted({s for s in stems if stems.count(s) > 1})
     if many and clash:
-        raise SystemExit(
-            f"ikid: error: several inputs are named {', '.join(clash)}; their outputs "
-            "would overwrite each other"
+        raise ikid.ArgumentError(
+            f"several inputs are named {', '.join(clash)}; their outputs would overwrite each other"
         )
+    # Several inputs, or -o naming a folder: outputs inside it, named after their inputs.
+    out = Path(args.output)
+    into_folder = many or _is_folder(args.output)
+    if into_folder:
+        out.mkdir(parents=True, exist_ok=True)
     jobs = []
     for path in inputs:
-        if many:
-            out.mkdir(parents=True, exist_ok=True)
-            stem = out / path.stem
-        else:
-            stem = out.with_suffix("") if out.suffix.lower() in (".mot", ".sto") else out
-            stem.parent.mkdir(parents=True, exist_ok=True)
-        mot = out if (not many and out.suffix.lower() == ".mot") else stem.with_name(stem.name + ".mot")
+        stem = out / path.stem if into_folder else _stem(args.output, path.stem)
+        mot = out if (not into_folder and out.suffix.lower() == ".mot") else _named(stem, ".mot")
         opt = {
             "map": args.map,
             "ik_model": args.model,
@@ -233,7 +403,7 @@ def cmd_process(args: argparse.Namespace) -> int:
             "missing_markers": args.missing_markers,
             "progress": not many,
             "calibration": args.calibration,
-            "outputs": (mot, stem.with_name(stem.name + ".sto")),
+            "outputs": (mot, _named(stem, ".sto")),
         }
         jobs.append((str(path), opt))
     if len(jobs) == 1:
@@ -245,11 +415,17 @@ def cmd_process(args: argparse.Namespace) -> int:
         if row["ok"]:
             print(f"{row['file']}: {row['summary']} ({row['seconds']:.2f} s) -> {', '.join(row['written'])}")
         else:
-            print(f"ikid: error: {row['error']}", file=sys.stderr)
+            print(row.get("traceback", "") + f"ikid: error: {row['error']}", file=sys.stderr)
+    failed = [r for r in rows if not r["ok"]]
     if many:
-        ok = sum(r["ok"] for r in rows)
-        print(f"{ok}/{len(rows)} files processed, {len(rows) - ok} failed")
-    return 0 if all(r["ok"] for r in rows) else 2
+        # The summary: every file that gave no output, with its cause.
+        print(
+            f"{len(rows) - len(failed)}/{len(rows)} files processed, {len(failed)} failed"
+            + (":" if failed else "")
+        )
+        for r in failed:
+            print(f"  {r['file']}: {_cause(r['file'], r['error'])}")
+    return 2 if failed else 0
 
 
 def cmd_track(args: argparse.Namespace) -> int:
@@ -257,9 +433,13 @@ def cmd_track(args: argparse.Namespace) -> int:
     tracker over the body model, for one subject (no network)."""
     from ikid.io import MarkerMap, read_markers, write_mot, write_sto
 
+    refiner = (
+        None
+        if args.refiner in ("", "none")
+        else _model_for(args.refiner, "ikid track --refiner", ("refine",))
+    )
     data = read_markers(args.input)
     frames = data.frames(MarkerMap.load(args.map) if args.map else None)
-    refiner = None if args.refiner in ("", "none") else ikid.load(args.refiner)
     tracker = ikid.Tracker(
         length_scale=args.length_scale,
         mass_scale=args.mass_scale,
@@ -269,11 +449,10 @@ def cmd_track(args: argparse.Namespace) -> int:
     )
     out = tracker.run(frames)
     k = out["start"]
-    stem = Path(args.output)
-    stem = stem.with_suffix("") if stem.suffix.lower() in (".mot", ".sto") else stem
-    stem.parent.mkdir(parents=True, exist_ok=True)
-    mot = write_mot(stem.with_name(stem.name + ".mot"), data.time[k:], out["q"][k:])
-    sto = write_sto(stem.with_name(stem.name + ".sto"), data.time[k:], out["tau"][k:])
+    stem = _stem(args.output, Path(args.input).stem)
+    with atomic_outputs():  # the pair replaces the old pair, or neither is replaced
+        mot = write_mot(_named(stem, ".mot"), data.time[k:], out["q"][k:])
+        sto = write_sto(_named(stem, ".sto"), data.time[k:], out["tau"][k:])
     gaps = int(np.count_nonzero(out["missing"][k:]))
     noise_mm = ", ".join(f"{v * 1e3:.2f}" for v in tracker.marker_noise)
     how = f"refined by {refiner.name}" if refiner else "not refined"
@@ -354,12 +533,7 @@ def cmd_id(args: argparse.Namespace) -> int:
             f"×{args.mass_scale:g} mass)",
         )
     else:
-        model = ikid.load(args.model)
-        if model.frame_kind != "joint_state":
-            raise ikid.InputError(
-                f"model {model.name!r} reads {model.feature_set} frames, not joint states "
-                "(q, q̇, q̈); use an id model"
-            )
+        model = _model_for(args.model, "ikid id --model", ("id",))
         if check_rate(model, rate, args.input, args.resample):
             time_s, q = resample(time_s, q, model.frame_rate_hz)
         qd = np.gradient(q, time_s, axis=0)
@@ -373,7 +547,12 @@ def cmd_id(args: argparse.Namespace) -> int:
         if len(run.time) == 0:
             raise ikid.InputError(f"{args.input}: no frame gave torques: {run.summary()}")
         out_time, tau, summary = run.time, run.values, run.summary()
-    path = write_sto(args.output, out_time, tau)
+    output = Path(args.output)
+    path = write_sto(
+        _named(_stem(args.output, Path(args.input).stem), ".sto") if _is_folder(args.output) else output,
+        out_time,
+        tau,
+    )
     print(f"{args.input}: {summary} -> {path}")
     return 0
 
@@ -381,22 +560,51 @@ def cmd_id(args: argparse.Namespace) -> int:
 # --- stream: live frames in, one line out per frame ----------------------------------------------
 
 
-def _parse_frame(line: str, frame_len: int, with_time: bool) -> tuple[float | None, np.ndarray]:
-    """One text frame: ``frame_len`` numbers (comma, semicolon, tab or space separated), the
-    time first with ``--time``. An empty field or ``nan`` is a missing value."""
+def _parse_frame(
+    line: str, frame_len: int, with_time: bool, with_number: bool = False
+) -> tuple[int | None, float | None, np.ndarray]:
+    """One text frame: the source's frame number first with ``--frame-number``, then the time
+    with ``--time``, then ``frame_len`` numbers (comma, semicolon, tab or space separated). An
+    empty field or ``nan`` is a missing value."""
     line = line.strip()
     fields = [f.strip() for f in line.split(",")] if "," in line else line.replace(";", " ").split()
-    want = frame_len + (1 if with_time else 0)
+    lead = int(with_number) + int(with_time)
+    want = frame_len + lead
     if len(fields) != want:
-        raise ikid.InputError(
-            f"expected {want} values ({'time + ' if with_time else ''}{frame_len} frame "
-            f"values), got {len(fields)}"
-        )
+        first = ("frame number + " if with_number else "") + ("time + " if with_time else "")
+        raise ikid.InputError(f"expected {want} values ({first}{frame_len} frame values), got {len(fields)}")
+    number = None
+    if with_number:
+        try:
+            number = int(fields[0])
+        except ValueError:
+            raise ikid.InputError(f"frame number {fields[0]!r} is not an integer") from None
+        fields = fields[1:]
     try:
         values = np.array([float(f) if f else np.nan for f in fields], np.float64)
     except ValueError as e:
         raise ikid.InputError(f"not a number: {e}") from None
-    return (float(values[0]), values[1:]) if with_time else (None, values)
+    if with_time and not math.isfinite(values[0]):
+        raise ikid.InputError(f"time {fields[0]!r} is not a finite number")
+    return (number, float(values[0]), values[1:]) if with_time else (number, None, values)
+
+
+#: Receive buffer `ikid stream --udp` asks for, bytes: a burst of 40,000 frames (~200 bytes a
+#: datagram) — a second of a 42 kHz burst, or 40 s at 1 kHz of a reader that stalled.
+UDP_RECEIVE_BUFFER = 8 << 20
+
+
+def _receive_buffer(sock, want: int = UDP_RECEIVE_BUFFER) -> int:
+    """Ask for a ``want``-byte receive buffer; the size granted (the system caps it: Linux's
+    ``net.core.rmem_max``). Linux reports twice what it grants (its bookkeeping): halved here."""
+    import socket
+
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, want)
+    except OSError:
+        pass  # the default stays; reported below
+    granted = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+    return granted // 2 if sys.platform.startswith("linux") else granted
 
 
 def _udp_lines(port: int, count: int | None, idle_s: float):
@@ -405,9 +613,17 @@ def _udp_lines(port: int, count: int | None, idle_s: float):
     import socket
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        granted = _receive_buffer(sock)
         sock.bind(("127.0.0.1", port))
         sock.settimeout(idle_s)
         print(f"ikid stream: listening on udp 127.0.0.1:{sock.getsockname()[1]}", file=sys.stderr, flush=True)
+        note = (
+            ""
+            if granted >= UDP_RECEIVE_BUFFER
+            else f", asked for {UDP_RECEIVE_BUFFER} (the system's limit; on Linux raise net.core.rmem_max): "
+            "a larger burst overflows it and its frames are lost"
+        )
+        print(f"ikid stream: receive buffer {granted} bytes{note}", file=sys.stderr, flush=True)
         received = 0
         while count is None or received < count:
             try:
@@ -423,13 +639,41 @@ def _udp_lines(port: int, count: int | None, idle_s: float):
                     yield line
 
 
+class _Losses:
+    """Frames lost between those received: from the source's frame numbers (a jump of k is
+    k - 1 lost), else from its times (a gap of k periods is k - 1 lost). A frame whose number
+    is not after the last one's is refused (late or repeated)."""
+
+    def __init__(self, rate_hz: float) -> None:
+        self.rate_hz = rate_hz
+        self.lost = 0
+        self.last_number: int | None = None
+        self.last_time: float | None = None
+
+    def number(self, n: int) -> None:
+        if self.last_number is not None:
+            if n <= self.last_number:
+                raise ikid.InputError(f"frame number {n} after {self.last_number} (late or repeated)")
+            self.lost += n - self.last_number - 1
+        self.last_number = n
+
+    def time(self, t: float) -> None:
+        if self.last_time is not None and t > self.last_time:
+            self.lost += max(0, round((t - self.last_time) * self.rate_hz) - 1)
+        self.last_time = t
+
+
 def cmd_stream(args: argparse.Namespace) -> int:
     """Frames (text lines) from stdin or UDP -> one CSV line per frame on stdout:
     ``frame,status,<outputs>``; status ``ok``, ``filled:<markers>``, ``filling`` (window not
-    full yet) or ``refused:<reason>`` (outputs empty). Nothing is skipped silently."""
-    from ikid.pipeline import same_rate
+    full yet) or ``refused:<reason>`` (outputs empty). Nothing is skipped silently: the summary
+    on stderr counts frames received, refused (by reason) and lost; exit status 0 if every
+    frame was processed, 3 if frames were lost or refused, 2 on an error."""
+    from ikid.pipeline import refusal_reason, same_rate
 
-    models = [ikid.load(args.model)] + ([ikid.load(args.torque_model)] if args.torque_model else [])
+    models = [_model_for(args.model, "ikid stream --model", ("ik", "chain"))]
+    if args.torque_model:
+        models.append(_model_for(args.torque_model, "ikid stream --torque-model", ("chain",)))
     rate = models[0].frame_rate_hz
     for m in models:
         if args.rate is not None and not same_rate(args.rate, m.frame_rate_hz):
@@ -450,15 +694,32 @@ def cmd_stream(args: argparse.Namespace) -> int:
         if args.udp is not None
         else (line for k, line in enumerate(sys.stdin) if args.count is None or k < args.count)
     )
-    counts: dict[str, int] = {}
+    counts: Counter = Counter()
+    refused: Counter = Counter()
+    losses = _Losses(rate)
     frame = 0
     for line in lines:
         if not line.strip() or line.lstrip().startswith("#"):
             continue
-        status, values = "ok", ""
+        status, values, label = "ok", "", frame
         try:
-            t, x = _parse_frame(line, models[0].frame_len, args.time)
-            results = [s.push(x, time=t) for s in streams]
+            try:
+                number, t, x = _parse_frame(line, models[0].frame_len, args.time, args.frame_number)
+            except ikid.InputError as e:
+                raise _Refused(str(e), "unreadable line") from None
+            if number is not None:
+                label = number
+                try:
+                    losses.number(number)
+                except ikid.InputError as e:
+                    raise _Refused(str(e), "late or repeated frame number") from None
+            elif t is not None:
+                losses.time(t)
+            try:
+                results = [s.push(x, time=t) for s in streams]
+            except ikid.InputError as e:
+                # The line's frame column is the one to read: the reason alone goes in the status.
+                raise _Refused(e.reason or str(e), refusal_reason(e)) from e
             ready = [r for r in results if r is not None]
             if len(ready) < len(results):
                 status = "filling"
@@ -467,25 +728,38 @@ def cmd_stream(args: argparse.Namespace) -> int:
                 filled = streams[0].filled_markers
                 if filled:
                     status = "filled:" + "+".join(filled)
-        except ikid.InputError as e:
-            # The line's frame column is the one to read: the reason alone goes in the status.
-            reason = e.reason or str(e)
-            status = "refused:" + reason.replace(",", ";").replace("\n", " ")
+        except _Refused as e:
+            status = "refused:" + e.detail.replace(",", ";").replace("\n", " ")
+            refused[e.key] += 1
             if args.strict:
-                print(f"ikid: error: frame {frame}: {e}", file=sys.stderr)
+                print(f"ikid: error: frame {label}: {e.detail}", file=sys.stderr)
                 return 2
-        out.write(f"{frame},{status},{values}\n")
+        out.write(f"{label},{status},{values}\n")
         if args.flush:
             out.flush()
-        key = status.split(":")[0]
-        counts[key] = counts.get(key, 0) + 1
+        counts[status.split(":")[0]] += 1
         frame += 1
     out.flush()
-    print(
-        f"ikid stream: {frame} frames at {rate:g} Hz: " + ", ".join(f"{v} {k}" for k, v in counts.items()),
-        file=sys.stderr,
-    )
-    return 0
+    parts = [f"{counts[k]} {k}" for k in ("ok", "filled", "filling", "refused") if counts[k]]
+    if args.frame_number or args.time:
+        parts.append(f"{losses.lost} lost (by {'frame number' if args.frame_number else 'time'})")
+    else:
+        parts.append("lost not counted (no frame numbers or times: --frame-number, --time)")
+    print(f"ikid stream: {frame} frames received at {rate:g} Hz: " + ", ".join(parts), file=sys.stderr)
+    if refused:
+        print(
+            "ikid stream: refused: " + "; ".join(f"{n} {reason}" for reason, n in refused.most_common()),
+            file=sys.stderr,
+        )
+    return EXIT_FRAMES_LOST if refused or losses.lost else 0
+
+
+class _Refused(Exception):
+    """A frame `ikid stream` gives no output for: ``detail`` for its line, ``key`` to count it by."""
+
+    def __init__(self, detail: str, key: str) -> None:
+        super().__init__(detail)
+        self.detail, self.key = detail, key
 
 
 # --- train / report / bench --------------------------------------------------------------------
@@ -495,17 +769,23 @@ BASE_CONFIG = {"ik": "wrist-ik", "chain": "wrist-chain", "id": "wrist-id"}
 
 
 def _config_path(name: str) -> Path:
-    """A TOML path, or the name of a shipped config (``ikid/training/configs``)."""
+    """A shipped config's name (``ikid/training/configs``) or a TOML path, by the rule of
+    :func:`ikid.load`: a name with no path separator and no ``.toml`` suffix is a shipped
+    config, even if a file or folder of that name is in the working directory."""
+    shipped_dir = Path(__file__).with_name("training") / "configs"
+    if ikid.is_model_name(name) and not name.endswith(".toml"):
+        shipped = shipped_dir / f"{name}.toml"
+        if not shipped.is_file():
+            known = sorted(q.stem for q in shipped_dir.glob("*.toml"))
+            raise ikid.InputError(
+                f"no shipped config {name!r} (shipped: {', '.join(known)}); a config file is given by a "
+                "path (with a folder or the .toml suffix)"
+            )
+        return shipped
     p = Path(name)
-    if p.suffix == ".toml" or p.exists():
-        if not p.exists():
-            raise ikid.InputError(f"{p}: no such config file")
-        return p
-    shipped = Path(__file__).with_name("training") / "configs" / f"{name}.toml"
-    if not shipped.exists():
-        known = sorted(q.stem for q in shipped.parent.glob("*.toml"))
-        raise ikid.InputError(f"no config {name!r}: give a .toml path or one of {', '.join(known)}")
-    return shipped
+    if not p.is_file():
+        raise ikid.InputError(f"{p}: no such config file")
+    return p
 
 
 def _training():
@@ -571,7 +851,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     from ikid.training import data as D
     from ikid.training.evaluate import evaluate_recordings, markdown
 
-    model = ikid.load(args.model)
+    model = _model_for(args.model, "ikid report --model", ("ik", "chain", "id"))
     recs = D.load_lab_recordings(args.data, args.map, model.frame_rate_hz if args.resample else None)
     rates = {r.meta["rate_hz"] for r in recs}
     from ikid.pipeline import check_rate
@@ -583,11 +863,14 @@ def cmd_report(args: argparse.Namespace) -> int:
     text = f"# ikid report: `{model.name}` on {args.data}\n\n" + markdown(result)
     print(text, end="")
     if args.output:
-        from ikid.io._atomic import write_text_atomic
-
-        out = Path(args.output)
-        write_text_atomic(out, text)
-        write_text_atomic(out.with_suffix(".json"), json.dumps(result, indent=1))
+        out = (
+            _named(_stem(args.output, model.name, (".md",)), ".md")
+            if _is_folder(args.output)
+            else Path(args.output)
+        )
+        with atomic_outputs():  # the report and its numbers replace the old pair together
+            write_text_atomic(out, text)
+            write_text_atomic(out.with_suffix(".json"), json.dumps(result, indent=1))
         print(f"-> {out}, {out.with_suffix('.json')}")
     return 0
 
@@ -596,6 +879,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
     """Per-push latency (p50/p99/max) of ``Stream.push`` from Python and ``predict``
     throughput (1 and 2 threads) of a model on a fresh simulated trial, on this machine."""
     model = ikid.load(args.model)
+    if args.frames <= model.window:
+        raise ikid.ArgumentError(
+            f"--frames {args.frames}: model {model.name!r} gives its first output at frame {model.window}; "
+            f"give more than {model.window} frames"
+        )
     if model.frame_kind != "markers":
         t = simulate("random", seed=424242, duration=args.frames / 1000.0 + 0.1)
         frames = np.concatenate([t.q, t.qd, t.qdd], axis=1)[: args.frames]
@@ -645,34 +933,49 @@ def main(argv: list[str] | None = None) -> int:
 
     p = sub.add_parser("simulate", help="simulate one trial and write .npz/.trc/.mot/.sto")
     p.add_argument("--protocol", choices=["thesis", "random"], default="random")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--duration", type=float, default=10.0, help="seconds (random protocol)")
-    p.add_argument("--shoulder-deg", type=float, default=0.0, help="shoulder flexion, degrees")
-    p.add_argument("--length-scale", type=float, default=1.0)
-    p.add_argument("--mass-scale", type=float, default=1.0)
-    p.add_argument("--rate", type=float, default=1000.0, help="physics and output rate, Hz")
+    p.add_argument("--seed", type=SEED, default=0, help="0 <= SEED < 2^32")
+    p.add_argument("--duration", type=POSITIVE, default=10.0, help="seconds (random protocol)")
+    p.add_argument("--shoulder-deg", type=SHOULDER_DEG, default=0.0, help="shoulder flexion, degrees")
+    p.add_argument("--length-scale", type=SUBJECT_LENGTH, default=1.0)
+    p.add_argument("--mass-scale", type=SUBJECT_MASS, default=1.0)
+    p.add_argument(
+        "--rate", type=SIM_RATE, default=1000.0, help="physics and output rate, Hz (up to 100 kHz)"
+    )
     p.add_argument(
         "--noise",
+        type=_noise_spec,
         action="append",
         default=[],
         metavar="KIND:VALUE",
         help="uniform:0.01 | gaussian:0.002 | drift:0.005 | occlusion:0.5 (repeatable)",
     )
-    p.add_argument("-o", "--output", required=True, help="output stem (writes STEM.npz, .trc, .mot, .sto)")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="output stem (writes STEM.npz, .trc, .mot, .sto, replacing old ones together), or a folder "
+        "(ending with / or existing: FOLDER/PROTOCOL_SEED.*)",
+    )
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("dataset", help="write the thesis-sized and the richer simulated datasets")
     p.add_argument("-o", "--output", required=True)
     p.add_argument(
-        "--random-trials", type=int, default=18, help="random multi-DoF trials (3 poses x 3 sizes x ...)"
+        "--random-trials", type=COUNT, default=18, help="random multi-DoF trials (3 poses x 3 sizes x ...)"
     )
-    p.add_argument("--duration", type=float, default=60.0, help="seconds per random trial")
-    p.add_argument("--jobs", type=int, default=None, help="threads (default: all cores)")
+    p.add_argument("--duration", type=POSITIVE, default=60.0, help="seconds per random trial")
+    p.add_argument("--jobs", type=POSITIVE_INT, default=None, help="threads (default: all cores)")
     p.set_defaults(func=cmd_dataset)
 
     def processing_options(p: argparse.ArgumentParser, model_help: str) -> None:
         p.add_argument("inputs", nargs="+", metavar="IN", help="marker files (.c3d, .trc) or folders of them")
-        p.add_argument("-o", "--output", required=True, help="output file (one input) or folder (several)")
+        p.add_argument(
+            "-o",
+            "--output",
+            required=True,
+            help="output file (one input), or a folder (several inputs, or ending with / or existing): "
+            "FOLDER/<input name>.mot",
+        )
         p.add_argument("--model", default="wrist-ik", help=model_help)
         p.add_argument(
             "--map", metavar="TOML", help="marker map: which label is which ikid marker (see map-template)"
@@ -688,7 +991,7 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument(
             "--calibration", metavar="JSON", help="the subject's marker placement (see `ikid calibrate`)"
         )
-        p.add_argument("--jobs", type=int, default=None, help="parallel files (default: all cores)")
+        p.add_argument("--jobs", type=POSITIVE_INT, default=None, help="parallel files (default: all cores)")
 
     p = sub.add_parser(
         "ik",
@@ -724,13 +1027,25 @@ def main(argv: list[str] | None = None) -> int:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", help="marker file (.c3d, .trc, .csv)")
-    p.add_argument("-o", "--output", required=True, help="output stem: writes STEM.mot and STEM.sto")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="output stem: writes STEM.mot and STEM.sto (together); a folder (ending with / or existing): "
+        "FOLDER/<input name>.mot, .sto",
+    )
     p.add_argument("--map", help="marker map (TOML) from the file's labels to ikid's")
     p.add_argument(
-        "--length-scale", type=float, default=1.0, help="subject's segment lengths / the default subject's"
+        "--length-scale",
+        type=SUBJECT_LENGTH,
+        default=1.0,
+        help="subject's segment lengths / the default subject's",
     )
     p.add_argument(
-        "--mass-scale", type=float, default=1.0, help="subject's segment masses / the default subject's"
+        "--mass-scale",
+        type=SUBJECT_MASS,
+        default=1.0,
+        help="subject's segment masses / the default subject's",
     )
     p.add_argument(
         "--refiner",
@@ -739,7 +1054,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument(
         "--jerk-noise",
-        type=float,
+        type=POSITIVE,
         default=ikid.DEFAULT_JERK_NOISE,
         help=f"motion model's jerk density, rad²/s⁵ (default {ikid.DEFAULT_JERK_NOISE:g}, "
         "tuned in docs/ekf.md)",
@@ -781,16 +1096,23 @@ def main(argv: list[str] | None = None) -> int:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", metavar="IN", help="angles, OpenSim .mot")
-    p.add_argument("-o", "--output", required=True, help=".sto to write")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help=".sto to write, or a folder (ending with / or existing): FOLDER/<input name>.sto",
+    )
     p.add_argument("--model", default="wrist-id", help="joint-state model (default wrist-id)")
     p.add_argument(
         "--reference",
         action="store_true",
         help="exact Newton-Euler for the subject below instead of the network",
     )
-    p.add_argument("--length-scale", type=float, default=1.0, help="subject size (--reference)")
-    p.add_argument("--mass-scale", type=float, default=1.0, help="subject mass factor (--reference)")
-    p.add_argument("--shoulder-deg", type=float, default=0.0, help="shoulder flexion, degrees (--reference)")
+    p.add_argument("--length-scale", type=SUBJECT_LENGTH, default=1.0, help="subject size (--reference)")
+    p.add_argument("--mass-scale", type=SUBJECT_MASS, default=1.0, help="subject mass factor (--reference)")
+    p.add_argument(
+        "--shoulder-deg", type=SHOULDER_DEG, default=0.0, help="shoulder flexion, degrees (--reference)"
+    )
     p.add_argument("--resample", action="store_true", help="resample the angles to the model's rate")
     p.set_defaults(func=cmd_id)
 
@@ -800,7 +1122,13 @@ def main(argv: list[str] | None = None) -> int:
         description="Frames in, one result line out per frame (CSV: frame,status,outputs).\n\n"
         "  ikid stream < frames.csv                          # 18 numbers per line (m)\n"
         "  ikid stream --time --torque-model wrist-chain < frames.csv   # time first\n"
-        "  ikid stream --udp 9870 --count 100000 --idle 5     # datagrams, 'END' stops",
+        "  ikid stream --udp 9870 --count 100000 --idle 5     # datagrams, 'END' stops\n"
+        "  ikid stream --udp 9870 --frame-number --time       # 'N,t,x1,...,z6': lost frames counted\n\n"
+        "At the end, a summary on stderr: frames received, ok, filled, filling, refused (by\n"
+        "reason) and lost (counted from the source's frame numbers, --frame-number, or its\n"
+        "times, --time). UDP asks for an 8 MiB receive buffer for bursts and says if it got less.\n\n"
+        "Exit status: 0 every frame was processed; 3 frames were lost or refused; 2 an error\n"
+        "(or, with --strict, the first refused frame).",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--model", default="wrist-ik", help="model (default wrist-ik)")
@@ -809,22 +1137,28 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument(
         "--udp",
-        type=int,
+        type=PORT,
         default=None,
         metavar="PORT",
         help="read datagrams on 127.0.0.1:PORT (0: any free port)",
     )
-    p.add_argument("--count", type=int, default=None, help="stop after this many frames")
+    p.add_argument("--count", type=POSITIVE_INT, default=None, help="stop after this many frames")
     p.add_argument(
-        "--idle", type=float, default=10.0, help="UDP: stop after this many seconds without a frame"
+        "--idle", type=POSITIVE, default=10.0, help="UDP: stop after this many seconds without a frame"
     )
     p.add_argument(
         "--time",
         action="store_true",
-        help="each line starts with the frame's time (s): gaps restart the window",
+        help="each line starts with the frame's time (s): gaps restart the window and count lost frames",
     )
     p.add_argument(
-        "--rate", type=float, default=None, help="the source's frame rate (Hz); refused if not the model's"
+        "--frame-number",
+        action="store_true",
+        help="each line starts with the source's frame number (before the time with --time): a jump "
+        "counts the frames lost between; a number not after the last is refused",
+    )
+    p.add_argument(
+        "--rate", type=POSITIVE, default=None, help="the source's frame rate (Hz); refused if not the model's"
     )
     p.add_argument(
         "--missing-markers", choices=["fill", "refuse"], default=None, help="override the model's policy"
@@ -858,10 +1192,14 @@ def main(argv: list[str] | None = None) -> int:
         help="ik: angles (default); chain: markers -> torques; id: joint states -> torques",
     )
     p.add_argument("--config", default=None, help="config name or TOML (default: the shipped one for --task)")
-    p.add_argument("--rate", type=float, default=None, help="resample every trial to this rate (Hz) first")
-    p.add_argument("--minutes", type=float, default=None, help="training time budget")
-    p.add_argument("--window", type=int, default=None, help="frames per window (default: the config's)")
-    p.add_argument("--hidden", default=None, help="hidden widths, e.g. 128,128 (default: the config's)")
+    p.add_argument("--rate", type=POSITIVE, default=None, help="resample every trial to this rate (Hz) first")
+    p.add_argument("--minutes", type=POSITIVE, default=None, help="training time budget")
+    p.add_argument(
+        "--window", type=POSITIVE_INT, default=None, help="frames per window (default: the config's)"
+    )
+    p.add_argument(
+        "--hidden", type=_widths, default=None, help="hidden widths, e.g. 128,128 (default: the config's)"
+    )
     p.add_argument("--no-onnx", action="store_true", help="skip the ONNX copy")
     p.add_argument("-o", "--output", required=True, help="model file (.safetensors) or output folder")
     p.set_defaults(func=cmd_train)
@@ -884,13 +1222,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--resample", action="store_true", help="resample the trials to the model's rate")
     p.add_argument("--clean-only", action="store_true", help="no added noise levels")
     p.add_argument(
-        "-o", "--output", default=None, help="Markdown file (+ .json beside it); for the full report a folder"
+        "-o",
+        "--output",
+        default=None,
+        help="Markdown file (+ .json beside it), or a folder (FOLDER/<model name>.md); for the full "
+        "report a folder",
     )
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("bench", help="latency and throughput of a model on this machine")
     p.add_argument("--model", default="wrist-ik")
-    p.add_argument("--frames", type=int, default=20000)
+    p.add_argument("--frames", type=POSITIVE_INT, default=20000, help="frames to push (more than the window)")
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser(
@@ -908,7 +1250,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except ikid.IkidError as e:
+    except (ikid.IkidError, OSError) as e:
+        # What a user can act on (a bad file, option or model; a failed write) is a message naming
+        # it; anything else is a bug and keeps its traceback.
         print(f"ikid: error: {e}", file=sys.stderr)
         return 2
 

@@ -57,7 +57,7 @@ class Run:
         return ", ".join(parts)
 
 
-def _reason(error: _native.InputError) -> str:
+def refusal_reason(error: _native.InputError) -> str:
     """A short, countable reason for a refused frame, from the core's classification."""
     markers = ", ".join(error.markers)
     if error.code == "missing_markers":
@@ -120,7 +120,7 @@ def run_model(
         try:
             out = stream.push(frame, time=float(t))
         except _native.InputError as e:
-            refused[_reason(e)] += 1
+            refused[refusal_reason(e)] += 1
             continue
         if out is None:
             refused["window filling"] += 1

@@ -18,7 +18,7 @@ import numpy as np
 
 from ikid import _native
 from ikid.io import write_mot, write_sto, write_trc
-from ikid.io._atomic import atomic_output
+from ikid.io._atomic import Incomplete, atomic_output, atomic_outputs
 
 #: Noise models by name, each ``fn(markers, seed, **params) -> markers``.
 NOISE: dict[str, Callable[..., np.ndarray]] = {
@@ -60,7 +60,10 @@ class Trial:
         return Trial(self.time, self.q, self.qd, self.qdd, self.tau, markers, self.q_ref, meta)
 
     def save(self, stem: str | os.PathLike[str]) -> list[Path]:
-        """Write ``stem.npz``, ``.trc``, ``.mot``, ``.sto``; returns the paths."""
+        """Write ``stem.npz``, ``.trc``, ``.mot``, ``.sto``; returns the paths. The four files
+        replace any old ones together, only once all of them are written and checked (see
+        :func:`ikid.io._atomic.atomic_outputs`); a failed write is an :class:`ikid.WriteError`
+        naming the file and leaves the old four as they were."""
         stem = Path(stem)
         stem.parent.mkdir(parents=True, exist_ok=True)
 
@@ -69,14 +72,17 @@ class Trial:
 
         npz = named(".npz")
         arrays = {k: getattr(self, k) for k in ("time", "q", "qd", "qdd", "tau", "markers", "q_ref")}
-        with atomic_output(npz, suffix=".npz") as tmp:
-            np.savez_compressed(tmp, **arrays, metadata=np.array(json.dumps(self.metadata)))
-        return [
-            npz,
-            write_trc(named(".trc"), self.time, self.markers, self.rate_hz),
-            write_mot(named(".mot"), self.time, self.q),
-            write_sto(named(".sto"), self.time, self.tau),
-        ]
+        with atomic_outputs():
+            with atomic_output(
+                npz, suffix=".npz", verify=lambda tmp: _check_npz(tmp, [*arrays, "metadata"])
+            ) as tmp:
+                np.savez_compressed(tmp, **arrays, metadata=np.array(json.dumps(self.metadata)))
+            return [
+                npz,
+                write_trc(named(".trc"), self.time, self.markers, self.rate_hz),
+                write_mot(named(".mot"), self.time, self.q),
+                write_sto(named(".sto"), self.time, self.tau),
+            ]
 
     @staticmethod
     def load(path: str | os.PathLike[str]) -> Trial:
@@ -85,6 +91,20 @@ class Trial:
             return Trial(
                 z["time"], z["q"], z["qd"], z["qdd"], z["tau"], z["markers"], z["q_ref"], metadata=meta
             )
+
+
+def _check_npz(path: Path, names: list[str]) -> None:
+    """:class:`Incomplete` unless ``path`` is a whole zip archive holding an array per name
+    (its central directory, at the end of the file, lists them)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            held = {n.removesuffix(".npy") for n in z.namelist()}
+    except (zipfile.BadZipFile, OSError) as e:
+        raise Incomplete(f"read back an unreadable archive ({e})") from None
+    if missing := [n for n in names if n not in held]:
+        raise Incomplete(f"read back an archive without {', '.join(missing)}")
 
 
 def simulate(

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ikid.io._atomic import atomic_output
+from ikid.io._atomic import Incomplete, atomic_output
 from ikid.io.markers import FileFormatError, MarkerData, check_readable, unit_scale
 
 #: Wall-clock limit of the child that parses one file, seconds (a corrupt header can make a
@@ -135,7 +135,10 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
 
 def write_c3d(path: str | os.PathLike[str], data: MarkerData, units: str = "mm") -> Path:
     """Write marker trajectories as a ``.c3d`` file (float points; NaN stays NaN, read back as unseen).
-    Written to a temporary name and renamed: a file appears whole or not at all."""
+    Written to a temporary name, read back (header, point and frame counts, size) and only then
+    renamed: ezc3d does not report write errors (a full disk gives a short file and success),
+    so a file that did not reach the disk whole is a :class:`ikid.WriteError` naming ``path``,
+    and the previous file stays as it was."""
     ezc3d = _ezc3d()
     path = Path(path)
     scale = unit_scale(units, str(path))
@@ -146,6 +149,40 @@ def write_c3d(path: str | os.PathLike[str], data: MarkerData, units: str = "mm")
     pts = np.ones((4, len(data.labels), len(data)))
     pts[:3] = np.transpose(data.positions / scale, (2, 1, 0))
     c["data"]["points"] = pts
-    with atomic_output(path, suffix=".c3d") as tmp:
-        c.write(str(tmp))
+    n_frames, n_points = len(data), len(data.labels)
+    with atomic_output(path, suffix=".c3d", verify=lambda tmp: check_c3d(tmp, n_frames, n_points)) as tmp:
+        try:
+            c.write(str(tmp))
+        except RuntimeError as e:  # ezc3d's own complaints (it raises few)
+            raise Incomplete(f"ezc3d: {e}") from None
     return path
+
+
+def check_c3d(path: Path, n_frames: int, n_points: int) -> None:
+    """:class:`~ikid.io._atomic.Incomplete` unless the C3D file at ``path`` has a header
+    announcing ``n_points`` points and ``n_frames`` frames and is long enough to hold them
+    (parameter blocks, then every frame's points). A light parse of the 512-byte header, not
+    ezc3d: the writer's own reader would not be an independent check."""
+    size = os.stat(path).st_size
+    with open(path, "rb") as f:
+        head = f.read(512)
+        if len(head) < 512 or head[1] != 0x50 or head[0] < 2:
+            raise Incomplete(f"read back {size} bytes without a C3D header")
+        f.seek((head[0] - 1) * 512 + 3)
+        processor = f.read(1)
+    endian = ">" if processor == b"\x56" else "<"
+    points, analog, first, last = struct.unpack(endian + "HHHH", head[2:10])
+    (scale,) = struct.unpack(endian + "f", head[12:16])
+    (data_start,) = struct.unpack(endian + "H", head[16:18])
+    if points != n_points:
+        raise Incomplete(f"read back {points} points in the header, {n_points} were written")
+    if last != 0xFFFF and last - first + 1 != n_frames:
+        raise Incomplete(f"read back {last - first + 1} frames in the header, {n_frames} were written")
+    if data_start <= head[0]:
+        raise Incomplete(f"read back {size} bytes; the header places the data at block {data_start}")
+    word = 4 if scale < 0 else 2  # float or 16-bit integer data
+    need = (data_start - 1) * 512 + n_frames * (4 * points + analog) * word
+    if size < need:
+        raise Incomplete(
+            f"read back {size} bytes, the header's {n_points} points x {n_frames} frames need {need}"
+        )
