@@ -107,7 +107,9 @@ class MarkerMap:
             )
         bad = [k for k, v in landmarks.items() if not isinstance(v, str) or not v.strip()]
         if bad:
-            raise FileFormatError(f"{source}: the label for landmark {', '.join(bad)} must be a non-empty string")
+            raise FileFormatError(
+                f"{source}: the label for landmark {', '.join(bad)} must be a non-empty string"
+            )
         for k, v in landmarks.items():
             if v.strip() in seen:
                 raise FileFormatError(
@@ -159,7 +161,9 @@ class MarkerMap:
                 f"needs all of {', '.join(landmark_names())} (or calibrate from the neutral posture alone)"
             )
         labels = [self.landmarks[k] for k in landmark_names()]
-        absent = [f"{lab} ({k})" for k, lab in zip(landmark_names(), labels, strict=True) if lab not in data.labels]
+        absent = [
+            f"{lab} ({k})" for k, lab in zip(landmark_names(), labels, strict=True) if lab not in data.labels
+        ]
         if absent:
             raise _native.InputError(
                 f"{data.source or 'markers'}: landmark label(s) {', '.join(absent)} not found; the file has "
@@ -176,7 +180,11 @@ class MarkerMap:
         ]
         lines += [f'{m} = "{lab}"  # {descr[m]}' for m, lab in self.labels.items()]
         lm_descr = dict(_native.Calibration.LANDMARKS)
-        lines += ["", "# optional, for `ikid calibrate` from anatomical landmarks: their labels", "[landmarks]"]
+        lines += [
+            "",
+            "# optional, for `ikid calibrate` from anatomical landmarks: their labels",
+            "[landmarks]",
+        ]
         for k in landmark_names():
             if k in self.landmarks:
                 lines.append(f'{k} = "{self.landmarks[k]}"  # {lm_descr[k]}')
