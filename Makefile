@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo data models models-track report check test test-rust test-python test-python-slow test-c lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf
+.PHONY: all venv wheel demo data models models-track report check test test-rust test-python test-python-slow test-c lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf realdata
 
 all: wheel
 
@@ -203,3 +203,9 @@ compare-opensim: wheel
 # (~10 min on 2 cores; the eval extra brings biorbd).
 compare-ekf: wheel
 	$(PY) benches/ekf_peer.py
+
+# Real recordings (../shared/realdata, or $$IKID_REALDATA) through the CLI: calibrate from the
+# recording, ik, track, scored against the independent reference angles: docs/realdata.md and
+# docs/realdata/*.png; the last line is realdata: pyomeca_ik=... diverged=N (~1 min).
+realdata: wheel
+	$(PY) tools/realdata.py
