@@ -26,6 +26,7 @@ SLOW_MODULES = {
     "test_parity.py",
     "test_opensim.py",
     "test_biorbd.py",
+    "test_batch.py",  # 200 trials through `ikid run`, twice (~12 s)
 }
 SLOW_TESTS = {
     "test_train_and_report_on_a_lab_folder_through_the_cli",

@@ -46,6 +46,14 @@ def parse_output(text: str, n_out: int) -> tuple[list[str], list[str], np.ndarra
     return header, status, values
 
 
+def exit_status(argv: list[str]) -> int:
+    """The CLI's exit status, whether a command returned it or argparse exited."""
+    try:
+        return cli(argv)
+    except SystemExit as e:
+        return e.code if isinstance(e.code, int) else 1
+
+
 def stream_reference(model: ikid.Model, frames: np.ndarray) -> np.ndarray:
     s = model.stream()
     rows = []
@@ -85,9 +93,17 @@ def test_stream_reports_each_bad_line_and_goes_on(trial, monkeypatch, capsys):
     frames_nan[57, 3:6] = np.nan
     text[57] = csv_lines(frames_nan[57:58]).strip()  # a marker missing early: not fillable yet
     monkeypatch.setattr(sys, "stdin", io.StringIO("\n".join(text) + "\n"))
-    assert cli(["stream", "--missing-markers", "refuse"]) == 0
-    _, status, values = parse_output(capsys.readouterr().out, 3)
+    assert cli(["stream", "--missing-markers", "refuse"]) == 3  # ran to the end, frames refused
+    captured = capsys.readouterr()
+    _, status, values = parse_output(captured.out, 3)
     assert len(status) == 60
+    # The summary counts what the lines say: 3 refused (2 unreadable lines, 1 missing marker).
+    window = ikid.load("wrist-ik").window
+    assert (
+        f"60 frames received at 1000 Hz: {60 - 3 - (window - 1)} ok, {window - 1} filling, 3 refused, "
+        "lost not counted" in captured.err
+    ), captured.err
+    assert "refused: 2 unreadable line; 1 " in captured.err, captured.err
     assert status[55].startswith("refused:expected 18 values")
     assert status[56].startswith("refused:not a number")
     assert status[57].startswith("refused:") and "USP" in status[57]
@@ -109,7 +125,7 @@ def test_stream_at_another_rate_is_refused_with_the_reason(trial, monkeypatch, c
     monkeypatch.setattr(
         sys, "stdin", io.StringIO(csv_lines(trial.markers[:3], with_time=np.arange(3) * 4e-4))
     )
-    assert cli(["stream", "--time"]) == 0
+    assert cli(["stream", "--time"]) == 3
     _, status, _ = parse_output(capsys.readouterr().out, 3)
     assert status[1].startswith("refused:") and "resample the source to 1000 Hz" in status[1]
     assert status[2] == "filling"  # 0.8 ms after the last accepted frame: within jitter
@@ -351,10 +367,10 @@ def test_train_refuses_contradictory_or_bad_options(lab, tmp_path, capsys):
     ]
     assert cli([*base, "--config", "wrist-ik", "--task", "chain"]) == 2
     assert "--task chain but config 'wrist-ik' trains task 'ik'" in capsys.readouterr().err
-    assert cli([*base, "--hidden", "128;128"]) == 2
-    assert "--hidden '128;128'" in capsys.readouterr().err
+    assert exit_status([*base, "--hidden", "128;128"]) == 2
+    assert "argument --hidden: '128;128': expected widths like 128,128" in capsys.readouterr().err
     assert cli([*base, "--config", "nope"]) == 2
-    assert "no config 'nope'" in capsys.readouterr().err
+    assert "no shipped config 'nope'" in capsys.readouterr().err
     assert not (tmp_path / "m.safetensors").exists()
 
 
@@ -513,8 +529,11 @@ def test_track_writes_the_trackers_angles_and_torques(
     np.testing.assert_allclose(tau, expected["tau"][1:], rtol=1e-6, atol=1e-8)
     # And it tracks: after start-up, well under a degree from the truth at 1 % noise.
     assert np.degrees(np.sqrt(np.mean((q[300:] - t.q[301:]) ** 2))) < 0.5
-    assert cli(["track", str(tmp_path / "t.trc"), "-o", str(tmp_path / "bad"), "--length-scale", "-1"]) != 0
-    assert "length_scale: is -1" in capsys.readouterr().err
+    assert (
+        exit_status(["track", str(tmp_path / "t.trc"), "-o", str(tmp_path / "bad"), "--length-scale", "-1"])
+        == 2
+    )
+    assert "argument --length-scale: -1: length_scale" in capsys.readouterr().err
     assert not (tmp_path / "bad.mot").exists()
     # --refiner none: the bare filter.
     assert (
@@ -536,3 +555,299 @@ def test_track_writes_the_trackers_angles_and_torques(
     )
     bare = ikid.Tracker(length_scale=1.1, mass_scale=1.3).run(read_markers(tmp_path / "t.trc").frames(None))
     np.testing.assert_allclose(read_mot(tmp_path / "bare.mot")[1], bare["q"][1:], atol=1e-8)
+
+
+# --- outputs: -o FOLDER/, outputs that go together, errors as messages -------------------------
+
+
+@pytest.fixture
+def trc(trial, tmp_path) -> Path:
+    (tmp_path / "in").mkdir()
+    return write_trc(tmp_path / "in" / "walk.trc", trial.time, trial.markers, 1000.0)
+
+
+@pytest.mark.parametrize("existing", [True, False])
+@pytest.mark.parametrize(
+    ("command", "outputs"),
+    [
+        (["ik", "{trc}"], ["walk.mot"]),
+        (["run", "{trc}"], ["walk.mot", "walk.sto"]),
+        (["track", "{trc}", "--refiner", "none"], ["walk.mot", "walk.sto"]),
+        (["id", "{mot}"], ["angles.sto"]),
+        (
+            ["simulate", "--duration", "0.1", "--seed", "4"],
+            ["random_4.npz", "random_4.trc", "random_4.mot", "random_4.sto"],
+        ),
+    ],
+)
+def test_o_naming_a_folder_puts_the_outputs_inside_it(trial, trc, tmp_path, command, outputs, existing):
+    """Issue #22 case 9: `-o results/` (existing, or ending with a separator) writes
+    results/<input name>.mot, never results.mot beside the folder."""
+    mot = write_mot(tmp_path / "in" / "angles.mot", trial.time, trial.q)
+    folder = tmp_path / "results"
+    if existing:
+        folder.mkdir()
+    arg = str(folder) if existing else str(folder) + os.sep
+    argv = [a.format(trc=trc, mot=mot) for a in command] + ["-o", arg]
+    assert cli(argv) == 0
+    assert sorted(p.name for p in folder.iterdir()) == sorted(outputs)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in", "results"]  # nothing beside it
+
+
+def test_run_whose_sto_cannot_be_written_leaves_the_old_pair(trc, tmp_path, monkeypatch, capsys):
+    """Issue #22 case 5: a failing .sto write must not leave a new .mot beside the old .sto."""
+    import errno
+
+    out = tmp_path / "out" / "walk"
+    assert cli(["run", str(trc), "-o", str(out)]) == 0
+    old = {p.name: p.read_bytes() for p in out.parent.iterdir()}
+    assert sorted(old) == ["walk.mot", "walk.sto"]
+    real_fsync = os.fsync
+
+    def fsync(fd: int) -> None:  # the disk fails on the .sto
+        if ".walk.sto." in os.readlink(f"/proc/self/fd/{fd}"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    # Other models' outputs, so that the new pair would differ from the old.
+    assert cli(["run", str(trc), "-o", str(out), "--missing-markers", "refuse", "--resample"]) == 2
+    err = capsys.readouterr().err
+    assert f"ikid: error: {out}.sto: could not write it whole: No space left on device" in err, err
+    assert {p.name: p.read_bytes() for p in out.parent.iterdir()} == old
+
+
+def test_an_os_error_is_a_message_and_exit_2_not_a_traceback(trc, tmp_path):
+    (tmp_path / "afile").write_text("x")
+    run = subprocess.run(
+        [IKID, "ik", str(trc), "-o", str(tmp_path / "afile" / "out.mot")], capture_output=True, text=True
+    )
+    assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
+    assert run.stderr.startswith("ikid: error: ") and "afile" in run.stderr, run.stderr
+
+
+# --- numeric options --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("argv", "option"),
+    [
+        (["simulate", "-o", "x", "--rate", "0"], "--rate"),
+        (["simulate", "-o", "x", "--rate", "nan"], "--rate"),
+        (["simulate", "-o", "x", "--rate", "1e9"], "--rate"),
+        (["simulate", "-o", "x", "--duration", "-1"], "--duration"),
+        (["simulate", "-o", "x", "--duration", "inf"], "--duration"),
+        (["simulate", "-o", "x", "--seed", "-1"], "--seed"),
+        (["simulate", "-o", "x", "--seed", "1.5"], "--seed"),
+        (["simulate", "-o", "x", "--shoulder-deg", "400"], "--shoulder-deg"),
+        (["simulate", "-o", "x", "--length-scale", "0"], "--length-scale"),
+        (["simulate", "-o", "x", "--mass-scale", "-2"], "--mass-scale"),
+        (["simulate", "-o", "x", "--noise", "uniform:-1"], "--noise"),
+        (["simulate", "-o", "x", "--noise", "pink:0.1"], "--noise"),
+        (["dataset", "-o", "x", "--jobs", "0"], "--jobs"),
+        (["dataset", "-o", "x", "--random-trials", "-1"], "--random-trials"),
+        (["dataset", "-o", "x", "--duration", "0"], "--duration"),
+        (["ik", "x.trc", "-o", "x", "--jobs", "0"], "--jobs"),
+        (["run", "x.trc", "-o", "x", "--jobs", "-3"], "--jobs"),
+        (["track", "x.trc", "-o", "x", "--jerk-noise", "0"], "--jerk-noise"),
+        (["track", "x.trc", "-o", "x", "--mass-scale", "nan"], "--mass-scale"),
+        (["id", "x.mot", "-o", "x", "--length-scale", "-1"], "--length-scale"),
+        (["id", "x.mot", "-o", "x", "--shoulder-deg", "-inf"], "--shoulder-deg"),
+        (["stream", "--udp", "70000"], "--udp"),
+        (["stream", "--count", "0"], "--count"),
+        (["stream", "--idle", "0"], "--idle"),
+        (["stream", "--rate", "-1000"], "--rate"),
+        (["train", "-o", "x", "--window", "0"], "--window"),
+        (["train", "-o", "x", "--minutes", "0"], "--minutes"),
+        (["train", "-o", "x", "--rate", "0"], "--rate"),
+        (["train", "-o", "x", "--hidden", "64,0"], "--hidden"),
+        (["bench", "--frames", "0"], "--frames"),
+        (["bench", "--frames", "ten"], "--frames"),
+    ],
+)
+def test_every_numeric_option_is_checked_and_named(argv, option, capsys):
+    assert exit_status(argv) == 2
+    err = capsys.readouterr().err
+    assert f"error: argument {option}: " in err, err
+
+
+@pytest.mark.parametrize(
+    "argv", [["simulate", "--rate", "0", "-o", "x"], ["bench", "--frames", "0"], ["bench", "--frames", "10"]]
+)
+def test_the_issues_tracebacks_are_messages_now(argv, tmp_path):
+    """Issue #22 case 10 (`--rate 0`: ZeroDivisionError; `--frames 0`: IndexError), and a frame
+    count under the model's window."""
+    run = subprocess.run([IKID, *argv], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
+    option = "--rate" if "--rate" in argv else "--frames"
+    assert "error: " in run.stderr and option in run.stderr, run.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+# --- model cards against commands; shipped names against paths ---------------------------------
+
+
+#: A command with a model of the wrong task; what the message names (model and task); what it needs.
+WRONG_TASK = [
+    (
+        ["ik", "{trc}", "--model", "wrist-chain"],
+        "ikid ik --model wrist-chain: model 'wrist-chain' has task 'chain'",
+        "'ik' (markers -> angles)",
+    ),
+    (["ik", "{trc}", "--model", "wrist-id"], "model 'wrist-id' has task 'id'", "'ik'"),
+    (["run", "{trc}", "--model", "wrist-track"], "model 'wrist-track' has task 'refine'", "'ik'"),
+    (
+        ["run", "{trc}", "--torque-model", "wrist-ik"],
+        "ikid run --torque-model wrist-ik: model 'wrist-ik' has task 'ik'",
+        "'chain' (markers -> torques)",
+    ),
+    (
+        ["run", "{trc}", "--torque-model", "wrist-id"],
+        "model 'wrist-id' has task 'id' (joint states -> torques)",
+        "'chain'",
+    ),
+    (
+        ["track", "{trc}", "--refiner", "wrist-ik"],
+        "ikid track --refiner wrist-ik: model 'wrist-ik' has task 'ik'",
+        "'refine'",
+    ),
+    (
+        ["id", "{mot}", "--model", "wrist-chain"],
+        "ikid id --model wrist-chain: model 'wrist-chain' has task 'chain'",
+        "'id' (joint states -> torques)",
+    ),
+]
+
+
+@pytest.mark.parametrize(("argv", "named", "need"), WRONG_TASK)
+def test_a_model_of_the_wrong_task_is_refused_naming_model_task_and_need(
+    trial, trc, tmp_path, capsys, argv, named, need
+):
+    """Issue #22 case 3: `ikid ik --model wrist-chain` wrote torques into a .mot as angles."""
+    mot = write_mot(tmp_path / "in" / "angles.mot", trial.time, trial.q)
+    out = tmp_path / "out" / "x"
+    assert cli([a.format(trc=trc, mot=mot) for a in argv] + ["-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ikid: error: ") and named in err and f"needs a model of task {need}" in err, err
+    assert not out.parent.exists()  # nothing written, not even the folder
+
+
+def test_stream_refuses_a_torque_model_that_gives_angles(monkeypatch, capsys):
+    monkeypatch.setattr(sys, "stdin", io.StringIO(""))
+    assert cli(["stream", "--torque-model", "wrist-ik"]) == 2
+    assert "model 'wrist-ik' has task 'ik'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("kind", ["folder", "file"])
+def test_a_shipped_name_is_never_shadowed_by_a_file_or_folder_of_that_name(
+    trial, tmp_path, monkeypatch, kind
+):
+    """Issue #22 case 3: a folder named wrist-ik in the working directory made `--model wrist-ik`
+    fail, a file of that name would have been loaded instead. A bare shipped name is the shipped
+    model; a path (a separator, or the .safetensors suffix) is a file."""
+    monkeypatch.chdir(tmp_path)
+    shadow = tmp_path / "wrist-ik"
+    if kind == "folder":
+        shadow.mkdir()
+        (shadow / "wrist-ik.safetensors").write_bytes(b"not a model")
+    else:
+        ikid.load("wrist-chain").save(tmp_path / "chain.safetensors")
+        shadow.write_bytes((tmp_path / "chain.safetensors").read_bytes())  # a valid model, of another task
+    shipped = ikid.Model.load(Path(ikid.__file__).with_name("models") / "wrist-ik.safetensors")
+    frames = trial.markers[:80]
+    np.testing.assert_array_equal(ikid.load("wrist-ik").predict(frames), shipped.predict(frames))
+    assert ikid.load("wrist-ik").card == shipped.card
+    # The CLI follows the same rule: this is the shipped angle model, not the file.
+    trc = write_trc(tmp_path / "t.trc", trial.time, trial.markers, 1000.0)
+    assert cli(["ik", "t.trc", "-o", "t.mot", "--model", "wrist-ik"]) == 0
+    from ikid.io import read_markers
+
+    want = shipped.predict(read_markers(trc).frames())  # the frames as the file holds them
+    np.testing.assert_allclose(read_mot(tmp_path / "t.mot")[1], want, atol=1e-8)
+    # As a path, it is the file.
+    if kind == "file":
+        assert ikid.load("./wrist-ik").task == "chain"
+        assert ikid.load(Path("wrist-ik")).task == "chain"
+    else:
+        with pytest.raises(ikid.ReadError, match="wrist-ik"):
+            ikid.load("./wrist-ik")
+
+
+def test_a_bare_name_that_is_not_shipped_is_not_a_path(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    ikid.load("wrist-ik").save(tmp_path / "mine")
+    with pytest.raises(
+        ikid.NotFoundError, match=r"no model file 'mine' .*shipped: wrist-chain.*give it as a path, \./mine"
+    ):
+        ikid.load("mine")
+    assert ikid.load("./mine").task == "ik"
+    with pytest.raises(ikid.NotFoundError, match="nope.safetensors does not exist"):
+        ikid.load("nope.safetensors")
+    assert ikid.is_model_name("wrist-ik") and not ikid.is_model_name("a/wrist-ik")
+    assert not ikid.is_model_name("wrist-ik.safetensors") and not ikid.is_model_name(Path("wrist-ik"))
+
+
+# --- stream: lost frames, buffer, summary and exit status --------------------------------------
+
+
+def test_stream_counts_frames_lost_from_their_times(trial, monkeypatch, capsys):
+    """Time stamps 1 ms apart with 7 and 3 frames missing: 10 lost, exit 3; the same frames
+    without a gap: 0 lost, exit 0."""
+    frames, t = trial.markers[:120], trial.time[:120]
+    keep = np.ones(120, bool)
+    keep[60:67] = False
+    keep[90:93] = False
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames[keep], with_time=t[keep])))
+    assert cli(["stream", "--time"]) == 3
+    captured = capsys.readouterr()
+    _, status, _ = parse_output(captured.out, 3)
+    assert len(status) == keep.sum()
+    assert "10 lost (by time)" in captured.err, captured.err
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames, with_time=t)))
+    assert cli(["stream", "--time"]) == 0
+    assert "0 lost (by time)" in capsys.readouterr().err
+
+
+def test_stream_over_udp_counts_lost_datagrams_by_frame_number_and_sizes_its_buffer(trial):
+    """A source numbering its frames, 400 sent with 25 numbers skipped (as if the network lost
+    them) and one repeated: the summary says 400 received, 25 lost, the repeat refused; exit 3.
+    On 127.0.0.1, stopping by itself (count and idle time)."""
+    frames = trial.markers[:300].astype(np.float32).astype(np.float64)
+    numbers = [n for n in range(300 + 25) if not (100 <= n < 115 or 200 <= n < 210)][:299]
+    numbers.insert(150, numbers[149])  # one repeated
+    lines = [f"{n}," + csv_lines(frames[k : k + 1]).strip() for k, n in enumerate(numbers)]
+    proc = subprocess.Popen(
+        [IKID, "stream", "--udp", "0", "--frame-number", "--count", str(len(lines)), "--idle", "10"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        line = proc.stderr.readline()
+        port = int(line.rsplit(":", 1)[1])
+        buffer_line = proc.stderr.readline()
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            for row in lines:
+                sock.sendto(row.encode(), ("127.0.0.1", port))
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    # The buffer asked for (8 MiB), or what the system's limit grants, said so.
+    rmem_max = (
+        int(Path("/proc/sys/net/core/rmem_max").read_text())
+        if Path("/proc/sys/net/core/rmem_max").exists()
+        else None
+    )
+    m = re.fullmatch(r"ikid stream: receive buffer (\d+) bytes(, asked for 8388608 .*)?\n", buffer_line)
+    assert m, buffer_line
+    if rmem_max is not None:
+        assert int(m.group(1)) == min(8 << 20, rmem_max) or int(m.group(1)) >= 8 << 20, (m.group(1), rmem_max)
+        assert (m.group(2) is not None) == (rmem_max < 8 << 20)
+    assert proc.returncode == 3, err
+    _, status, _ = parse_output(out, 3)
+    assert len(status) == 300
+    assert [r.split(",", 1)[0] for r in out.strip().splitlines()[1:]] == [str(n) for n in numbers]
+    repeat = numbers[150]
+    assert status[150].startswith(f"refused:frame number {repeat} after {repeat} (late or repeated)")
+    assert "300 frames received at 1000 Hz:" in err and "1 refused, 25 lost (by frame number)" in err, err
+    assert "refused: 1 late or repeated frame number" in err, err

@@ -425,3 +425,210 @@ def test_text_outputs_are_utf8_and_get_normal_permissions_whatever_the_locale(tm
     finally:
         os.umask(old)
     assert (tmp_path / "m.txt").stat().st_mode & 0o777 == 0o644
+
+
+# --- whole files or none ----------------------------------------------------------------------
+
+#: Each writer, as a child process would call it on the same deterministic data: a statement
+#: writing ``path`` (``t`` a 0.5 s trial, ``io``/``ikid``/``np`` imported).
+WRITERS = {
+    "c3d": "io.write_c3d(path, io.MarkerData(tuple(ikid.marker_names()), t.time, "
+    "t.markers.reshape(-1, 6, 3), t.rate_hz))",
+    "trc": "io.write_trc(path, t.time, t.markers, t.rate_hz)",
+    "csv": "io.write_csv(path, t.time, t.q, ikid.coordinate_names())",
+    "csv_markers": "io.write_csv_markers(path, t.time, t.markers)",
+    "mot": "io.write_mot(path, t.time, t.q)",
+    "sto": "io.write_sto(path, t.time, t.tau)",
+    "json": "__import__('ikid.io._atomic').io._atomic.write_text_atomic(path, "
+    "__import__('json').dumps({'q': t.q.tolist()}))",
+    "npz": "t.save(path[: -len('.npz')])",
+}
+_SUFFIX = {"csv_markers": ".csv", "json": ".json"}
+
+_WRITE_CHILD = """
+import json, resource, signal, sys
+import ikid, numpy as np
+from ikid import io
+path, limit, mode = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+t = ikid.simulate("random", seed=7100, duration=0.5)
+if mode == "limit":
+    # A full disk, reproducibly: the process may not grow a file past `limit` bytes. SIGXFSZ
+    # ignored, so the write gets EFBIG (what a full disk's ENOSPC looks like to a writer).
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, resource.RLIM_INFINITY))
+try:
+    exec(sys.argv[4])
+except Exception as e:
+    print(json.dumps({"type": type(e).__name__, "write_error": isinstance(e, ikid.WriteError),
+                      "os_error": isinstance(e, OSError), "message": str(e)}))
+    sys.exit(1)
+print(json.dumps({"type": None}))
+"""
+
+
+def _write_in_child(path, writer: str, limit: int = 0) -> tuple[int, dict]:
+    run = subprocess.run(
+        [sys.executable, "-c", _WRITE_CHILD, str(path), str(limit), "limit" if limit else "free", writer],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    lines = run.stdout.strip().splitlines()
+    assert lines, run.stderr
+    return run.returncode, __import__("json").loads(lines[-1])
+
+
+@pytest.mark.parametrize("kind", sorted(WRITERS))
+def test_a_write_cut_short_by_a_full_disk_is_a_named_error_and_the_old_file_stays(tmp_path, kind):
+    """Issue #22 case 5: a file size limit at a third of the file (a full disk). ezc3d reports
+    success on a short write, so the C3D writer reads its file back; the others check their
+    writes. Every writer raises ikid.WriteError naming the file, and the good file written
+    before is byte for byte as it was, with no temporary file left beside it."""
+    path = tmp_path / f"trial{_SUFFIX.get(kind, '.' + kind)}"
+    status, result = _write_in_child(path, WRITERS[kind])
+    assert status == 0 and result["type"] is None, result
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    size = path.stat().st_size
+    assert size > 3000, size  # big enough that a third of it is a short file, not an empty one
+
+    status, result = _write_in_child(path, WRITERS[kind], limit=size // 3)
+    assert status == 1, result
+    assert result["write_error"] and result["os_error"], result
+    assert result["message"].startswith(f"{path}: could not write it whole: "), result["message"]
+    after = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    assert after == before  # the old file(s) unchanged, nothing new (no temporary file) beside
+
+
+def test_the_c3d_read_back_refuses_a_short_file_and_passes_a_whole_one(trial, tmp_path):
+    """The check behind the C3D writer, on a file ezc3d wrote whole, then cut: every cut is
+    caught, by the header's point and frame counts or by the size they need."""
+    from ikid.io._atomic import Incomplete
+    from ikid.io.c3d import check_c3d
+
+    data = lab_data(trial, tuple(ikid.marker_names()), extra=False)
+    good = io.write_c3d(tmp_path / "good.c3d", data).read_bytes()
+    check_c3d(tmp_path / "good.c3d", len(data), 6)  # whole: passes
+    # The size a float C3D of 6 points needs: its parameter blocks, then 16 bytes a point a frame.
+    assert len(good) >= 512 * (good[16] + 256 * good[17] - 1) + len(data) * 6 * 16
+    for cut in (0, 100, 512, 2048, len(good) // 3, len(good) - 600):
+        (tmp_path / "cut.c3d").write_bytes(good[:cut])
+        with pytest.raises(Incomplete, match="read back"):
+            check_c3d(tmp_path / "cut.c3d", len(data), 6)
+    with pytest.raises(Incomplete, match="read back 6 points in the header, 7 were written"):
+        check_c3d(tmp_path / "good.c3d", len(data), 7)
+    with pytest.raises(Incomplete, match=rf"read back {len(data)} frames in the header, 5 were written"):
+        check_c3d(tmp_path / "good.c3d", 5, 6)
+
+
+def test_bytes_reach_the_disk_before_the_rename_and_the_folder_after(tmp_path, monkeypatch):
+    """write + flush + fsync of the temporary file, whole, while the old file is still in
+    place; then the rename; then an fsync of the folder."""
+    from ikid.io._atomic import write_text_atomic
+
+    target = tmp_path / "q.mot"
+    target.write_text("old\n")
+    text = "new contents °\n" * 1000
+    synced: list[tuple[str, bytes | None, str]] = []
+    real_fsync = os.fsync
+
+    def fsync(fd: int) -> None:
+        real_fsync(fd)
+        where = os.readlink(f"/proc/self/fd/{fd}")
+        content = open(where, "rb").read() if os.path.isfile(where) else None
+        synced.append((where, content, target.read_text()))
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    write_text_atomic(target, text)
+    files = [(w, c, t) for w, c, t in synced if c is not None]
+    assert files and all(os.path.basename(w).startswith(".q.mot.") for w, _, _ in files), synced
+    assert all(c == text.encode() for _, c, _ in files)  # whole when synced...
+    assert all(t == "old\n" for _, _, t in files)  # ...and before the target was replaced
+    assert synced[-1][0] == str(tmp_path) and synced[-1][2] == text  # the folder, after the rename
+    assert target.read_text() == text and sorted(p.name for p in tmp_path.iterdir()) == ["q.mot"]
+
+
+def test_a_failed_sync_is_a_named_error_and_nothing_is_replaced(tmp_path, monkeypatch):
+    import errno
+
+    target = io.write_mot(tmp_path / "q.mot", [0.0, 0.001], np.zeros((2, 3)))
+    before = target.read_bytes()
+
+    def failing_fsync(fd: int) -> None:
+        raise OSError(errno.EIO, "Input/output error")
+
+    monkeypatch.setattr(os, "fsync", failing_fsync)
+    with pytest.raises(
+        ikid.WriteError, match=rf"^{re.escape(str(target))}: could not write it whole: Input"
+    ) as e:
+        io.write_mot(target, [0.0, 0.001], np.ones((2, 3)))
+    assert e.value.errno == errno.EIO and isinstance(e.value, OSError)
+    assert target.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["q.mot"]
+
+
+def test_outputs_that_go_together_are_replaced_together_or_not_at_all(tmp_path, monkeypatch):
+    """atomic_outputs: a failure on the second file (its sync, or its rename) leaves the old
+    pair exactly as it was — the first file, already written, is not renamed (or is put back)."""
+    import errno
+
+    from ikid.io._atomic import atomic_outputs
+
+    mot, sto = tmp_path / "t.mot", tmp_path / "t.sto"
+    io.write_mot(mot, [0.0, 0.001], np.zeros((2, 3)))
+    io.write_sto(sto, [0.0, 0.001], np.zeros((2, 3)))
+    old = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    real_fsync = os.fsync
+
+    def fsync(fd: int) -> None:  # the disk fails on the .sto's temporary file
+        if ".t.sto." in os.readlink(f"/proc/self/fd/{fd}"):
+            raise OSError(errno.EIO, "Input/output error")
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    with pytest.raises(ikid.WriteError, match=rf"^{re.escape(str(sto))}: .*none of the outputs .*t\.mot"):
+        with atomic_outputs():
+            io.write_mot(mot, [0.0, 0.001], np.ones((2, 3)))
+            io.write_sto(sto, [0.0, 0.001], np.ones((2, 3)))
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == old
+    monkeypatch.setattr(os, "fsync", real_fsync)
+
+    # The rename of the second fails (a folder sits where its file goes): the first is put back.
+    sto.unlink()
+    sto.mkdir()
+    old = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    with pytest.raises(ikid.WriteError, match=rf"^{re.escape(str(sto))}: could not write it whole"):
+        with atomic_outputs():
+            io.write_mot(mot, [0.0, 0.001], np.ones((2, 3)))
+            io.write_sto(sto, [0.0, 0.001], np.ones((2, 3)))
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == old
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.mot", "t.sto"]  # no temporary left
+    # And when both succeed, both are replaced.
+    sto.rmdir()
+    with atomic_outputs() as written:
+        io.write_mot(mot, [0.0, 0.001], np.ones((2, 3)))
+        io.write_sto(sto, [0.0, 0.001], np.ones((2, 3)))
+    assert written == [mot, sto]
+    np.testing.assert_allclose(io.read_mot(mot)[1], np.ones((2, 3)), rtol=1e-9)
+    np.testing.assert_array_equal(io.read_sto(sto)[1], np.ones((2, 3)))
+
+
+def test_a_trial_is_saved_whole_or_its_old_files_stay(tmp_path, monkeypatch):
+    """Trial.save (and `ikid simulate`): four files that belong together; the last failing
+    leaves the old four, byte for byte."""
+    import errno
+
+    ikid.simulate("random", seed=7101, duration=0.1).save(tmp_path / "t")
+    old = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    assert sorted(old) == ["t.mot", "t.npz", "t.sto", "t.trc"]
+    real_fsync = os.fsync
+
+    def fsync(fd: int) -> None:
+        if ".t.sto." in os.readlink(f"/proc/self/fd/{fd}"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    with pytest.raises(
+        ikid.WriteError, match=r"t\.sto: could not write it whole: No space left on device \(the disk"
+    ):
+        ikid.simulate("random", seed=7102, duration=0.1).save(tmp_path / "t")
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == old

@@ -228,6 +228,8 @@ def _temp_beside(path: Path, suffix: str) -> Path:
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent or ".")
     except OSError as e:
+        if not (path.parent or Path(".")).is_dir():
+            raise WriteError(f"{path}: cannot write it: no folder {path.parent}") from e
         raise _write_error(path, e) from e
     os.close(fd)
     return Path(tmp)
