@@ -263,7 +263,13 @@ def process(rec: Recording, folder: Path, work: Path, log: list[str]) -> dict:
         log,
     )
     calibrated = done.returncode == 0
-    result: dict = {"rec": rec, "ref": ref, "calibrated": calibrated, "calibrate_out": done.stdout.strip()}
+    result: dict = {
+        "rec": rec,
+        "ref": ref,
+        "calibrated": calibrated,
+        "calibrate_out": (done.stdout + done.stderr).strip(),
+        "cal_path": cal,
+    }
     rate = float(ref["meta"]["rate_hz"])
 
     def ik(calibration: Path | None, tag: str) -> tuple[Score | None, str]:
