@@ -12,6 +12,7 @@ import pytest
 import ikid
 from ikid import _native, io
 from ikid.cli import main as cli
+from ikid.io import MarkerMap
 from ikid.pipeline import run_model
 
 SHOULDER = 0.3
@@ -139,3 +140,184 @@ def test_calibrate_and_ik_commands_on_c3d_files(motion, tmp_path):
         t, q = io.read_mot(tmp_path / f"{name}.mot")
         errors[name] = np.mean((q - motion[np.round(t * 1000).astype(int)]) ** 2)
     assert errors["cal"] < 1e-4 < 100 * errors["cal"] < errors["raw"], errors
+
+
+# --- calibration from what a session has: landmarks, neutral frames, either arm -----------------
+
+#: Landmarks in the default forearm's anatomical frame (metres): lateral and medial epicondyle,
+#: radial and ulnar styloid, symmetric about the long axis so their ISB frame is the model's.
+LANDMARKS = np.array([[0.0, 0.26, 0.035], [0.0, 0.26, -0.035], [0.0, 0.005, 0.03], [0.0, 0.005, -0.03]])
+MIRROR = np.tile([1.0, 1.0, -1.0], 6)
+
+
+def landmark_frames(subject: Subject, n: int) -> np.ndarray:
+    """Where the subject's landmarks are at neutral, ``(n, 12)``: forearm markers moved onto them
+    (a marker sits at pose · scale · (offset + shift / scale))."""
+    offsets = np.array([m["offset"] for m in ikid.body_model()["markers"]])
+    points = []
+    for landmark in LANDMARKS:
+        shift = np.zeros((6, 3))
+        shift[0] = subject.scale * (landmark - offsets[0])
+        points.append(ikid.forward_markers(np.zeros((1, 3)), SHOULDER, subject.scale, 1.0, shift)[0, :3])
+    return np.tile(np.concatenate(points), (n, 1))
+
+
+class ClusterSubject(Subject):
+    """A Subject whose hand cluster is also turned ``turn_deg`` about the hand's long axis: a
+    rigid plate mounted at any orientation (beyond the 60° the movements method allows)."""
+
+    def __init__(self, seed: int, scale: float, turn_deg: float):
+        super().__init__(seed, scale)
+        offsets = np.array([m["offset"] for m in ikid.body_model()["markers"]])
+        c, s = np.cos(np.radians(turn_deg)), np.sin(np.radians(turn_deg))
+        turn = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+        for m in range(3, 6):
+            placed = offsets[m] + self.shift[m]
+            self.shift[m] = turn @ placed - offsets[m]
+
+
+@pytest.mark.parametrize(("seed", "scale", "turn"), [(6, 0.8, 120.0), (7, 1.2, -110.0)])
+def test_landmarks_and_neutral_frames_calibrate_clusters_at_any_orientation(motion, seed, scale, turn):
+    from ikid.calibration import calibrate_neutral
+
+    model = ikid.load("wrist-ik")
+    subject = ClusterSubject(seed, scale, turn)
+    nominal = mse(model, ikid.forward_markers(motion, SHOULDER), motion)
+    neutral = subject.markers(np.zeros((100, 3)))
+    neutral[::7, 9:12] = np.nan  # MC2 missing in some neutral frames
+    landmarks = landmark_frames(subject, 100)
+    landmarks[::3, 6:9] = np.nan  # the radial styloid in two thirds of them
+    cal = calibrate_neutral(neutral, landmarks)
+    assert cal.method == "landmarks" and cal.side == "right"
+    r = cal.report
+    assert (
+        r["neutral_frames"] == 100 - len(range(0, 100, 7))
+        and r["landmarks"]["frames"]["radial_styloid"] == 66
+    )
+    assert max(r["placement_deg"]) > 60.0, r  # refused by the movements method, fine here
+    assert r["landmarks"]["styloid_span_mm"] == pytest.approx(60.0 * scale, abs=1e-3)
+    calibrated = mse(model, subject.markers(motion), motion, cal)
+    assert calibrated <= 1.5 * nominal, (nominal, calibrated)
+    # With 1 % noise on the calibration frames (landmarks included) it stays near nominal.
+    noisy = subject.markers(np.zeros((100, 3)), 0.01, 5)
+    noisy_landmarks = landmark_frames(subject, 100) + np.random.default_rng(seed).normal(0, 0.001, (100, 12))
+    measured = mse(model, subject.markers(motion), motion, calibrate_neutral(noisy, noisy_landmarks))
+    assert measured <= 5 * nominal + 2e-5, (nominal, measured)
+
+
+def test_a_left_arm_is_mirrored_and_reads_the_right_arms_anatomical_angles(motion):
+    from ikid.calibration import calibrate_neutral
+
+    model = ikid.load("wrist-ik")
+    subject = ClusterSubject(8, 1.1, 30.0)
+    right_cal = calibrate_neutral(subject.markers(np.zeros((50, 3))), landmark_frames(subject, 50))
+    # The same subject's left arm in the same anatomical poses is the right one's mirror image.
+    left_neutral = subject.markers(np.zeros((50, 3))) * MIRROR
+    left_landmarks = landmark_frames(subject, 50) * np.tile([1.0, 1.0, -1.0], 4)
+    left_cal = calibrate_neutral(left_neutral, left_landmarks, side="left")
+    assert left_cal.side == "left" and "left arm" in repr(left_cal)
+    run = lambda frames, cal: run_model(model, frames, np.arange(len(frames)) / 1000.0, calibration=cal)  # noqa: E731
+    right = run(subject.markers(motion), right_cal)
+    left = run(subject.markers(motion) * MIRROR, left_cal)
+    np.testing.assert_allclose(left.values, right.values, atol=1e-5)
+    assert np.mean((left.values - motion[left.frame]) ** 2) < 1e-4
+    # Read as a right arm, the mirror image's supination and adduction come out reversed.
+    as_right = ikid.Calibration.from_matrices(left_cal.forearm, left_cal.hand)
+    wrong = run(subject.markers(motion) * MIRROR, as_right)
+    assert np.mean((wrong.values - motion[wrong.frame]) ** 2) > 100 * np.mean(
+        (left.values - motion[left.frame]) ** 2
+    )
+
+
+def test_bad_landmarks_and_neutral_frames_say_what_to_record():
+    from ikid.calibration import calibrate_neutral
+
+    subject = Subject(9, 1.0)
+    neutral, landmarks = subject.markers(np.zeros((20, 3))), landmark_frames(subject, 20)
+    gone = landmarks.copy()
+    gone[:, 3:6] = np.nan
+    with pytest.raises(
+        ikid.InputError, match=r"landmark medial_epicondyle .* is missing in every one of the 20 .* record it"
+    ):
+        calibrate_neutral(neutral, gone)
+    collinear = landmarks.copy()
+    collinear[:, 6:9] = landmarks[:, 0:3] * 0.3 + landmarks[:, 9:12] * 0.7  # a styloid on the long axis
+    collinear[:, 0:3] = collinear[:, 3:6] = landmarks[:, 9:12] + 3.0 * (
+        collinear[:, 6:9] - landmarks[:, 9:12]
+    )
+    with pytest.raises(ikid.InputError, match="nearly collinear"):
+        calibrate_neutral(neutral, collinear)
+    no_hand = neutral.copy()
+    no_hand[:, 12:15] = np.nan
+    with pytest.raises(
+        ikid.InputError,
+        match=r"no usable neutral frame: none of the 20 has all six markers \(missing: MC5 in 20\)",
+    ):
+        calibrate_neutral(no_hand)
+    with pytest.raises(ikid.InputError, match='side: is "up", expected "right" or "left"'):
+        calibrate_neutral(neutral, side="up")
+    with pytest.raises(ikid.InputError, match="landmarks: 9 columns, a landmark frame has 12"):
+        calibrate_neutral(neutral, landmarks[:, :9])
+
+
+def test_calibrate_command_from_landmarks_and_neutral_frames_of_a_task_trial(motion, tmp_path, capsys):
+    from ikid.calibration import calibration_info, check_calibration_map
+
+    subject = ClusterSubject(10, 1.1, 90.0)
+    neutral = subject.markers(np.zeros((100, 3)), 0.005, 6)
+    task = np.concatenate([neutral, subject.markers(motion, 0.005, 7)])  # neutral first, then the task
+    points = np.concatenate([landmark_frames(subject, 100), np.full((len(motion), 12), np.nan)])
+    lab = [f"L{i}" for i in range(6)]
+    lm_labels = ["EPl", "EPm", "STr", "STu"]
+    frames = np.concatenate([task, points], axis=1)
+    path = io.write_trc(
+        tmp_path / "task.trc", np.arange(len(frames)) / 1000.0, frames, 1000.0, lab + lm_labels
+    )
+    mapping = MarkerMap({m: lab[i] for i, m in enumerate(ikid.marker_names())})
+    toml = (
+        mapping.to_toml()
+        .replace('# lateral_epicondyle = "LABEL"', 'lateral_epicondyle = "EPl"')
+        .replace('# medial_epicondyle = "LABEL"', 'medial_epicondyle = "EPm"')
+        .replace('# radial_styloid = "LABEL"', 'radial_styloid = "STr"')
+        .replace('# ulnar_styloid = "LABEL"', 'ulnar_styloid = "STu"')
+    )
+    (tmp_path / "lab.toml").write_text(toml)
+    out = tmp_path / "s.json"
+    base = ["calibrate", "--static", str(path), "--map", str(tmp_path / "lab.toml"), "-o", str(out)]
+    assert cli(base + ["--frames", "0-99"]) == 0
+    info = calibration_info(out)
+    assert (info["method"], info["side"], info["marker_map"]["landmarks"]["ulnar_styloid"]) == (
+        "landmarks",
+        "right",
+        "STu",
+    )
+    check_calibration_map(out, MarkerMap.load(tmp_path / "lab.toml"))
+    with pytest.raises(ikid.InputError, match="measured with another marker map"):
+        check_calibration_map(out, None)
+    assert (
+        cli(
+            [
+                "ik",
+                str(path),
+                "-o",
+                str(tmp_path / "t.mot"),
+                "--map",
+                str(tmp_path / "lab.toml"),
+                "--calibration",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    t, q = io.read_mot(tmp_path / "t.mot")
+    frame = np.round(t * 1000).astype(int)
+    late = frame >= 200
+    assert np.mean((q[late] - motion[frame[late] - 100]) ** 2) < 2e-4
+    # The neutral method: the forearm at the body model's placement (not this subject's).
+    assert cli(base + ["--frames", "0-99", "--method", "neutral"]) == 0
+    assert calibration_info(out)["method"] == "neutral"
+    # Frames with the task in them are not a neutral posture; frames outside the file are refused.
+    assert cli(base + ["--frames", "0-400"]) != 0
+    assert "the hand moves" in capsys.readouterr().err
+    with pytest.raises(SystemExit, match="outside frames"):
+        cli(base + ["--frames", f"0-{len(frames)}"])
