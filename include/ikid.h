@@ -257,6 +257,15 @@ enum ikid_status ikid_stream_set_calibration(struct ikid_stream *stream,
 // `stream` must be a live handle; `mask` must point to writable storage.
 enum ikid_status ikid_stream_filled_markers(const struct ikid_stream *stream, uint32_t *mask);
 
+// `*status` receives the `IKID_FRAME_*` bits of the last output (valid after a push that
+// gave one): `IKID_FRAME_FILLED`, `IKID_FRAME_OUTSIDE_TRAINING` (the frame's features beyond
+// the model's training envelope), `IKID_FRAME_IMPLAUSIBLE` (an output far beyond it: treat it
+// as missing).
+//
+// # Safety
+// `stream` must be a live handle; `status` must point to writable storage.
+enum ikid_status ikid_stream_status(const struct ikid_stream *stream, uint32_t *status);
+
 // Pushes `n_frames` frames (`n_frames × frame_len` floats, e.g. a packet from the
 // acquisition system) and writes one row of `n_outputs` into `out` for each frame that
 // completes a window; `*rows` receives the row count. On failure (a refused frame)

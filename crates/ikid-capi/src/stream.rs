@@ -175,6 +175,22 @@ pub unsafe extern "C" fn ikid_stream_filled_markers(stream: *const ikid_stream, 
     })
 }
 
+/// `*status` receives the `IKID_FRAME_*` bits of the last output (valid after a push that
+/// gave one): `IKID_FRAME_FILLED`, `IKID_FRAME_OUTSIDE_TRAINING` (the frame's features beyond
+/// the model's training envelope), `IKID_FRAME_IMPLAUSIBLE` (an output far beyond it: treat it
+/// as missing).
+///
+/// # Safety
+/// `stream` must be a live handle; `status` must point to writable storage.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_status(stream: *const ikid_stream, status: *mut u32) -> ikid_status {
+    guard(|| {
+        let s = &unsafe { non_null(stream, "stream") }?.stream;
+        *unsafe { non_null_mut(status, "status") }? = u32::from(s.status());
+        Ok(())
+    })
+}
+
 /// Pushes `n_frames` frames (`n_frames × frame_len` floats, e.g. a packet from the
 /// acquisition system) and writes one row of `n_outputs` into `out` for each frame that
 /// completes a window; `*rows` receives the row count. On failure (a refused frame)

@@ -15,7 +15,17 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MARKERS", markers)?;
     m.add_function(wrap_pyfunction!(forward_markers, m)?)?;
     m.add_function(wrap_pyfunction!(body_model, m)?)?;
+    m.add_function(wrap_pyfunction!(check_marker_units, m)?)?;
+    m.add("MARKER_SPAN_M", ikid::body::MARKER_SPAN_M)?;
     Ok(())
+}
+
+/// Refuses a recording `(n, 18)` (metres) whose markers spread over a distance no forearm and
+/// hand span (median over its frames; `MARKER_SPAN_M`): `InputError` naming the likely cause
+/// ("are the units mm?"). Returns None for a plausible one.
+#[pyfunction]
+fn check_marker_units(frames: &Bound<'_, PyAny>) -> PyResult<()> {
+    with_f64_rows(frames, "frames", ikid::body::MARKER_FRAME_LEN, |v, _| ikid::body::check_recording_span(v).py_err())
 }
 
 /// A subject scaled from the default, each marker moved by `marker_shift` `(6, 3)` (metres,

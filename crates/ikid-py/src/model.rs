@@ -106,6 +106,50 @@ impl Model {
         self.inner.mlp().widths()
     }
 
+    /// True if the file carried a checksum of its tensors (verified on load); False for files
+    /// written before checksums existed (`ikid.load` warns about those).
+    #[getter]
+    fn has_checksum(&self) -> bool {
+        self.inner.has_checksum()
+    }
+
+    /// `ikid.FRAME_STATUS` bits for outputs `(n, n_outputs)` given for frames whose newest
+    /// features are `features` `(n, feature_len)`: outside the training envelope, implausible.
+    /// All zero for a model without an envelope.
+    fn frame_status<'py>(
+        &self,
+        py: Python<'py>,
+        features: &Bound<'py, PyAny>,
+        outputs: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray1<u8>>> {
+        let (nf, no) = (self.inner.feature_set().feature_len(), self.inner.n_outputs());
+        let features: Vec<f32> = with_floats(features, "features", 2, |v, shape| {
+            if shape[1] != nf {
+                return Err(input(format!("features: {} columns, the model's feature set has {nf}", shape[1])));
+            }
+            Ok(v.to_vec())
+        })?;
+        let outputs: Vec<f32> = with_floats(outputs, "outputs", 2, |v, shape| {
+            if shape[1] != no {
+                return Err(input(format!("outputs: {} columns, the model has {no} outputs", shape[1])));
+            }
+            Ok(v.to_vec())
+        })?;
+        if features.len() / nf != outputs.len() / no {
+            return Err(input(format!(
+                "features has {} rows, outputs {}: one row of each per frame",
+                features.len() / nf,
+                outputs.len() / no
+            )));
+        }
+        let bits: Vec<u8> = features
+            .chunks_exact(nf)
+            .zip(outputs.chunks_exact(no))
+            .map(|(f, o)| self.inner.frame_status(f, o))
+            .collect();
+        Ok(bits.into_pyarray(py))
+    }
+
     /// Predictions for a whole recording `(n, frame_len)`: `(n - window + 1, n_outputs)`,
     /// row `i` for frame `i + window - 1`. Runs on `threads` threads (default: all cores;
     /// every count gives bit-identical results). Releases the GIL.
@@ -259,6 +303,13 @@ impl Stream {
     #[getter]
     fn missing_markers(&self) -> &'static str {
         self.inner.missing_markers().name()
+    }
+
+    /// `ikid.FRAME_STATUS` bits of the last output: a filled marker, inputs outside the model's
+    /// training envelope, an implausible output (write it as missing).
+    #[getter]
+    fn status(&self) -> u8 {
+        self.inner.status()
     }
 
     /// Names of the markers filled in the last accepted frame (empty when it was complete):

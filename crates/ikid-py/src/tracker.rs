@@ -106,11 +106,15 @@ impl Tracker {
                         })
                     })
                     .py_err()?;
+                if start.is_none() {
+                    // Say why, where the core can: markers in the wrong units, most often.
+                    ikid::body::check_recording_span(values).py_err()?;
+                }
                 Ok((out, missing, noise, refined, status, start, n))
             })?;
         let Some(start) = start else {
             return Err(input(format!(
-                "frames: none of the {n} frames has every marker, so the tracker never started"
+                "frames: none of the {n} frames has every marker present and consistent, so the tracker never started"
             )));
         };
         let d = PyDict::new(py);

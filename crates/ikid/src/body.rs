@@ -141,6 +141,83 @@ pub fn first_marker(segment: Segment) -> usize {
     }
 }
 
+/// How far apart a forearm's and hand's six markers can be, m: their largest distance is at
+/// least 4 cm (two 3-marker clusters) and at most 0.8 m (an arm's forearm and hand together
+/// are ~0.45 m). Outside it, the numbers are not in the units the file or caller says — the
+/// commonest cause: millimetres read as centimetres or metres.
+pub const MARKER_SPAN_M: (f64, f64) = (0.04, 0.8);
+
+/// The largest distance between two markers present (finite) in `frame` (a marker frame), m;
+/// `None` with fewer than two present.
+pub fn marker_span(frame: &[f64]) -> Option<f64> {
+    let point = |m: usize| Vector3::new(frame[3 * m], frame[3 * m + 1], frame[3 * m + 2]);
+    let present = |m: usize| frame[3 * m..3 * m + 3].iter().all(|v| v.is_finite());
+    let mut span: Option<f64> = None;
+    for a in (0..N_MARKERS).filter(|&m| present(m)) {
+        for b in (a + 1..N_MARKERS).filter(|&m| present(m)) {
+            let d = (point(a) - point(b)).norm();
+            span = Some(span.map_or(d, |s: f64| s.max(d)));
+        }
+    }
+    span
+}
+
+/// Refuses a marker frame whose markers spread over a distance no forearm and hand span
+/// ([`MARKER_SPAN_M`]), naming the likely cause.
+pub fn check_marker_span(frame: &[f64], frame_index: usize) -> crate::Result<()> {
+    match marker_span(frame) {
+        Some(span) if !(MARKER_SPAN_M.0..=MARKER_SPAN_M.1).contains(&span) => {
+            Err(crate::Error::ImplausibleMarkers { frame: frame_index, detail: span_problem(span) })
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Checks a whole recording's scale (frames back to back): its median marker span must be one
+/// a forearm and hand can have ([`MARKER_SPAN_M`]). One glitched frame does not fail it; a
+/// recording in the wrong units does, with a message naming the likely cause.
+pub fn check_recording_span(frames: &[f64]) -> crate::Result<()> {
+    let mut spans: Vec<f64> = frames.chunks_exact(MARKER_FRAME_LEN).filter_map(marker_span).collect();
+    if spans.is_empty() {
+        return Ok(());
+    }
+    let mid = spans.len() / 2;
+    let (_, median, _) = spans.select_nth_unstable_by(mid, f64::total_cmp);
+    let median = *median;
+    if (MARKER_SPAN_M.0..=MARKER_SPAN_M.1).contains(&median) {
+        return Ok(());
+    }
+    let first = frames
+        .chunks_exact(MARKER_FRAME_LEN)
+        .position(|f| marker_span(f).is_some_and(|s| !(MARKER_SPAN_M.0..=MARKER_SPAN_M.1).contains(&s)))
+        .unwrap_or(0);
+    Err(crate::Error::ImplausibleMarkers {
+        frame: first,
+        detail: format!("{} (the median over the recording)", span_problem(median)),
+    })
+}
+
+fn span_problem(span: f64) -> String {
+    let (lo, hi) = MARKER_SPAN_M;
+    let hint = if span > hi {
+        let ratio = span / 0.3;
+        if ratio > 300.0 {
+            "are the units mm, read as metres?"
+        } else if ratio > 3.0 {
+            "are the units mm (or cm), read as cm (or metres)?"
+        } else {
+            "is a marker of another object (or a ghost) labelled as one of the arm's?"
+        }
+    } else {
+        "are the units metres, read as mm?"
+    };
+    format!(
+        "the markers spread over {span:.3} m, a forearm and hand over {:.0}–{:.0} cm: {hint}",
+        lo * 100.0,
+        hi * 100.0
+    )
+}
+
 /// Inertial and geometric parameters of one segment, in its own frame (SI units).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SegmentParams {

@@ -34,6 +34,17 @@ pub enum Error {
     /// The `__metadata__` model card is missing, is not JSON, or breaks the schema.
     #[error("model card: {0}")]
     ModelCard(String),
+    /// The tensors' bytes do not match the checksum the card was written with: the file was
+    /// damaged after it was written (a flipped bit moves the outputs without any other sign).
+    #[error(
+        "the weights are corrupt: their SHA-256 is {found}, the model card says {expected}; restore the file from its source"
+    )]
+    ChecksumMismatch {
+        /// The card's `tensor_sha256`.
+        expected: String,
+        /// The checksum of the tensors read.
+        found: String,
+    },
     /// The model card's format version is not one this build understands.
     #[error("model card format_version {found} is not supported (this build reads version {supported})")]
     UnsupportedVersion {
@@ -131,6 +142,15 @@ pub enum Error {
         /// The distance that gave it away.
         detail: String,
     },
+    /// The markers are spread over a distance no forearm and hand can span (see
+    /// [`crate::body::MARKER_SPAN_M`]): most likely the wrong units.
+    #[error("frame {frame}: {detail}")]
+    ImplausibleMarkers {
+        /// Index of the frame within the call.
+        frame: usize,
+        /// What is implausible and its likely cause.
+        detail: String,
+    },
     /// A segment's three markers are (nearly) collinear or coincident, so no frame can be fitted.
     #[error("frame {frame}: the {segment} markers are collinear or coincident; cannot build a segment frame")]
     DegenerateSegment {
@@ -206,12 +226,14 @@ impl Error {
             | Error::UnexpectedTensor { .. }
             | Error::WrongDtype { .. }
             | Error::ShapeMismatch { .. }
-            | Error::NonFiniteWeight { .. } => ErrorKind::ModelFile,
+            | Error::NonFiniteWeight { .. }
+            | Error::ChecksumMismatch { .. } => ErrorKind::ModelFile,
             Error::FrameLength { .. }
             | Error::NonFiniteInput { .. }
             | Error::MissingMarkers { .. }
             | Error::OutlierMarker { .. }
             | Error::DegenerateSegment { .. }
+            | Error::ImplausibleMarkers { .. }
             | Error::NonFiniteOutput { .. } => ErrorKind::Input,
             Error::BadArgument { .. } => ErrorKind::Argument,
         }
@@ -233,6 +255,8 @@ impl Error {
             Error::WrongDtype { .. } => "wrong_dtype",
             Error::ShapeMismatch { .. } => "shape_mismatch",
             Error::NonFiniteWeight { .. } => "non_finite_weight",
+            Error::ChecksumMismatch { .. } => "checksum_mismatch",
+            Error::ImplausibleMarkers { .. } => "implausible_markers",
             Error::FrameLength { .. } => "frame_length",
             Error::NonFiniteInput { .. } => "non_finite_input",
             Error::MissingMarkers { .. } => "missing_markers",
@@ -250,6 +274,7 @@ impl Error {
             | Error::MissingMarkers { frame, .. }
             | Error::OutlierMarker { frame, .. }
             | Error::DegenerateSegment { frame, .. }
+            | Error::ImplausibleMarkers { frame, .. }
             | Error::NonFiniteOutput { frame, .. } => Some(*frame),
             _ => None,
         }
@@ -284,6 +309,7 @@ impl Error {
         match self {
             Error::NonFiniteInput { field, value, .. } => Error::NonFiniteInput { frame, field, value },
             Error::DegenerateSegment { segment, .. } => Error::DegenerateSegment { frame, segment },
+            Error::ImplausibleMarkers { detail, .. } => Error::ImplausibleMarkers { frame, detail },
             Error::MissingMarkers { markers, reason, .. } => Error::MissingMarkers { frame, markers, reason },
             Error::OutlierMarker { markers, detail, .. } => Error::OutlierMarker { frame, markers, detail },
             Error::NonFiniteOutput { value, .. } => Error::NonFiniteOutput { frame, value },

@@ -6,6 +6,7 @@ use crate::error::{Error, Result};
 use crate::gaps::{GapFiller, MissingMarkers};
 use crate::model::Model;
 use crate::net::Scratch;
+use crate::status;
 
 /// A causal stream over a [`Model`]: push one frame at a time, get the prediction for the
 /// newest frame once the window is full.
@@ -49,6 +50,8 @@ pub struct Stream {
     /// Frames pushed since the stream was made (accepted or refused): the next frame's
     /// number, which its errors carry.
     pushed: usize,
+    /// [`status`] bits of the last output.
+    status: u8,
 }
 
 impl Model {
@@ -78,6 +81,7 @@ impl Stream {
             gap_restarts: 0,
             calibration: None,
             pushed: 0,
+            status: 0,
             model,
         }
     }
@@ -161,6 +165,12 @@ impl Stream {
     /// error leaves the window and the filler as they were.
     fn prepare(&mut self, frame: &[f32], index: usize) -> Result<()> {
         let set = self.model.feature_set();
+        if set.frame_len() == MARKER_FRAME_LEN && frame.len() == MARKER_FRAME_LEN {
+            // Markers no arm could hold (wrong units, a ghost far away) are refused, not fed
+            // to a network that would answer them with a confident number.
+            let wide: [f64; MARKER_FRAME_LEN] = std::array::from_fn(|i| f64::from(frame[i]));
+            crate::body::check_marker_span(&wide, index)?;
+        }
         if self.policy == MissingMarkers::Fill {
             if frame.len() != MARKER_FRAME_LEN {
                 return Err(Error::FrameLength {
@@ -217,6 +227,8 @@ impl Stream {
         if let Some(&value) = self.output.iter().find(|v| !v.is_finite()) {
             return Err(Error::NonFiniteOutput { frame: index, value });
         }
+        let filled = if self.filled_mask != 0 { status::FILLED } else { 0 };
+        self.status = filled | self.model.frame_status(&self.incoming, &self.output);
         Ok(Some(&self.output))
     }
 
@@ -347,6 +359,13 @@ impl Stream {
     /// The last prediction (valid after a `push` that returned `Some`).
     pub fn output(&self) -> &[f32] {
         &self.output
+    }
+
+    /// [`status`] bits of the last prediction (valid after a `push` that returned `Some`):
+    /// [`status::FILLED`], [`status::OUTSIDE_TRAINING`] (the newest frame's features beyond
+    /// the model's training envelope), [`status::IMPLAUSIBLE`] (an output far beyond it).
+    pub fn status(&self) -> u8 {
+        self.status
     }
 
     /// Forgets every frame held (e.g. after a gap in the recording). The gap filler keeps

@@ -398,6 +398,14 @@ impl Tracker {
         let lost = self.lost_frames();
         let missing = missing_markers(frame);
         let mut flags = 0u8;
+        // Markers no arm could hold (wrong units, a ghost far away) are all rejected.
+        let mut checked = [f64::NAN; MARKER_FRAME_LEN];
+        if body::check_marker_span(frame, index).is_ok() {
+            checked.copy_from_slice(frame);
+        } else {
+            flags |= status::REJECTED_MARKER;
+        }
+        let frame = &checked[..];
 
         // 1. The forearm: measured if its markers are present, rigid as learned and not jumped.
         let mut forearm_measured = false;

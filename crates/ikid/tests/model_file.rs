@@ -13,7 +13,8 @@ fn model() -> Model {
     random_model(FeatureSet::Markers, 5, &[16, 12], 3, 5)
 }
 
-/// The model's tensors as (name, shape, f32 values) and its card as a JSON value.
+/// The model's tensors as (name, shape, f32 values) and its card as a JSON value, without its
+/// checksum (as a file written before checksums: the structural checks below are reached).
 fn parts(m: &Model) -> (Vec<Tensor>, serde_json::Value) {
     let bytes = m.to_bytes();
     let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
@@ -26,7 +27,45 @@ fn parts(m: &Model) -> (Vec<Tensor>, serde_json::Value) {
         })
         .collect();
     tensors.sort_by(|a, b| a.0.cmp(&b.0));
-    (tensors, serde_json::from_str(&m.card().to_json()).unwrap())
+    let mut card: serde_json::Value = serde_json::from_str(&m.card().to_json()).unwrap();
+    card.as_object_mut().unwrap().remove("tensor_sha256");
+    (tensors, card)
+}
+
+/// A SHA-256 written independently of the crate's (Python's hashlib computed the same bytes'
+/// digest: the layout is documented on `tensor_sha256`), for a one-tensor file.
+#[test]
+fn the_checksum_is_sha256_of_the_documented_layout() {
+    // name "a", 0, "F32", 0, dims [2] as u64 LE, byte length 8 as u64 LE, then 1.0f32, -2.0f32.
+    let data: Vec<u8> = [1.0f32, -2.0].iter().flat_map(|x| x.to_le_bytes()).collect();
+    let sum = ikid::model::tensor_sha256([("a", Dtype::F32, &[2usize][..], &data[..])]);
+    // python3 -c "import hashlib,struct; print(hashlib.sha256(b'a\0F32\0'+struct.pack('<QQ',2,8)+struct.pack('<ff',1,-2)).hexdigest())"
+    assert_eq!(sum, "51867837c40fa265b1e2c3a5e881cb02e9bb224acca5d6b39423c4cec52c3f0e");
+}
+
+#[test]
+fn a_flipped_bit_in_any_tensor_is_refused_by_the_checksum() {
+    let m = model();
+    assert!(m.has_checksum() && m.card().tensor_sha256.is_some());
+    let bytes = m.to_bytes();
+    let header = 8 + u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    // The sign bit of a few values spread over the data section (every tensor's bytes).
+    for at in [header + 3, header + (bytes.len() - header) / 2 + 3, bytes.len() - 1] {
+        let mut bad = bytes.clone();
+        bad[at] ^= 0x80;
+        let err = load_err(&bad);
+        assert!(matches!(err, Error::ChecksumMismatch { .. }), "byte {at}: {err}");
+        assert_eq!(err.kind(), ikid::ErrorKind::ModelFile);
+        assert!(err.to_string().contains("corrupt"), "{err}");
+    }
+    // A file without a checksum (written before they existed) still loads, and says so.
+    let (t, card) = parts(&m);
+    let old = Model::from_bytes(&build(&t, &card)).unwrap();
+    assert!(!old.has_checksum());
+    // A checksum that is not 64 hex digits is a card error, named.
+    let mut card = card;
+    card["tensor_sha256"] = "xyz".into();
+    assert!(load_err(&build(&t, &card)).to_string().contains("tensor_sha256"));
 }
 
 fn build(tensors: &[Tensor], card: &serde_json::Value) -> Vec<u8> {
@@ -132,7 +171,8 @@ fn wrong_dtype_is_named() {
     let mut views: Vec<(String, TensorView<'_>)> =
         st.tensors().into_iter().filter(|(n, _)| n != "output.shift").collect();
     views.push(("output.shift".into(), TensorView::new(Dtype::F64, vec![3], &f64_data).unwrap()));
-    let meta = HashMap::from([(CARD_KEY.to_string(), m.card().to_json())]);
+    let (_, card) = parts(&m); // without the checksum, which the new bytes would fail first
+    let meta = HashMap::from([(CARD_KEY.to_string(), card.to_string())]);
     let err = load_err(&safetensors::serialize(views, Some(meta)).unwrap());
     assert!(matches!(&err, Error::WrongDtype { name, .. } if name == "output.shift"), "{err}");
     assert!(err.to_string().contains("F64"), "{err}");
@@ -313,14 +353,16 @@ fn non_finite_predictions_are_errors_never_outputs() {
     };
     let mlp = Mlp::new(Affine::identity(90), vec![layer], Affine::identity(3)).unwrap();
     let outputs = (0..3).map(|i| OutputSpec { name: format!("o{i}"), unit: "rad".into() }).collect();
-    let card = ModelCard::new("sum", "ik", FeatureSet::Markers, 5, 1000.0, outputs, &[Activation::Identity]);
+    // Joint-state frames (9 values): marker frames this large would be refused before the
+    // network as no arm's.
+    let card = ModelCard::new("sum", "id", FeatureSet::JointState, 10, 1000.0, outputs, &[Activation::Identity]);
     let m = Model::from_parts(card, mlp).unwrap();
-    let frames = vec![1.0e37f32; 10 * 18];
-    let err = m.predict(&frames, &mut [0.0; 18]).unwrap_err();
-    assert!(matches!(err, Error::NonFiniteOutput { frame: 4, .. }), "{err}");
+    let frames = vec![1.0e37f32; 12 * 9];
+    let err = m.predict(&frames, &mut [0.0; 3 * 3]).unwrap_err();
+    assert!(matches!(err, Error::NonFiniteOutput { frame: 9, .. }), "{err}");
     let mut s = m.stream();
     let mut last = None;
-    for f in frames.chunks_exact(18) {
+    for f in frames.chunks_exact(9) {
         last = Some(s.push(f).map(|o| o.is_some()));
     }
     assert!(matches!(last, Some(Err(Error::NonFiniteOutput { .. }))));

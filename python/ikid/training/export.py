@@ -79,6 +79,8 @@ class ModelSpec:
     provenance: Mapping[str, Any] = field(default_factory=dict)
     metrics: Mapping[str, Any] = field(default_factory=dict)
     output_offset: str | None = None  # "newest_features": outputs add the newest frame's features
+    #: The training data's ranges (see :func:`envelope_of`): frames outside it are flagged.
+    envelope: Mapping[str, Any] | None = None
 
 
 def linear_layers(net: nn.Module) -> list[tuple[nn.Linear, str]]:
@@ -125,7 +127,80 @@ def card_for(spec: ModelSpec, activations: Sequence[str]) -> dict[str, Any]:
         "provenance": dict(spec.provenance),
         "metrics": dict(spec.metrics),
         **({"output_offset": spec.output_offset} if spec.output_offset else {}),
+        **({"envelope": dict(spec.envelope)} if spec.envelope else {}),
     }
+
+
+def envelope_of(windows: np.ndarray, feature_len: int, outputs: np.ndarray) -> dict[str, Any]:
+    """The card's ``envelope``: each per-frame feature's range over every frame of the
+    training ``windows`` ``(n, window × feature_len)``, and each output's over ``outputs``
+    ``(n, n_outputs)`` (SI, what the model gives)."""
+    per_frame = np.asarray(windows, np.float64).reshape(-1, feature_len)
+    outputs = np.asarray(outputs, np.float64)
+
+    def bounds(a: np.ndarray) -> dict[str, list[float]]:
+        return {"min": a.min(0).tolist(), "max": a.max(0).tolist()}
+
+    return {"inputs": bounds(per_frame), "outputs": bounds(outputs)}
+
+
+def envelope_from_scaling(card: Mapping[str, Any], tensors: Mapping[str, np.ndarray]) -> dict[str, Any]:
+    """The envelope of a model whose scaling tensors were min-max fitted to ``[-1, 1]`` on its
+    training data (its card's ``scaling`` says so): the training ranges are those tensors'
+    inverse images, exactly. For models written before cards carried envelopes."""
+    scaling = card.get("scaling", {})
+    if not all(str(scaling.get(k, "")).startswith("minmax(-1,1)") for k in ("input", "output")):
+        raise ValueError(f"model {card['name']!r}: scaling {scaling} is not min-max on both sides")
+    feature_len = len(card["feature_names"])
+
+    def image(scale: np.ndarray, shift: np.ndarray, inverse: bool) -> tuple[np.ndarray, np.ndarray]:
+        scale, shift = scale.astype(np.float64), shift.astype(np.float64)
+        # inputs: x*scale + shift spans [-1, 1]; outputs: SI = h*scale + shift for h in [-1, 1].
+        ends = (
+            ((np.array([-1.0, 1.0])[:, None] - shift) / scale)
+            if inverse
+            else (np.array([-1.0, 1.0])[:, None] * scale + shift)
+        )
+        return ends.min(0), ends.max(0)
+
+    lo, hi = image(tensors["input.scale"], tensors["input.shift"], inverse=True)
+    lo, hi = lo.reshape(-1, feature_len).min(0), hi.reshape(-1, feature_len).max(0)
+    out_lo, out_hi = image(tensors["output.scale"], tensors["output.shift"], inverse=False)
+    if card.get("output_offset"):
+        # Outputs add the newest frame's same-named feature: ranges add.
+        n = len(out_lo)
+        out_lo, out_hi = out_lo + lo[:n], out_hi + hi[:n]
+    return {
+        "inputs": {"min": lo.tolist(), "max": hi.tolist()},
+        "outputs": {"min": out_lo.tolist(), "max": out_hi.tolist()},
+    }
+
+
+def restamp(path: str | Path, envelope: Mapping[str, Any] | None) -> ikid.Model:
+    """Rewrite model file ``path`` through the one writer: same tensors, the card given an
+    ``envelope`` (if not None) and a tensor checksum. Atomic; returns the model read back."""
+    from safetensors.numpy import load_file
+
+    path = Path(path)
+    card = dict(_native.Model.load(path).card)  # checked (and its checksum verified) first
+    tensors = load_file(str(path))
+    card.pop("tensor_sha256", None)
+    if envelope is not None:
+        card["envelope"] = dict(envelope)
+    n_layers = len(card["activations"])
+    weights: list[npt.ArrayLike] = [tensors[f"layers.{k}.weight"] for k in range(n_layers)]
+    biases: list[npt.ArrayLike] = [tensors[f"layers.{k}.bias"] for k in range(n_layers)]
+    model = _native.build_model(
+        json.dumps(card),
+        weights,
+        biases,
+        tensors["input.scale"],
+        tensors["input.shift"],
+        tensors["output.scale"],
+        tensors["output.shift"],
+    )
+    model.save(path)
+    return ikid.load(path)
 
 
 def export(
@@ -228,3 +303,30 @@ def load_torch(path: str | Path) -> WindowModel:
     return WindowModel(
         net, Affine(t["input.scale"], t["input.shift"]), Affine(t["output.scale"], t["output.shift"]), offset
     ).eval()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m ikid.training.export --restamp FILE...``: give model files written before
+    envelopes and checksums both, the envelope from their min-max scaling where it allows
+    (:func:`envelope_from_scaling`; otherwise only the checksum)."""
+    import argparse
+
+    p = argparse.ArgumentParser(prog="python -m ikid.training.export")
+    p.add_argument("--restamp", nargs="+", required=True, metavar="FILE")
+    args = p.parse_args(argv)
+    for f in args.restamp:
+        card = dict(_native.Model.load(Path(f)).card)
+        from safetensors.numpy import load_file
+
+        try:
+            envelope = card.get("envelope") or envelope_from_scaling(card, load_file(f))
+        except ValueError as e:
+            print(f"{f}: no envelope ({e}); checksum only")
+            envelope = None
+        model = restamp(f, envelope)
+        print(f"{f}: envelope {'yes' if model.card.get('envelope') else 'no'}, checksum {model.has_checksum}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -32,6 +32,29 @@ pub struct OutputSpec {
     pub unit: String,
 }
 
+/// The range of each of a list of values on the training data.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Bounds {
+    /// Smallest value seen, per value.
+    pub min: Vec<f64>,
+    /// Largest value seen, per value.
+    pub max: Vec<f64>,
+}
+
+/// Where a model knows what it is doing: the ranges of its per-frame features and of its
+/// outputs on its training data. A frame outside it is flagged
+/// ([`status::OUTSIDE_TRAINING`](crate::status::OUTSIDE_TRAINING)), an output far outside it
+/// is [`status::IMPLAUSIBLE`](crate::status::IMPLAUSIBLE) (see [`Model::frame_status`](crate::Model::frame_status)).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Envelope {
+    /// Per feature of one frame (the feature set's `feature_names`).
+    pub inputs: Bounds,
+    /// Per output.
+    pub outputs: Bounds,
+}
+
 /// The model card: what the network is, how to feed it, where it came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -77,6 +100,14 @@ pub struct ModelCard {
     /// Evaluation metrics the model shipped with, free-form.
     #[serde(default)]
     pub metrics: serde_json::Map<String, serde_json::Value>,
+    /// The training data's ranges (written by training); absent in older files, whose frames
+    /// are then never flagged as outside training.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub envelope: Option<Envelope>,
+    /// SHA-256 of the tensors (lowercase hex; see [`tensor_sha256`](super::tensor_sha256)),
+    /// written by the writer and verified by the loader. Absent in files written before it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tensor_sha256: Option<String>,
 }
 
 impl ModelCard {
@@ -107,6 +138,8 @@ impl ModelCard {
             scaling: BTreeMap::new(),
             provenance: Default::default(),
             metrics: Default::default(),
+            envelope: None,
+            tensor_sha256: None,
         }
     }
 
@@ -207,6 +240,33 @@ impl ModelCard {
                     ));
                 }
             }
+        }
+        if let Some(envelope) = &self.envelope {
+            for (what, bounds, n) in
+                [("inputs", &envelope.inputs, set.feature_len()), ("outputs", &envelope.outputs, self.outputs.len())]
+            {
+                if bounds.min.len() != n || bounds.max.len() != n {
+                    return bad(format!(
+                        "field \"envelope\".{what} has {} minima and {} maxima, expected {n} each",
+                        bounds.min.len(),
+                        bounds.max.len()
+                    ));
+                }
+                if let Some(i) = (0..n).find(|&i| !(bounds.min[i].is_finite() && bounds.max[i] >= bounds.min[i])) {
+                    return bad(format!(
+                        "field \"envelope\".{what}[{i}] is [{}, {}], expected finite min <= max",
+                        bounds.min[i], bounds.max[i]
+                    ));
+                }
+                if let Some(i) = (0..n).find(|&i| !bounds.max[i].is_finite()) {
+                    return bad(format!("field \"envelope\".{what}[{i}] has a non-finite max"));
+                }
+            }
+        }
+        if let Some(sum) = &self.tensor_sha256
+            && !(sum.len() == 64 && sum.bytes().all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b)))
+        {
+            return bad(format!("field \"tensor_sha256\" is {sum:?}, expected 64 lowercase hex digits"));
         }
         self.parsed_activations().map(|_| ())
     }

@@ -7,6 +7,7 @@ use crate::features::FeatureSet;
 use crate::net::{Affine, Dense, Mlp};
 use nalgebra::{DMatrix, DVector};
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
+use sha2::{Digest, Sha256};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -46,6 +47,14 @@ pub(super) fn parse(bytes: &[u8]) -> Result<(ModelCard, FeatureSet, Mlp)> {
         Error::ModelCard(format!("the file's __metadata__ has no {CARD_KEY:?} key: not an ikid model file"))
     })?;
     let card = ModelCard::from_json(json)?;
+    if let Some(expected) = &card.tensor_sha256 {
+        let mut all = tensors.tensors();
+        all.sort_by(|a, b| a.0.cmp(&b.0));
+        let found = tensor_sha256(all.iter().map(|(n, t)| (n.as_str(), t.dtype(), t.shape(), t.data())));
+        if &found != expected {
+            return Err(Error::ChecksumMismatch { expected: expected.clone(), found });
+        }
+    }
     let set = FeatureSet::from_name(&card.feature_set)?;
     let n_in = card.window * set.feature_len();
     let n_layers = card.activations.len();
@@ -110,7 +119,28 @@ fn read_f32(name: &str, t: &TensorView<'_>, expected: &[Option<usize>]) -> Resul
     Ok((shape, values))
 }
 
-/// Serialises a card and network to `.safetensors` bytes (the one writer of the format).
+/// The checksum a card's `tensor_sha256` holds: SHA-256, as lowercase hex, over the tensors
+/// in name order, each as its name, a 0 byte, its dtype's name, a 0 byte, its dimensions and
+/// its byte length (u64 little-endian each) and its bytes. Covers names and shapes too, so a
+/// renamed or reshaped tensor fails it as well as a flipped bit.
+pub fn tensor_sha256<'a>(tensors: impl IntoIterator<Item = (&'a str, Dtype, &'a [usize], &'a [u8])>) -> String {
+    let mut hash = Sha256::new();
+    for (name, dtype, shape, data) in tensors {
+        hash.update(name.as_bytes());
+        hash.update([0]);
+        hash.update(format!("{dtype:?}").as_bytes());
+        hash.update([0]);
+        for &d in shape {
+            hash.update((d as u64).to_le_bytes());
+        }
+        hash.update((data.len() as u64).to_le_bytes());
+        hash.update(data);
+    }
+    hash.finalize().iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Serialises a card and network to `.safetensors` bytes (the one writer of the format),
+/// the card's `tensor_sha256` set to the tensors written.
 pub fn to_bytes(card: &ModelCard, mlp: &Mlp) -> Result<Vec<u8>> {
     let row_major = |m: &DMatrix<f32>| m.transpose().as_slice().to_vec();
     let mut tensors: Vec<(String, Vec<usize>, Vec<f32>)> = vec![
@@ -123,8 +153,12 @@ pub fn to_bytes(card: &ModelCard, mlp: &Mlp) -> Result<Vec<u8>> {
         tensors.push((format!("layers.{k}.weight"), vec![l.weight.nrows(), l.weight.ncols()], row_major(&l.weight)));
         tensors.push((format!("layers.{k}.bias"), vec![l.bias.len()], l.bias.as_slice().to_vec()));
     }
-    let bytes: Vec<(String, Vec<usize>, Vec<u8>)> =
+    let mut bytes: Vec<(String, Vec<usize>, Vec<u8>)> =
         tensors.into_iter().map(|(n, s, v)| (n, s, v.iter().flat_map(|x| x.to_le_bytes()).collect())).collect();
+    bytes.sort_by(|a, b| a.0.cmp(&b.0));
+    let mut card = card.clone();
+    card.tensor_sha256 =
+        Some(tensor_sha256(bytes.iter().map(|(n, s, b)| (n.as_str(), Dtype::F32, s.as_slice(), b.as_slice()))));
     let views = bytes
         .iter()
         .map(|(n, s, b)| {

@@ -1,12 +1,13 @@
 //! The loaded model: its card, the network in both forms (the nalgebra oracle and the packed
 //! kernel), shared cheaply between streams and threads.
 
-use super::card::ModelCard;
+use super::card::{Bounds, Envelope, ModelCard};
 use super::file;
 use crate::error::{Error, Result};
 use crate::features::FeatureSet;
 use crate::gaps::MissingMarkers;
 use crate::net::{Mlp, PackedMlp};
+use crate::status;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -23,6 +24,38 @@ struct Inner {
     feature_set: FeatureSet,
     mlp: Mlp,
     packed: PackedMlp,
+    limits: Option<Limits>,
+}
+
+/// How far past its training range a feature may go, in widths of that range, before the
+/// frame is flagged [`status::OUTSIDE_TRAINING`]: the training data's extremes are samples,
+/// not walls.
+pub const ENVELOPE_MARGIN: f64 = 0.1;
+/// How far past its training range an output may go, in widths of that range, before it is
+/// [`status::IMPLAUSIBLE`]: twice the range the model ever learned to give.
+pub const IMPLAUSIBLE_MARGIN: f64 = 1.0;
+
+/// The card's envelope widened by the margins, as f32 to compare with the stream's values.
+#[derive(Debug)]
+struct Limits {
+    input: (Vec<f32>, Vec<f32>),
+    output: (Vec<f32>, Vec<f32>),
+}
+
+impl Limits {
+    fn new(envelope: &Envelope) -> Self {
+        let widen = |b: &Bounds, margin: f64| {
+            let pad = |i: usize| margin * (b.max[i] - b.min[i]) + 1e-6 * b.min[i].abs().max(b.max[i].abs()).max(1.0);
+            let lo = (0..b.min.len()).map(|i| (b.min[i] - pad(i)) as f32).collect();
+            let hi = (0..b.max.len()).map(|i| (b.max[i] + pad(i)) as f32).collect();
+            (lo, hi)
+        };
+        Limits { input: widen(&envelope.inputs, ENVELOPE_MARGIN), output: widen(&envelope.outputs, IMPLAUSIBLE_MARGIN) }
+    }
+}
+
+fn outside(values: &[f32], (lo, hi): &(Vec<f32>, Vec<f32>)) -> bool {
+    values.iter().zip(lo.iter().zip(hi)).any(|(v, (l, h))| !(v >= l && v <= h))
 }
 
 impl Model {
@@ -60,7 +93,8 @@ impl Model {
                 value,
             });
         }
-        Ok(Model { inner: Arc::new(Inner { card, feature_set, mlp, packed }) })
+        let limits = card.envelope.as_ref().map(Limits::new);
+        Ok(Model { inner: Arc::new(Inner { card, feature_set, mlp, packed, limits }) })
     }
 
     /// The model as the bytes of a `.safetensors` file.
@@ -74,11 +108,43 @@ impl Model {
         let path = path.as_ref();
         let io = |source| Error::Io { path: path.display().to_string(), source };
         let tmp = path.with_extension("safetensors.partial");
-        std::fs::write(&tmp, self.to_bytes()).map_err(io)?;
+        // The bytes must be on the disk before the rename makes them the file (a full disk
+        // or a power cut must not leave a truncated model under the final name).
+        let written = std::fs::File::create(&tmp).and_then(|mut f| {
+            std::io::Write::write_all(&mut f, &self.to_bytes())?;
+            f.sync_all()
+        });
+        if let Err(e) = written {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(io(e));
+        }
         std::fs::rename(&tmp, path).map_err(|e| {
             let _ = std::fs::remove_file(&tmp);
             io(e)
         })
+    }
+
+    /// [`status`] bits for one output: [`status::OUTSIDE_TRAINING`] if a feature of the newest
+    /// frame (`newest`, [`FeatureSet::feature_len`] values) lies beyond the card's envelope by
+    /// more than [`ENVELOPE_MARGIN`] of its range, [`status::IMPLAUSIBLE`] if an output (`outputs`)
+    /// lies beyond it by more than [`IMPLAUSIBLE_MARGIN`]. 0 for a model without an envelope.
+    /// Allocation-free, a few dozen comparisons: cheap enough for every push.
+    pub fn frame_status(&self, newest: &[f32], outputs: &[f32]) -> u8 {
+        let Some(limits) = &self.inner.limits else { return 0 };
+        let mut bits = 0;
+        if outside(newest, &limits.input) {
+            bits |= status::OUTSIDE_TRAINING;
+        }
+        if outside(outputs, &limits.output) {
+            bits |= status::IMPLAUSIBLE;
+        }
+        bits
+    }
+
+    /// True if the file carried a checksum of its tensors (verified when it was loaded); files
+    /// written before checksums existed have none.
+    pub fn has_checksum(&self) -> bool {
+        self.inner.card.tensor_sha256.is_some()
     }
 
     /// The model card.

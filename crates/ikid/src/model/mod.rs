@@ -18,6 +18,9 @@ mod file;
 mod handle;
 mod predict;
 
-pub use card::{CARD_KEY, FORMAT, FORMAT_VERSION, MAX_WINDOW, ModelCard, NEWEST_FEATURES, OutputSpec, TASKS};
-pub use file::{MAX_MODEL_FILE_BYTES, read_bounded, to_bytes};
+pub use card::{
+    Bounds, CARD_KEY, Envelope, FORMAT, FORMAT_VERSION, MAX_WINDOW, ModelCard, NEWEST_FEATURES, OutputSpec, TASKS,
+};
+pub use file::{MAX_MODEL_FILE_BYTES, read_bounded, tensor_sha256, to_bytes};
 pub use handle::Model;
+pub use handle::{ENVELOPE_MARGIN, IMPLAUSIBLE_MARGIN};

@@ -1,0 +1,116 @@
+//! Plausibility: the model card's training envelope flags frames outside it, markers no arm
+//! can hold are refused (with the likely cause), and the status bits reach the stream.
+
+use ikid::body::{self, BodyModel, MARKER_FRAME_LEN};
+use ikid::model::{Bounds, Envelope};
+use ikid::testing::random_model;
+use ikid::{Error, FeatureSet, Model, status};
+
+/// A joint-state model (features = the frame's 9 values) whose card says its inputs were all
+/// in [-1, 1] and its outputs in [-2, 2] during training.
+fn enveloped() -> Model {
+    let m = random_model(FeatureSet::JointState, 2, &[8], 3, 1);
+    let mut card = m.card().clone();
+    card.envelope = Some(Envelope {
+        inputs: Bounds { min: vec![-1.0; 9], max: vec![1.0; 9] },
+        outputs: Bounds { min: vec![-2.0; 3], max: vec![2.0; 3] },
+    });
+    Model::from_parts(card, m.mlp().clone()).unwrap()
+}
+
+#[test]
+fn frames_beyond_the_training_range_by_a_tenth_of_it_are_flagged() {
+    let m = enveloped();
+    let mut features = [0.0f32; 9];
+    assert_eq!(m.frame_status(&features, &[0.0; 3]), 0);
+    // The range is 2 wide: a tenth of it is 0.2, so 1.19 passes and 1.21 is flagged.
+    features[4] = 1.19;
+    assert_eq!(m.frame_status(&features, &[0.0; 3]), 0);
+    features[4] = 1.21;
+    assert_eq!(m.frame_status(&features, &[0.0; 3]), status::OUTSIDE_TRAINING);
+    features[4] = -1.21;
+    assert_eq!(m.frame_status(&features, &[0.0; 3]), status::OUTSIDE_TRAINING);
+    features[4] = f32::NAN;
+    assert_eq!(m.frame_status(&features, &[0.0; 3]), status::OUTSIDE_TRAINING);
+}
+
+#[test]
+fn outputs_beyond_the_training_range_by_its_width_are_implausible() {
+    let m = enveloped();
+    let ok = [0.0f32; 9];
+    // Outputs ranged over [-2, 2] (4 wide): up to 6 is plausible, 6.1 is not.
+    assert_eq!(m.frame_status(&ok, &[5.9, 0.0, -5.9]), 0);
+    assert_eq!(m.frame_status(&ok, &[0.0, 6.1, 0.0]), status::IMPLAUSIBLE);
+    assert_eq!(m.frame_status(&[3.0; 9], &[-7.0, 0.0, 0.0]), status::IMPLAUSIBLE | status::OUTSIDE_TRAINING);
+    // A model without an envelope flags nothing (files written before envelopes existed).
+    let plain = random_model(FeatureSet::JointState, 2, &[8], 3, 1);
+    assert_eq!(plain.frame_status(&[1e9; 9], &[1e9; 3]), 0);
+}
+
+#[test]
+fn the_stream_reports_each_outputs_status() {
+    let m = enveloped();
+    let mut s = m.stream();
+    let inside = [0.5f32; 9];
+    let outside = [5.0f32; 9];
+    s.push(&inside).unwrap();
+    let out = s.push(&inside).unwrap().unwrap().to_vec();
+    assert_eq!(s.status(), m.frame_status(&inside, &out));
+    assert_eq!(s.status() & status::OUTSIDE_TRAINING, 0);
+    let out = s.push(&outside).unwrap().unwrap().to_vec();
+    assert_ne!(s.status() & status::OUTSIDE_TRAINING, 0);
+    assert_eq!(s.status(), m.frame_status(&outside, &out));
+}
+
+#[test]
+fn an_envelope_that_does_not_fit_the_model_is_a_card_error() {
+    let m = enveloped();
+    let mut card = m.card().clone();
+    card.envelope.as_mut().unwrap().inputs.min.pop();
+    let err = Model::from_parts(card, m.mlp().clone()).unwrap_err();
+    assert!(err.to_string().contains("envelope") && err.to_string().contains("expected 9"), "{err}");
+    let mut card = m.card().clone();
+    card.envelope.as_mut().unwrap().outputs.max[1] = -5.0;
+    let err = Model::from_parts(card, m.mlp().clone()).unwrap_err();
+    assert!(err.to_string().contains("outputs[1]"), "{err}");
+}
+
+/// A marker frame of the default subject, every value multiplied by `scale`.
+fn scaled_frame(scale: f64) -> Vec<f64> {
+    let body = BodyModel::default();
+    body.marker_frames(&[0.1, -0.2, 0.05], 0.0).unwrap().iter().map(|v| v * scale).collect()
+}
+
+#[test]
+fn markers_in_the_wrong_units_are_refused_naming_the_likely_cause() {
+    // The default subject's six markers span about a forearm and hand.
+    let span = body::marker_span(&scaled_frame(1.0)).unwrap();
+    assert!((0.05..0.5).contains(&span), "{span}");
+    assert!(body::check_marker_span(&scaled_frame(1.0), 0).is_ok());
+    // mm numbers read as cm (×10), as m (×1000); m numbers read as mm (×0.001).
+    for (scale, cause) in [(10.0, "are the units mm"), (1000.0, "mm, read as metres"), (0.001, "metres, read as mm")] {
+        let err = body::check_marker_span(&scaled_frame(scale), 7).unwrap_err();
+        assert!(matches!(err, Error::ImplausibleMarkers { frame: 7, .. }), "{err}");
+        assert!(err.to_string().contains(cause), "×{scale}: {err}");
+    }
+    // A whole recording: one glitched frame does not fail it, the wrong units do.
+    let mut recording: Vec<f64> = (0..9).flat_map(|_| scaled_frame(1.0)).collect();
+    recording[..MARKER_FRAME_LEN].copy_from_slice(&scaled_frame(10.0));
+    assert!(body::check_recording_span(&recording).is_ok());
+    let wrong: Vec<f64> = recording.iter().map(|v| v * 10.0).collect();
+    let err = body::check_recording_span(&wrong).unwrap_err();
+    assert!(err.to_string().contains("median"), "{err}");
+}
+
+#[test]
+fn streams_refuse_and_trackers_reject_markers_no_arm_can_hold() {
+    let m = random_model(FeatureSet::Markers, 2, &[8], 3, 2);
+    let mut s = m.stream();
+    let frame: Vec<f32> = scaled_frame(10.0).iter().map(|&v| v as f32).collect();
+    let err = s.push(&frame).unwrap_err();
+    assert_eq!(err.code(), "implausible_markers");
+    let mut tracker = ikid::Tracker::new(BodyModel::default(), Default::default()).unwrap();
+    for _ in 0..50 {
+        assert_eq!(tracker.push(&scaled_frame(10.0)).unwrap(), None, "a tracker must not start on them");
+    }
+}
