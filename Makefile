@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo data models models-track report check test test-rust test-python test-python-slow test-c lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf realdata
+.PHONY: all venv wheel demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf realdata
 
 all: wheel
 
@@ -73,7 +73,7 @@ report: wheel
 check: lint test-rust test-python stubtest
 	@echo "make check: all passed"
 
-test: check test-python-slow fuzz
+test: check test-python-slow fuzz faults
 	@echo "make test: all suites passed"
 
 lint: fmt-check clippy ruff mypy check-header
@@ -103,6 +103,15 @@ test-python: wheel c
 
 test-python-slow: wheel c
 	cd tests && ../$(PY) -m pytest -q -p no:cacheprovider -m slow .
+
+# The fault suite (tests/faults, issue #22; part of `make test`): ~1000 probes, each one bad
+# input (mutated C3D/TRC/CSV/MOT/STO/TOML/JSON/safetensors files, bad option values, a full
+# disk, a read-only folder, garbage frames, corrupted weights, NULLs into libikid) with its
+# assertions: no traceback or crash, a named error or a flagged output, no partial write.
+# Not collected by pytest (no test_*.py there). Prints one line per failing probe; the last
+# line reads `faults: probes=<n> passed=<n> silent=<n> partial_writes=<n> tracebacks=<n>`.
+faults: wheel capi
+	cd tests && ../$(PY) -m faults
 
 stubtest: wheel
 	$(PY) -m mypy.stubtest ikid._native
