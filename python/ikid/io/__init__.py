@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 
+from ikid.io._atomic import WriteError, atomic_outputs
 from ikid.io.c3d import read_c3d, write_c3d
 from ikid.io.csv import read_csv_markers, write_csv, write_csv_markers
 from ikid.io.mapping import MarkerMap
@@ -37,6 +38,8 @@ __all__ = [
     "MarkerData",
     "MarkerMap",
     "Storage",
+    "WriteError",
+    "atomic_outputs",
     "read_c3d",
     "read_csv_markers",
     "write_csv",
