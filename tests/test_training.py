@@ -82,6 +82,16 @@ noise_levels = [0.0, 0.01]
         and card.get("output_offset") == ("newest_features" if offset else None)
     )
     assert set(card["metrics"]) == {"test_clean", "test_1%", "test_5%"}
+    # The card carries the training data's ranges and a checksum of the tensors.
+    assert model.has_checksum and len(card["tensor_sha256"]) == 64
+    env = card["envelope"]
+    assert len(env["inputs"]["min"]) == 3 and len(env["outputs"]["max"]) == 3
+    train_rec = D.simulate_one({"name": "t", "protocol": "random", "seed": 11, "duration": 3.0})
+    xt, yt = D.windows(train_rec.part("train"), "ik", "angles", 5, stride=7)  # what training saw
+    frames = xt.reshape(-1, 3)
+    np.testing.assert_allclose(frames.min(0), env["inputs"]["min"], atol=1e-6)
+    np.testing.assert_allclose(frames.max(0), env["inputs"]["max"], atol=1e-6)
+    np.testing.assert_allclose(yt.min(0), env["outputs"]["min"], atol=1e-6)
     assert card["provenance"]["data"]["seeds"] == [11] and len(card["provenance"]["data_sha256_16"]) == 16
     log = [
         json.loads(line) for line in (tmp_path / "runs" / "tiny-ik" / "log.jsonl").read_text().splitlines()

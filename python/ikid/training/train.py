@@ -29,7 +29,7 @@ from tqdm import tqdm
 
 import ikid
 from ikid.training import data as D
-from ikid.training.export import Affine, ModelSpec, WindowModel, export, export_onnx
+from ikid.training.export import Affine, ModelSpec, WindowModel, envelope_of, export, export_onnx
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -143,6 +143,8 @@ class Trained:
     log: list[dict[str, Any]]
     seconds: float
     best_val: float
+    #: The training data's ranges, for the card (frames outside it are flagged).
+    envelope: dict[str, Any] | None = None
 
 
 def _noisy(recs: list[D.Recording], tcfg: dict[str, Any], rng: np.random.Generator) -> list[D.Recording]:
@@ -187,6 +189,7 @@ def train(
     # windows; outputs from the targets, noisy ones for a correction (on clean windows it is ~0).
     x0, y0 = D.stack_windows(train_parts, task, fs, window, stride=7)
     inp = Affine.minmax(x0.min(0), x0.max(0))
+    envelope = envelope_of(x0, D.feature_len(fs), y0)
     if offset:
         x0, y0 = D.stack_windows(
             _noisy(train_parts, t, np.random.default_rng(t["seed"] + 2)), task, fs, window, stride=7
@@ -262,7 +265,7 @@ def train(
             break
     bar.close()
     net.load_state_dict(best_state)
-    return Trained(net.eval(), inp, out_fwd.inverse(), log, time.perf_counter() - start, best)
+    return Trained(net.eval(), inp, out_fwd.inverse(), log, time.perf_counter() - start, best, envelope)
 
 
 def spec_for(
@@ -278,6 +281,7 @@ def spec_for(
         missing_markers=m["missing_markers"],
         output_offset=m.get("output_offset"),
         output_names=ikid.coordinate_names(),
+        envelope=trained.envelope,
         scaling={
             "input": "minmax(-1,1) on clean training windows",
             "output": "minmax(-1,1) on training targets",
