@@ -1,0 +1,112 @@
+"""Plausibility from the Python side: checksums refuse corrupt weights, the training envelope
+flags frames outside it, the frame status bits are the C header's, wrong units are named."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ikid
+from ikid import _native
+from ikid.sim import simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _data_start(raw: bytes) -> int:
+    return 8 + struct.unpack("<Q", raw[:8])[0]
+
+
+@pytest.mark.parametrize("name", ["wrist-ik", "wrist-id", "wrist-chain", "wrist-track"])
+def test_a_flipped_sign_bit_in_a_shipped_model_is_refused(tmp_path, name):
+    # Issue #22 case 8: one flipped sign bit used to load and move the angles by 3.3°.
+    src = Path(ikid.__file__).with_name("models") / f"{name}.safetensors"
+    assert ikid.load(name).has_checksum
+    raw = bytearray(src.read_bytes())
+    start = _data_start(bytes(raw))
+    rng = np.random.default_rng(0)
+    for at in rng.integers(start, len(raw), size=5):
+        bad = bytearray(raw)
+        bad[(int(at) - start) // 4 * 4 + start + 3] ^= 0x80  # the sign bit of one f32
+        path = tmp_path / f"bad{at}.safetensors"
+        path.write_bytes(bytes(bad))
+        with pytest.raises(ikid.ModelFileError) as e:
+            ikid.load(path)
+        assert e.value.code == "checksum_mismatch" and "corrupt" in str(e.value) and str(path) in str(e.value)
+
+
+def test_frame_status_bits_are_the_c_headers():
+    header = (ROOT / "include" / "ikid.h").read_text()
+    defined = {m[0].lower(): int(m[1]) for m in re.findall(r"#define IKID_FRAME_(\w+) (\d+)", header)}
+    assert defined == dict(_native.FRAME_STATUS) and len(defined) == 6
+
+
+def _markers(seed: int) -> np.ndarray:
+    t = simulate(seed=seed, duration=2)
+    return np.asarray(t.markers, np.float64).reshape(len(t.time), -1)
+
+
+def _statuses(model, frames) -> np.ndarray:
+    stream, bits = model.stream(), []
+    for f in frames:
+        if stream.push(f) is not None:
+            bits.append(stream.status)
+    return np.array(bits)
+
+
+def test_simulated_trials_are_inside_the_shipped_envelopes_and_shrunk_wrists_are_not():
+    frames = _markers(21)
+    ik = ikid.load("wrist-ik")
+    assert ik.card["envelope"]["inputs"]["min"][0] < 0 < ik.card["envelope"]["inputs"]["max"][0]
+    assert not _statuses(ik, frames).any()
+    # The same markers with the hand turned 120° about the forearm: angles no training trial had.
+    q = np.radians([[0.0, 110.0, 60.0]] * 60)
+    outside = _native.forward_markers(q)
+    bits = _statuses(ik, outside)
+    assert (bits & ikid.FRAME_STATUS["outside_training"]).all(), bits
+
+
+def test_model_frame_status_agrees_with_the_stream():
+    ik = ikid.load("wrist-ik")
+    frames = _markers(22)[:200]
+    feats = ikid.compute_features(frames, "angles")
+    out = ik.predict(frames)
+    w = ik.window
+    assert np.array_equal(ik.frame_status(feats[w - 1 :], out), _statuses(ik, frames))
+
+
+@pytest.mark.parametrize("scale, cause", [(10.0, "are the units mm"), (1e-3, "read as mm")])
+def test_markers_in_the_wrong_units_are_named(scale, cause):
+    frames = _markers(23) * scale
+    with pytest.raises(ikid.InputError, match=cause):
+        _native.check_marker_units(frames)
+    _native.check_marker_units(frames / scale)  # the right units pass
+    with pytest.raises(ikid.InputError, match=cause):
+        ikid.Tracker().run(frames)
+    stream = ikid.load("wrist-ik").stream()
+    with pytest.raises(ikid.InputError) as e:
+        stream.push(frames[0])
+    assert e.value.code == "implausible_markers"
+
+
+def test_old_model_files_without_a_checksum_still_load(tmp_path):
+    src = Path(ikid.__file__).with_name("models") / "wrist-ik.safetensors"
+    path = tmp_path / "old.safetensors"
+    shutil.copy(src, path)
+    # Strip the checksum the way a file written before it would lack it.
+    from safetensors.numpy import load_file, save_file
+
+    tensors = load_file(str(path))
+    card = dict(ikid.load(path).card)
+    card.pop("tensor_sha256")
+    save_file(tensors, str(path), metadata={"ikid": json.dumps(card)})
+    with pytest.warns(UserWarning, match="checksum"):
+        model = ikid.load(path)
+    assert not model.has_checksum
+    np.testing.assert_array_equal(model.predict(_markers(24)), ikid.load("wrist-ik").predict(_markers(24)))
