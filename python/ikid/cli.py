@@ -1128,7 +1128,7 @@ def main(argv: list[str] | None = None) -> int:
         "calibrate",
         help="measure a subject's marker placement (landmarks, neutral frames, or movements)",
         description="A subject's marker placement -> calibration JSON (method, side and marker map recorded; "
-        "`ikid ik/run/track --calibration` refuse a trial read with another map).\n\n"
+        "ikid.calibration.check_calibration_map refuses a trial read with another map).\n\n"
         "  # landmarks (the map's [landmarks]: epicondyles, styloids) + neutral frames of any trial:\n"
         "  ikid calibrate --static s01_task.c3d --frames 0-9 --map lab.toml -o s01.json\n"
         "  # neutral posture only (no landmarks in the map, or --method neutral):\n"
