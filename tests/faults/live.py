@@ -108,7 +108,6 @@ FAULTS: dict[str, Fault] = {
     "labels-MC2-MC5-swapped-from-1500": _swap(K0, None),
     "labels-MC2-MC5-swapped-one-frame": _swap(K0, 1),
     "labels-MC2-MC5-swapped-throughout": _swap(0, None),
-    "noise-5mm-burst-200-frames": _at(_set(lambda b: b + _rng(3).normal(0, 0.005, b.shape)), 200),
 }
 TIME_FAULTS: dict[str, Fault] = {
     "time-backwards": _time_edit(lambda t: t.__setitem__(K0, t[K0 - 2])),
@@ -165,7 +164,7 @@ def stream_probe(corpus: Corpus, name: str, fault: Fault) -> Api:
             if out is None:
                 status.append("filling")
                 continue
-            status.append("filled" if s.filled_markers else "ok")
+            status.append("filled" if s.filled_markers or getattr(s, "status", 0) else "ok")
             if np.isfinite(ref[index[i]]).all():
                 d[i] = float(np.degrees(np.max(np.abs(out - ref[index[i]]))))
                 d[i] = d[i] if math.isfinite(d[i]) else math.inf
@@ -213,6 +212,8 @@ def _tracker_with_skips(make: Callable, frames: np.ndarray) -> tuple[np.ndarray,
                 break
             q[a + 1 : b] = out["q"]
             flagged[a + 1 : b] = (out["missing"] != 0) | ~np.isfinite(out["q"]).all(axis=1)
+            if "status" in out:  # the tracker's per-frame status bits (rejected, held, restarted...)
+                flagged[a + 1 : b] |= np.asarray(out["status"]) != 0
         else:
             return q, flagged, tracker
 
@@ -298,6 +299,13 @@ def predict_probe(corpus: Corpus, name: str, change: Callable[[np.ndarray], np.n
             return
         d = np.degrees(np.max(np.abs(out - expected), axis=1))
         off = ~np.isfinite(d) | (d > SILENT_DEG)
+        if hasattr(model, "frame_status"):  # rows flagged outside the envelope or implausible
+            import ikid
+
+            features = ikid.compute_features(bad, model.feature_set)[model.window - 1 :]
+            flags, e = call(model.frame_status, out, features)
+            if e is None:
+                off &= np.asarray(flags) == 0
         if off.any():
             v.silent(f"predict gave {int(off.sum())} rows over {SILENT_DEG:g}° off, nothing flagged")
 
