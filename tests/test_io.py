@@ -632,3 +632,14 @@ def test_a_trial_is_saved_whole_or_its_old_files_stay(tmp_path, monkeypatch):
     ):
         ikid.simulate("random", seed=7102, duration=0.1).save(tmp_path / "t")
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == old
+
+
+def test_refused_frames_are_counted_by_the_cores_code_not_by_their_message(trial):
+    """Messages carry numbers that differ from frame to frame (a spread of 2.616 m, 2.617 m...):
+    the summary counts frames by the core's stable code, with the first frame's message once."""
+    frames = trial.markers[:300] * 10.0  # a file in mm read as cm: every frame implausible
+    run = run_model(ikid.load("wrist-ik"), frames, trial.time[:300])
+    assert dict(run.refused) == {"implausible markers": 300}
+    summary = run.summary()
+    assert summary.startswith("0/300 frames with output, 300 implausible markers (first: frame 0: "), summary
+    assert summary.count("implausible") == 1 and "units" in summary, summary

@@ -44,12 +44,18 @@ class Run:
     resampled_from_hz: float | None = None
     #: Times a gap in the timestamps restarted the window.
     gap_restarts: int = 0
+    #: The first frame's message for each reason in :attr:`refused` (e.g. why the markers are
+    #: implausible), shown in the summary.
+    examples: dict[str, str] = field(default_factory=dict)
 
     def summary(self) -> str:
         parts = [f"{len(self.time)}/{self.n_frames} frames with output"]
         if self.filled.any():
             parts.append(f"{int(self.filled.sum())} with a filled marker")
-        parts += [f"{n} {reason}" for reason, n in self.refused.most_common()]
+        for reason, n in self.refused.most_common():
+            example = self.examples.get(reason)
+            explained = any(w in reason for w in _SELF_EXPLAINED) or not example
+            parts.append(f"{n} {reason}" if explained else f"{n} {reason} (first: {example})")
         if self.gap_restarts:
             parts.append(f"{self.gap_restarts} window restarts after time gaps")
         if self.resampled_from_hz:
@@ -58,7 +64,8 @@ class Run:
 
 
 def refusal_reason(error: _native.InputError) -> str:
-    """A short, countable reason for a refused frame, from the core's classification."""
+    """A short, countable reason for a refused frame, from the core's classification (its
+    stable code; never the message, whose numbers differ from frame to frame)."""
     markers = ", ".join(error.markers)
     if error.code == "missing_markers":
         return f"missing {markers} (not fillable)"
@@ -66,7 +73,13 @@ def refusal_reason(error: _native.InputError) -> str:
         return f"{markers} jumped"
     if error.code == "non_finite_input":
         return "missing marker (model refuses gaps)"
+    if error.code:
+        return error.code.replace("_", " ")
     return (error.reason or str(error)).split(";")[0]
+
+
+#: Reasons that say all there is to say; any other is shown with its first frame's message.
+_SELF_EXPLAINED = ("window filling", "missing ", "jumped", "missing marker")
 
 
 def check_rate(model: _native.Model, rate_hz: float, source: str, allow_resample: bool) -> bool:
@@ -113,6 +126,7 @@ def run_model(
     stream = model.stream(missing_markers=missing_markers, calibration=calibration)
     rows, index, filled = [], [], []
     refused: Counter = Counter()
+    examples: dict[str, str] = {}
     bar = _progress(len(frames), source) if progress else None
     for i, (t, frame) in enumerate(zip(time, frames, strict=True)):
         if bar is not None and i % 1000 == 999:
@@ -120,7 +134,9 @@ def run_model(
         try:
             out = stream.push(frame, time=float(t))
         except _native.InputError as e:
-            refused[refusal_reason(e)] += 1
+            reason = refusal_reason(e)
+            refused[reason] += 1
+            examples.setdefault(reason, f"frame {i}: {e.reason or e}")
             continue
         if out is None:
             refused["window filling"] += 1
@@ -142,6 +158,7 @@ def run_model(
         rate_hz,
         resampled_from,
         stream.gap_restarts,
+        examples,
     )
 
 
