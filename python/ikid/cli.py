@@ -1341,13 +1341,13 @@ def main(argv: list[str] | None = None) -> int:
 
     if argv is None:
         argv = sys.argv[1:]
-    if argv[:1] == ["demo"]:  # its own options (see `ikid demo --help`)
-        from ikid.demo import main as demo
-
-        demo(argv[1:])
-        return 0
-    args = parser.parse_args(argv)
     try:
+        if argv[:1] == ["demo"]:  # its own options (see `ikid demo --help`)
+            from ikid.demo import main as demo
+
+            demo(argv[1:])
+            return 0
+        args = parser.parse_args(argv)
         return args.func(args)
     except (ikid.IkidError, OSError) as e:
         # What a user can act on (a bad file, option or model; a failed write) is a message naming
