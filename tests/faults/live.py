@@ -302,8 +302,9 @@ def predict_probe(corpus: Corpus, name: str, change: Callable[[np.ndarray], np.n
         if hasattr(model, "frame_status"):  # rows flagged outside the envelope or implausible
             import ikid
 
-            features = ikid.compute_features(bad, model.feature_set)[model.window - 1 :]
-            flags, e = call(model.frame_status, out, features)
+            features, e = call(ikid.compute_features, bad, model.feature_set)
+            if e is None:
+                flags, e = call(model.frame_status, out, features[model.window - 1 :])
             if e is None:
                 off &= np.asarray(flags) == 0
         if off.any():
