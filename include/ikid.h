@@ -69,9 +69,8 @@ typedef struct ikid_model_info {
 } ikid_model_info;
 
 // The subject and how the tracker models motion and noise; start from
-// `ikid_tracker_settings_default()` and change what differs. There is no marker calibration
-// or per-marker placement shift here yet: the core's tracker has none (it tracks the scaled
-// default marker layout).
+// `ikid_tracker_settings_default()` and change what differs. A subject's marker placement is
+// given by `ikid_tracker_set_calibration`.
 typedef struct ikid_tracker_settings {
   // Subject's segment lengths (and marker offsets) relative to the default subject.
   double length_scale;
@@ -86,6 +85,10 @@ typedef struct ikid_tracker_settings {
   double noise_memory_s;
   // Standard deviation of the marker noise assumed before any has been measured, m.
   double initial_marker_noise;
+  // Measure the hand by its orientation only (its markers relative to their centroid), not
+  // by its position relative to the forearm: for real subjects, whose wrist centre the body
+  // model does not know. Always on with a calibration (`ikid_tracker_set_calibration`).
+  bool relative_hand;
 } ikid_tracker_settings;
 
 // Per-frame flags of a tracker's estimate.
@@ -236,18 +239,30 @@ enum ikid_status ikid_stream_push_at(struct ikid_stream *stream,
 // NUL-terminated string.
 enum ikid_status ikid_stream_set_missing_markers(struct ikid_stream *stream, const char *policy);
 
-// Calibrates the stream to a subject's marker placement: `forearm` and `hand` each point to
-// the 9 values (row-major) of one 3×3 rotation matrix, as the `"forearm"` and `"hand"`
-// arrays of a calibration file written by `ikid calibrate`; both NULL removes the
-// calibration. Refused (nothing changed) if a matrix is not a rotation or the model does
-// not read marker frames.
+// Calibrates the stream to a subject's marker placement, for a right arm: as
+// `ikid_stream_set_calibration_side(stream, forearm, hand, "right")`.
 //
 // # Safety
-// `stream` must be a live handle used by no other thread meanwhile; `forearm` and `hand`
-// must each be NULL or point to 9 readable doubles.
+// As `ikid_stream_set_calibration_side`.
 enum ikid_status ikid_stream_set_calibration(struct ikid_stream *stream,
                                              const double *forearm,
                                              const double *hand);
+
+// Calibrates the stream to a subject's marker placement: `forearm` and `hand` each point to
+// the 9 values (row-major) of one 3×3 rotation matrix, as the `"forearm"` and `"hand"`
+// arrays of a calibration file written by `ikid calibrate`, and `side` its `"side"`:
+// `"right"` (or NULL) or `"left"` (a left arm is mirrored into a right one; a left-arm
+// calibration used as a right one gives s_p and ad_ab with the wrong sign); both matrices
+// NULL removes the calibration. Refused (nothing
+// changed) if a matrix is not a rotation or the model does not read marker frames.
+//
+// # Safety
+// `stream` must be a live handle used by no other thread meanwhile; `forearm` and `hand`
+// must each be NULL or point to 9 readable doubles; `side` NULL or NUL-terminated.
+enum ikid_status ikid_stream_set_calibration_side(struct ikid_stream *stream,
+                                                  const double *forearm,
+                                                  const double *hand,
+                                                  const char *side);
 
 // `*mask` receives the markers filled in the last accepted frame (bit `i` = marker `i` in
 // frame order; 0 when the frame was complete): the flag on an output that rests on filled
@@ -381,6 +396,19 @@ enum ikid_status ikid_tracker_marker_noise(const struct ikid_tracker *tracker,
 // # Safety
 // `tracker` must be NULL or a handle from `ikid_tracker_new` not yet freed.
 void ikid_tracker_free(struct ikid_tracker *tracker);
+
+// Tracks a subject measured by a calibration (as `ikid_stream_set_calibration_side`: two
+// row-major rotation matrices and the side, `"right"`/NULL or `"left"`; both matrices NULL
+// removes it): each segment's markers are placed by it and the hand is measured by its
+// orientation. Starts the tracker afresh, as `ikid_tracker_reset`.
+//
+// # Safety
+// `tracker` a live handle used by no other thread meanwhile; `forearm` and `hand` NULL or 9
+// readable doubles each; `side` NULL or NUL-terminated.
+enum ikid_status ikid_tracker_set_calibration(struct ikid_tracker *tracker,
+                                              const double *forearm,
+                                              const double *hand,
+                                              const char *side);
 
 #ifdef __cplusplus
 }  // extern "C"

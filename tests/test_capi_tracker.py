@@ -19,8 +19,10 @@ KEYS = ("q", "qd", "qdd", "tau")
 
 
 def expected_rows(out: dict) -> np.ndarray:
-    """Per frame: q, qd, qdd, tau, missing, refined, noise (the C test's EXPECTED layout)."""
-    return np.column_stack([*(out[k] for k in KEYS), out["missing"], out["refined"], out["noise"]])
+    """Per frame: q, qd, qdd, tau, missing, refined, noise, status (the C test's EXPECTED layout)."""
+    return np.column_stack(
+        [*(out[k] for k in KEYS), out["missing"], out["refined"], out["noise"], out["status"]]
+    )
 
 
 @pytest.fixture(scope="module")

@@ -189,6 +189,8 @@ class Tracker:
         noise_memory_s: float = 10.0,
         initial_marker_noise: float = 1e-3,
         refiner: Model | None = None,
+        calibration: Calibration | None = None,
+        relative_hand: bool = False,
     ) -> Tracker: ...
     @property
     def refiner(self) -> Model | None: ...

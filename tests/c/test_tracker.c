@@ -17,7 +17,7 @@
 
 #include "check.h"
 
-enum { FRAME = 18, VALUES = 12, EXPECTED_COLS = 15 };
+enum { FRAME = 18, VALUES = 12, EXPECTED_COLS = 16 };
 
 /* Every value of a CSV file (commas, spaces, newlines between them; "nan" allowed). */
 static double *read_csv(const char *path, size_t cols, size_t *rows) {
@@ -45,7 +45,7 @@ static int matches(const double *values, const ikid_tracker_flags *flags, const 
     for (int k = 0; k < VALUES; k++)
         if (!same(values[k], row[k])) return 0;
     return flags->missing == (uint32_t)row[12] && flags->refined == (row[13] != 0) && same(flags->noise, row[14])
-           && flags->ready == !isnan(row[0]);
+           && flags->status == (uint32_t)row[15] && flags->ready == !isnan(row[0]);
 }
 
 /* First frame of EXPECTED with an estimate. */
@@ -140,7 +140,7 @@ int main(int argc, char **argv) {
             const double *f = frames + i * FRAME;
             double sentinel[VALUES];
             for (int k = 0; k < VALUES; k++) sentinel[k] = 7.0;
-            ikid_tracker_flags flags_sentinel = {77, true, true, 7.0};
+            ikid_tracker_flags flags_sentinel = {77, true, true, 7.0, 77};
             double inf_frame[FRAME];
             memcpy(inf_frame, f, sizeof inf_frame);
             inf_frame[13] = INFINITY;

@@ -16,6 +16,7 @@
 #![allow(unsafe_code)] // the ABI is raw pointers; every dereference is checked first
 
 mod boundary;
+mod calibration;
 mod model;
 mod stream;
 mod tracker;

@@ -1,9 +1,9 @@
 //! Stream handles: frame-by-frame inference, one thread at a time per stream.
 
 use crate::boundary::{Failure, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut};
+use crate::calibration::calibration_from;
 use crate::model::{ikid_model, recording_args};
 use ikid_core::Stream;
-use nalgebra::Matrix3;
 
 /// A causal frame-by-frame stream over a model (opaque). Use from one thread at a time.
 pub struct ikid_stream {
@@ -124,37 +124,41 @@ pub unsafe extern "C" fn ikid_stream_set_missing_markers(
     })
 }
 
-/// Calibrates the stream to a subject's marker placement: `forearm` and `hand` each point to
-/// the 9 values (row-major) of one 3×3 rotation matrix, as the `"forearm"` and `"hand"`
-/// arrays of a calibration file written by `ikid calibrate`; both NULL removes the
-/// calibration. Refused (nothing changed) if a matrix is not a rotation or the model does
-/// not read marker frames.
+/// Calibrates the stream to a subject's marker placement, for a right arm: as
+/// `ikid_stream_set_calibration_side(stream, forearm, hand, "right")`.
 ///
 /// # Safety
-/// `stream` must be a live handle used by no other thread meanwhile; `forearm` and `hand`
-/// must each be NULL or point to 9 readable doubles.
+/// As `ikid_stream_set_calibration_side`.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn ikid_stream_set_calibration(
     stream: *mut ikid_stream,
     forearm: *const f64,
     hand: *const f64,
 ) -> ikid_status {
+    unsafe { ikid_stream_set_calibration_side(stream, forearm, hand, std::ptr::null()) }
+}
+
+/// Calibrates the stream to a subject's marker placement: `forearm` and `hand` each point to
+/// the 9 values (row-major) of one 3×3 rotation matrix, as the `"forearm"` and `"hand"`
+/// arrays of a calibration file written by `ikid calibrate`, and `side` its `"side"`:
+/// `"right"` (or NULL) or `"left"` (a left arm is mirrored into a right one; a left-arm
+/// calibration used as a right one gives s_p and ad_ab with the wrong sign); both matrices
+/// NULL removes the calibration. Refused (nothing
+/// changed) if a matrix is not a rotation or the model does not read marker frames.
+///
+/// # Safety
+/// `stream` must be a live handle used by no other thread meanwhile; `forearm` and `hand`
+/// must each be NULL or point to 9 readable doubles; `side` NULL or NUL-terminated.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_set_calibration_side(
+    stream: *mut ikid_stream,
+    forearm: *const f64,
+    hand: *const f64,
+    side: *const std::ffi::c_char,
+) -> ikid_status {
     guard(|| {
         let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
-        let calibration = match (forearm.is_null(), hand.is_null()) {
-            (true, true) => None,
-            (false, false) => {
-                let f = unsafe { slice(forearm, 9, "forearm") }?;
-                let h = unsafe { slice(hand, 9, "hand") }?;
-                Some(ikid_core::Calibration::from_matrices(Matrix3::from_row_slice(f), Matrix3::from_row_slice(h))?)
-            }
-            _ => {
-                return Err(Failure::new(
-                    ikid_status::InvalidArgument,
-                    "forearm and hand: give both matrices, or both NULL to remove the calibration",
-                ));
-            }
-        };
+        let calibration = unsafe { calibration_from(forearm, hand, side) }?;
         s.set_calibration(calibration)?;
         Ok(())
     })

@@ -3,6 +3,7 @@
 //! to the core's `Tracker`.
 
 use crate::boundary::{Failure, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut};
+use crate::calibration::calibration_from;
 use crate::model::ikid_model;
 use ikid_core::body::{BodyModel, MARKER_FRAME_LEN};
 use ikid_core::tracker::{TRACKER_VALUES, TrackerOutput};
@@ -16,9 +17,8 @@ pub struct ikid_tracker {
 }
 
 /// The subject and how the tracker models motion and noise; start from
-/// `ikid_tracker_settings_default()` and change what differs. There is no marker calibration
-/// or per-marker placement shift here yet: the core's tracker has none (it tracks the scaled
-/// default marker layout).
+/// `ikid_tracker_settings_default()` and change what differs. A subject's marker placement is
+/// given by `ikid_tracker_set_calibration`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ikid_tracker_settings {
@@ -35,6 +35,10 @@ pub struct ikid_tracker_settings {
     pub noise_memory_s: f64,
     /// Standard deviation of the marker noise assumed before any has been measured, m.
     pub initial_marker_noise: f64,
+    /// Measure the hand by its orientation only (its markers relative to their centroid), not
+    /// by its position relative to the forearm: for real subjects, whose wrist centre the body
+    /// model does not know. Always on with a calibration (`ikid_tracker_set_calibration`).
+    pub relative_hand: bool,
 }
 
 /// Per-frame flags of a tracker's estimate.
@@ -82,6 +86,7 @@ pub extern "C" fn ikid_tracker_settings_default() -> ikid_tracker_settings {
         jerk_noise: s.jerk_noise,
         noise_memory_s: s.noise_memory_s,
         initial_marker_noise: s.initial_marker_noise,
+        relative_hand: s.relative_hand,
     }
 }
 
@@ -114,6 +119,7 @@ pub unsafe extern "C" fn ikid_tracker_new(
             jerk_noise: s.jerk_noise,
             noise_memory_s: s.noise_memory_s,
             initial_marker_noise: s.initial_marker_noise,
+            relative_hand: s.relative_hand,
         };
         let mut tracker = Tracker::new(body, settings)?;
         tracker.set_refiner(refiner)?;
@@ -270,4 +276,27 @@ pub unsafe extern "C" fn ikid_tracker_marker_noise(
 pub unsafe extern "C" fn ikid_tracker_free(tracker: *mut ikid_tracker) {
     // SAFETY: NULL or a live handle (caller's contract).
     unsafe { free_handle(tracker) }
+}
+
+/// Tracks a subject measured by a calibration (as `ikid_stream_set_calibration_side`: two
+/// row-major rotation matrices and the side, `"right"`/NULL or `"left"`; both matrices NULL
+/// removes it): each segment's markers are placed by it and the hand is measured by its
+/// orientation. Starts the tracker afresh, as `ikid_tracker_reset`.
+///
+/// # Safety
+/// `tracker` a live handle used by no other thread meanwhile; `forearm` and `hand` NULL or 9
+/// readable doubles each; `side` NULL or NUL-terminated.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_tracker_set_calibration(
+    tracker: *mut ikid_tracker,
+    forearm: *const f64,
+    hand: *const f64,
+    side: *const std::ffi::c_char,
+) -> ikid_status {
+    guard(|| {
+        let t = &mut unsafe { non_null_mut(tracker, "tracker") }?.tracker;
+        let calibration = unsafe { calibration_from(forearm, hand, side) }?;
+        t.set_calibration(calibration);
+        Ok(())
+    })
 }

@@ -2,6 +2,7 @@
 //! torques per frame). Conversion only.
 
 use crate::body::subject;
+use crate::calibration::Calibration;
 use crate::conv::{with_f64_rows, with_frame_f64};
 use crate::errors::{IntoPy, input};
 use crate::model::Model;
@@ -39,7 +40,7 @@ fn rows(out: &TrackerOutput) -> [[f64; N_COORDINATES]; 4] {
 #[pymethods]
 impl Tracker {
     #[new]
-    #[pyo3(signature = (length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=1000.0, jerk_noise=DEFAULT_JERK_NOISE, noise_memory_s=10.0, initial_marker_noise=1e-3, refiner=None))]
+    #[pyo3(signature = (length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=1000.0, jerk_noise=DEFAULT_JERK_NOISE, noise_memory_s=10.0, initial_marker_noise=1e-3, refiner=None, calibration=None, relative_hand=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         length_scale: f64,
@@ -50,10 +51,13 @@ impl Tracker {
         noise_memory_s: f64,
         initial_marker_noise: f64,
         refiner: Option<&Bound<'_, Model>>,
+        calibration: Option<PyRef<'_, Calibration>>,
+        relative_hand: bool,
     ) -> PyResult<Self> {
         let body = subject(length_scale, mass_scale, marker_shift)?;
-        let settings = TrackerSettings { rate_hz, jerk_noise, noise_memory_s, initial_marker_noise };
+        let settings = TrackerSettings { rate_hz, jerk_noise, noise_memory_s, initial_marker_noise, relative_hand };
         let mut inner = CoreTracker::new(body, settings).py_err()?;
+        inner.set_calibration(calibration.map(|c| c.inner));
         inner.set_refiner(refiner.map(|m| m.get().inner.clone())).py_err()?;
         Ok(Tracker { inner })
     }

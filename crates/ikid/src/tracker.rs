@@ -45,8 +45,9 @@
 use nalgebra::{Isometry3, Matrix3, SMatrix, SVector, Vector3};
 
 use crate::body::{self, BodyModel, COORDINATES, MARKER_FRAME_LEN, MARKERS, N_COORDINATES, Segment};
+use crate::calibration::{Calibration, Side};
 use crate::error::{Error, Result};
-use crate::features::FeatureSet;
+use crate::features::{FeatureSet, technical_frame};
 use crate::model::Model;
 use crate::reference::{self, JointState};
 use crate::status;
@@ -108,6 +109,8 @@ pub fn refiner_outputs() -> Vec<String> {
 }
 
 type StateVector = SVector<f64, N_STATE>;
+/// Each hand marker's predicted position and its motion per radian of each coordinate.
+type HandPrediction = ([Vector3<f64>; 3], [[Vector3<f64>; N_COORDINATES]; 3]);
 type StateMatrix = SMatrix<f64, N_STATE, N_STATE>;
 
 /// How the tracker models motion and noise.
@@ -122,6 +125,12 @@ pub struct TrackerSettings {
     pub noise_memory_s: f64,
     /// Standard deviation of marker noise assumed before any has been measured, m.
     pub initial_marker_noise: f64,
+    /// Measure the hand's orientation only — its markers relative to their own centroid — not
+    /// its position relative to the forearm's frame. The body model knows the wrist centre of a
+    /// simulated subject exactly; of a real subject it does not, and a centre a centimetre off
+    /// is read as degrees of wrist angle. On with a calibration ([`Tracker::set_calibration`]);
+    /// needs two hand markers per frame to correct.
+    pub relative_hand: bool,
 }
 
 impl Default for TrackerSettings {
@@ -133,6 +142,7 @@ impl Default for TrackerSettings {
             jerk_noise: DEFAULT_JERK_NOISE,
             noise_memory_s: 10.0,
             initial_marker_noise: 1e-3,
+            relative_hand: false,
         }
     }
 }
@@ -233,6 +243,13 @@ pub struct Tracker {
     gated_streak: usize,
     coast_streak: usize,
     restarts: usize,
+    /// The subject's placement: each segment's markers in its anatomical frame are taken from
+    /// the subject's own markers (their shape as learned, turned by the calibration) instead of
+    /// the body model's, once per shape learned (`templated`).
+    calibration: Option<Calibration>,
+    templated: [bool; 2],
+    /// The body model's own marker offsets, restored by [`reset`](Tracker::reset).
+    model_offsets: [[f64; 3]; body::N_MARKERS],
 }
 
 impl Tracker {
@@ -277,7 +294,11 @@ impl Tracker {
             gated_streak: 0,
             coast_streak: 0,
             restarts: 0,
+            calibration: None,
+            templated: [false; 2],
+            model_offsets: [[0.0; 3]; body::N_MARKERS],
         };
+        tracker.model_offsets = tracker.body.marker_offsets;
         tracker.reset();
         Ok(tracker)
     }
@@ -299,9 +320,49 @@ impl Tracker {
         self.gated_streak = 0;
         self.coast_streak = 0;
         self.restarts = 0;
+        self.templated = [false; 2];
+        self.body.marker_offsets = self.model_offsets;
         if let Some(r) = self.refiner.as_mut() {
             r.reset();
         }
+    }
+
+    /// Track a subject measured by `calibration` (see [`crate::calibration`]): each segment's
+    /// markers are placed in its anatomical frame by the calibration (their shape taken from the
+    /// subject's first complete frame), a left arm is mirrored into a right one, and the hand is
+    /// measured by its orientation ([`TrackerSettings::relative_hand`]). `None`: the body model's
+    /// placement. Starts fresh, as after [`reset`](Self::reset).
+    pub fn set_calibration(&mut self, calibration: Option<Calibration>) {
+        self.calibration = calibration;
+        self.reset();
+    }
+
+    /// The calibration in use, if any.
+    pub fn calibration(&self) -> Option<&Calibration> {
+        self.calibration.as_ref()
+    }
+
+    fn relative_hand(&self) -> bool {
+        self.settings.relative_hand || self.calibration.is_some()
+    }
+
+    /// Places `segment`'s markers in the body model as the calibration says: the markers of
+    /// `frame` in the segment's technical frame, turned into its anatomical frame.
+    fn take_template(&mut self, segment: Segment, frame: &[f64]) {
+        let Some(calibration) = self.calibration else { return };
+        let narrow: [f32; MARKER_FRAME_LEN] = std::array::from_fn(|i| frame[i] as f32);
+        let Ok((origin, technical)) = technical_frame(&narrow, segment, 0) else { return };
+        let t = match segment {
+            Segment::Forearm => calibration.forearm,
+            Segment::Hand => calibration.hand,
+        };
+        let first = body::first_marker(segment);
+        for k in first..first + 3 {
+            let p = Vector3::new(frame[3 * k], frame[3 * k + 1], frame[3 * k + 2]);
+            let local = t * (technical.transpose() * (p - origin));
+            self.body.marker_offsets[k] = [local.x, local.y, local.z];
+        }
+        self.templated[segment as usize] = true;
     }
 
     /// Use `model` to refine every estimate (see the [module docs](self)), or none. The model
@@ -405,6 +466,11 @@ impl Tracker {
         } else {
             flags |= status::REJECTED_MARKER;
         }
+        if self.calibration.is_some_and(|c| c.side == Side::Left) {
+            for z in checked.iter_mut().skip(2).step_by(3) {
+                *z = -*z;
+            }
+        }
         let frame = &checked[..];
 
         // 1. The forearm: measured if its markers are present, rigid as learned and not jumped.
@@ -413,6 +479,10 @@ impl Tracker {
             let (rejected, relearned) = self.check_rigid(Segment::Forearm, frame, lost);
             if relearned {
                 flags |= status::RESTARTED;
+                self.templated[Segment::Forearm as usize] = false;
+            }
+            if rejected == 0 && !self.templated[Segment::Forearm as usize] {
+                self.take_template(Segment::Forearm, frame);
             }
             if rejected == 0
                 && let Ok(pose) = reference::fit_segment(&self.body, frame, Segment::Forearm, index)
@@ -435,6 +505,10 @@ impl Tracker {
         let (rejected, relearned) = self.check_rigid(Segment::Hand, frame, lost);
         if relearned {
             flags |= status::RESTARTED;
+            self.templated[Segment::Hand as usize] = false;
+        }
+        if rejected == 0 && missing >> 3 == 0 && !self.templated[Segment::Hand as usize] {
+            self.take_template(Segment::Hand, frame);
         }
         reject_hand_markers(&mut hand, rejected >> 3);
         if rejected != 0 {
@@ -451,8 +525,12 @@ impl Tracker {
                 (self.transition * x, self.transition * p * self.transition.transpose() + self.process_noise)
             }
             None => {
-                let start =
-                    if forearm_measured && hand_complete { self.frame_solution(&forearm, frame, index) } else { None };
+                let placed = self.calibration.is_none() || self.templated == [true; 2];
+                let start = if forearm_measured && hand_complete && placed {
+                    self.frame_solution(&forearm, frame, index)
+                } else {
+                    None
+                };
                 let Some(x) = start else {
                     self.learn_noise(&hand);
                     return Ok(None);
@@ -645,7 +723,7 @@ impl Tracker {
     /// Hand markers (bits 0–2) whose innovation at the prediction is implausible: beyond
     /// [`GATE_CHI2`] of its predicted covariance and longer than [`GATE_FLOOR_M`].
     fn gate(&self, forearm: &Isometry3<f64>, hand: &[f64; N_HAND], x: &StateVector, p: &StateMatrix) -> u8 {
-        let (predicted, jac) = self.hand_prediction(forearm, x);
+        let Some((predicted, jac)) = self.hand_prediction(forearm, x, hand) else { return 0 };
         let p_q = p.fixed_view::<3, 3>(0, 0).into_owned();
         let mut gated = 0u8;
         for m in 0..3 {
@@ -670,13 +748,16 @@ impl Tracker {
     }
 
     /// The hand markers' predicted positions at the state `x`, and each one's Jacobian columns
-    /// (its motion per radian of each coordinate).
+    /// (its motion per radian of each coordinate). With [`TrackerSettings::relative_hand`],
+    /// relative to the centroid of the markers present in `hand` (the measured centroid is
+    /// taken as it is: only the hand's orientation is predicted); `None` there with fewer than
+    /// two present, which carry no orientation.
     fn hand_prediction(
         &self,
         forearm: &Isometry3<f64>,
         x: &StateVector,
-    ) -> ([Vector3<f64>; 3], [[Vector3<f64>; N_COORDINATES]; 3]) {
-        let centre = forearm.translation.vector;
+        hand: &[f64; N_HAND],
+    ) -> Option<HandPrediction> {
         // World axes of the three joints at the prediction: a point p of the hand moves by
         // w_i × (p − centre) per radian of coordinate i. The chain's product is the hand's
         // orientation in the lab (the forearm's times `body::wrist_rotation`).
@@ -687,9 +768,25 @@ impl Tracker {
             *axis = rotation * local;
             rotation *= nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(local), x[i]);
         }
-        let arms: [Vector3<f64>; 3] =
-            std::array::from_fn(|m| rotation * Vector3::from(self.body.marker_offsets[3 + m]));
-        (arms.map(|a| centre + a), arms.map(|a| axes.map(|w| w.cross(&a))))
+        let offset = |m: usize| Vector3::from(self.body.marker_offsets[3 + m]);
+        let (centre, reference) = if self.relative_hand() {
+            let present = hand_markers_present(hand);
+            let n = present.count_ones();
+            if n < 2 {
+                return None;
+            }
+            let (mut measured, mut local) = (Vector3::zeros(), Vector3::zeros());
+            for m in (0..3).filter(|m| present & (1 << m) != 0) {
+                measured += Vector3::new(hand[3 * m], hand[3 * m + 1], hand[3 * m + 2]);
+                local += offset(m);
+            }
+            let n = f64::from(n);
+            (measured / n, local / n)
+        } else {
+            (forearm.translation.vector, Vector3::zeros())
+        };
+        let arms: [Vector3<f64>; 3] = std::array::from_fn(|m| rotation * (offset(m) - reference));
+        Some((arms.map(|a| centre + a), arms.map(|a| axes.map(|w| w.cross(&a)))))
     }
 
     /// Pushes every frame of `frames` ([`MARKER_FRAME_LEN`] values each, back to back) in
@@ -762,7 +859,7 @@ impl Tracker {
     /// noise is independent between coordinates), linearised at the prediction.
     fn correct(&self, forearm: &Isometry3<f64>, hand: &[f64; N_HAND], x: &mut StateVector, p: &mut StateMatrix) {
         let prior_q = Vector3::new(x[0], x[1], x[2]);
-        let (predicted, jac) = self.hand_prediction(forearm, x);
+        let Some((predicted, jac)) = self.hand_prediction(forearm, x, hand) else { return };
         for m in 0..3 {
             for k in 0..3 {
                 let z = hand[3 * m + k];
