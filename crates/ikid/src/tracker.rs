@@ -61,6 +61,9 @@ const N_HAND: usize = 9;
 const HAND_START: usize = 3 * 3;
 /// Variance of white noise's third difference over the noise's own variance: 1 + 9 + 9 + 1.
 const THIRD_DIFFERENCE_GAIN: f64 = 20.0;
+/// Noise variance over the mean square of a coordinate's distance from the rigid fit of three
+/// markers: the fit takes 6 of the 9 coordinates' degrees of freedom.
+const FIT_RESIDUAL_GAIN: f64 = 3.0;
 /// Weight of the initial noise guess, in frames: the estimate is the guess for the first few
 /// frames and the data's soon after.
 const PRIOR_FRAMES: f64 = 10.0;
@@ -90,6 +93,14 @@ pub const GATE_FLOOR_M: f64 = 0.02;
 /// position, or restarts the hand from the frame's own solution ([`status::RESTARTED`]), and a
 /// state carried forward without correction stops extrapolating.
 pub const LOST_S: f64 = 0.03;
+/// How far a hand marker may sit from the rigid fit of the hand's shape to its three markers,
+/// m, for the three to count as agreeing with one another.
+pub const FIT_TOLERANCE_M: f64 = 0.005;
+/// The correction is linearised again at the corrected state while it moves an angle by more
+/// than this, rad ...
+pub const RELINEARISE_RAD: f64 = 1e-3;
+/// ... at most this many times in all.
+pub const MAX_ITERATIONS: usize = 5;
 
 /// The refiner's corrections are scaled by `σ / (σ + REFINER_GATE_NOISE)`, σ the mean learned
 /// hand-marker noise (m): ~1 on noisy markers, → 0 on clean ones, which the filter already
@@ -517,7 +528,7 @@ impl Tracker {
         let hand_complete = hand.iter().all(|v| !v.is_nan());
 
         let Some(forearm) = self.forearm else {
-            self.learn_noise(&hand);
+            self.learn_noise(&hand, index);
             return Ok(None);
         };
         let (mut x, mut p) = match self.state {
@@ -532,7 +543,7 @@ impl Tracker {
                     None
                 };
                 let Some(x) = start else {
-                    self.learn_noise(&hand);
+                    self.learn_noise(&hand, index);
                     return Ok(None);
                 };
                 (x, self.initial_covariance())
@@ -547,18 +558,24 @@ impl Tracker {
             flags |= status::REJECTED_MARKER;
         }
         let used = hand_markers_present(&hand);
+        let raw: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i]);
         self.gated_streak = if present != 0 && used == 0 { self.gated_streak + 1 } else { 0 };
-        if self.gated_streak >= lost && forearm_measured && present == 0b111 {
-            let raw: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i]);
-            if let Some(restart) = self.frame_solution(&forearm, frame, index) {
-                (x, p) = (restart, self.initial_covariance());
-                hand = raw;
-                self.gated_streak = 0;
-                self.restarts += 1;
-                flags |= status::RESTARTED;
-                if let Some(r) = self.refiner.as_mut() {
-                    r.reset();
-                }
+        // Every hand marker present and fitting the hand's shape, yet gated: the markers agree
+        // with one another, not with the filter — the filter is what is wrong (a fast move it
+        // could not follow, a gap it coasted through), so restart now rather than after `lost`.
+        let lost_hand = self.gated_streak >= lost || (gated != 0 && self.hand_fits(&raw, index));
+        if lost_hand
+            && forearm_measured
+            && present == 0b111
+            && let Some(restart) = self.frame_solution(&forearm, frame, index)
+        {
+            (x, p) = (restart, self.initial_covariance());
+            hand = raw;
+            self.gated_streak = 0;
+            self.restarts += 1;
+            flags |= status::RESTARTED;
+            if let Some(r) = self.refiner.as_mut() {
+                r.reset();
             }
         }
         self.coast_streak = if hand_markers_present(&hand) == 0 { self.coast_streak + 1 } else { 0 };
@@ -575,10 +592,11 @@ impl Tracker {
         if missing != 0 {
             flags |= status::FILLED;
         }
-        self.learn_noise(&hand);
+        self.learn_noise(&hand, index);
         self.correct(&forearm, &hand, &mut x, &mut p);
         // One turn is one posture: keep each angle in (−π, π] so that a restart or a long
-        // gap can never leave the estimate a whole turn off.
+        // gap can never leave the estimate a whole turn off; and e_f within ±90°.
+        principal_branch(&mut x, &mut p);
         for c in 0..N_COORDINATES {
             x[c] = wrap_angle(x[c]);
         }
@@ -639,6 +657,14 @@ impl Tracker {
         let mut x = StateVector::zeros();
         x.fixed_rows_mut::<3>(0).copy_from(&Vector3::from(q0));
         Some(x)
+    }
+
+    /// Whether the three markers of `hand` sit where the hand's shape puts them, each within
+    /// [`FIT_TOLERANCE_M`] of the rigid fit of the shape to them (none of them an outlier).
+    fn hand_fits(&self, hand: &[f64; N_HAND], index: usize) -> bool {
+        self.fit_residual(hand, index).is_some_and(|r| {
+            r.chunks_exact(3).all(|m| m.iter().map(|v| v * v).sum::<f64>() <= FIT_TOLERANCE_M * FIT_TOLERANCE_M)
+        })
     }
 
     /// Checks a segment's present markers against the distances between them learned so far
@@ -723,7 +749,9 @@ impl Tracker {
     /// Hand markers (bits 0–2) whose innovation at the prediction is implausible: beyond
     /// [`GATE_CHI2`] of its predicted covariance and longer than [`GATE_FLOOR_M`].
     fn gate(&self, forearm: &Isometry3<f64>, hand: &[f64; N_HAND], x: &StateVector, p: &StateMatrix) -> u8 {
-        let Some((predicted, jac)) = self.hand_prediction(forearm, x, hand) else { return 0 };
+        let Some((predicted, jac)) = self.hand_prediction(forearm, &x.fixed_rows::<3>(0).into_owned(), hand) else {
+            return 0;
+        };
         let p_q = p.fixed_view::<3, 3>(0, 0).into_owned();
         let mut gated = 0u8;
         for m in 0..3 {
@@ -755,7 +783,7 @@ impl Tracker {
     fn hand_prediction(
         &self,
         forearm: &Isometry3<f64>,
-        x: &StateVector,
+        q: &Vector3<f64>,
         hand: &[f64; N_HAND],
     ) -> Option<HandPrediction> {
         // World axes of the three joints at the prediction: a point p of the hand moves by
@@ -766,7 +794,7 @@ impl Tracker {
         for (i, axis) in axes.iter_mut().enumerate() {
             let local = Vector3::from(COORDINATES[i].axis);
             *axis = rotation * local;
-            rotation *= nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(local), x[i]);
+            rotation *= nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(local), q[i]);
         }
         let offset = |m: usize| Vector3::from(self.body.marker_offsets[3 + m]);
         let (centre, reference) = if self.relative_hand() {
@@ -833,53 +861,95 @@ impl Tracker {
     }
 
     /// Update each coordinate's noise variance from its newest third difference (skipped where
-    /// a marker was missing in any of the four frames).
-    fn learn_noise(&mut self, hand: &[f64; N_HAND]) {
+    /// a marker was missing in any of the four frames). With [`TrackerSettings::relative_hand`],
+    /// the third difference of its distance from the rigid fit of the hand's shape (skipped
+    /// unless all three hand markers were there): at a low frame rate a fast hand's third
+    /// differences are its motion, not noise, and a skin marker's slow slide is not noise the
+    /// filter can average either; the fit's residual removes the first, the difference the second.
+    fn learn_noise(&mut self, hand: &[f64; N_HAND], index: usize) {
+        let now = if self.relative_hand() {
+            self.fit_residual(hand, index).map_or([f64::NAN; N_HAND], |r| r.map(|v| v * FIT_RESIDUAL_GAIN.sqrt()))
+        } else {
+            *hand
+        };
         if self.history_len == 3 {
-            let forget = 1.0 / (self.settings.noise_memory_s * self.settings.rate_hz);
-            for (i, &now) in hand.iter().enumerate() {
+            for (i, &now) in now.iter().enumerate() {
                 let [a, b, c] = [self.history[0][i], self.history[1][i], self.history[2][i]];
                 let d3 = now - 3.0 * a + 3.0 * b - c;
                 if d3.is_finite() {
-                    let sample = (d3 * d3 / THIRD_DIFFERENCE_GAIN)
-                        .min(NOISE_CLIP * self.noise_variance[i].max(self.data_variance[i]));
-                    let w = (1.0 / (self.noise_samples[i] + PRIOR_FRAMES)).max(forget);
-                    self.noise_variance[i] += w * (sample - self.noise_variance[i]);
-                    let w = (1.0 / (self.noise_samples[i] + 1.0)).max(forget);
-                    self.data_variance[i] += w * (sample - self.data_variance[i]);
-                    self.noise_samples[i] += 1.0;
+                    self.add_noise_sample(i, d3 * d3 / THIRD_DIFFERENCE_GAIN);
                 }
             }
         }
-        self.history = [*hand, self.history[0], self.history[1]];
+        self.history = [now, self.history[0], self.history[1]];
         self.history_len = (self.history_len + 1).min(3);
     }
 
-    /// The Kalman correction by the present hand marker coordinates, one scalar at a time (the
-    /// noise is independent between coordinates), linearised at the prediction.
-    fn correct(&self, forearm: &Isometry3<f64>, hand: &[f64; N_HAND], x: &mut StateVector, p: &mut StateMatrix) {
-        let prior_q = Vector3::new(x[0], x[1], x[2]);
-        let Some((predicted, jac)) = self.hand_prediction(forearm, x, hand) else { return };
-        for m in 0..3 {
-            for k in 0..3 {
-                let z = hand[3 * m + k];
-                if z.is_nan() {
-                    continue;
-                }
-                // h_row · (x − prior) accounts for the corrections already made this frame.
-                let h = [jac[m][0][k], jac[m][1][k], jac[m][2][k]];
-                let moved: f64 = (0..3).map(|i| h[i] * (x[i] - prior_q[i])).sum();
-                let innovation = z - predicted[m][k] - moved;
-                // ph = P hᵀ (h touches only the angles).
-                let ph: StateVector = p.column(0) * h[0] + p.column(1) * h[1] + p.column(2) * h[2];
-                let s = h[0] * ph[0] + h[1] * ph[1] + h[2] * ph[2] + self.noise_variance[3 * m + k];
-                let gain = ph / s;
-                *x += gain * innovation;
-                *p -= gain * ph.transpose();
-            }
+    fn add_noise_sample(&mut self, i: usize, sample: f64) {
+        let forget = 1.0 / (self.settings.noise_memory_s * self.settings.rate_hz);
+        let sample = sample.min(NOISE_CLIP * self.noise_variance[i].max(self.data_variance[i]));
+        let w = (1.0 / (self.noise_samples[i] + PRIOR_FRAMES)).max(forget);
+        self.noise_variance[i] += w * (sample - self.noise_variance[i]);
+        let w = (1.0 / (self.noise_samples[i] + 1.0)).max(forget);
+        self.data_variance[i] += w * (sample - self.data_variance[i]);
+        self.noise_samples[i] += 1.0;
+    }
+
+    /// Each hand marker coordinate of `hand` minus the rigid fit of the hand's shape (as placed
+    /// in the body model) to the three, m; `None` unless all three are present and the shape
+    /// is the subject's (after a calibration's template is taken).
+    fn fit_residual(&self, hand: &[f64; N_HAND], index: usize) -> Option<[f64; N_HAND]> {
+        if hand.iter().any(|v| v.is_nan()) || (self.calibration.is_some() && !self.templated[Segment::Hand as usize]) {
+            return None;
         }
-        // Keep P symmetric against rounding.
-        *p = (*p + p.transpose()) * 0.5;
+        let mut frame = [0.0; MARKER_FRAME_LEN];
+        frame[HAND_START..].copy_from_slice(hand);
+        let pose = reference::fit_segment(&self.body, &frame, Segment::Hand, index).ok()?;
+        let fitted: [Vector3<f64>; 3] = std::array::from_fn(|m| {
+            pose.transform_vector(&Vector3::from(self.body.marker_offsets[3 + m])) + pose.translation.vector
+        });
+        Some(std::array::from_fn(|i| hand[i] - fitted[i / 3][i % 3]))
+    }
+
+    /// The Kalman correction by the present hand marker coordinates, one scalar at a time (the
+    /// noise is independent between coordinates), linearised at the prediction and then, while
+    /// the correction moves an angle by more than [`RELINEARISE_RAD`], again at the corrected
+    /// state (an iterated EKF, at most [`MAX_ITERATIONS`] times): a large correction — a fast
+    /// move at a low frame rate, or near gimbal lock — is not overshot.
+    fn correct(&self, forearm: &Isometry3<f64>, hand: &[f64; N_HAND], x: &mut StateVector, p: &mut StateMatrix) {
+        let (prior, prior_p) = (*x, *p);
+        let mut at = Vector3::new(x[0], x[1], x[2]);
+        for _ in 0..MAX_ITERATIONS {
+            let Some((predicted, jac)) = self.hand_prediction(forearm, &at, hand) else { return };
+            let (mut xi, mut pi) = (prior, prior_p);
+            for m in 0..3 {
+                for k in 0..3 {
+                    let z = hand[3 * m + k];
+                    if z.is_nan() {
+                        continue;
+                    }
+                    // h_row · (x − at) accounts for the corrections already made, and for the
+                    // linearisation point's distance from the prediction.
+                    let h = [jac[m][0][k], jac[m][1][k], jac[m][2][k]];
+                    let moved: f64 = (0..3).map(|i| h[i] * (xi[i] - at[i])).sum();
+                    let innovation = z - predicted[m][k] - moved;
+                    // ph = P hᵀ (h touches only the angles).
+                    let ph: StateVector = pi.column(0) * h[0] + pi.column(1) * h[1] + pi.column(2) * h[2];
+                    let s = h[0] * ph[0] + h[1] * ph[1] + h[2] * ph[2] + self.noise_variance[3 * m + k];
+                    let gain = ph / s;
+                    xi += gain * innovation;
+                    pi -= gain * ph.transpose();
+                }
+            }
+            // Keep P symmetric against rounding.
+            *p = (pi + pi.transpose()) * 0.5;
+            *x = xi;
+            let step = (0..3).map(|i| (xi[i] - at[i]).abs()).fold(0.0, f64::max);
+            if step.is_nan() || step <= RELINEARISE_RAD {
+                return;
+            }
+            at = Vector3::new(xi[0], xi[1], xi[2]);
+        }
     }
 }
 
@@ -898,6 +968,30 @@ fn reject_hand_markers(hand: &mut [f64; N_HAND], bits: u8) {
 /// Bits 0–2: hand markers with all three coordinates present.
 fn hand_markers_present(hand: &[f64; N_HAND]) -> u8 {
     (0..3).filter(|&m| hand[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())).fold(0, |b, m| b | 1 << m)
+}
+
+/// Moves a state whose e_f is beyond ±90° (past gimbal lock) to the other Euler triple of the
+/// same rotation, `(s_p + π, ±π − e_f, ad_ab + π)`, the one [`body::wrist_angles`] gives and
+/// the one a restart starts from: e_f's velocity and acceleration change sign, the others'
+/// do not (and so the covariance's e_f rows and columns).
+fn principal_branch(x: &mut StateVector, p: &mut StateMatrix) {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    let b = wrap_angle(x[1]);
+    if b.abs() <= FRAC_PI_2 {
+        return;
+    }
+    x[0] += PI;
+    x[1] = PI.copysign(b) - b;
+    x[2] += PI;
+    for i in [4, 7] {
+        x[i] = -x[i];
+    }
+    for i in [1, 4, 7] {
+        let mut row = p.row_mut(i);
+        row *= -1.0;
+        let mut col = p.column_mut(i);
+        col *= -1.0;
+    }
 }
 
 /// `a` (rad) moved by whole turns into (−π, π].

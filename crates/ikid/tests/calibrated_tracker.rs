@@ -3,6 +3,7 @@
 //! one it cannot (which is why a lab needs the calibration).
 
 use ikid::body::{BodyModel, MARKER_FRAME_LEN};
+use ikid::body::{wrist_angles, wrist_rotation};
 use ikid::calibration::{Calibration, Side};
 use ikid::{Tracker, TrackerSettings};
 use nalgebra::{Rotation3, Vector3};
@@ -85,4 +86,82 @@ fn a_calibrated_tracker_follows_a_subject_the_body_model_does_not_fit() {
     let mut plain =
         Tracker::new(BodyModel::default(), TrackerSettings { rate_hz: rate, ..Default::default() }).unwrap();
     assert!(worst_deg(&mut plain, &frames, &q, 50) > 10.0);
+}
+
+/// Wheelchair-racing-like pushes at 70 Hz (issue #19): extension to ~−80° and back to +25°
+/// flexion every 0.6 s (up to ~13 rad/s), pronation and deviation swinging along, and a tilt
+/// about the forearm's anterior axis that carries the hand past gimbal lock's side, so that near
+/// full extension s_p and ad_ab swing by tens of degrees a frame (as the recording's do).
+fn racing(rate: f64, n: usize) -> Vec<[f64; 3]> {
+    use std::f64::consts::TAU;
+    (0..n)
+        .map(|i| {
+            let phase = TAU * i as f64 / rate / 0.6;
+            // A push: fast into extension, slower back (the phase runs unevenly).
+            let p = phase - 0.8 * phase.sin();
+            let q = [
+                (35.0 * (p + 1.0).sin() + 10.0).to_radians(),
+                (-30.0 + 55.0 * p.cos()).to_radians(),
+                (12.0 * (2.0 * p).sin() - 5.0).to_radians(),
+            ];
+            let tilt = Rotation3::from_axis_angle(&Vector3::x_axis(), (12.0 * (p + 0.5).sin()).to_radians());
+            wrist_angles(&(tilt * wrist_rotation(&q)))
+        })
+        .collect()
+}
+
+/// Geodesic angle between the rotations of two wrist-angle triples, degrees.
+fn geodesic_deg(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    (wrist_rotation(a).inverse() * wrist_rotation(b)).angle().to_degrees()
+}
+
+#[test]
+fn a_calibrated_tracker_follows_fast_pushes_at_70_hz_through_gimbal_lock_region() {
+    let body = subject();
+    let rate = 70.0;
+    let q = racing(rate, 700);
+    let mut frames = body.marker_frames(&q.concat(), 0.4).unwrap();
+    let mut rng = ikid::rng::SplitMix::new(19);
+    for v in frames.iter_mut() {
+        *v += 2e-4 * rng.normal();
+    }
+    // MC2 missing for a frame at every full extension (e_f below −75°).
+    let mut gaps = 0;
+    for (i, qi) in q.iter().enumerate() {
+        if qi[1] < (-75f64).to_radians() && i % 2 == 0 {
+            frames[i * MARKER_FRAME_LEN + 9..i * MARKER_FRAME_LEN + 12].fill(f64::NAN);
+            gaps += 1;
+        }
+    }
+    assert!(gaps > 10, "{gaps}");
+    let neutral = body.marker_frames(&[0.0; 3].repeat(10), 0.4).unwrap();
+    let neutral32: Vec<f32> = neutral.iter().map(|&v| v as f32).collect();
+    let (calibration, _) = Calibration::from_neutral(&neutral32, None, Side::Right).unwrap();
+    for jerk_noise in [ikid::tracker::DEFAULT_JERK_NOISE, 1e5, 1e7] {
+        let settings = TrackerSettings { rate_hz: rate, jerk_noise, ..Default::default() };
+        let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
+        tracker.set_calibration(Some(calibration));
+        let (mut worst_ok, mut worst, mut se, mut n) = (0.0f64, 0.0f64, 0.0, 0);
+        tracker
+            .run(&frames, |i, out, estimated| {
+                if !estimated || i < 35 {
+                    return;
+                }
+                let e = geodesic_deg(&out.state.q, &q[i]);
+                worst = worst.max(e);
+                if q[i][1].abs() <= 60f64.to_radians() {
+                    worst_ok = worst_ok.max(e);
+                    se += e * e;
+                    n += 1;
+                }
+            })
+            .unwrap();
+        let rms = (se / f64::from(n)).sqrt();
+        eprintln!(
+            "jerk {jerk_noise}: rms {rms:.2}° worst {worst_ok:.2}° (all frames {worst:.1}°), {} restarts",
+            tracker.restarts()
+        );
+        assert!(rms < 3.0 && worst_ok < 10.0, "jerk {jerk_noise}: {rms}° RMS, {worst_ok}° worst where |e_f| ≤ 60°");
+        assert!(worst < 30.0, "jerk {jerk_noise}: {worst}° off near gimbal lock");
+    }
 }
