@@ -85,7 +85,7 @@ fmt-check:
 clippy:
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 
-PY_SOURCES := python tests benches examples
+PY_SOURCES := python tests benches examples tools
 ruff: wheel
 	$(VENV)/bin/ruff check $(PY_SOURCES)
 	$(VENV)/bin/ruff format --check $(PY_SOURCES)

@@ -677,7 +677,7 @@ def test_every_numeric_option_is_checked_and_named(argv, option, capsys):
         (["simulate", "--rate", "0", "-o", "x"], "--rate"),
         (["bench", "--frames", "0"], "--frames"),
         (["bench", "--frames", "10"], "--frames 10"),
-        (["demo", "--seconds", "0"], "duration is 0 s"),
+        (["demo", "--seconds", "0"], "argument --seconds: 0"),
     ],
 )
 def test_the_issues_tracebacks_are_messages_now(argv, says, tmp_path):

@@ -83,9 +83,12 @@ def test_racing_ik_calibrated_from_the_recording_gives_outputs(results):
     assert ik is not None and ik.finite and ik.coverage >= 0.98, results["racing"]["ik_how"]
 
 
-def test_uncalibrated_ik_is_far_off_which_is_what_the_calibration_is_for(results):
+def test_uncalibrated_ik_is_refused_with_what_to_do_instead(results):
+    # Read with the body model's placement these markers give angles 68-128° off; the
+    # placement check refuses them instead of writing those numbers.
     for name, r in results.items():
-        assert r["ik_raw"].rms_valid > 30.0, (name, r["ik_raw"].rms_valid)
+        assert r["ik_raw"] is None, (name, r["ik_raw"].rms_valid)
+        assert "calibrate the subject" in r["ik_raw_how"] and "--calibration" in r["ik_raw_how"], name
 
 
 def test_the_racing_static_trial_with_a_glove_marker_missing_calibrates_from_frames_that_have_it(

@@ -28,7 +28,12 @@ def main(argv: list[str] | None = None) -> int:
         if not isinstance(mutant, dict) or "Mutant" not in mutant:
             continue  # the unmutated baseline
         m = mutant["Mutant"]
-        kind = {"CaughtMutant": "caught", "Timeout": "caught", "MissedMutant": "missed", "Unviable": "unviable"}.get(outcome["summary"])
+        kind = {
+            "CaughtMutant": "caught",
+            "Timeout": "caught",
+            "MissedMutant": "missed",
+            "Unviable": "unviable",
+        }.get(outcome["summary"])
         if kind is None:
             print(f"mutants: unexpected outcome {outcome['summary']!r} for {m['name']}", file=sys.stderr)
             return 1

@@ -289,7 +289,8 @@ def process(rec: Recording, folder: Path, work: Path, log: list[str]) -> dict:
 
     result["geometry"] = geometry_check(trial, mapping, cal, ref) if calibrated else None
     result["ik"], result["ik_how"] = ik(cal if calibrated else None, "ik")
-    result["ik_raw"], _ = ik(None, "ik_uncalibrated")
+    # Uncalibrated: the body model's placement cannot read these markers; ik says so and refuses.
+    result["ik_raw"], result["ik_raw_how"] = ik(None, "ik_uncalibrated")
 
     help_text = run(["track", "--help"], [])
     track_has_calibration = "--calibration" in help_text.stdout
@@ -300,10 +301,7 @@ def process(rec: Recording, folder: Path, work: Path, log: list[str]) -> dict:
         base += ["--calibration", str(cal)]
         tracked_with = "calibrated"
     done = run(base, log)
-    refiner = "wrist-track"
-    if done.returncode != 0 and "refine" in done.stderr:
-        done = run(base + ["--refiner", "none"], log)
-        refiner = "none (the refiner refuses this rate)"
+    refiner = "none (auto: the refiner is for 1000 Hz)" if "not refined" in done.stdout else "wrist-track"
     result["track_how"] = f"{tracked_with}, refiner {refiner}"
     if done.returncode == 0:
         t, q = read_mot(stem.with_suffix(".mot"))
@@ -420,7 +418,8 @@ def write_report(results: list[dict], log: list[str], path: Path, seconds: float
             f"| {r['rec'].name} | {n} | {fmt(ik.rms_valid if ik else np.nan)} | "
             f"{fmt(ik.rms_gimbal if ik else np.nan)} | "
             f"{fmt(ik.p95_gimbal if ik else np.nan)} / {fmt(ik.max_valid if ik else np.nan)} | "
-            f"{100 * ik.coverage if ik else 0:.1f} % | {fmt(raw.rms_valid if raw else np.nan)} | "
+            f"{100 * ik.coverage if ik else 0:.1f} % | "
+            f"{fmt(raw.rms_valid) if raw else 'refused'} | "
             f"{fmt(tr.rms_valid if tr else np.nan)} | {fmt(tr.rms_gimbal if tr else np.nan)} | "
             f"{fmt(tr.max_valid if tr else np.nan)} | "
             f"{fmt(r['geometry'].rms_valid if r['geometry'] else np.nan)} | "

@@ -17,12 +17,14 @@ resolution and re-exports. ``import ikid`` never imports torch.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 from ikid._native import (
     COORDINATES,
     DEFAULT_JERK_NOISE,
     FEATURE_SETS,
+    FRAME_STATUS,
     MARKERS,
     REFINER_GATE_NOISE,
     REFINER_OUTPUTS,
@@ -39,6 +41,8 @@ from ikid._native import (
     Tracker,
     __version__,
     body_model,
+    check_default_placement,
+    check_marker_units,
     compute_features,
     feature_set_info,
     fill_gaps,
@@ -55,6 +59,7 @@ __all__ = [
     "COORDINATES",
     "DEFAULT_JERK_NOISE",
     "FEATURE_SETS",
+    "FRAME_STATUS",
     "MARKERS",
     "REFINER_GATE_NOISE",
     "REFINER_OUTPUTS",
@@ -76,6 +81,8 @@ __all__ = [
     "compute_features",
     "coordinate_names",
     "feature_set_info",
+    "check_default_placement",
+    "check_marker_units",
     "fill_gaps",
     "forward_markers",
     "is_model_name",
@@ -128,7 +135,15 @@ def load(name_or_path: str | os.PathLike[str]) -> Model:
     path = Path(name_or_path)
     if not os.path.lexists(path):
         raise NotFoundError(f"no model file {str(name_or_path)!r}: {path} does not exist")
-    return Model.load(path)
+    model = Model.load(path)
+    if not model.has_checksum:
+        warnings.warn(
+            f"{path}: written before model files carried a checksum of their weights, so a "
+            "corrupted file cannot be told from a good one; re-save it "
+            "(python -m ikid.training.export --restamp FILE) to add one",
+            stacklevel=2,
+        )
+    return model
 
 
 def is_model_name(name_or_path: str | os.PathLike[str]) -> bool:

@@ -205,8 +205,11 @@ class Tracker:
     def settings(self) -> dict[str, float]: ...
 
 def check_marker_units(frames: _Floats) -> None: ...
+def check_default_placement(frames: _Floats, length_scale: float = 1.0) -> None: ...
 
 MARKER_SPAN_M: tuple[float, float]
+LENGTH_SCALE_RANGE: tuple[float, float]
+MASS_SCALE_RANGE: tuple[float, float]
 
 def body_model(
     length_scale: float = 1.0,

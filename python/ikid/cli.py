@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 import ikid
+from ikid import _native
 from ikid.io._atomic import atomic_outputs, write_text_atomic
 from ikid.sim import Trial, simulate
 
@@ -91,8 +92,16 @@ POSITIVE = _number(gt=0)
 POSITIVE_INT = _number(int, ge=1)
 COUNT = _number(int, ge=0)
 FINITE = _number()
-SUBJECT_LENGTH = _number(gt=0, name="length_scale (the subject's segment lengths / the default's)")
-SUBJECT_MASS = _number(gt=0, name="mass_scale (the subject's segment masses / the default's)")
+SUBJECT_LENGTH = _number(
+    ge=_native.LENGTH_SCALE_RANGE[0],
+    le=_native.LENGTH_SCALE_RANGE[1],
+    name="length_scale (the subject's segment lengths / the default's)",
+)
+SUBJECT_MASS = _number(
+    ge=_native.MASS_SCALE_RANGE[0],
+    le=_native.MASS_SCALE_RANGE[1],
+    name="mass_scale (the subject's segment masses / the default's)",
+)
 SHOULDER_DEG = _number(ge=-180, le=180, unit=" degrees")
 SEED = _number(int, ge=0, lt=2**32)
 SIM_RATE = _number(gt=0, le=100_000, unit=" Hz")
@@ -114,6 +123,11 @@ def _widths(text: str) -> str:
 NOISE_KINDS = ("uniform", "gaussian", "drift", "occlusion")
 
 
+#: Largest value of each noise kind: all of a marker's range (uniform, a fraction), 10 cm
+#: (gaussian, drift), 100 occlusion bursts per second (one every 10 ms).
+NOISE_MAX = {"uniform": 1.0, "gaussian": 0.1, "drift": 0.1, "occlusion": 100.0}
+
+
 def _noise_spec(spec: str) -> str:
     """``--noise``: checked here (argparse type), parsed by :func:`_noise`."""
     kind, _, value = spec.partition(":")
@@ -125,6 +139,8 @@ def _noise_spec(spec: str) -> str:
         raise argparse.ArgumentTypeError(f"{spec!r}: expected KIND:NUMBER, e.g. uniform:0.01") from None
     if not (math.isfinite(v) and v >= 0):
         raise argparse.ArgumentTypeError(f"{spec!r}: the value must be a finite number >= 0")
+    if v > NOISE_MAX[kind]:
+        raise argparse.ArgumentTypeError(f"{spec!r}: {kind} noise is at most {NOISE_MAX[kind]:g}")
     return spec
 
 
@@ -305,6 +321,33 @@ def _inputs(paths: list[str]) -> list[Path]:
     return found
 
 
+def _naming(path: str, error: BaseException) -> str:
+    """The error's message, starting with the input file it concerns (a read or write error
+    names its own file already)."""
+    message = str(error)
+    if path in message or isinstance(error, OSError):
+        return message
+    return f"{path}: {message}"
+
+
+def _subject_calibration(frames: np.ndarray, calibration: str | None, mapping, source: str):
+    """The calibration a run of ``frames`` (read with ``mapping``) uses: the file given,
+    checked against the marker map it was measured with; or, without one, the body model's
+    placement, after checking that it can read these markers at all (units, then placement:
+    an uncalibrated real recording reads 50-170° off). Errors name ``source``."""
+    from ikid.calibration import check_calibration_map
+
+    try:
+        ikid.check_marker_units(frames)
+        if calibration:
+            check_calibration_map(calibration, mapping)
+            return ikid.load_calibration(calibration)
+        ikid.check_default_placement(frames)
+    except ikid.IkidError as e:
+        raise type(e)(_naming(source, e)) from None
+    return None
+
+
 def _process_one(job: tuple[str, dict]) -> dict:
     """One marker file -> .mot (and .sto): read, map, check the rate, run, write. In a worker.
     The outputs of one file replace the old ones together, or none does."""
@@ -318,7 +361,7 @@ def _process_one(job: tuple[str, dict]) -> dict:
         data = read_markers(path)
         mapping = MarkerMap.load(opt["map"]) if opt["map"] else None
         frames = data.frames(mapping)
-        calibration = ikid.load_calibration(opt["calibration"]) if opt["calibration"] else None
+        calibration = _subject_calibration(frames, opt["calibration"], mapping, path)
         runs = {}
         for kind, name in (("angles", opt["ik_model"]), ("torques", opt.get("torque_model"))):
             if name:
@@ -338,11 +381,14 @@ def _process_one(job: tuple[str, dict]) -> dict:
                 raise ikid.InputError(f"{path}: no frame gave {kind}: {r.summary()}")
         with atomic_outputs() as written:
             if "angles" in runs:
-                write_mot(opt["outputs"][0], runs["angles"].time, runs["angles"].values)
+                r = runs["angles"]
+                write_mot(opt["outputs"][0], r.time, r.values, status=r.status)
             if "torques" in runs:
-                write_sto(opt["outputs"][1], runs["torques"].time, runs["torques"].values)
+                r = runs["torques"]
+                write_sto(opt["outputs"][1], r.time, r.values, status=r.status)
         first = next(iter(runs.values()))
         row.update(
+            clean=all(r.clean for r in runs.values()),
             ok=True,
             frames=len(data),
             rate_hz=data.rate_hz,
@@ -350,7 +396,7 @@ def _process_one(job: tuple[str, dict]) -> dict:
             written=list(map(str, written)),
         )
     except (ikid.IkidError, OSError) as e:
-        row.update(ok=False, error=str(e))
+        row.update(ok=False, error=_naming(path, e))
     except Exception as e:  # a bug: named with its traceback, and the batch goes on
         row.update(
             ok=False, error=f"{path}: unexpected {type(e).__name__} (a bug in ikid: please report it): {e}"
@@ -425,41 +471,81 @@ def cmd_process(args: argparse.Namespace) -> int:
         )
         for r in failed:
             print(f"  {r['file']}: {_cause(r['file'], r['error'])}")
-    return 2 if failed else 0
+    if failed:
+        return 2
+    unclean = [r["file"] for r in rows if not r["clean"]]
+    if args.strict and unclean:
+        print(
+            f"ikid: --strict: {len(unclean)} file(s) with refused, implausible or flagged frames: "
+            + ", ".join(unclean),
+            file=sys.stderr,
+        )
+        return 3
+    return 0
 
 
 def cmd_track(args: argparse.Namespace) -> int:
     """Markers -> angles (.mot) and torques (.sto) with ``ikid.Tracker``: the causal Kalman
-    tracker over the body model, for one subject (no network)."""
+    tracker over the body model, for one subject (no network), at the recording's own rate.
+    Every row carries its status bits; a row no wrist can give is not written but counted."""
     from ikid.io import MarkerMap, read_markers, write_mot, write_sto
 
-    refiner = (
-        None
-        if args.refiner in ("", "none")
-        else _model_for(args.refiner, "ikid track --refiner", ("refine",))
-    )
     data = read_markers(args.input)
-    frames = data.frames(MarkerMap.load(args.map) if args.map else None)
-    tracker = ikid.Tracker(
-        length_scale=args.length_scale,
-        mass_scale=args.mass_scale,
-        rate_hz=data.rate_hz,
-        jerk_noise=args.jerk_noise,
-        refiner=refiner,
-    )
-    out = tracker.run(frames)
+    refiner = None
+    if args.refiner == "auto":
+        shipped = ikid.load("wrist-track")
+        refiner = (
+            shipped if abs(shipped.frame_rate_hz - data.rate_hz) <= 1e-3 * shipped.frame_rate_hz else None
+        )
+    elif args.refiner not in ("", "none"):
+        refiner = _model_for(args.refiner, "ikid track --refiner", ("refine",))
+    mapping = MarkerMap.load(args.map) if args.map else None
+    frames = data.frames(mapping)
+    calibration = _subject_calibration(frames, args.calibration, mapping, args.input)
+    try:
+        tracker = ikid.Tracker(
+            length_scale=args.length_scale,
+            mass_scale=args.mass_scale,
+            rate_hz=data.rate_hz,
+            jerk_noise=args.jerk_noise,
+            refiner=refiner,
+            calibration=calibration,
+        )
+        out = tracker.run(frames)
+    except ikid.IkidError as e:
+        raise type(e)(_naming(args.input, e)) from None
     k = out["start"]
+    status = out["status"]
+    bits = ikid.FRAME_STATUS
+    keep = np.arange(len(frames)) >= k
+    implausible = keep & (status & bits["implausible"] != 0)
+    keep &= ~implausible  # nothing no wrist can do is written as a number
     stem = _stem(args.output, Path(args.input).stem)
     with atomic_outputs():  # the pair replaces the old pair, or neither is replaced
-        mot = write_mot(_named(stem, ".mot"), data.time[k:], out["q"][k:])
-        sto = write_sto(_named(stem, ".sto"), data.time[k:], out["tau"][k:])
-    gaps = int(np.count_nonzero(out["missing"][k:]))
+        mot = write_mot(_named(stem, ".mot"), data.time[keep], out["q"][keep], status=status[keep])
+        sto = write_sto(_named(stem, ".sto"), data.time[keep], out["tau"][keep], status=status[keep])
+    counts = {name: int(np.count_nonzero(status[keep] & bit)) for name, bit in bits.items()}
     noise_mm = ", ".join(f"{v * 1e3:.2f}" for v in tracker.marker_noise)
     how = f"refined by {refiner.name}" if refiner else "not refined"
+    placed = "uncalibrated"
+    if calibration is not None:
+        from ikid.calibration import calibration_info
+
+        placed = f"calibrated ({calibration_info(args.calibration)['method']}, {calibration.side} arm)"
+    notes = [f"{n} {name.replace('_', ' ')}" for name, n in counts.items() if n]
+    if implausible.any():
+        notes.append(f"{int(implausible.sum())} implausible (not written)")
+    if tracker.restarts:
+        notes.append(f"{tracker.restarts} restarts after losing the hand")
     print(
-        f"{args.input}: {len(frames) - k} frames tracked from frame {k} at {data.rate_hz:g} Hz, "
-        f"{how} ({gaps} with a marker missing); hand marker noise learned (mm): {noise_mm} -> {mot}, {sto}"
+        f"{args.input}: {int(keep.sum())}/{len(frames)} frames tracked from frame {k} "
+        f"at {data.rate_hz:g} Hz, "
+        f"{placed}, {how}; flagged: {', '.join(notes) or 'none'}; hand marker noise learned (mm): {noise_mm} "
+        f"-> {mot}, {sto}"
     )
+    if args.strict and (k > 0 or status[k:].any()):
+        print(f"ikid: --strict: {args.input} has frames without an estimate or flagged", file=sys.stderr)
+        return 3
     return 0
 
 
@@ -492,6 +578,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     static = read_markers(args.static)
     chosen = _frame_selection(args.frames, len(static), args.static) if args.frames else None
     neutral = static.frames(mapping)
+    try:
+        ikid.check_marker_units(neutral)
+    except ikid.IkidError as e:
+        raise type(e)(_naming(args.static, e)) from None
     if chosen is not None:
         neutral = neutral[chosen]
     method = args.method
@@ -609,14 +699,18 @@ def cmd_id(args: argparse.Namespace) -> int:
         )
         if len(run.time) == 0:
             raise ikid.InputError(f"{args.input}: no frame gave torques: {run.summary()}")
-        out_time, tau, summary = run.time, run.values, run.summary()
+        out_time, tau, summary, status = run.time, run.values, run.summary(), run.status
     output = Path(args.output)
     path = write_sto(
         _named(_stem(args.output, Path(args.input).stem), ".sto") if _is_folder(args.output) else output,
         out_time,
         tau,
+        status=None if args.reference else status,
     )
     print(f"{args.input}: {summary} -> {path}")
+    if args.strict and not args.reference and not run.clean:
+        print(f"ikid: --strict: {args.input} has refused, implausible or flagged frames", file=sys.stderr)
+        return 3
     return 0
 
 
@@ -1055,6 +1149,11 @@ def main(argv: list[str] | None = None) -> int:
             "--calibration", metavar="JSON", help="the subject's marker placement (see `ikid calibrate`)"
         )
         p.add_argument("--jobs", type=POSITIVE_INT, default=None, help="parallel files (default: all cores)")
+        p.add_argument(
+            "--strict",
+            action="store_true",
+            help="exit 3 if any frame was refused, or any output flagged (the ikid_status column)",
+        )
 
     p = sub.add_parser(
         "ik",
@@ -1112,15 +1211,27 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument(
         "--refiner",
-        default="wrist-track",
-        help="refinement model, shipped name or file; 'none' for the bare filter",
+        default="auto",
+        help="refinement model, shipped name or file; 'none' for the bare filter; 'auto' (default): "
+        "wrist-track where the recording's rate is its own (1000 Hz), else none (the summary says which)",
     )
     p.add_argument(
         "--jerk-noise",
-        type=POSITIVE,
+        type=_number(gt=0, le=1e12, unit=" rad²/s⁵"),
         default=ikid.DEFAULT_JERK_NOISE,
         help=f"motion model's jerk density, rad²/s⁵ (default {ikid.DEFAULT_JERK_NOISE:g}, "
         "tuned in docs/ekf.md)",
+    )
+    p.add_argument(
+        "--calibration",
+        metavar="JSON",
+        help="the subject's marker placement (see `ikid calibrate`); without it the body model's placement "
+        "is checked against the markers first, and a recording it cannot read is refused",
+    )
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="exit 3 if any frame has no estimate or is flagged (the ikid_status column)",
     )
     p.set_defaults(func=cmd_track)
 
@@ -1213,6 +1324,11 @@ def main(argv: list[str] | None = None) -> int:
         "--shoulder-deg", type=SHOULDER_DEG, default=0.0, help="shoulder flexion, degrees (--reference)"
     )
     p.add_argument("--resample", action="store_true", help="resample the angles to the model's rate")
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="exit 3 if any frame was refused or any torque flagged (the ikid_status column)",
+    )
     p.set_defaults(func=cmd_id)
 
     p = sub.add_parser(
@@ -1331,7 +1447,12 @@ def main(argv: list[str] | None = None) -> int:
 
     p = sub.add_parser("bench", help="latency and throughput of a model on this machine")
     p.add_argument("--model", default="wrist-ik")
-    p.add_argument("--frames", type=POSITIVE_INT, default=20000, help="frames to push (more than the window)")
+    p.add_argument(
+        "--frames",
+        type=_number(int, ge=1, le=36_000_000),
+        default=20000,
+        help="frames to push (more than the window; at most 10 hours at 1 kHz)",
+    )
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser(

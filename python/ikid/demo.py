@@ -23,15 +23,20 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
         prog="ikid demo", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
+    from ikid.cli import SEED, SHOULDER_DEG, _number  # the CLI's checked option types
+
     parser.add_argument(
-        "--seed", type=int, default=424242, help="trial seed (the shipped models trained on seeds 1000-9004)"
+        "--seed", type=SEED, default=424242, help="trial seed (the shipped models trained on seeds 1000-9004)"
     )
-    parser.add_argument("--seconds", type=float, default=20.0)
+    parser.add_argument("--seconds", type=_number(gt=0, le=36000, unit=" s"), default=20.0)
     parser.add_argument(
-        "--shoulder-deg", type=float, default=30.0, help="shoulder flexion (training: 0, 45, -20)"
+        "--shoulder-deg", type=SHOULDER_DEG, default=30.0, help="shoulder flexion (training: 0, 45, -20)"
     )
     parser.add_argument(
-        "--noise", type=float, default=0.01, help="uniform marker noise, fraction of each coordinate's range"
+        "--noise",
+        type=_number(ge=0, le=1),
+        default=0.01,
+        help="uniform marker noise, fraction of each coordinate's range",
     )
     parser.add_argument("--plot", type=Path, default=Path("out/demo/demo.png"))
     args = parser.parse_args(argv)

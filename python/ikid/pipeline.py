@@ -47,11 +47,25 @@ class Run:
     #: The first frame's message for each reason in :attr:`refused` (e.g. why the markers are
     #: implausible), shown in the summary.
     examples: dict[str, str] = field(default_factory=dict)
+    #: Each output row's ``ikid.FRAME_STATUS`` bits (filled, outside the training range).
+    status: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8))
+
+    def flagged(self, bit: str) -> int:
+        """Output rows carrying status bit ``bit`` (an ``ikid.FRAME_STATUS`` name)."""
+        return int(np.count_nonzero(self.status & _native.FRAME_STATUS[bit]))
+
+    @property
+    def clean(self) -> bool:
+        """True if every frame has an output and none is flagged: what ``--strict`` asks."""
+        lost = sum(n for reason, n in self.refused.items() if reason != "window filling")
+        return lost == 0 and not self.status.any()
 
     def summary(self) -> str:
         parts = [f"{len(self.time)}/{self.n_frames} frames with output"]
         if self.filled.any():
             parts.append(f"{int(self.filled.sum())} with a filled marker")
+        if self.flagged("outside_training"):
+            parts.append(f"{self.flagged('outside_training')} outside the model's training range (flagged)")
         for reason, n in self.refused.most_common():
             example = self.examples.get(reason)
             explained = any(w in reason for w in _SELF_EXPLAINED) or not example
@@ -124,7 +138,8 @@ def run_model(
         time, frames = resample(time, frames, model.frame_rate_hz)
         resampled_from, rate_hz = rate_hz, model.frame_rate_hz
     stream = model.stream(missing_markers=missing_markers, calibration=calibration)
-    rows, index, filled = [], [], []
+    rows, index, filled, status = [], [], [], []
+    implausible = _native.FRAME_STATUS["implausible"]
     refused: Counter = Counter()
     examples: dict[str, str] = {}
     bar = _progress(len(frames), source) if progress else None
@@ -141,9 +156,16 @@ def run_model(
         if out is None:
             refused["window filling"] += 1
             continue
+        if stream.status & implausible:
+            # Nothing no wrist can give is written as a number: the frame is counted instead.
+            reason = "implausible outputs (far outside the model's training range), not written"
+            refused[reason] += 1
+            examples.setdefault(reason, f"frame {i}: {np.array2string(np.asarray(out), precision=3)}")
+            continue
         rows.append(out)
         index.append(i)
         filled.append(bool(stream.filled_markers))
+        status.append(stream.status)
     if bar is not None:
         bar.close()
     values = np.array(rows, np.float64).reshape(-1, model.n_outputs)
@@ -159,6 +181,7 @@ def run_model(
         resampled_from,
         stream.gap_restarts,
         examples,
+        np.array(status, np.uint8),
     )
 
 

@@ -580,7 +580,8 @@ def stream_probes(corpus: Corpus) -> list[Api]:
 
 def tracker_probes(corpus: Corpus) -> list[Api]:
     out = []
-    fields = [f[0] for f in Settings._fields_]
+    # The numeric fields (a bool, e.g. relative_hand, has no bad value to give).
+    fields = [f[0] for f in Settings._fields_ if f[1] is C.c_double]
     for field in fields:
         for value in (0.0, -1.0, math.nan, math.inf, 1e308):
 

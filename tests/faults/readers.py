@@ -99,8 +99,9 @@ def through_pipeline(v: Verdict, corpus: Corpus, path: Path, data) -> None:
     if e is not None:
         judge_error(v, e, [str(path)], "run_model: ")
         return
+    # Flagged: any status bit (a filled marker, inputs outside the training range, ...).
     compare_angles(
-        v, clean_run(str(corpus.root)), run.time, run.values, run.filled, "wrist-ik on what was read"
+        v, clean_run(str(corpus.root)), run.time, run.values, run.status != 0, "wrist-ik on what was read"
     )
 
 

@@ -17,6 +17,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(body_model, m)?)?;
     m.add_function(wrap_pyfunction!(check_marker_units, m)?)?;
     m.add("MARKER_SPAN_M", ikid::body::MARKER_SPAN_M)?;
+    m.add("LENGTH_SCALE_RANGE", ikid::body::LENGTH_SCALE_RANGE)?;
+    m.add("MASS_SCALE_RANGE", ikid::body::MASS_SCALE_RANGE)?;
     Ok(())
 }
 

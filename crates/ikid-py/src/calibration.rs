@@ -10,7 +10,20 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyDictMethods};
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<Calibration>()
+    m.add_class::<Calibration>()?;
+    m.add_function(wrap_pyfunction!(check_default_placement, m)?)
+}
+
+/// Refuses (`ArgumentError` saying what to do) a recording `(n, 18)` (metres) that the body
+/// model's own marker placement cannot read: its markers' distances, or the median posture
+/// read that way, are not a wrist's. What every uncalibrated run checks first.
+#[pyfunction]
+#[pyo3(signature = (frames, length_scale = 1.0))]
+fn check_default_placement(frames: &Bound<'_, PyAny>, length_scale: f64) -> PyResult<()> {
+    let body = ikid::body::BodyModel::try_scaled(length_scale, 1.0).py_err()?;
+    with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |v, _| {
+        ikid::calibration::check_default_placement(v, &body).py_err()
+    })
 }
 
 /// The subject's marker placement: each segment's technical frame (from its markers) in its

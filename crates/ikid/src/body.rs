@@ -141,6 +141,13 @@ pub fn first_marker(segment: Segment) -> usize {
     }
 }
 
+/// Subjects' segment lengths relative to the default subject's that [`BodyModel::try_scaled`]
+/// accepts: a small child's to a very tall adult's, with room (a factor outside is a typo).
+pub const LENGTH_SCALE_RANGE: (f64, f64) = (0.3, 3.0);
+/// Subjects' segment masses relative to the default subject's that [`BodyModel::try_scaled`]
+/// accepts (mass grows with the cube of size).
+pub const MASS_SCALE_RANGE: (f64, f64) = (0.02, 30.0);
+
 /// How far apart a forearm's and hand's six markers can be, m: their largest distance is at
 /// least 4 cm (two 3-marker clusters) and at most 0.8 m (an arm's forearm and hand together
 /// are ~0.45 m). Outside it, the numbers are not in the units the file or caller says — the
@@ -301,9 +308,14 @@ impl Default for BodyModel {
 impl BodyModel {
     /// [`scaled`](Self::scaled) with the factors checked (positive and finite).
     pub fn try_scaled(length_factor: f64, mass_factor: f64) -> crate::Result<Self> {
-        for (what, v) in [("length_scale", length_factor), ("mass_scale", mass_factor)] {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err(crate::Error::BadArgument { what, detail: format!("is {v}, expected a positive factor") });
+        for (what, v, (lo, hi)) in
+            [("length_scale", length_factor, LENGTH_SCALE_RANGE), ("mass_scale", mass_factor, MASS_SCALE_RANGE)]
+        {
+            if !(lo..=hi).contains(&v) {
+                return Err(crate::Error::BadArgument {
+                    what,
+                    detail: format!("is {v}, expected a factor from {lo} to {hi} (of the default subject's)"),
+                });
             }
         }
         Ok(Self::scaled(length_factor, mass_factor))

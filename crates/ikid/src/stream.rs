@@ -165,6 +165,7 @@ impl Stream {
     /// error leaves the window and the filler as they were.
     fn prepare(&mut self, frame: &[f32], index: usize) -> Result<()> {
         let set = self.model.feature_set();
+        let reanchors = self.filler.reanchors();
         if set.frame_len() == MARKER_FRAME_LEN && frame.len() == MARKER_FRAME_LEN {
             // Markers no arm could hold (wrong units, a ghost far away) are refused, not fed
             // to a network that would answer them with a confident number.
@@ -203,6 +204,13 @@ impl Stream {
                 None => set.compute(frame, &mut self.incoming, index)?,
             }
             self.filled_mask = 0;
+        }
+        if self.filler.reanchors() != reanchors {
+            // The markers moved further than continuity allows and the filler took this frame
+            // as the new truth: frames were lost. A window spanning the loss would mix frames
+            // the network never saw together, so it restarts here (as after a time gap).
+            self.head = 0;
+            self.filled = 0;
         }
         Ok(())
     }

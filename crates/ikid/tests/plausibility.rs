@@ -114,3 +114,42 @@ fn streams_refuse_and_trackers_reject_markers_no_arm_can_hold() {
         assert_eq!(tracker.push(&scaled_frame(10.0)).unwrap(), None, "a tracker must not start on them");
     }
 }
+
+/// Frames of a moving wrist at 1 kHz (the default subject, f32).
+fn moving(n: usize) -> Vec<f32> {
+    let q: Vec<f64> = (0..n)
+        .flat_map(|i| {
+            let t = i as f64 / 1000.0;
+            [0.9 * (2.1 * t).sin(), -0.7 * (1.7 * t).sin(), 0.3 * (2.9 * t).cos()]
+        })
+        .collect();
+    BodyModel::default().marker_frames(&q, 0.0).unwrap().iter().map(|&v| v as f32).collect()
+}
+
+#[test]
+fn after_lost_frames_a_stream_without_times_restarts_its_window_where_it_reanchors() {
+    // 0.1 s of frames lost (a network stall) with no time stamps to tell: the first frames
+    // after it are refused as jumps until the filler re-anchors; from there the stream must
+    // give exactly what a fresh stream started there gives — no output mixes both sides.
+    let m = random_model(FeatureSet::Markers, 5, &[8], 3, 4);
+    let frames = moving(2000);
+    let kept: Vec<f32> = frames[..900 * 18].iter().chain(&frames[1000 * 18..]).copied().collect();
+    let mut s = m.stream();
+    let mut outputs = Vec::new();
+    for (i, f) in kept.chunks_exact(18).enumerate() {
+        match s.push(f) {
+            Ok(Some(o)) => outputs.push((i, o.to_vec())),
+            Ok(None) => {}
+            Err(e) => assert_eq!(e.code(), "outlier_marker", "frame {i}: {e}"),
+        }
+    }
+    assert_eq!(s.gap_filler().reanchors(), 1);
+    let restart = outputs.iter().map(|(i, _)| *i).find(|&i| i >= 900).unwrap() + 1 - 5;
+    assert!((900..910).contains(&restart), "re-anchored at {restart}");
+    let mut fresh = m.stream();
+    for (i, f) in kept.chunks_exact(18).enumerate().skip(restart) {
+        let want = fresh.push(f).unwrap().map(|o| o.to_vec());
+        let got = outputs.iter().find(|(k, _)| *k == i).map(|(_, o)| o.clone());
+        assert_eq!(got, want, "frame {i}");
+    }
+}

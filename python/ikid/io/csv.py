@@ -72,9 +72,11 @@ def read_csv_markers(path: str | os.PathLike[str]) -> MarkerData:
             f"{src}:{start + 1}: marker(s) {', '.join(incomplete)} lack an x, y or z column"
         )
     rows: list[list[float]] = []
+    linenos: list[int] = []
     for lineno, line in enumerate(lines[start + 1 :], start=start + 2):
         if not line.strip():
             continue
+        linenos.append(lineno)
         cells = line.split(",")
         if len(cells) != len(header):
             raise FileFormatError(f"{src}:{lineno}: {len(cells)} values, the header names {len(header)}")
@@ -87,8 +89,15 @@ def read_csv_markers(path: str | os.PathLike[str]) -> MarkerData:
         raise FileFormatError(f"{src}: {len(rows)} data row(s); at least 2 are needed")
     table = np.array(rows, np.float64)
     time = table[:, 0]
-    if not np.all(np.isfinite(time)) or np.any(np.diff(time) <= 0):
-        raise FileFormatError(f"{src}: time must be finite and increase from row to row")
+    if not np.all(np.isfinite(time)):
+        k = int(np.argwhere(~np.isfinite(time))[0][0])
+        raise FileFormatError(f"{src}:{linenos[k]}: time {time[k]} is not a number")
+    if np.any(np.diff(time) <= 0):
+        k = int(np.argwhere(np.diff(time) <= 0)[0][0]) + 1
+        raise FileFormatError(
+            f"{src}:{linenos[k]}: time {time[k]:g} s does not come after the row before's "
+            f"({time[k - 1]:g} s): time must increase from row to row"
+        )
     dt = np.diff(time)
     if np.max(np.abs(dt - np.median(dt))) > 0.01 * np.median(dt):
         raise FileFormatError(

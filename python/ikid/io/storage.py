@@ -104,7 +104,11 @@ def read_storage(path: str | os.PathLike[str]) -> Storage:
         raise FileFormatError(f"{src}:{body[k + 1][0]}: non-finite value")
     time = rows[:, 0]
     if np.any(np.diff(time) <= 0):
-        raise FileFormatError(f"{src}: time must increase from row to row")
+        k = int(np.argwhere(np.diff(time) <= 0)[0][0]) + 1
+        raise FileFormatError(
+            f"{src}:{body[k + 1][0]}: time {time[k]:g} s does not come after the row before's "
+            f"({time[k - 1]:g} s): time must increase from row to row"
+        )
     return Storage(time, columns[1:], rows[:, 1:], in_degrees, src, header)
 
 
@@ -157,13 +161,30 @@ def write_storage(path: str | os.PathLike[str], time, values, columns: list[str]
     return write_text_atomic(path, "\n".join(header) + "\n" + buf.getvalue())
 
 
-def write_mot(path: str | os.PathLike[str], time, q) -> Path:
-    """Wrist angles ``(n, 3)`` in radians -> ``.mot`` in degrees (``inDegrees=yes``)."""
-    return write_storage(
-        path, time, np.degrees(np.asarray(q, np.float64)), coordinate_names(), in_degrees=True
-    )
+#: The column of per-frame ``ikid.FRAME_STATUS`` bits that ikid's writers add (0: nothing
+#: unusual); OpenSim reads it as one more column, readers here by name skip it.
+STATUS_COLUMN = "ikid_status"
 
 
-def write_sto(path: str | os.PathLike[str], time, tau) -> Path:
-    """Joint torques ``(n, 3)`` in N·m -> ``.sto`` with OpenSim's ``<coordinate>_moment`` columns."""
-    return write_storage(path, time, tau, moment_names(), in_degrees=False)
+def _with_status(values: np.ndarray, columns: list[str], status) -> tuple[np.ndarray, list[str]]:
+    if status is None:
+        return values, columns
+    status = np.asarray(status)
+    if status.shape != (len(values),):
+        raise _native.InputError(f"status: expected one value per row ({len(values)}), got {status.shape}")
+    return np.column_stack([values, status.astype(np.float64)]), [*columns, STATUS_COLUMN]
+
+
+def write_mot(path: str | os.PathLike[str], time, q, status=None) -> Path:
+    """Wrist angles ``(n, 3)`` in radians -> ``.mot`` in degrees (``inDegrees=yes``); with
+    ``status`` ``(n,)``, each row's ``ikid.FRAME_STATUS`` bits in a last column
+    (:data:`STATUS_COLUMN`)."""
+    values, columns = _with_status(np.degrees(np.asarray(q, np.float64)), coordinate_names(), status)
+    return write_storage(path, time, values, columns, in_degrees=True)
+
+
+def write_sto(path: str | os.PathLike[str], time, tau, status=None) -> Path:
+    """Joint torques ``(n, 3)`` in N·m -> ``.sto`` with OpenSim's ``<coordinate>_moment`` columns
+    (and ``status``, as :func:`write_mot`)."""
+    values, columns = _with_status(np.asarray(tau, np.float64), moment_names(), status)
+    return write_storage(path, time, values, columns, in_degrees=False)

@@ -18,8 +18,10 @@ impl Model {
     /// [`n_predictions(n)`](Self::n_predictions) rows of [`n_outputs`](Self::n_outputs).
     /// Gives exactly the values a fresh [`Stream`](crate::Stream) fed the same frames gives, missing markers
     /// included (filled in one causal pass first when the model's policy is
-    /// [`MissingMarkers::Fill`]). Runs on up to
-    /// [`std::thread::available_parallelism`] threads. Returns the number of rows.
+    /// [`MissingMarkers::Fill`]). A marker frame spread over more than an arm spans
+    /// ([`crate::body::check_marker_span`]: wrong units, a ghost marker) is refused, as a stream
+    /// refuses it. Runs on up to [`std::thread::available_parallelism`] threads. Returns the
+    /// number of rows.
     pub fn predict(&self, frames: &[f32], out: &mut [f32]) -> Result<usize> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         self.predict_with_threads(frames, out, threads)
@@ -42,6 +44,13 @@ impl Model {
                 what: "output buffer",
                 detail: format!("has {} values, expected {rows} rows × {no} = {}", out.len(), rows * no),
             });
+        }
+        if fl == crate::body::MARKER_FRAME_LEN {
+            // As a stream does: markers no arm could hold are refused, not predicted from.
+            for (i, frame) in frames.chunks_exact(fl).enumerate() {
+                let wide: [f64; crate::body::MARKER_FRAME_LEN] = std::array::from_fn(|k| f64::from(frame[k]));
+                crate::body::check_marker_span(&wide, i)?;
+            }
         }
         let filled;
         let frames = if self.missing_markers() == MissingMarkers::Fill && frames.iter().any(|v| !v.is_finite()) {
