@@ -10,7 +10,13 @@
 //!    [`TrackerSettings::jerk_noise`];
 //! 3. each hand marker coordinate that is present corrects it, weighted by that coordinate's
 //!    own noise variance (the hand's markers rotate about the wrist centre, the forearm
-//!    frame's origin; the measurement is linearised at the prediction);
+//!    frame's origin). The measurement is linearised at the hand's own solution when its three
+//!    markers are there (else at the prediction) and again at the corrected state while that
+//!    moves (an iterated EKF: a fast move at a low frame rate, or one near gimbal lock, is not
+//!    overshot); markers further from the prediction than its covariance allows
+//!    ([`MANOEUVRE_NIS`]) scale that covariance up by as much (a manoeuvre: an impact the
+//!    white-jerk model did not expect). e_f is kept within ±90° (past it, the other Euler
+//!    triple of the same rotation);
 //! 4. the torques follow from the state by Newton–Euler ([`reference::inverse_dynamics_at`],
 //!    gravity's direction from the fitted forearm).
 //!
@@ -20,7 +26,10 @@
 //! markers. The tracker estimates each coordinate's variance from its third differences
 //! (white noise of variance σ² gives third differences of variance 20σ²; a smooth marker's
 //! are ~1e-7 m at 1 kHz), so clean markers are followed exactly and noisy ones are weighed
-//! by how noisy they are. A missing marker simply corrects nothing.
+//! by how noisy they are. A missing marker simply corrects nothing. Measuring the hand by its
+//! orientation ([`TrackerSettings::relative_hand`], on with a calibration), the differences are
+//! of each marker's residual to the hand's rigid fit instead: at a real lab's 70–100 Hz a fast
+//! hand's own third differences are its motion, not noise (0.2 mm plates read as 1.7 mm).
 //!
 //! Optionally a learned *refiner* ([`Tracker::set_refiner`]) corrects the estimate: a network
 //! over a window of the tracker's own states ([`FeatureSet::TrackerState`]: q̇, q̈ and the
@@ -36,8 +45,9 @@
 //! markers break the rigid shape learned for it, a forearm that jumped faster than a forearm
 //! moves, a hand marker too far from the prediction for the filter's own uncertainty — and a
 //! rejected marker corrects nothing and teaches no noise. When every usable hand marker has been
-//! rejected for [`LOST_S`], the tracker decides it, not the markers, is wrong and restarts from
-//! the frame's own solution. Angles stay within one turn. Each output's [`status`] bits say
+//! rejected for [`LOST_S`] — or at once when the hand's three markers fit its shape
+//! ([`FIT_TOLERANCE_M`]) and are gated all the same — the tracker decides it, not the markers,
+//! is wrong and restarts from the frame's own solution. Angles stay within one turn. Each output's [`status`] bits say
 //! what happened (tests: "a frame shifted by a kilometre", "garbage frames", "a lost hand").
 //!
 //! Allocation-free: the state is fixed-size, so a push costs a few microseconds and no heap.
@@ -93,6 +103,9 @@ pub const GATE_FLOOR_M: f64 = 0.02;
 /// position, or restarts the hand from the frame's own solution ([`status::RESTARTED`]), and a
 /// state carried forward without correction stops extrapolating.
 pub const LOST_S: f64 = 0.03;
+/// Squared Mahalanobis distance of the hand markers from the prediction, per coordinate, beyond
+/// which the prediction's covariance is scaled up to match it (a manoeuvre).
+pub const MANOEUVRE_NIS: f64 = 3.0;
 /// How far a hand marker may sit from the rigid fit of the hand's shape to its three markers,
 /// m, for the three to count as agreeing with one another.
 pub const FIT_TOLERANCE_M: f64 = 0.005;
@@ -593,7 +606,17 @@ impl Tracker {
             flags |= status::FILLED;
         }
         self.learn_noise(&hand, index);
-        self.correct(&forearm, &hand, &mut x, &mut p);
+        // With the hand's three markers, linearise first at their own solution (the Euler triple
+        // nearest the prediction): near gimbal lock the prediction can be far off in angles
+        // while near in rotation, and the iterations then start in the right place.
+        let start = if forearm_measured && hand_markers_present(&hand) == 0b111 {
+            let mut whole = [0.0; MARKER_FRAME_LEN];
+            whole[HAND_START..].copy_from_slice(&hand);
+            self.frame_solution(&forearm, &whole, index).map(|s| nearest_triple(&s, &x))
+        } else {
+            None
+        };
+        self.correct(&forearm, &hand, start, &mut x, &mut p);
         // One turn is one posture: keep each angle in (−π, π] so that a restart or a long
         // gap can never leave the estimate a whole turn off; and e_f within ±90°.
         principal_branch(&mut x, &mut p);
@@ -916,12 +939,22 @@ impl Tracker {
     /// the correction moves an angle by more than [`RELINEARISE_RAD`], again at the corrected
     /// state (an iterated EKF, at most [`MAX_ITERATIONS`] times): a large correction — a fast
     /// move at a low frame rate, or near gimbal lock — is not overshot.
-    fn correct(&self, forearm: &Isometry3<f64>, hand: &[f64; N_HAND], x: &mut StateVector, p: &mut StateMatrix) {
-        let (prior, prior_p) = (*x, *p);
-        let mut at = Vector3::new(x[0], x[1], x[2]);
-        for _ in 0..MAX_ITERATIONS {
+    fn correct(
+        &self,
+        forearm: &Isometry3<f64>,
+        hand: &[f64; N_HAND],
+        start: Option<Vector3<f64>>,
+        x: &mut StateVector,
+        p: &mut StateMatrix,
+    ) {
+        let (prior, mut prior_p) = (*x, *p);
+        let mut at = start.unwrap_or(Vector3::new(x[0], x[1], x[2]));
+        let mut inflated = false;
+        let mut iteration = 0;
+        while iteration < MAX_ITERATIONS {
             let Some((predicted, jac)) = self.hand_prediction(forearm, &at, hand) else { return };
             let (mut xi, mut pi) = (prior, prior_p);
+            let (mut nis, mut used) = (0.0, 0.0);
             for m in 0..3 {
                 for k in 0..3 {
                     let z = hand[3 * m + k];
@@ -936,10 +969,20 @@ impl Tracker {
                     // ph = P hᵀ (h touches only the angles).
                     let ph: StateVector = pi.column(0) * h[0] + pi.column(1) * h[1] + pi.column(2) * h[2];
                     let s = h[0] * ph[0] + h[1] * ph[1] + h[2] * ph[2] + self.noise_variance[3 * m + k];
+                    nis += innovation * innovation / s;
+                    used += 1.0;
                     let gain = ph / s;
                     xi += gain * innovation;
                     pi -= gain * ph.transpose();
                 }
+            }
+            if iteration == 0 && !inflated && nis > MANOEUVRE_NIS * used {
+                // The markers are further from the prediction than its covariance allows: the
+                // hand moved as the motion model did not expect (an impact, a fast turn at a low
+                // frame rate). Trust the prediction less, by as much as it missed.
+                prior_p *= nis / used;
+                inflated = true;
+                continue;
             }
             // Keep P symmetric against rounding.
             *p = (pi + pi.transpose()) * 0.5;
@@ -949,6 +992,7 @@ impl Tracker {
                 return;
             }
             at = Vector3::new(xi[0], xi[1], xi[2]);
+            iteration += 1;
         }
     }
 }
@@ -992,6 +1036,17 @@ fn principal_branch(x: &mut StateVector, p: &mut StateMatrix) {
         let mut col = p.column_mut(i);
         col *= -1.0;
     }
+}
+
+/// Of the two Euler triples of the rotation whose angles are `solution`'s first three, moved by
+/// whole turns, the one nearest the angles of `x`.
+fn nearest_triple(solution: &StateVector, x: &StateVector) -> Vector3<f64> {
+    use std::f64::consts::PI;
+    let near = |q: [f64; 3]| Vector3::from_fn(|i, _| x[i] + wrap_angle(q[i] - x[i]));
+    let a = near([solution[0], solution[1], solution[2]]);
+    let b = near([solution[0] + PI, PI - solution[1], solution[2] + PI]);
+    let distance = |q: &Vector3<f64>| (0..3).map(|i| (q[i] - x[i]).powi(2)).sum::<f64>();
+    if distance(&b) < distance(&a) { b } else { a }
 }
 
 /// `a` (rad) moved by whole turns into (−π, π].

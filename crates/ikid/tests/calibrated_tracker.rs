@@ -89,9 +89,10 @@ fn a_calibrated_tracker_follows_a_subject_the_body_model_does_not_fit() {
 }
 
 /// Wheelchair-racing-like pushes at 70 Hz (issue #19): extension to ~−80° and back to +25°
-/// flexion every 0.6 s (up to ~13 rad/s), pronation and deviation swinging along, and a tilt
-/// about the forearm's anterior axis that carries the hand past gimbal lock's side, so that near
-/// full extension s_p and ad_ab swing by tens of degrees a frame (as the recording's do).
+/// flexion every 0.6 s, fastest through extension, pronation and deviation swinging along,
+/// and a tilt about the forearm's anterior axis that carries the hand past gimbal lock's side,
+/// so that near full extension s_p and ad_ab swing by tens of degrees a frame (as the
+/// recording's do).
 fn racing(rate: f64, n: usize) -> Vec<[f64; 3]> {
     use std::f64::consts::TAU;
     (0..n)
@@ -157,11 +158,10 @@ fn a_calibrated_tracker_follows_fast_pushes_at_70_hz_through_gimbal_lock_region(
             })
             .unwrap();
         let rms = (se / f64::from(n)).sqrt();
-        eprintln!(
-            "jerk {jerk_noise}: rms {rms:.2}° worst {worst_ok:.2}° (all frames {worst:.1}°), {} restarts",
-            tracker.restarts()
-        );
-        assert!(rms < 3.0 && worst_ok < 10.0, "jerk {jerk_noise}: {rms}° RMS, {worst_ok}° worst where |e_f| ≤ 60°");
-        assert!(worst < 30.0, "jerk {jerk_noise}: {worst}° off near gimbal lock");
+        // Before issue #19's fixes: 1.8° RMS and 5.3° worst at the default jerk, 1.5° and 6.2° at
+        // 1e5, 166° off at 1e7 (after a restart, on a filter far off in Euler angles).
+        assert!(rms < 1.2 && worst_ok < 4.0, "jerk {jerk_noise}: {rms}° RMS, {worst_ok}° worst where |e_f| ≤ 60°");
+        // Near gimbal lock (a hand marker missing every other frame there) it stays on the hand.
+        assert!(worst < 40.0, "jerk {jerk_noise}: {worst}° off near gimbal lock");
     }
 }
