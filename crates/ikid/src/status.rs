@@ -14,8 +14,10 @@ pub const FILLED: u8 = 1;
 /// A present marker was rejected as implausible (it broke its segment's rigid shape, or it
 /// was too far from where the wrist could have moved it) and was not used.
 pub const REJECTED_MARKER: u8 = 2;
-/// The tracker lost the wrist (every marker it could use was rejected for a while) and
-/// restarted from this frame's own solution.
+/// The tracker lost the wrist (its markers agreed with one another but not with it) and
+/// restarted from its own solution at this frame — or did so, or held through a long gap, within
+/// the last [`LOST_S`](crate::tracker::LOST_S): its velocities and accelerations (so the
+/// torques) are still settling.
 pub const RESTARTED: u8 = 4;
 /// A segment was not measured in this frame (its markers missing or rejected): its last pose
 /// was held, or the estimate was carried forward without a correction.

@@ -177,15 +177,20 @@ impl Default for TrackerSettings {
 pub const DEFAULT_JERK_NOISE: f64 = 3e3;
 
 impl TrackerSettings {
+    /// Each setting must be positive and at most what any recording needs: a value beyond is a
+    /// typo (or a unit slip) that would make the filter's arithmetic overflow, not a setting.
     fn check(&self) -> Result<()> {
-        for (what, v) in [
-            ("rate_hz", self.rate_hz),
-            ("jerk_noise", self.jerk_noise),
-            ("noise_memory_s", self.noise_memory_s),
-            ("initial_marker_noise", self.initial_marker_noise),
+        for (what, v, max, unit) in [
+            ("rate_hz", self.rate_hz, 100_000.0, "Hz"),
+            ("jerk_noise", self.jerk_noise, 1e12, "rad²/s⁵"),
+            ("noise_memory_s", self.noise_memory_s, 86_400.0, "s"),
+            ("initial_marker_noise", self.initial_marker_noise, 1.0, "m"),
         ] {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err(Error::BadArgument { what, detail: format!("is {v}, expected a positive number") });
+            if !(v > 0.0 && v <= max) {
+                return Err(Error::BadArgument {
+                    what,
+                    detail: format!("is {v}, expected a positive number up to {max:e} {unit}"),
+                });
             }
         }
         Ok(())
@@ -266,6 +271,8 @@ pub struct Tracker {
     /// Frames in a row whose present hand markers were all gated, and without any correction.
     gated_streak: usize,
     coast_streak: usize,
+    /// Frames still to flag [`status::RESTARTED`] after a restart or a long hold.
+    settling: usize,
     restarts: usize,
     /// The subject's placement: each segment's markers in its anatomical frame are taken from
     /// the subject's own markers (their shape as learned, turned by the calibration) instead of
@@ -317,6 +324,7 @@ impl Tracker {
             forearm_jumps: 0,
             gated_streak: 0,
             coast_streak: 0,
+            settling: 0,
             restarts: 0,
             calibration: None,
             templated: [false; 2],
@@ -343,6 +351,7 @@ impl Tracker {
         self.forearm_jumps = 0;
         self.gated_streak = 0;
         self.coast_streak = 0;
+        self.settling = 0;
         self.restarts = 0;
         self.templated = [false; 2];
         self.body.marker_offsets = self.model_offsets;
@@ -586,12 +595,22 @@ impl Tracker {
             hand = raw;
             self.gated_streak = 0;
             self.restarts += 1;
-            flags |= status::RESTARTED;
+            self.settling = lost;
             if let Some(r) = self.refiner.as_mut() {
                 r.reset();
             }
         }
+        let coasted = self.coast_streak;
         self.coast_streak = if hand_markers_present(&hand) == 0 { self.coast_streak + 1 } else { 0 };
+        if self.coast_streak == 0 && coasted >= lost {
+            // Corrected again after holding: the velocities and accelerations start over.
+            self.settling = self.settling.max(lost);
+        }
+        if self.settling > 0 {
+            // A restart and the frames after it while q̇ and q̈ (so the torques) settle.
+            flags |= status::RESTARTED;
+            self.settling -= 1;
+        }
         if self.coast_streak > 0 {
             flags |= status::HELD;
         }
@@ -1690,6 +1709,17 @@ mod tests {
         let err =
             Tracker::new(BodyModel::default(), TrackerSettings { jerk_noise: -1.0, ..Default::default() }).unwrap_err();
         assert!(err.to_string().contains("jerk_noise"), "{err}");
+        // Absurdly large settings are typos, refused by name, not an overflow later.
+        for (settings, name) in [
+            (TrackerSettings { rate_hz: 1e308, ..Default::default() }, "rate_hz"),
+            (TrackerSettings { jerk_noise: 1e13, ..Default::default() }, "jerk_noise"),
+            (TrackerSettings { noise_memory_s: 1e9, ..Default::default() }, "noise_memory_s"),
+            (TrackerSettings { initial_marker_noise: 2.0, ..Default::default() }, "initial_marker_noise"),
+        ] {
+            let err = Tracker::new(BodyModel::default(), settings).unwrap_err().to_string();
+            assert!(err.contains(name) && err.contains("up to"), "{err}");
+        }
+        assert!(Tracker::new(BodyModel::default(), TrackerSettings { jerk_noise: 1e12, ..Default::default() }).is_ok());
         tracker.reset();
         assert!(tracker.push(&f[..MARKER_FRAME_LEN]).unwrap().is_none());
     }

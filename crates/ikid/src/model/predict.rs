@@ -20,7 +20,7 @@ impl Model {
     /// included (filled in one causal pass first when the model's policy is
     /// [`MissingMarkers::Fill`]). A marker frame spread over more than an arm spans
     /// ([`crate::body::check_marker_span`]: wrong units, a ghost marker) is refused, as a stream
-    /// refuses it. Runs on up to [`std::thread::available_parallelism`] threads. Returns the
+    /// refuses it, and so (under [`MissingMarkers::Refuse`]) is a marker that jumped. Runs on up to [`std::thread::available_parallelism`] threads. Returns the
     /// number of rows.
     pub fn predict(&self, frames: &[f32], out: &mut [f32]) -> Result<usize> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -46,10 +46,15 @@ impl Model {
             });
         }
         if fl == crate::body::MARKER_FRAME_LEN {
-            // As a stream does: markers no arm could hold are refused, not predicted from.
+            // As a stream does: markers no arm could hold are refused, not predicted from, and
+            // (under the refuse policy, where nothing is filled) so is a marker that jumped.
+            let mut continuity = (self.missing_markers() == MissingMarkers::Refuse).then(crate::GapFiller::new);
             for (i, frame) in frames.chunks_exact(fl).enumerate() {
                 let wide: [f64; crate::body::MARKER_FRAME_LEN] = std::array::from_fn(|k| f64::from(frame[k]));
                 crate::body::check_marker_span(&wide, i)?;
+                if let Some(filler) = continuity.as_mut() {
+                    filler.check(frame, i)?;
+                }
             }
         }
         let filled;
