@@ -39,8 +39,10 @@ STANDARD = {
 # --- output checks -------------------------------------------------------------------------------
 
 
-def compare_storage(v: Verdict, got: Path, ref: Path) -> None:
-    """``got`` (a .mot or .sto written by a run that succeeded) against the clean run's."""
+def compare_storage(v: Verdict, got: Path, ref: Path, time_scale: float = 1.0) -> None:
+    """``got`` (a .mot or .sto written by a run that succeeded) against the clean run's; its
+    row at time ``t`` is the clean run's at ``t * time_scale`` (a file whose header states
+    another rate than its data's: its times are the header's)."""
     from ikid.io import read_storage
 
     if not got.exists():
@@ -67,7 +69,7 @@ def compare_storage(v: Verdict, got: Path, ref: Path) -> None:
         tol = 0.25 * (np.ptp(y, axis=0) + 1e-3)
     count, worst, at = 0, 0.0, 0.0
     for i, t in enumerate(a.time):
-        k = ref_rows.get(int(round(t * 1e6)))
+        k = ref_rows.get(int(round(t * time_scale * 1e6)))
         if k is None or flagged[i]:
             continue
         excess = np.abs(x[i] - y[k]) / tol
@@ -101,10 +103,10 @@ def readable_outputs(paths: list[Path]) -> callable:
     return check
 
 
-def compare(pairs: list[tuple[Path, Path]]):
+def compare(pairs: list[tuple[Path, Path]], time_scale: float = 1.0):
     def check(r: Run, v: Verdict) -> None:
         for got, ref in pairs:
-            compare_storage(v, got, ref)
+            compare_storage(v, got, ref, time_scale)
 
     return check
 
@@ -190,7 +192,15 @@ def processing(b: Builder) -> None:
                 d,
                 expect=expect,
                 names=names,
-                check=compare([(d / "out.mot", ref / "track.mot"), (d / "out.sto", ref / "track.sto")]),
+                check=(
+                    # A header stating half the data's rate: the tracker runs at the rate it is
+                    # told, which no marker can contradict. Its angles must still be right (at
+                    # the file's times); its velocities, so torques, follow the stated rate, a
+                    # documented limit (docs/RELIABILITY.md), so the .sto is not compared.
+                    compare([(d / "out.mot", ref / "track.mot")], time_scale=0.5)
+                    if m == "rate-500-data-at-1000"
+                    else compare([(d / "out.mot", ref / "track.mot"), (d / "out.sto", ref / "track.sto")])
+                ),
             )
             if kind != "trc":
                 continue

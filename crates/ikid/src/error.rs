@@ -133,7 +133,7 @@ pub enum Error {
     },
     /// A marker is far from where its segment's other markers put it (it jumped, or two
     /// labels swapped), and the stream's policy could not replace it.
-    #[error("frame {frame}: marker(s) {markers} inconsistent with the rigid segment ({detail}); no output computed")]
+    #[error("frame {frame}: marker(s) {markers} out of place ({detail}); no output computed")]
     OutlierMarker {
         /// Index of the frame within the call.
         frame: usize,

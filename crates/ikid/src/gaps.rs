@@ -385,6 +385,26 @@ impl GapFiller {
 
     fn outlier_error(&self, frame: &[f32], outliers: u8, frame_index: usize) -> Error {
         let i = outliers.trailing_zeros() as usize;
+        // Say what gave it away: a broken distance, or (distances intact) a jump from the last
+        // accepted frame — the frames between may have been lost.
+        if self.pair_outliers(frame) & outliers == 0
+            && let Some(last) = &self.last
+        {
+            let s = i / 3;
+            let rms = (self.marker_motion_sum[s] / self.motion_frames.max(1) as f64).sqrt();
+            let limit = (OUTLIER_SIGMAS * rms).max(OUTLIER_FLOOR);
+            let moved = (marker(frame, i) - marker(last, i)).norm();
+            return Error::OutlierMarker {
+                frame: frame_index,
+                markers: mask_names(outliers),
+                detail: format!(
+                    "{} moved {:.1} mm since the last frame accepted, where its segment moves at most {:.1} mm per frame: a jump, or frames lost in between",
+                    MARKERS[i].name,
+                    1e3 * moved,
+                    1e3 * limit
+                ),
+            };
+        }
         let k = PAIRS.iter().position(|&(a, b)| a == i || b == i).expect("every marker is in a pair");
         let (a, b) = PAIRS[k];
         let d = (marker(frame, a) - marker(frame, b)).norm();
@@ -802,7 +822,9 @@ mod tests {
         }
         let before = f;
         let err = filler.fill(&mut f, 7).unwrap_err().to_string();
-        assert!(err.contains("frame 7") && err.contains("MC2, MC5") && err.contains("rigid segment"), "{err}");
+        // The distances hold, so the message names the jump, not a broken distance.
+        assert!(err.contains("frame 7") && err.contains("MC2, MC5") && err.contains("since the last frame"), "{err}");
+        assert!(err.contains("MC2 moved") && err.contains("mm per frame"), "{err}");
         assert_eq!(f.map(f32::to_bits), before.map(f32::to_bits), "unchanged on error");
         assert!(matches!(filler.check(&f, 7), Err(Error::OutlierMarker { .. })));
         // The stream goes on with the true labels.

@@ -58,7 +58,9 @@ impl Model {
             }
         }
         let filled;
-        let frames = if self.missing_markers() == MissingMarkers::Fill && frames.iter().any(|v| !v.is_finite()) {
+        // Under the fill policy every frame goes through the filler, as in a stream: it fills
+        // missing markers and refuses (or replaces) ones that jumped.
+        let frames = if self.missing_markers() == MissingMarkers::Fill && fl == crate::body::MARKER_FRAME_LEN {
             filled = fill_gaps(frames, false)?.0;
             &filled[..]
         } else {
