@@ -81,6 +81,8 @@ SIGNATURES = {
     "ikid_stream_push_at": ([vp, C.c_double, f32p, sz, f32p, sz, C.POINTER(C.c_bool)], C.c_int),
     "ikid_stream_set_missing_markers": ([vp, C.c_char_p], C.c_int),
     "ikid_stream_set_calibration": ([vp, f64p, f64p], C.c_int),
+    "ikid_stream_set_calibration_side": ([vp, f64p, f64p, C.c_char_p], C.c_int),
+    "ikid_stream_status": ([vp, C.POINTER(C.c_uint32)], C.c_int),
     "ikid_stream_filled_markers": ([vp, C.POINTER(C.c_uint32)], C.c_int),
     "ikid_stream_push_many": ([vp, f32p, sz, sz, f32p, sz, C.POINTER(sz)], C.c_int),
     "ikid_stream_reset": ([vp], C.c_int),
@@ -92,6 +94,7 @@ SIGNATURES = {
     "ikid_tracker_reset": ([vp], C.c_int),
     "ikid_tracker_marker_noise": ([vp, f64p, sz], C.c_int),
     "ikid_tracker_free": ([vp], None),
+    "ikid_tracker_set_calibration": ([vp, f64p, f64p, C.c_char_p], C.c_int),
 }
 
 
