@@ -110,3 +110,51 @@ def test_old_model_files_without_a_checksum_still_load(tmp_path):
         model = ikid.load(path)
     assert not model.has_checksum
     np.testing.assert_array_equal(model.predict(_markers(24)), ikid.load("wrist-ik").predict(_markers(24)))
+
+
+def test_the_c_stream_reports_the_same_status_and_takes_a_left_arm_calibration():
+    import ctypes as C
+
+    from faults.capi import f32p, f64p, last_error, lib
+
+    path = Path(ikid.__file__).with_name("models") / "wrist-ik.safetensors"
+    model = C.c_void_p()
+    assert lib().ikid_model_load(str(path).encode(), C.byref(model)) == 0, last_error()
+    try:
+        # A wrist turning from neutral to postures beyond the training range over 0.4 s.
+        q = np.radians(np.linspace([0.0, 0.0, 0.0], [0.0, 110.0, 60.0], 400))
+        mirror = np.tile([1.0, 1.0, -1.0], 6)
+        frames = (_native.forward_markers(q) * mirror).astype(np.float32)  # a left arm
+        neutral = _native.forward_markers(np.zeros((10, 3))) * mirror
+        measured = ikid.Calibration.from_neutral(neutral, side="left")
+        calibration = ikid.Calibration.from_matrices(measured.forearm, measured.hand, side="left")
+        py = ikid.load("wrist-ik").stream(calibration=calibration)
+        stream = C.c_void_p()
+        assert lib().ikid_stream_new(model, C.byref(stream)) == 0
+        forearm = np.ascontiguousarray(measured.forearm)
+        hand = np.ascontiguousarray(measured.hand)
+        status = lib().ikid_stream_set_calibration_side(
+            stream, forearm.ctypes.data_as(f64p), hand.ctypes.data_as(f64p), b"left"
+        )
+        assert status == 0, last_error()
+        seen = set()
+        for f in frames:
+            want = py.push(f)
+            out = np.zeros(3, np.float32)
+            ready = C.c_bool(False)
+            frame = np.ascontiguousarray(f)
+            pushed = lib().ikid_stream_push(
+                stream, frame.ctypes.data_as(f32p), 18, out.ctypes.data_as(f32p), 3, C.byref(ready)
+            )
+            assert pushed == 0, last_error()
+            assert ready.value == (want is not None)
+            if want is not None:
+                bits = C.c_uint32(99)
+                assert lib().ikid_stream_status(stream, C.byref(bits)) == 0
+                assert bits.value == py.status and out.tobytes() == want.tobytes()
+                seen.add(bits.value & ikid.FRAME_STATUS["outside_training"])
+        assert seen == {0, ikid.FRAME_STATUS["outside_training"]}  # both kinds of frame were there
+        assert lib().ikid_stream_status(stream, None) != 0 and "status" in last_error()
+        lib().ikid_stream_free(stream)
+    finally:
+        lib().ikid_model_free(model)
