@@ -56,6 +56,10 @@ TRAIN_DEFAULTS: dict[str, Any] = {
 }
 
 
+#: The simulator's step rate; ``[data] rate_hz`` (simulated data) keeps every k-th of its frames.
+SIM_RATE_HZ = 1000.0
+
+
 def load_config(path: str | Path) -> dict[str, Any]:
     with open(path, "rb") as f:
         cfg = tomllib.load(f)
@@ -88,7 +92,7 @@ def load_config(path: str | Path) -> dict[str, Any]:
 def build_recordings(data_cfg: dict[str, Any]) -> list[D.Recording]:
     """The training recordings named by a ``[data]`` table: ``lab`` (a folder of a lab's marker
     files with same-stem .mot/.sto; ``map``, ``rate_hz`` optional), ``folder`` (saved simulated
-    trials), or what to simulate."""
+    trials), or what to simulate (``rate_hz``, optional: sampled at that rate, a divisor of 1 kHz)."""
     if "lab" in data_cfg:
         return D.load_lab_recordings(data_cfg["lab"], data_cfg.get("map"), data_cfg.get("rate_hz"))
     if "folder" in data_cfg:
@@ -106,6 +110,15 @@ def build_recordings(data_cfg: dict[str, Any]) -> list[D.Recording]:
         specs += D.recording_set(
             "thesis", seeds=[0], mass_follows_length=data_cfg.get("mass_follows_length", True), **common
         )
+    if "rate_hz" in data_cfg:
+        # Recorded at rate_hz: the simulator steps at 1 kHz and keeps every k-th frame (the same
+        # motion as at 1 kHz, sampled as a lab at that rate would).
+        every = SIM_RATE_HZ / float(data_cfg["rate_hz"])
+        if every < 1 or abs(every - round(every)) > 1e-9:
+            raise ValueError(
+                f"[data] rate_hz {data_cfg['rate_hz']} must divide {SIM_RATE_HZ:g} Hz (the simulator's rate)"
+            )
+        specs = [{**s, "output_every": int(round(every))} for s in specs]
     return D.simulate_all(specs)
 
 
