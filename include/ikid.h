@@ -45,6 +45,26 @@ typedef enum ikid_status {
   IKID_STATUS_PANIC = 6,
 } ikid_status;
 
+// What a stream does with a missing (NaN) marker (`ikid_stream_set_missing_markers`).
+enum ikid_missing_markers
+#if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+  : uint32_t
+#endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+ {
+  // Refuse the frame: an error, no output.
+  IKID_MISSING_MARKERS_REFUSE = 0,
+  // Fill it from the other markers and flag it (`ikid_stream_filled_markers`,
+  // `IKID_FRAME_FILLED`).
+  IKID_MISSING_MARKERS_FILL = 1,
+};
+#ifndef __cplusplus
+#if __STDC_VERSION__ >= 202311L
+typedef enum ikid_missing_markers ikid_missing_markers;
+#else
+typedef uint32_t ikid_missing_markers;
+#endif // __STDC_VERSION__ >= 202311L
+#endif // __cplusplus
+
 // A loaded, validated model (opaque). Thread-safe: share it between threads freely.
 typedef struct ikid_model ikid_model;
 
@@ -149,13 +169,35 @@ void ikid_model_free(struct ikid_model *model);
 // `model` must be a live handle; `out` must point to writable storage.
 enum ikid_status ikid_model_get_info(const struct ikid_model *model, struct ikid_model_info *out);
 
-// The model's name, task (`"ik"`, `"id"`, ...) or feature set, selected by `field`
-// (0 = name, 1 = task, 2 = feature set); NULL for another `field` or a NULL model.
-// Valid while the model handle lives.
+// The model's name (e.g. `"wrist-ik"`), or NULL for a NULL model. Valid while the model
+// handle lives.
 //
 // # Safety
 // `model` must be NULL or a live handle.
-const char *ikid_model_describe(const struct ikid_model *model, uint32_t field);
+const char *ikid_model_name(const struct ikid_model *model);
+
+// The model's task: `"ik"` (markers → angles), `"id"` (joint state → torques), `"chain"`
+// (markers → torques) or `"refine"` (a tracker's refiner); NULL for a NULL model.
+//
+// # Safety
+// `model` must be NULL or a live handle.
+const char *ikid_model_task(const struct ikid_model *model);
+
+// The model's feature set (e.g. `"angles"`: what it computes from each frame); NULL for a
+// NULL model.
+//
+// # Safety
+// `model` must be NULL or a live handle.
+const char *ikid_model_feature_set(const struct ikid_model *model);
+
+// Deprecated (use `ikid_model_name`, `ikid_model_task`, `ikid_model_feature_set`): the
+// model's name, task or feature set by `field` (0, 1, 2); NULL for another `field`.
+//
+// # Safety
+// `model` must be NULL or a live handle.
+__attribute__((deprecated("use ikid_model_name, ikid_model_task or ikid_model_feature_set")))
+const char *ikid_model_describe(const struct ikid_model *model,
+                                uint32_t field);
 
 // Name of output `index` (e.g. `"ra_wr_s_p"`), or NULL if out of range. Valid while the
 // model handle lives. Outputs are in SI units (radians, N·m).
@@ -176,16 +218,37 @@ const char *ikid_model_frame_name(const struct ikid_model *model, size_t index);
 //
 // # Safety
 // `model` must be NULL or a live handle.
-size_t ikid_predict_rows(const struct ikid_model *model, size_t n_frames);
+size_t ikid_model_predict_rows(const struct ikid_model *model, size_t n_frames);
+
+// Deprecated name of `ikid_model_predict_rows` (kept for one release).
+//
+// # Safety
+// As `ikid_model_predict_rows`.
+__attribute__((deprecated("renamed ikid_model_predict_rows")))
+size_t ikid_predict_rows(const struct ikid_model *model,
+                         size_t n_frames);
 
 // Predicts a whole recording: `frames` holds `n_frames × frame_len` floats (row-major);
-// `out` (room for `out_len` floats) receives `ikid_predict_rows(n_frames)` rows of
+// `out` (room for `out_len` floats) receives `ikid_model_predict_rows(n_frames)` rows of
 // `n_outputs`, row `i` for frame `i + window - 1`; `*rows` receives the row count. Uses all
 // cores. Nothing is written on failure.
 //
 // # Safety
 // `frames` must point to `n_frames × frame_len` readable floats, `out` to `out_len`
 // writable floats, `rows` to writable storage.
+enum ikid_status ikid_model_predict(const struct ikid_model *model,
+                                    const float *frames,
+                                    size_t n_frames,
+                                    size_t frame_len,
+                                    float *out,
+                                    size_t out_len,
+                                    size_t *rows);
+
+// Deprecated name of `ikid_model_predict` (kept for one release).
+//
+// # Safety
+// As `ikid_model_predict`.
+__attribute__((deprecated("renamed ikid_model_predict")))
 enum ikid_status ikid_predict(const struct ikid_model *model,
                               const float *frames,
                               size_t n_frames,
@@ -230,14 +293,13 @@ enum ikid_status ikid_stream_push_at(struct ikid_stream *stream,
                                      size_t out_len,
                                      bool *ready);
 
-// Sets what the stream does with a missing (NaN) marker: `"refuse"` (an error, no output)
-// or `"fill"` (filled from the other markers and flagged, see
-// `ikid_stream_filled_markers`). Streams start with the model card's policy.
+// Sets what the stream does with a missing (NaN) marker: `IKID_MISSING_MARKERS_REFUSE` or
+// `IKID_MISSING_MARKERS_FILL` (an `ikid_missing_markers`; any other value is refused with
+// `IKID_STATUS_INVALID_ARGUMENT`). Streams start with the model card's policy.
 //
 // # Safety
-// `stream` must be a live handle used by no other thread meanwhile; `policy` a
-// NUL-terminated string.
-enum ikid_status ikid_stream_set_missing_markers(struct ikid_stream *stream, const char *policy);
+// `stream` must be a live handle used by no other thread meanwhile.
+enum ikid_status ikid_stream_set_missing_markers(struct ikid_stream *stream, uint32_t policy);
 
 // Calibrates the stream to a subject's marker placement, for a right arm: as
 // `ikid_stream_set_calibration_side(stream, forearm, hand, "right")`.

@@ -94,8 +94,15 @@ int main(int argc, char **argv) {
           "info %zu %zu %zu %g", info.frame_len, info.window, info.n_outputs, info.frame_rate_hz);
     CHECK(strcmp(ikid_model_output_name(model, 0), "ra_wr_s_p") == 0 && ikid_model_output_name(model, 3) == NULL, "output names");
     CHECK(strcmp(ikid_model_frame_name(model, 10), "MC2.y") == 0 && ikid_model_frame_name(model, 18) == NULL, "frame names");
-    CHECK(strcmp(ikid_model_describe(model, 1), "ik") == 0 && strcmp(ikid_model_describe(model, 2), "markers") == 0 && ikid_model_describe(model, 7) == NULL, "describe");
-    CHECK(ikid_model_output_name(NULL, 0) == NULL && ikid_predict_rows(NULL, 10) == 0 && ikid_predict_rows(model, 10) == 6 && ikid_predict_rows(model, 3) == 0, "NULL-safe getters");
+    CHECK(strcmp(ikid_model_task(model), "ik") == 0 && strcmp(ikid_model_feature_set(model), "markers") == 0 && ikid_model_name(model) != NULL, "named getters");
+    CHECK(ikid_model_name(NULL) == NULL && ikid_model_task(NULL) == NULL && ikid_model_feature_set(NULL) == NULL, "NULL-safe named getters");
+    CHECK(ikid_model_output_name(NULL, 0) == NULL && ikid_model_predict_rows(NULL, 10) == 0 && ikid_model_predict_rows(model, 10) == 6 && ikid_model_predict_rows(model, 3) == 0, "NULL-safe getters");
+    /* The old names stay for one release, deprecated, and give the same answers. */
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wdeprecated-declarations"
+    CHECK(ikid_model_describe(model, 1) == ikid_model_task(model) && ikid_model_describe(model, 2) == ikid_model_feature_set(model) && ikid_model_describe(model, 0) == ikid_model_name(model) && ikid_model_describe(model, 7) == NULL, "describe (deprecated)");
+    CHECK(ikid_predict_rows(model, 10) == 6, "ikid_predict_rows (deprecated)");
+#pragma GCC diagnostic pop
 
     size_t n_frames = 0, n_expected = 0;
     float *frames = read_csv(argv[2], info.frame_len, &n_frames);
@@ -148,13 +155,13 @@ int main(int argc, char **argv) {
     /* Whole-recording prediction. */
     size_t rows = 0;
     memset(rows_out, 0, n_expected * 3 * sizeof(float));
-    CHECK(ikid_predict(model, frames, n_frames, 18, rows_out, n_expected * 3, &rows) == IKID_STATUS_OK && rows == n_expected
+    CHECK(ikid_model_predict(model, frames, n_frames, 18, rows_out, n_expected * 3, &rows) == IKID_STATUS_OK && rows == n_expected
           && memcmp(rows_out, expected, n_expected * 3 * sizeof(float)) == 0, "predict");
-    CHECK(ikid_predict(model, frames, n_frames, 18, rows_out, 5, &rows) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "room for 5"), "predict small out");
-    CHECK(ikid_predict(model, frames, n_frames, 9, rows_out, n_expected * 3, &rows) == IKID_STATUS_INPUT && contains(ikid_last_error(), "frame_len is 9"), "predict frame_len");
-    CHECK(ikid_predict(model, frames, n_frames, 18, rows_out, n_expected * 3, NULL) == IKID_STATUS_NULL_PARAMETER, "predict NULL rows");
-    CHECK(ikid_predict(model, NULL, 0, 18, NULL, 0, &rows) == IKID_STATUS_OK && rows == 0, "predict nothing into nothing");
-    CHECK(ikid_predict(model, frames, 3, 18, NULL, 0, &rows) == IKID_STATUS_OK && rows == 0, "short recording needs no out");
+    CHECK(ikid_model_predict(model, frames, n_frames, 18, rows_out, 5, &rows) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "room for 5"), "predict small out");
+    CHECK(ikid_model_predict(model, frames, n_frames, 9, rows_out, n_expected * 3, &rows) == IKID_STATUS_INPUT && contains(ikid_last_error(), "frame_len is 9"), "predict frame_len");
+    CHECK(ikid_model_predict(model, frames, n_frames, 18, rows_out, n_expected * 3, NULL) == IKID_STATUS_NULL_PARAMETER, "predict NULL rows");
+    CHECK(ikid_model_predict(model, NULL, 0, 18, NULL, 0, &rows) == IKID_STATUS_OK && rows == 0, "predict nothing into nothing");
+    CHECK(ikid_model_predict(model, frames, 3, 18, NULL, 0, &rows) == IKID_STATUS_OK && rows == 0, "short recording needs no out");
     free(rows_out);
 
     /* Threads share one model, each with its own stream. */
@@ -175,9 +182,9 @@ int main(int argc, char **argv) {
     /* Missing-marker policy, flags and timed pushes. */
     ikid_stream *timed = NULL;
     CHECK(ikid_stream_new(model, &timed) == IKID_STATUS_OK, "timed stream");
-    CHECK(ikid_stream_set_missing_markers(timed, "guess") == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "guess"), "bad policy: %s", ikid_last_error());
-    CHECK(ikid_stream_set_missing_markers(timed, NULL) == IKID_STATUS_NULL_PARAMETER, "NULL policy");
-    CHECK(ikid_stream_set_missing_markers(timed, "fill") == IKID_STATUS_OK, "fill policy");
+    CHECK(ikid_stream_set_missing_markers(timed, 7) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "policy is 7"), "bad policy: %s", ikid_last_error());
+    CHECK(ikid_stream_set_missing_markers(NULL, IKID_MISSING_MARKERS_FILL) == IKID_STATUS_NULL_PARAMETER, "NULL stream");
+    CHECK(ikid_stream_set_missing_markers(timed, IKID_MISSING_MARKERS_FILL) == IKID_STATUS_OK, "fill policy");
     uint32_t mask = 99;
     int timed_bad = 0;
     for (size_t i = 0; i < n_frames; i++) {

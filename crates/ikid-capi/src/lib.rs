@@ -23,7 +23,7 @@ mod tracker;
 
 pub use boundary::{ikid_last_error, ikid_status, ikid_status_message, ikid_version};
 pub use model::{ikid_model, ikid_model_info};
-pub use stream::ikid_stream;
+pub use stream::{ikid_missing_markers, ikid_stream};
 pub use tracker::{ikid_tracker, ikid_tracker_flags, ikid_tracker_settings};
 
 /// Frame status bit (`ikid_tracker_flags.status`): a missing marker was filled, or the

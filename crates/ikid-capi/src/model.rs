@@ -104,20 +104,51 @@ pub unsafe extern "C" fn ikid_model_get_info(model: *const ikid_model, out: *mut
     })
 }
 
-/// The model's name, task (`"ik"`, `"id"`, ...) or feature set, selected by `field`
-/// (0 = name, 1 = task, 2 = feature set); NULL for another `field` or a NULL model.
-/// Valid while the model handle lives.
+/// The model's name (e.g. `"wrist-ik"`), or NULL for a NULL model. Valid while the model
+/// handle lives.
 ///
 /// # Safety
 /// `model` must be NULL or a live handle.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn ikid_model_describe(model: *const ikid_model, field: u32) -> *const c_char {
+pub unsafe extern "C" fn ikid_model_name(model: *const ikid_model) -> *const c_char {
     // SAFETY: NULL or live (caller's contract).
-    let Some(m) = (unsafe { model.as_ref() }) else { return std::ptr::null() };
+    unsafe { model.as_ref() }.map_or(std::ptr::null(), |m| m.name.as_ptr())
+}
+
+/// The model's task: `"ik"` (markers → angles), `"id"` (joint state → torques), `"chain"`
+/// (markers → torques) or `"refine"` (a tracker's refiner); NULL for a NULL model.
+///
+/// # Safety
+/// `model` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_model_task(model: *const ikid_model) -> *const c_char {
+    // SAFETY: NULL or live (caller's contract).
+    unsafe { model.as_ref() }.map_or(std::ptr::null(), |m| m.task.as_ptr())
+}
+
+/// The model's feature set (e.g. `"angles"`: what it computes from each frame); NULL for a
+/// NULL model.
+///
+/// # Safety
+/// `model` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_model_feature_set(model: *const ikid_model) -> *const c_char {
+    // SAFETY: NULL or live (caller's contract).
+    unsafe { model.as_ref() }.map_or(std::ptr::null(), |m| m.feature_set.as_ptr())
+}
+
+/// Deprecated (use `ikid_model_name`, `ikid_model_task`, `ikid_model_feature_set`): the
+/// model's name, task or feature set by `field` (0, 1, 2); NULL for another `field`.
+///
+/// # Safety
+/// `model` must be NULL or a live handle.
+#[deprecated(note = "use ikid_model_name, ikid_model_task or ikid_model_feature_set")]
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_model_describe(model: *const ikid_model, field: u32) -> *const c_char {
     match field {
-        0 => m.name.as_ptr(),
-        1 => m.task.as_ptr(),
-        2 => m.feature_set.as_ptr(),
+        0 => unsafe { ikid_model_name(model) },
+        1 => unsafe { ikid_model_task(model) },
+        2 => unsafe { ikid_model_feature_set(model) },
         _ => std::ptr::null(),
     }
 }
@@ -150,13 +181,23 @@ pub unsafe extern "C" fn ikid_model_frame_name(model: *const ikid_model, index: 
 /// # Safety
 /// `model` must be NULL or a live handle.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn ikid_predict_rows(model: *const ikid_model, n_frames: usize) -> usize {
+pub unsafe extern "C" fn ikid_model_predict_rows(model: *const ikid_model, n_frames: usize) -> usize {
     // SAFETY: NULL or live (caller's contract).
     unsafe { model.as_ref() }.map_or(0, |m| m.model.n_predictions(n_frames))
 }
 
+/// Deprecated name of `ikid_model_predict_rows` (kept for one release).
+///
+/// # Safety
+/// As `ikid_model_predict_rows`.
+#[deprecated(note = "renamed ikid_model_predict_rows")]
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_predict_rows(model: *const ikid_model, n_frames: usize) -> usize {
+    unsafe { ikid_model_predict_rows(model, n_frames) }
+}
+
 /// Predicts a whole recording: `frames` holds `n_frames × frame_len` floats (row-major);
-/// `out` (room for `out_len` floats) receives `ikid_predict_rows(n_frames)` rows of
+/// `out` (room for `out_len` floats) receives `ikid_model_predict_rows(n_frames)` rows of
 /// `n_outputs`, row `i` for frame `i + window - 1`; `*rows` receives the row count. Uses all
 /// cores. Nothing is written on failure.
 ///
@@ -164,7 +205,7 @@ pub unsafe extern "C" fn ikid_predict_rows(model: *const ikid_model, n_frames: u
 /// `frames` must point to `n_frames × frame_len` readable floats, `out` to `out_len`
 /// writable floats, `rows` to writable storage.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn ikid_predict(
+pub unsafe extern "C" fn ikid_model_predict(
     model: *const ikid_model,
     frames: *const f32,
     n_frames: usize,
@@ -183,7 +224,25 @@ pub unsafe extern "C" fn ikid_predict(
     })
 }
 
-/// Checks and converts the arguments shared by `ikid_predict` and `ikid_stream_push_many`:
+/// Deprecated name of `ikid_model_predict` (kept for one release).
+///
+/// # Safety
+/// As `ikid_model_predict`.
+#[deprecated(note = "renamed ikid_model_predict")]
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_predict(
+    model: *const ikid_model,
+    frames: *const f32,
+    n_frames: usize,
+    frame_len: usize,
+    out: *mut f32,
+    out_len: usize,
+    rows: *mut usize,
+) -> ikid_status {
+    unsafe { ikid_model_predict(model, frames, n_frames, frame_len, out, out_len, rows) }
+}
+
+/// Checks and converts the arguments shared by `ikid_model_predict` and `ikid_stream_push_many`:
 /// `n_frames` frames of `frame_len` floats at `frames`, and room at `out` (`out_len` floats)
 /// for `rows` predictions of `m`.
 ///

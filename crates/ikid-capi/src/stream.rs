@@ -100,26 +100,39 @@ unsafe fn push_one(
     Ok(())
 }
 
-/// Sets what the stream does with a missing (NaN) marker: `"refuse"` (an error, no output)
-/// or `"fill"` (filled from the other markers and flagged, see
-/// `ikid_stream_filled_markers`). Streams start with the model card's policy.
+/// What a stream does with a missing (NaN) marker (`ikid_stream_set_missing_markers`).
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ikid_missing_markers {
+    /// Refuse the frame: an error, no output.
+    Refuse = 0,
+    /// Fill it from the other markers and flag it (`ikid_stream_filled_markers`,
+    /// `IKID_FRAME_FILLED`).
+    Fill = 1,
+}
+
+/// Sets what the stream does with a missing (NaN) marker: `IKID_MISSING_MARKERS_REFUSE` or
+/// `IKID_MISSING_MARKERS_FILL` (an `ikid_missing_markers`; any other value is refused with
+/// `IKID_STATUS_INVALID_ARGUMENT`). Streams start with the model card's policy.
 ///
 /// # Safety
-/// `stream` must be a live handle used by no other thread meanwhile; `policy` a
-/// NUL-terminated string.
+/// `stream` must be a live handle used by no other thread meanwhile.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn ikid_stream_set_missing_markers(
-    stream: *mut ikid_stream,
-    policy: *const std::ffi::c_char,
-) -> ikid_status {
+pub unsafe extern "C" fn ikid_stream_set_missing_markers(stream: *mut ikid_stream, policy: u32) -> ikid_status {
     guard(|| {
         let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
-        let policy = unsafe { non_null(policy, "policy") }?;
-        // SAFETY: non-null and NUL-terminated (caller's contract).
-        let name = unsafe { std::ffi::CStr::from_ptr(policy) }
-            .to_str()
-            .map_err(|_| Failure::new(ikid_status::InvalidArgument, "policy is not UTF-8"))?;
-        s.set_missing_markers(ikid_core::MissingMarkers::from_name(name)?)?;
+        // A u32, not the enum: a C caller may pass any integer, which must not become UB here.
+        let policy = match policy {
+            p if p == ikid_missing_markers::Refuse as u32 => ikid_core::MissingMarkers::Refuse,
+            p if p == ikid_missing_markers::Fill as u32 => ikid_core::MissingMarkers::Fill,
+            other => {
+                return Err(Failure::new(
+                    ikid_status::InvalidArgument,
+                    format!("policy is {other}, expected IKID_MISSING_MARKERS_REFUSE (0) or IKID_MISSING_MARKERS_FILL (1)"),
+                ));
+            }
+        };
+        s.set_missing_markers(policy)?;
         Ok(())
     })
 }
