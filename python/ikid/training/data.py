@@ -191,7 +191,10 @@ def features(rec: Recording, task: str, feature_set: str) -> np.ndarray:
     first filled by the core's gap filler, as a ``"fill"`` stream does."""
     frames = rec.frames(feature_set)
     if ikid.feature_set_info(feature_set)["frame_kind"] == "markers" and np.isnan(frames).any():
-        frames = ikid.fill_gaps(frames)[0]
+        filled = ikid.fill_gaps(frames, unfillable="keep")[0]
+        # A complete frame the filler takes for a jump (at 100 Hz a fast reach can move 8x the
+        # segment's RMS step in one frame) keeps its own markers: training learns the motion.
+        frames = np.where(np.isnan(filled) & ~np.isnan(frames), frames, filled)
     return ikid.compute_features(frames, feature_set)
 
 
