@@ -47,7 +47,7 @@ C_TYPES = {
 def header_struct(name: str) -> type[C.Structure]:
     """A ctypes structure with the fields ``include/ikid.h`` gives ``name`` (the ABI grows
     fields; a stale copy here would let the library write past a buffer)."""
-    text = HEADER.read_text()
+    text = HEADER.read_text(encoding="utf-8")
     body = text.split(f"typedef struct {name} {{", 1)[1].split(f"}} {name};", 1)[0]
     fields = []
     for line in body.splitlines():
