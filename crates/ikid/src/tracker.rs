@@ -52,7 +52,7 @@
 //!
 //! Allocation-free: the state is fixed-size, so a push costs a few microseconds and no heap.
 
-use nalgebra::{Isometry3, Matrix3, SMatrix, SVector, Vector3};
+use nalgebra::{Isometry3, Matrix3, Rotation3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
 
 use crate::body::{self, BodyModel, COORDINATES, MARKER_FRAME_LEN, MARKERS, N_COORDINATES, Segment};
 use crate::calibration::{Calibration, Side};
@@ -115,6 +115,18 @@ pub const RELINEARISE_RAD: f64 = 1e-3;
 /// ... at most this many times in all.
 pub const MAX_ITERATIONS: usize = 5;
 
+/// How long the wrist's centre of rotation is remembered, s (exponential forgetting): the
+/// functional joint centre ([`JointCentre`]) is learned from the frames with both segments whole.
+pub const CENTRE_MEMORY_S: f64 = 30.0;
+/// Frames with both segments whole needed before the learned centre is used, s (at least 10 frames).
+pub const CENTRE_MIN_S: f64 = 0.5;
+/// Smallest standard deviation the learned centre is given, m (its residual floor).
+pub const CENTRE_MIN_STD_M: f64 = 1e-3;
+/// Weight of the wrist centre beside each of a segment's two markers when the segment's pose is
+/// fitted to them and it (a marker gap): the markers fix what they can, the centre the turn
+/// about the line through them.
+pub const CENTRE_WEIGHT: f64 = 0.01;
+
 /// The refiner's corrections are scaled by `σ / (σ + REFINER_GATE_NOISE)`, σ the mean learned
 /// hand-marker noise (m): ~1 on noisy markers, → 0 on clean ones, which the filter already
 /// follows exactly (a network's own error floor would only add to it there).
@@ -133,8 +145,9 @@ pub fn refiner_outputs() -> Vec<String> {
 }
 
 type StateVector = SVector<f64, N_STATE>;
-/// Each hand marker's predicted position and its motion per radian of each coordinate.
-type HandPrediction = ([Vector3<f64>; 3], [[Vector3<f64>; N_COORDINATES]; 3]);
+/// Each hand marker's predicted position and its motion per radian of each coordinate; the
+/// fourth: the point asked for (the wrist centre), zeros without one.
+type HandPrediction = ([Vector3<f64>; 4], [[Vector3<f64>; N_COORDINATES]; 4]);
 type StateMatrix = SMatrix<f64, N_STATE, N_STATE>;
 
 /// How the tracker models motion and noise.
@@ -279,6 +292,9 @@ pub struct Tracker {
     /// the body model's, once per shape learned (`templated`).
     calibration: Option<Calibration>,
     templated: [bool; 2],
+    /// The wrist's centre of rotation, learned from frames with both segments whole (with a
+    /// calibration; the body model's own is its segments' common origin).
+    centre: JointCentre,
     /// The body model's own marker offsets, restored by [`reset`](Tracker::reset).
     model_offsets: [[f64; 3]; body::N_MARKERS],
 }
@@ -328,6 +344,7 @@ impl Tracker {
             restarts: 0,
             calibration: None,
             templated: [false; 2],
+            centre: JointCentre::new(),
             model_offsets: [[0.0; 3]; body::N_MARKERS],
         };
         tracker.model_offsets = tracker.body.marker_offsets;
@@ -354,6 +371,7 @@ impl Tracker {
         self.settling = 0;
         self.restarts = 0;
         self.templated = [false; 2];
+        self.centre = JointCentre::new();
         self.body.marker_offsets = self.model_offsets;
         if let Some(r) = self.refiner.as_mut() {
             r.reset();
@@ -396,6 +414,62 @@ impl Tracker {
             self.body.marker_offsets[k] = [local.x, local.y, local.z];
         }
         self.templated[segment as usize] = true;
+        // The centre was learned in the old placement's frames.
+        self.centre = JointCentre::new();
+    }
+
+    /// The wrist's centre of rotation `(c_f, c_h, variance)`: in the forearm's and the hand's
+    /// frames, and its uncertainty per coordinate (m²). Uncalibrated, the body model's (both
+    /// segments' origin); calibrated, the one learned ([`JointCentre`]), once it has seen
+    /// [`CENTRE_MIN_S`] of frames.
+    fn wrist_centre(&self) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
+        if self.calibration.is_none() {
+            return Some((Vector3::zeros(), Vector3::zeros(), CENTRE_MIN_STD_M * CENTRE_MIN_STD_M));
+        }
+        if self.templated != [true; 2] {
+            return None;
+        }
+        let min_frames = ((CENTRE_MIN_S * self.settings.rate_hz).ceil() as usize).max(10);
+        self.centre.solve(min_frames)
+    }
+
+    /// The forearm's pose from two of its markers (`usable`: frame-marker bits 0–2) and, for
+    /// the turn about the line through them, the wrist centre seen from the hand when the
+    /// hand's three markers are there (`hand`), else the last pose turned as little as fits
+    /// them. `None` without a last pose or a centre to use.
+    fn forearm_from_two(
+        &self,
+        frame: &[f64],
+        usable: u8,
+        hand: &[f64; N_HAND],
+        index: usize,
+    ) -> Option<Isometry3<f64>> {
+        let [a, b] = {
+            let mut two = (0..3).filter(|k| usable & (1 << k) != 0);
+            [two.next()?, two.next()?]
+        };
+        let offset = |k: usize| Vector3::from(self.body.marker_offsets[k]);
+        let point = |k: usize| Vector3::new(frame[3 * k], frame[3 * k + 1], frame[3 * k + 2]);
+        if hand.iter().all(|v| !v.is_nan())
+            && let Some((cf, ch, _)) = self.wrist_centre()
+        {
+            let mut whole = [0.0; MARKER_FRAME_LEN];
+            whole[HAND_START..].copy_from_slice(hand);
+            if let Ok(hand_pose) = reference::fit_segment(&self.body, &whole, Segment::Hand, index) {
+                let centre = hand_pose * nalgebra::Point3::from(ch);
+                return fit_points(
+                    &[offset(a), offset(b), cf],
+                    &[point(a), point(b), centre.coords],
+                    [1.0, 1.0, CENTRE_WEIGHT],
+                );
+            }
+        }
+        let last = self.forearm?;
+        let (was, now) = (last.rotation * (offset(b) - offset(a)), point(b) - point(a));
+        let turn = UnitQuaternion::rotation_between(&was, &now).unwrap_or_else(UnitQuaternion::identity);
+        let rotation = turn * last.rotation;
+        let translation = (point(a) + point(b)) / 2.0 - rotation * ((offset(a) + offset(b)) / 2.0);
+        Some(Isometry3::from_parts(Translation3::from(translation), rotation))
     }
 
     /// Use `model` to refine every estimate (see the [module docs](self)), or none. The model
@@ -508,6 +582,8 @@ impl Tracker {
 
         // 1. The forearm: measured if its markers are present, rigid as learned and not jumped.
         let mut forearm_measured = false;
+        // Its markers that may be used: present, and (two or three of them) rigid as learned.
+        let mut forearm_usable = !missing & FOREARM_MARKERS;
         if missing & FOREARM_MARKERS == 0 {
             let (rejected, relearned) = self.check_rigid(Segment::Forearm, frame, lost);
             if relearned {
@@ -517,20 +593,27 @@ impl Tracker {
             if rejected == 0 && !self.templated[Segment::Forearm as usize] {
                 self.take_template(Segment::Forearm, frame);
             }
+            forearm_usable &= !rejected;
             if rejected == 0
                 && let Ok(pose) = reference::fit_segment(&self.body, frame, Segment::Forearm, index)
-                && self.forearm_plausible(&pose, index, lost)
             {
-                self.forearm = Some(pose);
-                self.forearm_frame = index;
-                forearm_measured = true;
+                if self.forearm_plausible(&pose, index, lost) {
+                    self.forearm = Some(pose);
+                    self.forearm_frame = index;
+                    forearm_measured = true;
+                } else {
+                    forearm_usable = 0; // the whole forearm jumped: nothing of it is used
+                }
             }
             if !forearm_measured {
                 flags |= status::REJECTED_MARKER;
             }
-        }
-        if !forearm_measured && self.forearm.is_some() {
-            flags |= status::HELD;
+        } else if forearm_usable.count_ones() == 2 {
+            let (rejected, _) = self.check_rigid(Segment::Forearm, frame, lost);
+            if rejected != 0 {
+                forearm_usable = 0;
+                flags |= status::REJECTED_MARKER;
+            }
         }
 
         // 2. The hand's markers: NaN where missing or breaking the hand's rigid shape.
@@ -548,6 +631,24 @@ impl Tracker {
             flags |= status::REJECTED_MARKER;
         }
         let hand_complete = hand.iter().all(|v| !v.is_nan());
+
+        // 1b. A forearm with one marker missing or rejected: its pose from the two others and
+        // the wrist centre (see `forearm_from_two`), if that is a pose it could have reached.
+        let mut forearm_estimated = false;
+        if !forearm_measured
+            && forearm_usable.count_ones() == 2
+            && self.templated[Segment::Forearm as usize] | self.calibration.is_none()
+            && let Some(pose) = self.forearm_from_two(frame, forearm_usable, &hand, index)
+            && self.forearm_plausible(&pose, index, lost)
+        {
+            self.forearm = Some(pose);
+            self.forearm_frame = index;
+            forearm_estimated = true;
+        }
+        if !forearm_measured && !forearm_estimated && self.forearm.is_some() {
+            flags |= status::HELD;
+        }
+        let forearm_seen = forearm_measured || forearm_estimated;
 
         let Some(forearm) = self.forearm else {
             self.learn_noise(&hand, index);
@@ -587,7 +688,7 @@ impl Tracker {
         // could not follow, a gap it coasted through), so restart now rather than after `lost`.
         let lost_hand = self.gated_streak >= lost || (gated != 0 && self.hand_fits(&raw, index));
         if lost_hand
-            && forearm_measured
+            && forearm_seen
             && present == 0b111
             && let Some(restart) = self.frame_solution(&forearm, frame, index)
         {
@@ -625,17 +726,37 @@ impl Tracker {
             flags |= status::FILLED;
         }
         self.learn_noise(&hand, index);
+        if forearm_measured
+            && hand_markers_present(&hand) == 0b111
+            && self.calibration.is_some()
+            && self.templated == [true; 2]
+        {
+            // Both segments whole and agreeing with the filter: a frame for the wrist centre.
+            let mut whole = [0.0; MARKER_FRAME_LEN];
+            whole[HAND_START..].copy_from_slice(&hand);
+            if let Ok(hand_pose) = reference::fit_segment(&self.body, &whole, Segment::Hand, index) {
+                let forget = 1.0 / (CENTRE_MEMORY_S * self.settings.rate_hz);
+                self.centre.add(&forearm, &hand_pose, forget);
+            }
+        }
+        // Two hand markers measured relative to each other leave the hand's turn about the line
+        // through them open: the wrist centre, fixed in the forearm, closes it.
+        let centre = if self.relative_hand() && hand_markers_present(&hand).count_ones() == 2 {
+            self.wrist_centre().map(|(cf, ch, variance)| (forearm * nalgebra::Point3::from(cf), ch, variance))
+        } else {
+            None
+        };
         // With the hand's three markers, linearise first at their own solution (the Euler triple
         // nearest the prediction): near gimbal lock the prediction can be far off in angles
         // while near in rotation, and the iterations then start in the right place.
-        let start = if forearm_measured && hand_markers_present(&hand) == 0b111 {
+        let start = if forearm_seen && hand_markers_present(&hand) == 0b111 {
             let mut whole = [0.0; MARKER_FRAME_LEN];
             whole[HAND_START..].copy_from_slice(&hand);
             self.frame_solution(&forearm, &whole, index).map(|s| nearest_triple(&s, &x))
         } else {
             None
         };
-        self.correct(&forearm, &hand, start, &mut x, &mut p);
+        self.correct(&forearm, &hand, centre.map(|(w, ch, v)| (w.coords, ch, v)), start, &mut x, &mut p);
         // One turn is one posture: keep each angle in (−π, π] so that a restart or a long
         // gap can never leave the estimate a whole turn off; and e_f within ±90°.
         principal_branch(&mut x, &mut p);
@@ -791,7 +912,8 @@ impl Tracker {
     /// Hand markers (bits 0–2) whose innovation at the prediction is implausible: beyond
     /// [`GATE_CHI2`] of its predicted covariance and longer than [`GATE_FLOOR_M`].
     fn gate(&self, forearm: &Isometry3<f64>, hand: &[f64; N_HAND], x: &StateVector, p: &StateMatrix) -> u8 {
-        let Some((predicted, jac)) = self.hand_prediction(forearm, &x.fixed_rows::<3>(0).into_owned(), hand) else {
+        let Some((predicted, jac)) = self.hand_prediction(forearm, &x.fixed_rows::<3>(0).into_owned(), hand, None)
+        else {
             return 0;
         };
         let p_q = p.fixed_view::<3, 3>(0, 0).into_owned();
@@ -827,6 +949,7 @@ impl Tracker {
         forearm: &Isometry3<f64>,
         q: &Vector3<f64>,
         hand: &[f64; N_HAND],
+        extra: Option<Vector3<f64>>,
     ) -> Option<HandPrediction> {
         // World axes of the three joints at the prediction: a point p of the hand moves by
         // w_i × (p − centre) per radian of coordinate i. The chain's product is the hand's
@@ -855,7 +978,10 @@ impl Tracker {
         } else {
             (forearm.translation.vector, Vector3::zeros())
         };
-        let arms: [Vector3<f64>; 3] = std::array::from_fn(|m| rotation * (offset(m) - reference));
+        let arms: [Vector3<f64>; 4] = std::array::from_fn(|m| match m {
+            3 => extra.map_or(Vector3::zeros(), |e| rotation * (e - reference)),
+            _ => rotation * (offset(m) - reference),
+        });
         Some((arms.map(|a| centre + a), arms.map(|a| axes.map(|w| w.cross(&a)))))
     }
 
@@ -962,6 +1088,7 @@ impl Tracker {
         &self,
         forearm: &Isometry3<f64>,
         hand: &[f64; N_HAND],
+        centre: Option<(Vector3<f64>, Vector3<f64>, f64)>,
         start: Option<Vector3<f64>>,
         x: &mut StateVector,
         p: &mut StateMatrix,
@@ -971,12 +1098,19 @@ impl Tracker {
         let mut inflated = false;
         let mut iteration = 0;
         while iteration < MAX_ITERATIONS {
-            let Some((predicted, jac)) = self.hand_prediction(forearm, &at, hand) else { return };
+            let Some((predicted, jac)) = self.hand_prediction(forearm, &at, hand, centre.map(|c| c.1)) else {
+                return;
+            };
             let (mut xi, mut pi) = (prior, prior_p);
             let (mut nis, mut used) = (0.0, 0.0);
-            for m in 0..3 {
+            for m in 0..4 {
                 for k in 0..3 {
-                    let z = hand[3 * m + k];
+                    // The fourth: the wrist centre (the forearm's point, where the hand's would be).
+                    let (z, variance) = match (m, centre) {
+                        (3, Some((world, _, variance))) => (world[k], variance),
+                        (3, None) => break,
+                        _ => (hand[3 * m + k], self.noise_variance[3 * m + k]),
+                    };
                     if z.is_nan() {
                         continue;
                     }
@@ -987,9 +1121,11 @@ impl Tracker {
                     let innovation = z - predicted[m][k] - moved;
                     // ph = P hᵀ (h touches only the angles).
                     let ph: StateVector = pi.column(0) * h[0] + pi.column(1) * h[1] + pi.column(2) * h[2];
-                    let s = h[0] * ph[0] + h[1] * ph[1] + h[2] * ph[2] + self.noise_variance[3 * m + k];
-                    nis += innovation * innovation / s;
-                    used += 1.0;
+                    let s = h[0] * ph[0] + h[1] * ph[1] + h[2] * ph[2] + variance;
+                    if m < 3 {
+                        nis += innovation * innovation / s;
+                        used += 1.0;
+                    }
                     let gain = ph / s;
                     xi += gain * innovation;
                     pi -= gain * ph.transpose();
@@ -1014,6 +1150,94 @@ impl Tracker {
             iteration += 1;
         }
     }
+}
+
+/// The wrist's centre of rotation learned from the subject's own frames (a functional joint
+/// centre, as SCoRE): the point `c_f` fixed in the forearm and `c_h` fixed in the hand that stay
+/// together, `R_f c_f + t_f = R_h c_h + t_h`, by least squares over the frames where both
+/// segments' poses were measured whole (exponential forgetting over [`CENTRE_MEMORY_S`]), pulled
+/// weakly towards the point midway between the two segments' origins of the first such frame
+/// (what rotations about one axis leave undetermined). Fixed-size: no allocation.
+#[derive(Debug, Clone, Copy)]
+struct JointCentre {
+    normal: SMatrix<f64, 6, 6>,
+    rhs: SVector<f64, 6>,
+    /// Sum of |t_h − t_f|² (weighted), for the residual.
+    bb: f64,
+    weight: f64,
+    frames: usize,
+    prior: SVector<f64, 6>,
+}
+
+impl JointCentre {
+    fn new() -> Self {
+        JointCentre {
+            normal: SMatrix::zeros(),
+            rhs: SVector::zeros(),
+            bb: 0.0,
+            weight: 0.0,
+            frames: 0,
+            prior: SVector::zeros(),
+        }
+    }
+
+    fn add(&mut self, forearm: &Isometry3<f64>, hand: &Isometry3<f64>, forget: f64) {
+        let (rf, rh) =
+            (forearm.rotation.to_rotation_matrix().into_inner(), hand.rotation.to_rotation_matrix().into_inner());
+        let (tf, th) = (forearm.translation.vector, hand.translation.vector);
+        if self.frames == 0 {
+            let mid = (tf + th) / 2.0;
+            let (cf, ch) = (rf.transpose() * (mid - tf), rh.transpose() * (mid - th));
+            self.prior = SVector::<f64, 6>::from_iterator(cf.iter().chain(ch.iter()).copied());
+        }
+        let mut a = SMatrix::<f64, 3, 6>::zeros();
+        a.fixed_view_mut::<3, 3>(0, 0).copy_from(&rf);
+        a.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-rh));
+        let b = th - tf;
+        let keep = 1.0 - forget;
+        self.normal = self.normal * keep + a.transpose() * a;
+        self.rhs = self.rhs * keep + a.transpose() * b;
+        self.bb = self.bb * keep + b.norm_squared();
+        self.weight = self.weight * keep + 1.0;
+        self.frames += 1;
+    }
+
+    /// `(c_f, c_h, variance)`: the centre in the forearm's and the hand's frames, and the mean
+    /// square of its residual per coordinate (m², at least [`CENTRE_MIN_STD_M`]²); `None` before
+    /// `min_frames` frames.
+    fn solve(&self, min_frames: usize) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
+        if self.frames < min_frames {
+            return None;
+        }
+        let lambda = 1e-4 * self.weight;
+        let m = self.normal + SMatrix::<f64, 6, 6>::identity() * lambda;
+        let c = m.cholesky()?.solve(&(self.rhs + self.prior * lambda));
+        let residual = (self.bb - 2.0 * c.dot(&self.rhs) + (c.transpose() * self.normal * c)[0]) / (3.0 * self.weight);
+        if !residual.is_finite() {
+            return None;
+        }
+        let variance = residual.max(CENTRE_MIN_STD_M * CENTRE_MIN_STD_M);
+        Some((c.fixed_rows::<3>(0).into_owned(), c.fixed_rows::<3>(3).into_owned(), variance))
+    }
+}
+
+/// The rigid motion taking the `template` points onto the `measured` ones by weighted least
+/// squares (Kabsch); `None` if they are collinear.
+fn fit_points(template: &[Vector3<f64>; 3], measured: &[Vector3<f64>; 3], weights: [f64; 3]) -> Option<Isometry3<f64>> {
+    let total: f64 = weights.iter().sum();
+    let tc = (0..3).map(|k| template[k] * weights[k]).sum::<Vector3<f64>>() / total;
+    let mc = (0..3).map(|k| measured[k] * weights[k]).sum::<Vector3<f64>>() / total;
+    let h: Matrix3<f64> = (0..3).map(|k| (template[k] - tc) * (measured[k] - mc).transpose() * weights[k]).sum();
+    let svd = h.svd(true, true);
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    if svd.singular_values.iter().filter(|&&s| s > 1e-15).count() < 2 {
+        return None;
+    }
+    let d = (v_t.transpose() * u.transpose()).determinant().signum();
+    let r = v_t.transpose() * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * u.transpose();
+    let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+    let translation = mc - rotation * tc;
+    Some(Isometry3::from_parts(Translation3::from(translation), rotation))
 }
 
 /// Frame-marker bits of the forearm's markers.
@@ -1215,8 +1439,9 @@ mod tests {
             f[frame * MARKER_FRAME_LEN] = f64::NAN; // RSP gone for 200 ms
         }
         let (est, status, tracker) = track(&f, 100.0);
-        assert!(status[300..320].iter().all(|s| s & status::HELD != 0 && s & status::FILLED != 0));
-        assert!(worst_deg(&q[330..], &est[330..]) < 0.5, "{}", worst_deg(&q[330..], &est[330..]));
+        // The forearm's pose comes from its two other markers and the wrist centre: filled, not held.
+        assert!(status[300..320].iter().all(|s| s & status::HELD == 0 && s & status::FILLED != 0));
+        assert!(worst_deg(&q[300..], &est[300..]) < 0.5, "{}", worst_deg(&q[300..], &est[300..]));
         assert!(est.iter().flatten().all(|v| v.is_finite()));
         assert_eq!(tracker.restarts(), 0);
     }
