@@ -6,10 +6,31 @@ a :class:`ikid.Stream` with their timestamps, exactly as they would live: the mo
 missing-marker policy applies, a gap in time restarts the window, and a frame the stream
 refuses (a marker it cannot fill, a jumping marker) yields no row — it is counted, by
 reason, in :attr:`Run.refused`, never written as a guess.
+
+**Which model, at which rate** (:func:`pick_model`, the one place this is decided). A shipped
+name without a rate suffix, such as ``wrist-ik``, names a *family*: that model and its shipped
+siblings ``<name>-<rate>hz`` (``wrist-ik-100hz``, ``wrist-ik-250hz``). Each member's rate is its
+card's ``frame_rate_hz`` (the suffix only finds the files). For a recording at rate *r*:
+
+1. the member whose rate equals *r* (within :data:`RATE_TOLERANCE`) runs on the recording's own
+   frames, exactly as a live stream at that rate would;
+2. otherwise the member with the lowest rate above *r* (the fastest one, for a recording faster
+   than every member) runs at its own rate on the recording *resampled to it*, and the outputs
+   are the ones at the recording's own frame times (:func:`run_model`, ``at_recording_frames``).
+   Nothing is written between frames, and a missing frame stays missing: a grid point takes a
+   recording frame's markers exactly where it falls on one, the cubic Hermite between two frames
+   uses those two (never a missing one's neighbours), and no grid point is made inside a time gap.
+   ``--resample`` (``resample_to_model``) keeps the older behaviour: the whole recording resampled,
+   outputs on the model's grid.
+
+A model given as a file (or an explicit per-rate name, or a loaded :class:`ikid.Model`) is
+that model: at another rate than its card's it is refused unless ``resample_to_model``.
 """
 
 from __future__ import annotations
 
+import os
+import re
 from collections import Counter
 from dataclasses import dataclass, field
 
@@ -49,6 +70,12 @@ class Run:
     examples: dict[str, str] = field(default_factory=dict)
     #: Each output row's ``ikid.FRAME_STATUS`` bits (filled, outside the training range).
     status: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8))
+    #: The model that ran (its card's name) and its card's rate.
+    model_name: str = ""
+    model_rate_hz: float = 0.0
+    #: True if the recording was resampled to the model's rate and the outputs taken at the
+    #: recording's own frame times (``rate_hz`` is then the recording's).
+    at_recording_frames: bool = False
 
     def flagged(self, bit: str) -> int:
         """Output rows carrying status bit ``bit`` (an ``ikid.FRAME_STATUS`` name)."""
@@ -74,7 +101,21 @@ class Run:
             parts.append(f"{self.gap_restarts} window restarts after time gaps")
         if self.resampled_from_hz:
             parts.append(f"resampled {self.resampled_from_hz:g} -> {self.rate_hz:g} Hz")
+        if self.model_name:
+            parts.append(self.model_note())
         return ", ".join(parts)
+
+    def model_note(self) -> str:
+        """Which model ran, at which rate, on which frames (for the summary line)."""
+        head = f"model {self.model_name} ({self.model_rate_hz:g} Hz)"
+        if self.at_recording_frames:
+            return (
+                f"{head}, the {self.rate_hz:g} Hz recording resampled to it, "
+                f"outputs at the recording's frames"
+            )
+        if self.resampled_from_hz:
+            return f"{head}, outputs at its rate"
+        return f"{head} at the recording's rate"
 
 
 def refusal_reason(error: _native.InputError) -> str:
@@ -110,8 +151,64 @@ def check_rate(model: _native.Model, rate_hz: float, source: str, allow_resample
     return True
 
 
+#: A shipped per-rate model's name: its family's name and its rate (``wrist-ik-100hz``).
+_PER_RATE = re.compile(r"^(?P<family>.+)-(?P<rate>\d+(?:\.\d+)?)hz$")
+
+#: A recording frame runs on the model grid point within 1/(2·PHASE_STEPS) of a model period
+#: of it (0.05 ms at 100 Hz): frames are grouped by their phase on the model's grid in steps of
+#: 1/PHASE_STEPS period, one stream per group (70 Hz on a 100 Hz model: 7 groups).
+PHASE_STEPS = 100
+
+
+def family_members(name: str | os.PathLike[str]) -> list[_native.Model]:
+    """The shipped models of family ``name``, slowest first: ``name`` itself and every shipped
+    ``<name>-<rate>hz``, each at its card's ``frame_rate_hz``. Empty if ``name`` is not a family
+    (a path, a per-rate name such as ``wrist-ik-100hz``, or not shipped)."""
+    import ikid
+
+    if not ikid.is_model_name(name) or _PER_RATE.match(str(name)):
+        return []
+    names = [
+        n
+        for n in ikid.available_models()
+        if n == name or ((m := _PER_RATE.match(n)) is not None and m["family"] == name)
+    ]
+    return sorted((ikid.load(n) for n in names), key=lambda m: m.frame_rate_hz)
+
+
+def pick_model(
+    model: _native.Model | str | os.PathLike[str],
+    rate_hz: float | None,
+    *,
+    resample_to_model: bool = False,
+    source: str = "frames",
+) -> tuple[_native.Model, str]:
+    """The model to run on a recording at ``rate_hz`` and how: ``(model, how)``, ``how`` one of
+    ``"native"`` (the recording's own frames), ``"at_frames"`` (resampled to the model's rate,
+    outputs at the recording's frame times) or ``"resample"`` (resampled, outputs on the model's
+    grid: ``resample_to_model``). The rule is the module's docstring; a model that cannot run at
+    ``rate_hz`` is an :class:`ikid.InputError` saying what to do."""
+    if isinstance(model, _native.Model):
+        return model, (
+            "resample" if rate_hz and check_rate(model, rate_hz, source, resample_to_model) else "native"
+        )
+    members = family_members(model)
+    if not members:
+        import ikid
+
+        return pick_model(ikid.load(model), rate_hz, resample_to_model=resample_to_model, source=source)
+    if rate_hz is None:  # one frame: no rate to go by, the family's own model
+        return next(m for m in members if m.name == str(model) or m is members[-1]), "native"
+    for m in members:
+        if same_rate(rate_hz, m.frame_rate_hz):
+            return m, "native"
+    above = [m for m in members if m.frame_rate_hz > rate_hz]
+    chosen = above[0] if above else members[-1]
+    return chosen, ("resample" if resample_to_model else "at_frames")
+
+
 def run_model(
-    model: _native.Model,
+    model: _native.Model | str | os.PathLike[str],
     frames,
     time,
     *,
@@ -123,66 +220,181 @@ def run_model(
     progress: bool = False,
 ) -> Run:
     """Run ``model`` over ``frames`` ``(n, frame_len)`` at ``time`` ``(n,)`` seconds; with a
-    ``calibration`` (see :func:`ikid.calibrate`), for this subject's marker placement."""
+    ``calibration`` (see :func:`ikid.calibrate`), for this subject's marker placement.
+
+    ``model`` is a loaded model, a file, or a shipped name; a family name (``"wrist-ik"``) runs
+    the family's model for the recording's rate (:func:`pick_model`; :attr:`Run.model_name` says
+    which). ``rate_hz`` defaults to the median of the time steps."""
     frames = np.asarray(frames, np.float64)
     time = np.asarray(time, np.float64)
     if frames.ndim != 2 or time.shape != (len(frames),):
+        n_cols = model.frame_len if isinstance(model, _native.Model) else "frame_len"
         raise _native.InputError(
-            f"{source}: expected frames (n, {model.frame_len}) and time (n,), "
-            f"got {frames.shape} and {time.shape}"
+            f"{source}: expected frames (n, {n_cols}) and time (n,), got {frames.shape} and {time.shape}"
         )
+    if rate_hz is None and len(time) > 1:
+        rate_hz = 1.0 / float(np.median(np.diff(time)))
+    model, how = pick_model(model, rate_hz, resample_to_model=resample_to_model, source=source)
     if rate_hz is None:
-        rate_hz = 1.0 / float(np.median(np.diff(time))) if len(time) > 1 else model.frame_rate_hz
-    resampled_from = None
-    if check_rate(model, rate_hz, source, resample_to_model):
-        time, frames = resample(time, frames, model.frame_rate_hz)
-        resampled_from, rate_hz = rate_hz, model.frame_rate_hz
-    stream = model.stream(missing_markers=missing_markers, calibration=calibration)
-    rows, index, filled, status = [], [], [], []
-    implausible = _native.FRAME_STATUS["implausible"]
-    refused: Counter = Counter()
-    examples: dict[str, str] = {}
+        rate_hz = model.frame_rate_hz
+    kw = {"missing_markers": missing_markers, "calibration": calibration}
     bar = _progress(len(frames), source) if progress else None
-    for i, (t, frame) in enumerate(zip(time, frames, strict=True)):
-        if bar is not None and i % 1000 == 999:
-            bar.update(1000)
-        try:
-            out = stream.push(frame, time=float(t))
-        except _native.InputError as e:
-            reason = refusal_reason(e)
-            refused[reason] += 1
-            examples.setdefault(reason, f"frame {i}: {e.reason or e}")
-            continue
-        if out is None:
-            refused["window filling"] += 1
-            continue
-        if stream.status & implausible:
-            # Nothing no wrist can give is written as a number: the frame is counted instead.
-            reason = "implausible outputs (far outside the model's training range), not written"
-            refused[reason] += 1
-            examples.setdefault(reason, f"frame {i}: {np.array2string(np.asarray(out), precision=3)}")
-            continue
-        rows.append(out)
-        index.append(i)
-        filled.append(bool(stream.filled_markers))
-        status.append(stream.status)
-    if bar is not None:
-        bar.close()
-    values = np.array(rows, np.float64).reshape(-1, model.n_outputs)
-    idx = np.array(index, np.int64)
-    return Run(
-        time[idx],
-        idx,
-        values,
-        np.array(filled, bool),
-        len(frames),
-        refused,
-        rate_hz,
-        resampled_from,
-        stream.gap_restarts,
-        examples,
-        np.array(status, np.uint8),
-    )
+    try:
+        if how == "at_frames":
+            return _run_at_recording_frames(model, frames, time, rate_hz, kw, bar)
+        resampled_from = None
+        if how == "resample":
+            time, frames = resample(time, frames, model.frame_rate_hz)
+            resampled_from, rate_hz = rate_hz, model.frame_rate_hz
+        tally = _Tally(len(frames))
+        stream = model.stream(**kw)
+        for i, (t, frame) in enumerate(zip(time, frames, strict=True)):
+            if bar is not None and i % 1000 == 999:
+                bar.update(1000)
+            tally.add(i, _push(stream, t, frame))
+        return tally.run(model, time, rate_hz, resampled_from, stream.gap_restarts)
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+class _Tally:
+    """Outcomes per frame, in frame order, into a :class:`Run`."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.rows: list = []
+        self.index: list[int] = []
+        self.filled: list[bool] = []
+        self.status: list[int] = []
+        self.refused: Counter = Counter()
+        self.examples: dict[str, str] = {}
+
+    def add(self, i: int, outcome: tuple) -> None:
+        if outcome[0] == "out":
+            _, values, filled, status = outcome
+            self.rows.append(values)
+            self.index.append(i)
+            self.filled.append(filled)
+            self.status.append(status)
+        else:
+            _, reason, example = outcome
+            self.refused[reason] += 1
+            if example is not None:
+                self.examples.setdefault(reason, f"frame {i}: {example}")
+
+    def run(self, model, time, rate_hz, resampled_from, gap_restarts, at_frames: bool = False) -> Run:
+        values = np.array(self.rows, np.float64).reshape(-1, model.n_outputs)
+        idx = np.array(self.index, np.int64)
+        return Run(
+            time[idx],
+            idx,
+            values,
+            np.array(self.filled, bool),
+            self.n,
+            self.refused,
+            rate_hz,
+            resampled_from,
+            gap_restarts,
+            self.examples,
+            np.array(self.status, np.uint8),
+            model.name,
+            model.frame_rate_hz,
+            at_frames,
+        )
+
+
+def _push(stream: _native.Stream, t: float, frame: np.ndarray) -> tuple:
+    """One frame through ``stream``: ``("out", values, filled, status)`` or ``("none", reason,
+    example message or None)``."""
+    try:
+        out = stream.push(frame, time=float(t))
+    except _native.InputError as e:
+        return ("none", refusal_reason(e), e.reason or str(e))
+    if out is None:
+        return ("none", "window filling", None)
+    if stream.status & _native.FRAME_STATUS["implausible"]:
+        # Nothing no wrist can give is written as a number: the frame is counted instead.
+        reason = "implausible outputs (far outside the model's training range), not written"
+        return ("none", reason, np.array2string(np.asarray(out), precision=3))
+    return ("out", out, bool(stream.filled_markers), stream.status)
+
+
+def _run_at_recording_frames(
+    model: _native.Model, frames: np.ndarray, time: np.ndarray, rate_hz: float, kw: dict, bar
+) -> Run:
+    """``model`` at its own rate over a recording at ``rate_hz``, an output at each recording
+    frame's time: the frames are grouped by their phase on the model's grid (see
+    :data:`PHASE_STEPS`); each group gets its own stream over a grid of that phase, on which every
+    frame of the group is a grid point carrying the frame's own markers, the points between
+    frames interpolated (cubic Hermite from the two frames around them only), none made inside a
+    time gap (> 1.5 recording periods: the stream restarts after it, as live)."""
+    if len(time) < 2:
+        raise _native.InputError(f"resampling needs at least 2 frames, got {len(time)}")
+    if not np.all(np.isfinite(time)) or np.any(np.diff(time) <= 0):
+        raise _native.InputError("time must be finite and strictly increasing to resample")
+    period = 1.0 / model.frame_rate_hz
+    pos = (time - time[0]) / period
+    phase = np.round((pos - np.floor(pos)) * PHASE_STEPS).astype(np.int64) % PHASE_STEPS
+    gap = 1.5 / rate_hz
+    slopes = _local_slopes(time, frames, gap)
+    outcomes: list[tuple | None] = [None] * len(time)
+    restarts = 0
+    for b in np.unique(phase):
+        phi = b / PHASE_STEPS
+        members = np.flatnonzero(phase == b)
+        at = np.round(pos[members] - phi).astype(np.int64)
+        grid_t = time[0] + (phi + np.arange(at.max() + 1)) * period
+        values, valid = _hermite(time, frames, slopes, grid_t, gap)
+        values[at], grid_t[at], valid[at] = frames[members], time[members], True
+        frame_at = dict(zip(at.tolist(), members.tolist(), strict=True))
+        stream = model.stream(**kw)
+        for k in np.flatnonzero(valid):
+            outcome = _push(stream, grid_t[k], values[k])
+            i = frame_at.get(int(k))
+            if i is not None:
+                outcomes[i] = outcome
+                if bar is not None:
+                    bar.update(1)
+        restarts = max(restarts, stream.gap_restarts)
+    tally = _Tally(len(time))
+    for i, outcome in enumerate(outcomes):
+        tally.add(i, outcome or ("none", "not run", None))
+    return tally.run(model, time, rate_hz, None, restarts, at_frames=True)
+
+
+def _local_slopes(time: np.ndarray, values: np.ndarray, gap: float) -> np.ndarray:
+    """Each sample's slope (as :func:`ikid.io.resample`'s: second-order central differences) from
+    its neighbours that are present and not across a time gap (> ``gap`` s): one-sided beside a
+    missing sample or a gap, 0 with neither. A missing sample never makes its neighbours' slopes
+    missing, so it only touches the intervals on either side of it."""
+    h = np.diff(time)[:, None]
+    d = np.diff(values, axis=0) / h
+    ok = np.isfinite(d) & (h <= gap)
+    nan_row = np.full((1, values.shape[1]), np.nan)
+    back = np.vstack([nan_row, np.where(ok, d, np.nan)])
+    fwd = np.vstack([np.where(ok, d, np.nan), nan_row])
+    h1 = np.vstack([nan_row[:, :1], h])
+    h2 = np.vstack([h, nan_row[:, :1]])
+    with np.errstate(invalid="ignore"):
+        central = (h2 * back + h1 * fwd) / (h1 + h2)  # = numpy.gradient's second-order formula
+    slopes = np.where(np.isfinite(central), central, np.where(np.isfinite(back), back, fwd))
+    return np.where(np.isfinite(slopes), slopes, 0.0)
+
+
+def _hermite(
+    time: np.ndarray, values: np.ndarray, slopes: np.ndarray, new_time: np.ndarray, gap: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Cubic Hermite values at ``new_time`` and whether each point is usable (inside the
+    recording, not inside a time gap). A point between a missing sample and its neighbour is
+    missing (NaN) in that column."""
+    i = np.clip(np.searchsorted(time, new_time, side="right") - 1, 0, len(time) - 2)
+    h = (time[i + 1] - time[i])[:, None]
+    s = (new_time[:, None] - time[i][:, None]) / h
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    out = h00 * values[i] + h10 * h * slopes[i] + h01 * values[i + 1] + h11 * h * slopes[i + 1]
+    valid = (h[:, 0] <= gap) & (new_time >= time[0]) & (new_time <= time[-1])
+    return out, valid
 
 
 def _progress(total: int, label: str):

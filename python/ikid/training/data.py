@@ -195,7 +195,23 @@ def features(rec: Recording, task: str, feature_set: str) -> np.ndarray:
         # A complete frame the filler takes for a jump (at 100 Hz a fast reach can move 8x the
         # segment's RMS step in one frame) keeps its own markers: training learns the motion.
         frames = np.where(np.isnan(filled) & ~np.isnan(frames), frames, filled)
+        if np.isnan(frames).any():
+            # Rare (a put-back burst changes what the filler accepts after it): hold the
+            # marker's last value, so the recording stays whole.
+            frames = _hold_last(frames)
     return ikid.compute_features(frames, feature_set)
+
+
+def _hold_last(frames: np.ndarray) -> np.ndarray:
+    """``frames`` with each NaN replaced by its column's last finite value (the first finite one
+    before any)."""
+    out = np.array(frames, dtype=np.float64)
+    for c in np.flatnonzero(np.isnan(out).any(axis=0)):
+        col = out[:, c]
+        ok = np.flatnonzero(~np.isnan(col))
+        last = np.maximum.accumulate(np.where(~np.isnan(col), np.arange(len(col)), -1))
+        out[:, c] = col[np.where(last >= 0, last, ok[0])]
+    return out
 
 
 def feature_len(feature_set: str) -> int:

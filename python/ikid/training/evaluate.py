@@ -38,8 +38,23 @@ def truth(model: Predictor, rec: D.Recording) -> np.ndarray:
 
 
 def predict(model: Predictor, rec: D.Recording) -> np.ndarray:
-    """Predictions for every frame with a full window (row ``i`` is frame ``i + window - 1``)."""
-    return model.predict(rec.frames(model.feature_set)).astype(np.float64)
+    """Predictions for every frame with a full window (row ``i`` is frame ``i + window - 1``);
+    NaN where a stream refuses the frame (at 100 Hz the gap filler takes a rare fast reach for a
+    jump, which ``predict`` refuses for the whole recording)."""
+    frames = rec.frames(model.feature_set)
+    try:
+        return model.predict(frames).astype(np.float64)
+    except ikid.InputError:
+        stream = model.stream()  # type: ignore[attr-defined]
+        out = np.full((len(frames), model.n_outputs), np.nan)  # type: ignore[attr-defined]
+        for i, frame in enumerate(frames):
+            try:
+                y = stream.push(frame)
+            except ikid.InputError:
+                continue
+            if y is not None:
+                out[i] = y
+        return out[model.window - 1 :]
 
 
 def errors(model: Predictor, recs: Sequence[D.Recording], split: str) -> tuple[np.ndarray, np.ndarray]:
@@ -54,8 +69,9 @@ def errors(model: Predictor, recs: Sequence[D.Recording], split: str) -> tuple[n
         lo, hi = D.SPLIT_FRACTIONS[split] if split != "all" else (0.0, 1.0)
         n = len(r)
         a, b = max(int(round(lo * n)) - (model.window - 1), 0), int(round(hi * n)) - (model.window - 1)
-        errs.append(pred[a:b] - true[a:b])
-        trues.append(true[a:b])
+        ok = np.isfinite(pred[a:b]).all(axis=1)
+        errs.append((pred[a:b] - true[a:b])[ok])
+        trues.append(true[a:b][ok])
     return np.concatenate(errs), np.concatenate(trues)
 
 
