@@ -365,8 +365,10 @@ def _process_one(job: tuple[str, dict]) -> dict:
         runs = {}
         for kind, name in (("angles", opt["ik_model"]), ("torques", opt.get("torque_model"))):
             if name:
+                # A shipped family name (the default wrist-ik) runs its model for the file's rate
+                # (ikid.pipeline.pick_model); a file or a per-rate name is that model.
                 runs[kind] = run_model(
-                    ikid.load(name),
+                    name,
                     frames,
                     data.time,
                     rate_hz=data.rate_hz,
@@ -392,7 +394,9 @@ def _process_one(job: tuple[str, dict]) -> dict:
             ok=True,
             frames=len(data),
             rate_hz=data.rate_hz,
-            summary=first.summary(),
+            summary="; ".join(
+                [first.summary()] + [f"{kind}: {r.model_note()}" for kind, r in list(runs.items())[1:]]
+            ),
             written=list(map(str, written)),
         )
     except (ikid.IkidError, OSError) as e:
@@ -1162,7 +1166,12 @@ def main(argv: list[str] | None = None) -> int:
         "  ikid ik sessions/ -o results/ --resample",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    processing_options(p, "angle model, shipped name or file (default wrist-ik)")
+    processing_options(
+        p,
+        "angle model, shipped name or file (default wrist-ik: the shipped wrist-ik model whose card rate is "
+        "the file's, e.g. wrist-ik-100hz; another rate runs on the next faster one, resampled, outputs "
+        "at the file's frames)",
+    )
     p.set_defaults(func=cmd_process)
 
     p = sub.add_parser(
@@ -1172,7 +1181,9 @@ def main(argv: list[str] | None = None) -> int:
         "  ikid run trial.c3d -o out/trial   # out/trial.mot, out/trial.sto",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    processing_options(p, "angle model (default wrist-ik)")
+    processing_options(
+        p, "angle model (default wrist-ik: the shipped wrist-ik model for the file's rate, as in `ikid ik`)"
+    )
     p.add_argument(
         "--torque-model", default="wrist-chain", help="markers -> torques model (default wrist-chain)"
     )
