@@ -59,10 +59,16 @@ type FilledFrames<'py> = (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray1<u8>>);
 /// Runs a fresh gap filler (what a `"fill"` stream does) over a recording `(n, 18)`: the
 /// filled frames (float32) and per frame the bit mask of markers filled (uint8, bit `i` =
 /// marker `i`). A frame it cannot fill raises (`unfillable="raise"`) or stays missing with
-/// mask 0 (`unfillable="keep"`).
+/// mask 0 (`unfillable="keep"`). `rate_hz`: the frames' rate (the filler's time constants are
+/// in seconds).
 #[pyfunction]
-#[pyo3(signature = (frames, unfillable = "raise"))]
-fn fill_gaps<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>, unfillable: &str) -> PyResult<FilledFrames<'py>> {
+#[pyo3(signature = (frames, unfillable = "raise", rate_hz = 1000.0))]
+fn fill_gaps<'py>(
+    py: Python<'py>,
+    frames: &Bound<'py, PyAny>,
+    unfillable: &str,
+    rate_hz: f64,
+) -> PyResult<FilledFrames<'py>> {
     let keep = match unfillable {
         "raise" => false,
         "keep" => true,
@@ -76,7 +82,7 @@ fn fill_gaps<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>, unfillable: &str)
                 ikid::body::MARKER_FRAME_LEN
             )));
         }
-        let (filled, masks) = py.detach(|| ikid::gaps::fill_gaps(values, keep)).py_err()?;
+        let (filled, masks) = py.detach(|| ikid::gaps::fill_gaps(values, keep, rate_hz)).py_err()?;
         Ok((filled.into_pyarray(py).reshape([shape[0], shape[1]])?, masks.into_pyarray(py)))
     })
 }

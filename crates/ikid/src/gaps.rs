@@ -78,9 +78,8 @@ pub const MIN_MOTION: f64 = 0.005;
 /// axis) costs 4× (1 %) to 9× (5 %) the complete-marker error; with 10 and 3 µm, 1.0–2.1×;
 /// with 1000 and 0.3 µm, 1.0×.
 pub const PRIOR_WEIGHT: f64 = 1000.0;
-/// Frame-to-frame displacement (metres per frame) below which a segment counts as still:
-/// 0.3 µm, i.e. 0.3 mm/s at 1000 Hz.
-pub const STILL_SPEED: f64 = 3e-7;
+/// Speed (m/s) below which a segment counts as still: 0.3 mm/s (0.3 µm per frame at 1 kHz).
+pub const STILL_SPEED_M_PER_S: f64 = 3e-4;
 /// Marker noise variance (m²) below which the joint centre's and the markers' weights stop
 /// growing: (0.1 mm)².
 pub const NOISE_FLOOR: f64 = 1e-8;
@@ -89,10 +88,11 @@ pub const NOISE_FLOOR: f64 = 1e-8;
 /// rises above [`NOISE_FLOOR`]; clean markers are used as they are). Noise in the technical
 /// frames biases the least-squares centre (errors in the regressors): at 5 % noise it sat
 /// 1.4 mm off, and a metacarpal-head marker missing then cost the shipped wrist-ik 2.15× its
-/// complete-marker error; averaged over 10 frames (10 ms at the models' 1 kHz, in which a
+/// complete-marker error; averaged over 10 ms (10 frames at the models' 1 kHz, in which a
 /// segment turns about the centre by well under a degree) it sits 0.13 mm off (measured on
-/// docs/report.md's held-out trials).
-pub const CENTRE_SMOOTHING_FRAMES: f64 = 10.0;
+/// docs/report.md's held-out trials). In seconds, so a filler at 100 Hz averages one frame,
+/// not 100 ms of motion.
+pub const CENTRE_SMOOTHING_S: f64 = 0.01;
 
 const SEGMENTS: [Segment; 2] = [Segment::Forearm, Segment::Hand];
 
@@ -129,6 +129,10 @@ pub struct GapFiller {
     candidate: Option<[f32; MARKER_FRAME_LEN]>,
     candidate_frames: u32,
     reanchors: u64,
+    /// [`STILL_SPEED_M_PER_S`] and [`CENTRE_SMOOTHING_S`] at this filler's frame rate, in
+    /// metres per frame and frames.
+    still_step: f64,
+    centre_smoothing: f64,
 }
 
 /// Consecutive frames, each rigid and within the motion limit of the one before, that must all
@@ -154,9 +158,18 @@ impl Default for GapFiller {
 }
 
 impl GapFiller {
-    /// A filler that has seen nothing yet.
+    /// A filler for frames at 1 kHz (the shipped models' rate) that has seen nothing yet.
     pub fn new() -> Self {
+        Self::at_rate(1000.0)
+    }
+
+    /// A filler for frames at `rate_hz` (its time constants are in seconds; a model card's
+    /// rate, always positive) that has seen nothing yet.
+    pub fn at_rate(rate_hz: f64) -> Self {
+        let rate = if rate_hz.is_finite() && rate_hz > 0.0 { rate_hz } else { 1000.0 };
         GapFiller {
+            still_step: STILL_SPEED_M_PER_S / rate,
+            centre_smoothing: (CENTRE_SMOOTHING_S * rate).max(1.0),
             local_sum: [Vector3::zeros(); N_MARKERS],
             normal: Matrix6::zeros(),
             rhs: Vector6::zeros(),
@@ -463,7 +476,7 @@ impl GapFiller {
             None => weight[3] = 0.0,
         }
         let seg = occluded as usize;
-        weight[3] *= PRIOR_WEIGHT / (1.0 + self.mean_square_step(seg) / (STILL_SPEED * STILL_SPEED));
+        weight[3] *= PRIOR_WEIGHT / (1.0 + self.mean_square_step(seg) / (self.still_step * self.still_step));
         // The joint centre, by inverse variance: it comes from the whole segment, the visible
         // markers from the occluded one (marker noise estimated from each segment's pair
         // distances; the centre's doubled for its lever).
@@ -503,7 +516,7 @@ impl GapFiller {
         // constant of up to CENTRE_SMOOTHING_FRAMES as its noise rises above the floor.
         let mut smoothed = [0.0; MARKER_FRAME_LEN];
         for (s, segment) in SEGMENTS.into_iter().enumerate() {
-            let frames = centre_smoothing_frames(self.noise_variance(s));
+            let frames = centre_smoothing_frames(self.noise_variance(s), self.centre_smoothing);
             let first = 3 * first_marker(segment);
             for i in first..first + 9 {
                 let x = frame[i] as f64;
@@ -568,11 +581,14 @@ impl GapFiller {
     }
 }
 
-/// Runs a fresh [`GapFiller`] over a whole recording of marker frames: the frames with each
-/// fillable missing marker filled, and per frame the bit mask of markers filled. A frame that
-/// cannot be filled stops the run with its error, or with `keep_unfillable` stays missing
-/// (mask 0; markers found to have jumped are set missing).
-pub fn fill_gaps(frames: &[f32], keep_unfillable: bool) -> Result<(Vec<f32>, Vec<u8>)> {
+/// Runs a fresh [`GapFiller`] (at `rate_hz`) over a whole recording of marker frames: the
+/// frames with each fillable missing marker filled, and per frame the bit mask of markers
+/// filled. A frame that cannot be filled stops the run with its error, or with
+/// `keep_unfillable` stays missing (mask 0; markers found to have jumped are set missing).
+pub fn fill_gaps(frames: &[f32], keep_unfillable: bool, rate_hz: f64) -> Result<(Vec<f32>, Vec<u8>)> {
+    if !(rate_hz.is_finite() && rate_hz > 0.0) {
+        return Err(Error::BadArgument { what: "rate_hz", detail: format!("is {rate_hz}, expected a positive rate") });
+    }
     if !frames.len().is_multiple_of(MARKER_FRAME_LEN) {
         return Err(Error::BadArgument {
             what: "frames",
@@ -580,7 +596,7 @@ pub fn fill_gaps(frames: &[f32], keep_unfillable: bool) -> Result<(Vec<f32>, Vec
         });
     }
     let mut filled = frames.to_vec();
-    let mut filler = GapFiller::new();
+    let mut filler = GapFiller::at_rate(rate_hz);
     let masks = filled
         .chunks_exact_mut(MARKER_FRAME_LEN)
         .enumerate()
@@ -623,9 +639,10 @@ fn marker(frame: &[f32], i: usize) -> Vector3<f64> {
 
 /// Time constant (frames) of the running mean the joint-centre fit reads, for a segment whose
 /// marker noise variance is `noise_variance` (m²): 1 (markers as they are) when clean, rising
-/// to [`CENTRE_SMOOTHING_FRAMES`] as the noise passes [`NOISE_FLOOR`] (halfway at it).
-fn centre_smoothing_frames(noise_variance: f64) -> f64 {
-    1.0 + (CENTRE_SMOOTHING_FRAMES - 1.0) * noise_variance / (noise_variance + NOISE_FLOOR)
+/// to `smoothing` frames ([`CENTRE_SMOOTHING_S`] at the filler's rate) as the noise passes
+/// [`NOISE_FLOOR`] (halfway at it).
+fn centre_smoothing_frames(noise_variance: f64, smoothing: f64) -> f64 {
+    1.0 + (smoothing - 1.0) * noise_variance / (noise_variance + NOISE_FLOOR)
 }
 
 /// Rotation and translation taking the `local` points onto the `lab` ones in the weighted
@@ -1000,10 +1017,19 @@ mod tests {
     #[test]
     fn the_centre_smoothing_runs_from_one_frame_clean_to_ten_noisy() {
         // By hand: 1 + 9 v / (v + 1e-8).
-        assert_eq!(centre_smoothing_frames(0.0), 1.0);
-        assert!((centre_smoothing_frames(NOISE_FLOOR) - 5.5).abs() < 1e-12);
-        assert!((centre_smoothing_frames(3.0 * NOISE_FLOOR) - 7.75).abs() < 1e-12);
-        assert!((centre_smoothing_frames(1.0) - 10.0).abs() < 1e-6);
+        // At 1 kHz the 10 ms time constant is 10 frames.
+        let at_1k = GapFiller::new().centre_smoothing;
+        assert_eq!(at_1k, 10.0);
+        assert_eq!(centre_smoothing_frames(0.0, at_1k), 1.0);
+        assert!((centre_smoothing_frames(NOISE_FLOOR, at_1k) - 5.5).abs() < 1e-12);
+        assert!((centre_smoothing_frames(3.0 * NOISE_FLOOR, at_1k) - 7.75).abs() < 1e-12);
+        assert!((centre_smoothing_frames(1.0, at_1k) - 10.0).abs() < 1e-6);
+        // Time constants are in seconds: 2.5 frames at 250 Hz, never below one frame; a still
+        // segment moves 0.3 mm/s whatever the rate.
+        assert_eq!(GapFiller::at_rate(250.0).centre_smoothing, 2.5);
+        assert_eq!(GapFiller::at_rate(50.0).centre_smoothing, 1.0);
+        assert!((GapFiller::at_rate(100.0).still_step - 3e-6).abs() < 1e-18);
+        assert!((GapFiller::new().still_step - 3e-7).abs() < 1e-18);
     }
 
     #[test]
@@ -1177,9 +1203,9 @@ mod tests {
         for k in 0..3 {
             frames.swap(1502 * 18 + 9 + k, 1502 * 18 + 12 + k); // MC2 and MC5 swap labels: not
         }
-        let err = fill_gaps(&frames, false).unwrap_err();
+        let err = fill_gaps(&frames, false, 1000.0).unwrap_err();
         assert!(matches!(err, Error::MissingMarkers { frame: 10, .. }), "{err}");
-        let (filled, masks) = fill_gaps(&frames, true).unwrap();
+        let (filled, masks) = fill_gaps(&frames, true, 1000.0).unwrap();
         assert_eq!(masks.len(), 1600);
         for (i, &m) in masks.iter().enumerate() {
             assert_eq!(m, if i == 1500 { 1 << 4 } else { 0 }, "frame {i}");
@@ -1192,14 +1218,14 @@ mod tests {
                 assert_eq!(nan, gone.contains(&m), "frame {i} marker {m}");
             }
         }
-        let err = fill_gaps(&frames[..17], true).unwrap_err().to_string();
+        let err = fill_gaps(&frames[..17], true, 1000.0).unwrap_err().to_string();
         assert!(err.contains("17 values"), "{err}");
         // Without keep_unfillable the label swap alone stops the run too, naming it.
         let mut swapped = truth.clone();
         for k in 0..3 {
             swapped.swap(1502 * 18 + 9 + k, 1502 * 18 + 12 + k);
         }
-        let stopped = fill_gaps(&swapped, false).map(|(_, masks)| masks.len());
+        let stopped = fill_gaps(&swapped, false, 1000.0).map(|(_, masks)| masks.len());
         assert!(matches!(stopped, Err(Error::OutlierMarker { frame: 1502, .. })), "{stopped:?}");
     }
 

@@ -74,7 +74,7 @@ impl Stream {
             scratch: model.packed().scratch(),
             output: vec![0.0; model.n_outputs()],
             policy: model.missing_markers(),
-            filler: GapFiller::new(),
+            filler: GapFiller::at_rate(model.card().frame_rate_hz),
             frame_buf: [0.0; MARKER_FRAME_LEN],
             filled_mask: 0,
             last_time: None,

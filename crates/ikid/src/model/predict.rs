@@ -61,7 +61,7 @@ impl Model {
         // Under the fill policy every frame goes through the filler, as in a stream: it fills
         // missing markers and refuses (or replaces) ones that jumped.
         let frames = if self.missing_markers() == MissingMarkers::Fill && fl == crate::body::MARKER_FRAME_LEN {
-            filled = fill_gaps(frames, false)?.0;
+            filled = fill_gaps(frames, false, self.card().frame_rate_hz)?.0;
             &filled[..]
         } else {
             frames
