@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf realdata
+.PHONY: all venv wheel demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf compare-rates realdata
 
 all: wheel
 
@@ -212,6 +212,12 @@ compare-opensim: wheel
 # (~10 min on 2 cores; the eval extra brings biorbd).
 compare-ekf: wheel
 	$(PY) benches/ekf_peer.py
+
+# ikid at 100, 250 and 1000 Hz (the wrist-ik model for each rate, the Tracker) beside biorbd's EKF
+# at the same rate on the same held-out frames: docs/rates.md and target/rates.json (~10 min on
+# 2 cores; not part of `make test`).
+compare-rates: wheel
+	$(PY) benches/rates.py
 
 # Real recordings (../shared/realdata, or $$IKID_REALDATA) through the CLI: calibrate from the
 # recording, ik, track, scored against the independent reference angles: docs/realdata.md and
