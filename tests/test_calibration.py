@@ -313,6 +313,21 @@ def test_calibrate_command_from_landmarks_and_neutral_frames_of_a_task_trial(mot
     frame = np.round(t * 1000).astype(int)
     late = frame >= 200
     assert np.mean((q[late] - motion[frame[late] - 100]) ** 2) < 2e-4
+    # The landmarks also say how large the subject is: the forearm's long axis (styloids to
+    # epicondyles: 0.255 m on the default arm here, times the subject's 1.1) over the default
+    # forearm's length; `ikid track` takes the subject's size from there.
+    forearm = ikid.body_model()["segments"]["forearm"]["length"]
+    estimate = calibration_info(out)["report"]["landmarks"]["length_scale"]
+    assert abs(estimate - 0.255 * 1.1 / forearm) < 1e-3, estimate
+    capsys.readouterr()
+    track = ["track", str(path), "-o", str(tmp_path / "tr"), "--map", str(tmp_path / "lab.toml")]
+    assert cli(track + ["--calibration", str(out), "--refiner", "none"]) == 0
+    said = capsys.readouterr().out
+    assert f"subject ×{estimate:.3g} length" in said and "estimated from the calibration's landmarks" in said
+    t, q = io.read_mot(tmp_path / "tr.mot")
+    frame = np.round(t * 1000).astype(int)
+    late = frame >= 200
+    assert np.mean((q[late] - motion[frame[late] - 100]) ** 2) < 2e-4
     # The neutral method: the forearm at the body model's placement (not this subject's).
     assert cli(base + ["--frames", "0-99", "--method", "neutral"]) == 0
     assert calibration_info(out)["method"] == "neutral"

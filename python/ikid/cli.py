@@ -506,10 +506,11 @@ def cmd_track(args: argparse.Namespace) -> int:
     mapping = MarkerMap.load(args.map) if args.map else None
     frames = data.frames(mapping)
     calibration = _subject_calibration(frames, args.calibration, mapping, args.input)
+    length_scale, mass_scale, size_from = _subject_size(args)
     try:
         tracker = ikid.Tracker(
-            length_scale=args.length_scale,
-            mass_scale=args.mass_scale,
+            length_scale=length_scale,
+            mass_scale=mass_scale,
             rate_hz=data.rate_hz,
             jerk_noise=args.jerk_noise,
             refiner=refiner,
@@ -543,7 +544,7 @@ def cmd_track(args: argparse.Namespace) -> int:
         notes.append(f"{tracker.restarts} restarts after losing the hand")
     print(
         f"{args.input}: {int(keep.sum())}/{len(frames)} frames tracked from frame {k} "
-        f"at {data.rate_hz:g} Hz, "
+        f"at {data.rate_hz:g} Hz, subject ×{length_scale:.3g} length, ×{mass_scale:.3g} mass ({size_from}), "
         f"{placed}, {how}; flagged: {', '.join(notes) or 'none'}; hand marker noise learned (mm): {noise_mm} "
         f"-> {mot}, {sto}"
     )
@@ -551,6 +552,27 @@ def cmd_track(args: argparse.Namespace) -> int:
         print(f"ikid: --strict: {args.input} has frames without an estimate or flagged", file=sys.stderr)
         return 3
     return 0
+
+
+def _subject_size(args: argparse.Namespace) -> tuple[float, float, str]:
+    """The subject's (length, mass) scales for the tracker, and where they came from: the
+    options; else the calibration's size estimate (its landmarks: the forearm's length over
+    the default subject's), mass its cube; else the default subject."""
+    from ikid.calibration import calibration_info
+
+    estimate = None
+    if args.calibration:
+        landmarks = (calibration_info(args.calibration).get("report") or {}).get("landmarks") or {}
+        estimate = landmarks.get("length_scale")
+    if args.length_scale is not None:
+        length, source = args.length_scale, "given"
+    elif estimate is not None:
+        length = min(max(float(estimate), _native.LENGTH_SCALE_RANGE[0]), _native.LENGTH_SCALE_RANGE[1])
+        source = "estimated from the calibration's landmarks"
+    else:
+        length, source = 1.0, "the default subject"
+    mass = args.mass_scale if args.mass_scale is not None else length**3
+    return length, mass, source
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
@@ -1211,14 +1233,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--length-scale",
         type=SUBJECT_LENGTH,
-        default=1.0,
-        help="subject's segment lengths / the default subject's",
+        default=None,
+        help="subject's segment lengths / the default subject's (default: the calibration's estimate "
+        "from its landmarks, else 1)",
     )
     p.add_argument(
         "--mass-scale",
         type=SUBJECT_MASS,
-        default=1.0,
-        help="subject's segment masses / the default subject's",
+        default=None,
+        help="subject's segment masses / the default subject's (default: the cube of the length scale)",
     )
     p.add_argument(
         "--refiner",

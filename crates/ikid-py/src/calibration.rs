@@ -201,6 +201,7 @@ impl Calibration {
                 ld.set_item("styloid_span_mm", l.styloid_span_mm)?;
                 ld.set_item("epicondyle_span_mm", l.epicondyle_span_mm)?;
                 ld.set_item("styloid_axis_deg", l.styloid_axis_deg)?;
+                ld.set_item("length_scale", l.length_scale)?;
                 d.set_item("landmarks", ld)?;
             }
             None => d.set_item("landmarks", py.None())?,

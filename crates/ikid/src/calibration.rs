@@ -222,6 +222,11 @@ pub struct LandmarkReport {
     pub epicondyle_span_mm: f64,
     /// Angle between the styloid line and the long axis, degrees (90 for ideal landmarks).
     pub styloid_axis_deg: f64,
+    /// The subject's size estimated from it: the long axis (mid-styloids to mid-epicondyles,
+    /// the forearm's length) over the default subject's forearm length — what
+    /// [`BodyModel::scaled`](crate::body::BodyModel::scaled) takes as `length_factor` (its
+    /// cube is the matching `mass_factor` for a subject of the default's build).
+    pub length_scale: f64,
 }
 
 impl Default for Calibration {
@@ -664,6 +669,7 @@ fn forearm_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Result<(Rotat
         styloid_span_mm: 1e3 * across.norm(),
         epicondyle_span_mm: 1e3 * (le - me).norm(),
         styloid_axis_deg,
+        length_scale: long.norm() / body::BodyModel::default().forearm.length,
     };
     Ok((Rotation3::from_matrix_unchecked(axes.transpose()), report))
 }
@@ -941,6 +947,31 @@ mod tests {
         let mut m = frames.to_vec();
         Side::Left.to_right(&mut m);
         m
+    }
+
+    #[test]
+    fn landmarks_estimate_the_subjects_size_from_the_forearms_length() {
+        // Epicondyles at the elbow and styloids at the wrist of a subject 1.1× the default:
+        // the long axis is the subject's forearm, so the estimate is the subject's scale.
+        let scale = 1.1;
+        let body = body::BodyModel::scaled(scale, scale.powi(3));
+        let length = body.forearm.length;
+        let pose = body.forearm_pose(0.5);
+        let (markers, _) = neutral_session(10, &[[0.0; 3]; 6], 0.0, [0.0; 3]);
+        let points = [[0.0, length, 0.035], [0.0, length, -0.035], [0.0, 0.0, 0.03], [0.0, 0.0, -0.03]];
+        let landmarks: Vec<f32> = (0..10)
+            .flat_map(|_| {
+                points.into_iter().flat_map(|p| {
+                    let p = pose * nalgebra::Point3::from(p);
+                    [p.x as f32, p.y as f32, p.z as f32]
+                })
+            })
+            .collect();
+        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks };
+        let (_, report) = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap();
+        let lm = report.landmarks.unwrap();
+        assert!((lm.length_scale - scale).abs() < 1e-5, "{lm:?}");
+        assert!((lm.long_axis_mm - 1e3 * length).abs() < 1e-2, "{lm:?}");
     }
 
     #[test]
