@@ -128,7 +128,9 @@ pub unsafe extern "C" fn ikid_stream_set_missing_markers(stream: *mut ikid_strea
             other => {
                 return Err(Failure::new(
                     ikid_status::InvalidArgument,
-                    format!("policy is {other}, expected IKID_MISSING_MARKERS_REFUSE (0) or IKID_MISSING_MARKERS_FILL (1)"),
+                    format!(
+                        "policy is {other}, expected IKID_MISSING_MARKERS_REFUSE (0) or IKID_MISSING_MARKERS_FILL (1)"
+                    ),
                 ));
             }
         };
