@@ -13,8 +13,12 @@ Writes ``docs/realdata.md`` and ``docs/realdata/*.png``; the last line printed i
 
     realdata: pyomeca_ik=<deg> pyomeca_track=<deg> racing_ik=<deg> racing_track=<deg> diverged=<count>
 
-(racing on its gimbal_ok frames; diverged = trials whose track output is non-finite or more
-than 100° off the reference anywhere). The recordings are read in place, never copied.
+(racing on its gimbal_ok frames; diverged = trials and probes whose track output is non-finite or
+more than 100° off the reference anywhere, garbage frames included; the left arm if non-finite).
+It also probes the tracker's promises (issue #19 item 3) through `ikid track`: 200 ms gaps of each
+marker, no 360° jumps, garbage bursts flagged and recovered from within 100 ms, refusal when
+uncalibrated, and the racing left arm (section 5 of the report). The recordings are read in place,
+never copied.
 
 Sign conventions (checked in ``check_conventions``): the reference is intrinsic Y-Z'-X'' of the
 hand in the forearm (ISB axes: X volar, Y proximal, Z radial on a right arm), s_p positive in
@@ -344,6 +348,308 @@ def headline(r: dict, key: str) -> float:
     return s.rms_gimbal if r["rec"].name == "racing" else s.rms_valid
 
 
+# --- the tracker's promises (issue #19 item 3), probed through `ikid track` ----------------------
+
+GAP_S = 0.2  # each artificial gap
+GAP_EVERY_S = 2.0  # one every 2 s, from 1 s
+GAP_COST_MAX = 2.0  # x the gap-free error on the same frames
+RECOVERY_S = 0.1  # back within GARBAGE_COST_MAX x the gap-free error this long after a burst
+RECOVERY_WINDOW_S = 0.5  # ... judged over this long
+GARBAGE_COST_MAX = 2.0
+JUMP_MAX_DEG = 180.0  # consecutive output angles never differ by more (no 360° jumps)
+RANGE_MARGIN_DEG = 45.0  # the left arm: angles within the coordinates' ranges ± this ...
+IN_RANGE_MIN = 0.99  # ... on at least this share of frames
+LEFT_MARKERS = {
+    "RSP": "ForearmL1",
+    "USP": "ForearmL2",
+    "FAP": "ForearmL3",
+    "MC2": "GloveL1",
+    "MC5": "GloveL2",
+    "MCB": "GloveL3",
+}
+
+
+@dataclass
+class Run:
+    """One `ikid track` output at the recording's frames: angles (rad, NaN where no row was
+    written), the ikid_status column (-1 where no row), and the command's exit status."""
+
+    q: np.ndarray
+    status: np.ndarray
+    returncode: int
+    message: str = ""
+
+
+def track_file(path: Path, mapping: Path, cal: Path | None, out: Path, n: int, log: list[str] | None) -> Run:
+    """`ikid track` one marker file; its rows placed at frame numbers (time x rate)."""
+    from ikid.io import read_markers
+    from ikid.io.storage import read_storage
+
+    args = ["track", str(path), "-o", str(out), "--map", str(mapping)]
+    args += ["--calibration", str(cal)] if cal else []
+    done = run(args, log if log is not None else [])
+    q = np.full((n, 3), np.nan)
+    status = np.full(n, -1, np.int64)
+    if done.returncode != 0:
+        return Run(q, status, done.returncode, (done.stdout + done.stderr).strip())
+    rate = read_markers(path).rate_hz
+    table = read_storage(out.with_suffix(".mot"))
+    rows = np.rint(table.time * rate).astype(int)
+    angles = table.select(["ra_wr_s_p", "ra_wr_e_f", "ra_wr_ad_ab"])
+    q[rows] = np.radians(angles) if table.in_degrees else angles
+    status[rows] = table.column("ikid_status").astype(np.int64)
+    return Run(q, status, 0, (done.stdout + done.stderr).strip())
+
+
+def write_probe(data, rec: Recording, frames: np.ndarray, path: Path) -> Path:
+    """The recording with its six mapped markers replaced by `frames` ((n, 18), metres)."""
+    from ikid.io import write_c3d
+    from ikid.io.markers import MarkerData
+
+    positions = data.positions.copy()
+    for j, label in enumerate(rec.markers.values()):
+        positions[:, data.labels.index(label)] = frames[:, 3 * j : 3 * j + 3]
+    return write_c3d(path, MarkerData(data.labels, data.time, positions, data.rate_hz, str(path)))
+
+
+def frame_errors(q: np.ndarray, ref: dict) -> np.ndarray:
+    """Geodesic error per frame, degrees; NaN where no output or the reference is not valid."""
+    e = geodesic_deg(ikid_rotation(np.nan_to_num(q)), reference_rotation(ref["angles"]))
+    e[~np.isfinite(q).all(axis=1) | ~ref["valid"]] = np.nan
+    return e
+
+
+def jumps(q: np.ndarray) -> tuple[float, float]:
+    """(largest change of any angle between consecutive rows, degrees; largest geodesic angle
+    between consecutive rows' rotations, degrees): rows of consecutive frames both written."""
+    both = np.isfinite(q[1:]).all(axis=1) & np.isfinite(q[:-1]).all(axis=1)
+    if not both.any():
+        return 0.0, 0.0
+    step = np.degrees(np.abs(np.diff(q, axis=0)[both])).max()
+    turn = geodesic_deg(ikid_rotation(q[1:][both]), ikid_rotation(q[:-1][both])).max()
+    return float(step), float(turn)
+
+
+def rms(x: np.ndarray) -> float:
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x**2))) if len(x) else float("nan")
+
+
+def probes(r: dict, folder: Path, work: Path, log: list[str]) -> dict:
+    """Gaps, garbage bursts and the uncalibrated run for one recording (see the module doc)."""
+    from ikid.io import MarkerMap, read_markers
+
+    rec, ref = r["rec"], r["ref"]
+    trial = folder / rec.trial
+    mapping = work / f"{rec.name}.toml"
+    data = read_markers(trial)
+    frames = data.frames(MarkerMap.load(mapping))
+    n, rate = len(frames), data.rate_hz
+    scored = ref["gimbal_ok"] if rec.name == "racing" else ref["valid"]
+    cal = r["cal_path"] if r["calibrated"] else None
+    base = track_file(trial, mapping, cal, work / f"{rec.name}_probe_base", n, None)
+    e0 = frame_errors(base.q, ref)
+    out: dict = {"base": base, "runs": {}, "gaps": {}, "garbage": {}}
+    out["runs"]["gap-free"] = base
+
+    # 1. Gaps: each marker missing for 200 ms every 2 s.
+    length = int(round(GAP_S * rate))
+    starts = np.arange(int(round(1.0 * rate)), n - length, int(round(GAP_EVERY_S * rate)))
+    in_gap = np.zeros(n, bool)
+    for s in starts:
+        in_gap[s : s + length] = True
+    for j, name in enumerate(rec.markers):
+        f = frames.copy()
+        f[in_gap, 3 * j : 3 * j + 3] = np.nan
+        probe = write_probe(data, rec, f, work / f"{rec.name}_gap_{name}.c3d")
+        got = track_file(probe, mapping, cal, work / f"{rec.name}_gap_{name}", n, None)
+        e = frame_errors(got.q, ref)
+        both = scored & np.isfinite(e0) & np.isfinite(e)
+        lost = scored & np.isfinite(e0) & ~np.isfinite(e)
+        out["runs"][f"gap {name}"] = got
+        out["gaps"][name] = {
+            "rms": rms(e[both]),
+            "base": rms(e0[both]),
+            "cost": rms(e[both]) / rms(e0[both]),
+            "in_gaps": rms(e[both & in_gap]),
+            "max": float(np.nanmax(e[both])) if both.any() else float("nan"),
+            "no_output": int(lost.sum()),
+            "gaps": len(starts),
+        }
+
+    # 3. Garbage: bursts of 1, 5 and 20 frames (random frames, shifted by 1 km, one marker 10 cm
+    # off), and two labels swapped for 0.5 s; each kind in its own file, bursts 1.5 s apart.
+    rng = np.random.default_rng(19)
+    centre = np.nanmedian(frames.reshape(n, 6, 3), axis=(0, 1))
+    swap_len = int(round(0.5 * rate))
+    kinds = {
+        "random frames": [1, 5, 20],
+        "shifted by 1 km": [1, 5, 20],
+        "one marker 10 cm off": [1, 5, 20],
+        "two labels swapped": [swap_len, swap_len],
+    }
+    spacing = int(round(1.5 * rate))
+    for kind, lengths in kinds.items():
+        f = frames.copy()
+        bursts = []
+        for b, k in enumerate(lengths):
+            s = int(round(1.0 * rate)) + b * spacing
+            if s + k + int((RECOVERY_S + RECOVERY_WINDOW_S) * rate) >= n:
+                break
+            sl = slice(s, s + k)
+            if kind == "random frames":
+                f[sl] = centre[None].repeat(6, 0).reshape(-1) + rng.uniform(-0.5, 0.5, (k, 18))
+            elif kind == "shifted by 1 km":
+                f[sl] += 1000.0
+            elif kind == "one marker 10 cm off":
+                m = [4, 1, 3][b % 3]  # MC5, USP, MC2
+                d = rng.normal(size=3)
+                f[sl, 3 * m : 3 * m + 3] += 0.1 * d / np.linalg.norm(d)
+            else:
+                a, c = [(3, 4), (0, 1)][b % 2]  # MC2<->MC5, then RSP<->USP
+                f[sl, 3 * a : 3 * a + 3], f[sl, 3 * c : 3 * c + 3] = (
+                    frames[sl, 3 * c : 3 * c + 3].copy(),
+                    frames[sl, 3 * a : 3 * a + 3].copy(),
+                )
+            bursts.append((s, k))
+        tag = kind.split()[0] + kind.split()[-1]
+        probe = write_probe(data, rec, f, work / f"{rec.name}_garbage_{tag}.c3d")
+        got = track_file(probe, mapping, cal, work / f"{rec.name}_garbage_{tag}", n, None)
+        out["runs"][kind] = got
+        e = frame_errors(got.q, ref)
+        results = []
+        wait, window = int(np.ceil(RECOVERY_S * rate)), int(round(RECOVERY_WINDOW_S * rate))
+        for s, k in bursts:
+            bad = np.arange(s, s + k)
+            unflagged = int(np.sum(got.status[bad] == 0))  # written with status 0
+            end = s + k
+
+            def cost(d: int, end: int = end, e: np.ndarray = e, window: int = window) -> float:
+                w = np.arange(end + d, min(end + d + window, n))
+                w = w[scored[w] & np.isfinite(e0[w])]
+                after = e[w]
+                if not np.isfinite(after).all():  # no output on a scored frame there
+                    return float("inf")
+                return rms(after) / rms(e0[w])
+
+            recovery = next((d for d in range(0, 3 * wait + 1) if cost(d) <= GARBAGE_COST_MAX), None)
+            results.append(
+                {
+                    "frames": k,
+                    "unflagged": unflagged,
+                    "cost": cost(wait),
+                    "recovery_ms": float("inf") if recovery is None else 1e3 * recovery / rate,
+                }
+            )
+        out["garbage"][kind] = results
+
+    # 4. Uncalibrated: refused, saying to calibrate.
+    out["uncalibrated"] = track_file(trial, mapping, None, work / f"{rec.name}_probe_uncal", n, log)
+    # 2. No 360° jumps in any of these runs.
+    out["jumps"] = {name: jumps(got.q) for name, got in out["runs"].items()}
+    out["diverged"] = [
+        name
+        for name, got in out["runs"].items()
+        if got.returncode != 0
+        or not np.isfinite(got.q[np.isfinite(got.q).all(axis=1)]).all()
+        or np.nanmax(np.nan_to_num(frame_errors(got.q, ref), nan=0.0)) > DIVERGED_DEG
+    ]
+    return out
+
+
+def median_posture_frames(data, markers: dict[str, str], k: int = 10) -> list[int]:
+    """The `k` frames whose hand-in-forearm rotation (technical frames of the two clusters) is
+    closest to the median posture: the rule the racing reference chose its neutral frames by."""
+    xyz = np.stack([data.marker(markers[m]) for m in ("RSP", "USP", "FAP", "MC2", "MC5", "MCB")], axis=1)
+    whole = np.flatnonzero(np.isfinite(xyz).all(axis=(1, 2)))
+
+    def frames_of(p: np.ndarray) -> np.ndarray:  # Gram-Schmidt on three markers, (n, 3, 3) columns
+        x = p[:, 1] - p[:, 0]
+        x /= np.linalg.norm(x, axis=1, keepdims=True)
+        z = np.cross(x, p[:, 2] - p[:, 0])
+        z /= np.linalg.norm(z, axis=1, keepdims=True)
+        return np.stack([x, np.cross(z, x), z], axis=2)
+
+    rel = np.einsum("nji,njk->nik", frames_of(xyz[whole, :3]), frames_of(xyz[whole, 3:]))
+    u, _, vt = np.linalg.svd(rel.mean(axis=0))  # chordal mean
+    mean = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
+    off = geodesic_deg(rel, np.broadcast_to(mean, rel.shape))
+    # Of the 50 frames nearest that posture, the k nearest one another (the tightest cluster).
+    near = np.argsort(off)[:50]
+    best, chosen = np.inf, near[:k]
+    for c in near:
+        d = geodesic_deg(rel[near], np.broadcast_to(rel[c], (len(near), 3, 3)))
+        group = near[np.argsort(d)[:k]]
+        spread = max(geodesic_deg(rel[group], np.broadcast_to(rel[g], (k, 3, 3))).max() for g in group)
+        if spread < best:
+            best, chosen = spread, group
+    return sorted(int(i) for i in whole[chosen])
+
+
+def left_arm(folder: Path, work: Path, right: dict, log: list[str]) -> dict:
+    """The racing recording's left arm: calibrated from neutral frames (the right arm's), tracked;
+    no reference there, so: finite, no 360° jumps, in range, and e_f against the right arm's."""
+    import ikid
+    from ikid.io import read_markers
+
+    rec = next(r for r in RECORDINGS if r.name == "racing")
+    trial = folder / rec.trial
+    mapping = work / "racing_left.toml"
+    mapping.write_text(
+        map_toml(Recording("racing_left", rec.trial, rec.reference, LEFT_MARKERS, {}, "", "left"))
+    )
+    cal = work / "racing_left.json"
+    out: dict = {}
+    data = read_markers(trial)
+    n = len(data)
+    for how, chosen in (
+        ("the right arm's neutral frames", right["ref"]["meta"]["neutral_frames"]),
+        (
+            "the 10 frames nearest one another near the left arm's median posture",
+            median_posture_frames(data, LEFT_MARKERS),
+        ),
+    ):
+        neutral = ",".join(str(i) for i in chosen)
+        cmd = [
+            "calibrate",
+            "--static",
+            str(trial),
+            "--frames",
+            neutral,
+            "--map",
+            str(mapping),
+            "-o",
+            str(cal),
+        ]
+        done = run(cmd, log)
+        out.setdefault("attempts", []).append((how, neutral, (done.stdout + done.stderr).strip()))
+        if done.returncode == 0:
+            break
+    out["calibrate_out"] = (done.stdout + done.stderr).strip()
+    out["calibrated"] = done.returncode == 0
+    out["neutral_how"] = how
+    got = track_file(
+        trial, mapping, cal if done.returncode == 0 else None, work / "racing_left_track", n, log
+    )
+    out["run"] = got
+    q = got.q
+    written = np.isfinite(q).all(axis=1)
+    lo = np.array([c[2][0] for c in ikid._native.COORDINATES]) - np.radians(RANGE_MARGIN_DEG)
+    hi = np.array([c[2][1] for c in ikid._native.COORDINATES]) + np.radians(RANGE_MARGIN_DEG)
+    inside = written & np.all((q >= lo) & (q <= hi), axis=1)
+    out["in_range"] = float(inside.sum() / n)  # rows not written (implausible) count as outside
+    out["written"] = float(written.sum() / n)
+    out["jumps"] = jumps(q)
+    out["diverged"] = got.returncode != 0 or not np.isfinite(q[written]).all()
+    right_q = right["probes"]["base"].q
+    both = written & np.isfinite(right_q).all(axis=1)
+    out["ef_correlation"] = (
+        float(np.corrcoef(q[both, 1], right_q[both, 1])[0, 1]) if both.sum() > 2 else float("nan")
+    )
+    out["ef_frames"] = int(both.sum())
+    return out
+
+
 # --- report ------------------------------------------------------------------------------------
 
 
@@ -389,11 +695,180 @@ def plot(r: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def plot_left(left: dict, right: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = right["ref"]["time"]
+    fig, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
+    names = ["s_p (supination +)", "e_f (flexion +)", "ad_ab (ulnar deviation +)"]
+    for k, ax in enumerate(axes):
+        ax.plot(t, np.degrees(right["probes"]["base"].q[:, k]), "C1", lw=1, label="right arm (ikid track)")
+        ax.plot(t, np.degrees(left["run"].q[:, k]), "C2", lw=1, label="left arm (ikid track)")
+        ax.set_ylabel(f"{names[k]}, °")
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time, s")
+    fig.suptitle(f"racing: left arm vs right arm, e_f correlation {left['ef_correlation']:.2f}")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def fmt(x: float) -> str:
     return "–" if not np.isfinite(x) else f"{x:.2f}"
 
 
-def write_report(results: list[dict], log: list[str], path: Path, seconds: float) -> None:
+def probe_report(results: list[dict], left: dict) -> list[str]:
+    """The tracker's promises (issue #19 item 3) as report sections."""
+    lines = [
+        "## The tracker's promises, probed through `ikid track`",
+        "",
+        "Each probe is a copy of the recording with its six mapped markers changed (written to a "
+        "temporary C3D with `ikid.io.write_c3d`), tracked by `ikid track --calibration` as above and "
+        "scored on the same frames as the gap-free run (pyomeca: valid frames; racing: gimbal_ok).",
+        "",
+        f"### 1. 200 ms gaps of any one marker (bound: ≤ {GAP_COST_MAX:g}× the gap-free error)",
+        "",
+        f"Gaps of {GAP_S * 1e3:.0f} ms every {GAP_EVERY_S:g} s from 1 s (pyomeca 3, racing 5). "
+        "Cost = geodesic RMS with the gaps / without, over the same frames.",
+        "",
+        "| trial | marker | RMS with gaps | gap-free | cost | RMS inside the gaps | max "
+        "| scored frames without output |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in results:
+        for m, g in r["probes"]["gaps"].items():
+            lines.append(
+                f"| {r['rec'].name} | {m} ({r['rec'].markers[m]}) | {fmt(g['rms'])} | {fmt(g['base'])} | "
+                f"**{g['cost']:.2f}×** | {fmt(g['in_gaps'])} | {fmt(g['max'])} | {g['no_output']} |"
+            )
+    lines += [
+        "",
+        f"### 2. No 360° jumps (bound: consecutive outputs ≤ {JUMP_MAX_DEG:g}° apart per angle)",
+        "",
+        "Over every run above and below (gap-free, each gap and garbage probe): the largest change of "
+        "any angle between consecutive written frames, and the largest geodesic angle between "
+        "consecutive rotations (a flip of Euler triple near gimbal lock changes angles, not the rotation).",
+        "",
+        "| trial | runs | largest step of an angle, ° | largest geodesic step, ° |",
+        "|---|---|---|---|",
+    ]
+    for r in results:
+        j = r["probes"]["jumps"]
+        lines.append(
+            f"| {r['rec'].name} | {len(j)} | {max(v[0] for v in j.values()):.1f} | "
+            f"{max(v[1] for v in j.values()):.1f} |"
+        )
+    lines += [
+        "",
+        f"### 3. Garbage frames (bounds: every garbage row flagged or absent; ≤ {GARBAGE_COST_MAX:g}× the "
+        f"gap-free error {RECOVERY_S * 1e3:.0f} ms after a burst)",
+        "",
+        f"Bursts 1.5 s apart from 1 s; after each, the error over the {RECOVERY_WINDOW_S * 1e3:.0f} ms "
+        f"starting {RECOVERY_S * 1e3:.0f} ms after its last frame against the gap-free run's on the same "
+        "frames; recovery = the shortest wait after the burst for which that holds. Random frames: "
+        "uniform within ±0.5 m of the markers' median; one marker 10 cm off: MC5, USP, MC2 in turn; "
+        "two labels swapped for 0.5 s: MC2↔MC5, then RSP↔USP.",
+        "",
+        "| trial | garbage | burst frames | garbage rows written unflagged | cost 100 ms after "
+        "| recovery, ms |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in results:
+        for kind, bursts in r["probes"]["garbage"].items():
+            for b in bursts:
+                lines.append(
+                    f"| {r['rec'].name} | {kind} | {b['frames']} | {b['unflagged']} | {b['cost']:.2f}× | "
+                    f"{b['recovery_ms']:.0f} |"
+                )
+    lines += [
+        "",
+        "### 4. Uncalibrated, `ikid track` refuses",
+        "",
+        "| trial | exit status | message |",
+        "|---|---|---|",
+    ]
+    for r in results:
+        u = r["probes"]["uncalibrated"]
+        msg = u.message.splitlines()[-1] if u.message else ""
+        lines.append(f"| {r['rec'].name} | {u.returncode} | {msg.replace(str(REPO) + '/', '')} |")
+    lines += [
+        "",
+        "### 5. The racing left arm (`ForearmL1-3`, `GloveL1-3`; no reference angles)",
+        "",
+        f'Calibrated by `ikid calibrate --frames <neutral frames>` with `side = "left"` in the map '
+        f"(method neutral): the right arm's neutral frames first, else (the left hand moves there) the 10 "
+        f"frames nearest one another among those nearest the left arm's median posture (as the "
+        f"reference chose the right arm's); tracked by `ikid track --calibration`. Bounds: no divergence, no "
+        f"360° jumps, angles within the coordinates' ranges ± {RANGE_MARGIN_DEG:g}° on ≥ "
+        f"{100 * IN_RANGE_MIN:g} % of frames (a row not written counts as outside).",
+        "",
+        *[
+            f"- calibration from {how} ({frames}): {msg.splitlines()[-1] if msg else ''}"
+            for how, frames, msg in left["attempts"]
+        ],
+        f"- written rows: {100 * left['written']:.1f} % of frames; within range ± {RANGE_MARGIN_DEG:g}°: "
+        f"{100 * left['in_range']:.1f} %",
+        f"- largest step between consecutive outputs: {left['jumps'][0]:.1f}° per angle, "
+        f"{left['jumps'][1]:.1f}° geodesic; diverged: {'yes' if left['diverged'] else 'no'}",
+        f"- flexion/extension, left vs right arm (Pearson, {left['ef_frames']} frames with both): "
+        f"**{left['ef_correlation']:.2f}**",
+        "",
+        "![racing left arm](realdata/racing_left.png)",
+        "",
+    ]
+    return lines
+
+
+def count_diverged(results: list[dict], left: dict) -> int:
+    """Trials and probes whose track output is non-finite or > DIVERGED_DEG off the reference
+    anywhere (the left arm, without a reference: non-finite or failed)."""
+    n = sum(diverged(r["track"]) for r in results)
+    n += sum(len(r["probes"]["diverged"]) for r in results)
+    return n + int(left["diverged"])
+
+
+def probe_summary(results: list[dict], left: dict) -> list[str]:
+    """One line per requirement, as printed and as the report's summary."""
+    lines = []
+    for r in results:
+        pr, name = r["probes"], r["rec"].name
+        gaps = ", ".join(f"{m} {g['cost']:.2f}x" for m, g in pr["gaps"].items())
+        worst = max(g["cost"] for g in pr["gaps"].values())
+        lines.append(
+            f"{name}: 200 ms gaps, cost vs gap-free (<= {GAP_COST_MAX:g}x): {gaps}; worst {worst:.2f}x"
+        )
+        step = max(j[0] for j in pr["jumps"].values())
+        turn = max(j[1] for j in pr["jumps"].values())
+        lines.append(
+            f"{name}: largest step between consecutive outputs over {len(pr['jumps'])} runs: "
+            f"{step:.1f}° per angle (<= {JUMP_MAX_DEG:g}), {turn:.1f}° geodesic"
+        )
+        g = [b for bursts in pr["garbage"].values() for b in bursts]
+        lines.append(
+            f"{name}: garbage bursts: {sum(b['unflagged'] for b in g)} garbage frames written unflagged; "
+            f"worst cost {RECOVERY_S * 1e3:.0f} ms after a burst {max(b['cost'] for b in g):.2f}x "
+            f"(<= {GARBAGE_COST_MAX:g}x); slowest recovery {max(b['recovery_ms'] for b in g):.0f} ms"
+        )
+        u = pr["uncalibrated"]
+        lines.append(
+            f"{name}: track uncalibrated: exit {u.returncode}"
+            f"{', says to calibrate' if 'calibrate' in u.message else ', NO calibrate message'}"
+        )
+    lines.append(
+        f"racing left arm: {'calibrated' if left['calibrated'] else 'NOT calibrated'}; "
+        f"in range ±{RANGE_MARGIN_DEG:g}° {100 * left['in_range']:.1f} % of frames; "
+        f"largest step {left['jumps'][0]:.1f}°; e_f correlation with the right arm "
+        f"{left['ef_correlation']:.2f} ({left['ef_frames']} frames); diverged {int(left['diverged'])}"
+    )
+    return lines
+
+
+def write_report(results: list[dict], left: dict, log: list[str], path: Path, seconds: float) -> None:
     lines = [
         "# ikid on real recordings",
         "",
@@ -436,6 +911,7 @@ def write_report(results: list[dict], log: list[str], path: Path, seconds: float
     lines += [""]
     for r in results:
         lines += [f"![{r['rec'].name}](realdata/{r['rec'].name}.png)", ""]
+    lines += probe_report(results, left)
     lines += [
         "## Notes",
         "",
@@ -456,8 +932,9 @@ def write_report(results: list[dict], log: list[str], path: Path, seconds: float
         "when resampled).",
         "- `track`: calibrated when `ikid track` has `--calibration`, else uncalibrated (the body model's "
         "placement), as the table says; the shipped refiner only where its rate allows.",
-        f"- diverged (last line): trials whose track output is non-finite or more than {DIVERGED_DEG:.0f}° "
-        "off the reference on some valid frame.",
+        f"- diverged (last line): trials and probes whose track output is non-finite or more than "
+        f"{DIVERGED_DEG:.0f}° off the reference on some valid frame (garbage frames included), and the "
+        "left arm if non-finite.",
         f"- {seconds:.0f} s on this machine.",
         "",
         "## Commands and their output",
@@ -487,7 +964,17 @@ def main(argv: list[str] | None = None) -> int:
         work = Path(args.keep) if args.keep else Path(tmp)
         work.mkdir(parents=True, exist_ok=True)
         results = [process(rec, folder, work, log) for rec in RECORDINGS]
+        for r in results:
+            r["probes"] = probes(r, folder, work, log)
+        left = left_arm(folder, work, next(r for r in results if r["rec"].name == "racing"), log)
         log = [entry.replace(str(work), "$WORK").replace(str(folder), "$REALDATA") for entry in log]
+        for r in results:
+            u = r["probes"]["uncalibrated"]
+            u.message = u.message.replace(str(work), "$WORK").replace(str(folder), "$REALDATA")
+        left["attempts"] = [
+            (h, f, m.replace(str(work), "$WORK").replace(str(folder), "$REALDATA"))
+            for h, f, m in left["attempts"]
+        ]
     for r in results:
         ik, tr = r["ik"], r["track"]
         print(
@@ -496,13 +983,20 @@ def main(argv: list[str] | None = None) -> int:
             f"track {fmt(headline(r, 'track'))}° "
             f"(valid {fmt(tr.rms_valid if tr else np.nan)}; {r['track_how']})"
         )
+    for line in probe_summary(results, left):
+        print(line)
     if args.doc:
         doc = Path(args.doc)
         for r in results:
             plot(r, doc.parent / "realdata" / f"{r['rec'].name}.png")
-        write_report(results, log, doc, time.perf_counter() - t0)
+        plot_left(
+            left,
+            next(r for r in results if r["rec"].name == "racing"),
+            doc.parent / "realdata" / "racing_left.png",
+        )
+        write_report(results, left, log, doc, time.perf_counter() - t0)
     by = {r["rec"].name: r for r in results}
-    n_div = sum(diverged(r["track"]) for r in results)
+    n_div = count_diverged(results, left)
     last = " ".join(
         f"{name}_{key}={headline(by[name], key):.2f}"
         for name in ("pyomeca", "racing")
