@@ -165,3 +165,38 @@ fn a_calibrated_tracker_follows_fast_pushes_at_70_hz_through_gimbal_lock_region(
         assert!(worst < 40.0, "jerk {jerk_noise}: {worst}° off near gimbal lock");
     }
 }
+
+/// Issue #19: a forearm marker missing for 200 ms while the forearm moves (the shoulder flexing
+/// 0.2–0.8 rad at 0.5 Hz, 100 Hz) used to hold the forearm's last pose, reading the forearm's
+/// motion as wrist angles (11.8° worst here); its pose now comes from the two other markers and
+/// the wrist centre learned from the whole frames.
+#[test]
+fn a_calibrated_tracker_keeps_a_moving_forearm_through_a_200_ms_gap_of_any_of_its_markers() {
+    let body = subject();
+    let rate = 100.0;
+    let q = trajectory(1000, rate);
+    let frames: Vec<f64> = q
+        .iter()
+        .enumerate()
+        .flat_map(|(i, qi)| {
+            let shoulder = 0.5 + 0.3 * (std::f64::consts::TAU * 0.5 * i as f64 / rate).sin();
+            body.marker_frames(qi, shoulder).unwrap()
+        })
+        .collect();
+    let neutral = body.marker_frames(&[0.0; 3].repeat(10), 0.5).unwrap();
+    let neutral32: Vec<f32> = neutral.iter().map(|&v| v as f32).collect();
+    let (calibration, _) = Calibration::from_neutral(&neutral32, None, Side::Right).unwrap();
+    for marker in 0..3 {
+        let mut gappy = frames.clone();
+        for gap in [300, 500, 700] {
+            for f in gap..gap + 20 {
+                gappy[f * MARKER_FRAME_LEN + 3 * marker..f * MARKER_FRAME_LEN + 3 * marker + 3].fill(f64::NAN);
+            }
+        }
+        let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+        let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
+        tracker.set_calibration(Some(calibration));
+        let worst = worst_deg(&mut tracker, &gappy, &q, 100);
+        assert!(worst < 1.0, "forearm marker {marker}: {worst}° off through its gaps");
+    }
+}
