@@ -3,8 +3,11 @@
 //! coordinate's noise as it goes.
 //!
 //! Per frame:
-//! 1. the forearm's pose is fitted to its three markers (Kabsch; the previous pose is kept
-//!    while one is missing: the forearm moves slowly next to the hand);
+//! 1. the forearm's pose is fitted to its three markers (Kabsch); with one missing or rejected,
+//!    to the two others and the wrist centre seen from the hand (else the last pose turned as
+//!    little as fits the two). The centre is learned from the subject's whole frames (a
+//!    functional joint centre, [`JointCentre`]); it also closes the turn that two hand markers
+//!    leave open (the hand measured by its orientation: a third measurement, weighed by its fit);
 //! 2. the state — `(q, q̇, q̈)` of the three wrist coordinates — is predicted with a
 //!    constant-acceleration model whose jerk is white noise of spectral density
 //!    [`TrackerSettings::jerk_noise`];
