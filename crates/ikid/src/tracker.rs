@@ -6,7 +6,7 @@
 //! 1. the forearm's pose is fitted to its three markers (Kabsch); with one missing or rejected,
 //!    to the two others and the wrist centre seen from the hand (else the last pose turned as
 //!    little as fits the two). The centre is learned from the subject's whole frames (a
-//!    functional joint centre, [`JointCentre`]); it also closes the turn that two hand markers
+//!    functional joint centre, `JointCentre`); it also closes the turn that two hand markers
 //!    leave open (the hand measured by its orientation: a third measurement, weighed by its fit);
 //! 2. the state — `(q, q̇, q̈)` of the three wrist coordinates — is predicted with a
 //!    constant-acceleration model whose jerk is white noise of spectral density
@@ -119,7 +119,7 @@ pub const RELINEARISE_RAD: f64 = 1e-3;
 pub const MAX_ITERATIONS: usize = 5;
 
 /// How long the wrist's centre of rotation is remembered, s (exponential forgetting): the
-/// functional joint centre ([`JointCentre`]) is learned from the frames with both segments whole.
+/// functional joint centre (`JointCentre`) is learned from the frames with both segments whole.
 pub const CENTRE_MEMORY_S: f64 = 30.0;
 /// Frames with both segments whole needed before the learned centre is used, s (at least 10 frames).
 pub const CENTRE_MIN_S: f64 = 0.5;
