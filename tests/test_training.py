@@ -178,7 +178,8 @@ def test_bad_configs_are_refused_by_name(tmp_path):
 
 def test_the_package_ships_the_default_models():
     # wrist-track (the Kalman tracker's refiner) has its own tests in test_tracker.py.
-    assert ikid.available_models() == sorted([*SHIPPED, "wrist-track"])
+    # wrist-ik-100hz/-250hz: the IK model per common rate (tests/test_rates.py).
+    assert ikid.available_models() == sorted([*SHIPPED, "wrist-track", "wrist-ik-100hz", "wrist-ik-250hz"])
 
 
 def test_wrist_track_matches_torch():
