@@ -153,3 +153,37 @@ fn after_lost_frames_a_stream_without_times_restarts_its_window_where_it_reancho
         assert_eq!(got, want, "frame {i}");
     }
 }
+
+#[test]
+fn a_correcting_model_gives_the_per_frame_solution_where_its_window_is_beyond_training() {
+    // An angles model that corrects the newest frame's angles, trained (its card says) on
+    // postures with every angle in [-0.5, 0.5] rad.
+    let plain = random_model(FeatureSet::Angles, 6, &[16], 3, 21);
+    let mut card = plain.card().clone();
+    card.output_offset = Some(ikid::model::NEWEST_FEATURES.into());
+    card.envelope = Some(Envelope {
+        inputs: Bounds { min: vec![-0.5; 3], max: vec![0.5; 3] },
+        outputs: Bounds { min: vec![-0.5; 3], max: vec![0.5; 3] },
+    });
+    let model = Model::from_parts(card, plain.mlp().clone()).unwrap();
+    let body = BodyModel::default();
+    // Six frames at one posture each: inside the range, then with flexion at 0.55 rad (10 % of
+    // the range beyond it, past the 2 % margin), then at 0.51 (within the margin).
+    for (q, corrected) in [([0.2, 0.3, -0.1], true), ([0.2, 0.55, -0.1], false), ([0.2, 0.51, -0.1], true)] {
+        let frames: Vec<f32> = body.marker_frames(&q.repeat(6), 0.0).unwrap().iter().map(|&v| v as f32).collect();
+        let mut out = [0f32; 3];
+        model.predict(&frames, &mut out).unwrap();
+        let mut plain_out = [0f32; 3];
+        plain.predict(&frames, &mut plain_out).unwrap();
+        let mut angles = [0f32; 3];
+        FeatureSet::Angles.compute(&frames[5 * 18..], &mut angles, 0).unwrap();
+        for k in 0..3 {
+            let want = if corrected { plain_out[k] + angles[k] } else { angles[k] };
+            assert_eq!(out[k].to_bits(), want.to_bits(), "{q:?} output {k}");
+        }
+        // The stream gives the same.
+        let mut stream = model.stream();
+        let last = frames.chunks_exact(18).filter_map(|f| stream.push(f).unwrap().map(<[f32]>::to_vec)).last();
+        assert_eq!(last.unwrap(), out.to_vec(), "{q:?}");
+    }
+}
