@@ -97,6 +97,11 @@ pub const RIGID_TOLERANCE_REL: f64 = 0.15;
 pub const MAX_SEGMENT_SPEED: f64 = 20.0;
 /// Slack on the forearm's jump check, m.
 pub const JUMP_TOLERANCE_M: f64 = 0.05;
+/// Largest jump of the forearm taken as real once it persists (the subject relabelled, a
+/// camera re-calibrated, the first frames the odd ones), m: the size of a capture volume. A
+/// farther jump (a frame 1 km off, coordinates in the wrong units) stays rejected however long
+/// it lasts.
+pub const MAX_RELOCATION_M: f64 = 20.0;
 /// Hand marker innovations beyond this squared Mahalanobis distance (3 dof: p ≈ 1e-6) ...
 pub const GATE_CHI2: f64 = 30.0;
 /// ... and longer than this, m, are rejected as implausible for one frame.
@@ -905,7 +910,7 @@ impl Tracker {
             return true;
         }
         self.forearm_jumps += 1;
-        if self.forearm_jumps >= lost {
+        if self.forearm_jumps >= lost && jump <= MAX_RELOCATION_M {
             self.forearm_jumps = 0;
             return true;
         }
@@ -1347,6 +1352,31 @@ mod tests {
 
     fn worst_deg(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
         a.iter().zip(b).flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).abs().to_degrees())).fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn a_burst_a_kilometre_off_stays_rejected_and_a_real_relocation_is_taken() {
+        let body = BodyModel::default();
+        let q = trajectory(2000, 1000.0);
+        let clean = frames(&body, &q, 0.2);
+        let (good, _, _) = track(&clean, 1000.0);
+        for (shift, taken) in [(1000.0, false), (1.0, true)] {
+            // 100 frames (more than LOST_S): the 1 km ones stay rejected and flagged, then the
+            // tracker goes on as if they never came; the 1 m ones are a relocation, taken.
+            let mut f = clean.clone();
+            for v in &mut f[1000 * MARKER_FRAME_LEN..1100 * MARKER_FRAME_LEN] {
+                *v += shift;
+            }
+            let (est, status, _) = track(&f, 1000.0);
+            let flagged = status[1000..1100].iter().filter(|s| *s & status::REJECTED_MARKER != 0).count();
+            if taken {
+                assert!(flagged < 100, "{shift} m: {flagged} of 100 rejected");
+            } else {
+                assert_eq!(flagged, 100, "{shift} m");
+                let after = worst_deg(&good[1200..], &est[1200..]); // 100 ms after the burst
+                assert!(after < 0.01, "{after}° off after the burst");
+            }
+        }
     }
 
     #[test]
