@@ -33,6 +33,7 @@ import os
 import re
 from collections import Counter
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -237,7 +238,7 @@ def run_model(
     model, how = pick_model(model, rate_hz, resample_to_model=resample_to_model, source=source)
     if rate_hz is None:
         rate_hz = model.frame_rate_hz
-    kw = {"missing_markers": missing_markers, "calibration": calibration}
+    kw: dict[str, Any] = {"missing_markers": missing_markers, "calibration": calibration}
     bar = _progress(len(frames), source) if progress else None
     try:
         if how == "at_frames":
@@ -358,8 +359,8 @@ def _run_at_recording_frames(
                     bar.update(1)
         restarts = max(restarts, stream.gap_restarts)
     tally = _Tally(len(time))
-    for i, outcome in enumerate(outcomes):
-        tally.add(i, outcome or ("none", "not run", None))
+    for i, got in enumerate(outcomes):
+        tally.add(i, got or ("none", "not run", None))
     return tally.run(model, time, rate_hz, None, restarts, at_frames=True)
 
 
