@@ -79,8 +79,9 @@ def _empty(folder: Path, t) -> Path:
     return path
 
 
-def _other_rate(folder: Path, t) -> Path:
-    return write_trc(folder / "b08_250_hz.trc", t.time[::4], t.markers[::4], 250.0)
+def _zeros(folder: Path, t) -> Path:
+    """An export that wrote zeros for every marker (a failed reconstruction)."""
+    return write_trc(folder / "b08_zeros.trc", t.time, np.zeros_like(t.markers), 1000.0)
 
 
 def _other_labels(folder: Path, t) -> Path:
@@ -109,7 +110,7 @@ BROKEN = [
     (_directory, r"it is a directory; expected"),
     (_junk_c3d, r"not a readable C3D file|header says|truncated"),
     (_empty, r"line 1: not a TRC file"),
-    (_other_rate, r"sampled at 250 Hz but model 'wrist-ik' was trained at 1000 Hz"),
+    (_zeros, r"the markers spread over 0\.000 m"),
     (_other_labels, r"label\(s\) RSP \(RSP\), .* not found; the file has R\.RadStyl"),
     (_time_backwards, r"time goes from 0\.098 to 0\.05 s at frame 100; it must increase"),
 ]

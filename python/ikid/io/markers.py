@@ -11,7 +11,6 @@ from __future__ import annotations
 import os
 import stat
 from dataclasses import dataclass, field
-from itertools import combinations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -24,11 +23,6 @@ if TYPE_CHECKING:
 
 #: Length units a marker file may state, and their size in metres.
 UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
-
-#: Plausible median distance between two wrist markers, metres. ikid's closest pair (the
-#: styloids) is ~5 cm and the farthest (elbow-side forearm to knuckles) ~30 cm; a file in
-#: the wrong units is off by 10x-1000x and lands far outside.
-PLAUSIBLE_MARKER_DISTANCE_M = (0.01, 1.0)
 
 
 class FileFormatError(_native.InputError):
@@ -156,18 +150,14 @@ class MarkerData:
                     f"{source}: marker {name} (label {mapping.label_of(name)!r}) is missing in every frame; "
                     "ikid needs each marker in at least some frames"
                 )
-        complete = np.isfinite(frames).all(axis=1)
-        if complete.any():
-            xyz = frames[complete].reshape(-1, 6, 3)
-            d = np.median(
-                [np.linalg.norm(xyz[:, a] - xyz[:, b], axis=1).mean() for a, b in combinations(range(6), 2)]
-            )
-            lo, hi = PLAUSIBLE_MARKER_DISTANCE_M
-            if not lo <= d <= hi:
-                raise _native.InputError(
-                    f"{source}: the wrist markers are {d:.4g} m apart (median over pairs), outside "
-                    f"{lo}-{hi} m; the file says its units are {self.file_units!r} — are they?"
-                )
+        # Units: the core's one check (the markers' spread against what an arm spans), named
+        # with the file and what its header claims.
+        try:
+            _native.check_marker_units(frames)
+        except _native.InputError as e:
+            raise _native.InputError(
+                f"{source}: {e.reason or e} (the file says its units are {self.file_units!r})"
+            ) from None
         return frames
 
 
