@@ -204,6 +204,7 @@ class Score:
     finite: bool = True
     error: np.ndarray | None = None  # geodesic error per reference frame (NaN: no output/invalid)
     angles: np.ndarray | None = None  # ikid's angles at the reference frames, degrees, ikid signs
+    lag_ms: float = float("nan")  # the delay of the outputs that fits the reference best
 
 
 def score(t_out, q_out, ref: dict, tol: float) -> Score:
@@ -224,7 +225,27 @@ def score(t_out, q_out, ref: dict, tol: float) -> Score:
         ref_ikid = ref["angles"][gimbal] * np.array([-1.0, 1.0, 1.0])
         d = np.degrees(q[gimbal]) - ref_ikid
         s.per_angle_gimbal = tuple(float(v) for v in np.sqrt(np.mean(d**2, axis=0)))
+    s.lag_ms = best_lag_ms(q, has, ref)
     return s
+
+
+def best_lag_ms(q: np.ndarray, has: np.ndarray, ref: dict, most: int = 5) -> float:
+    """The delay (ms; positive: the outputs come after the reference) among 0-``most`` frames
+    either way whose geodesic RMS against the reference, on the valid frames both have, is
+    least: how much a causal filter lags (the reference is per-frame and unfiltered)."""
+    step = float(np.median(np.diff(ref["time"])))
+    rot_q, rot_ref = ikid_rotation(np.nan_to_num(q)), reference_rotation(ref["angles"])
+    best, lag = np.inf, float("nan")
+    for k in range(-most, most + 1):
+        # output frame i against reference frame i - k
+        i = np.arange(max(k, 0), len(q) + min(k, 0))
+        ok = has[i] & ref["valid"][i] & ref["valid"][i - k]
+        if ok.sum() < 10:
+            continue
+        rms = float(np.sqrt(np.mean(geodesic_deg(rot_q[i][ok], rot_ref[i - k][ok]) ** 2)))
+        if rms < best:
+            best, lag = rms, 1e3 * k * step
+    return lag
 
 
 def read_reference(folder: Path, name: str) -> dict:
@@ -883,8 +904,8 @@ def write_report(results: list[dict], left: dict, log: list[str], path: Path, se
         "",
         "| trial | frames scored | ik RMS (valid) | ik RMS (gimbal_ok) | ik p95 / max | ik outputs | "
         "ik uncalibrated RMS | track RMS (valid) | track RMS (gimbal_ok) | track max | "
-        "calibration check | how |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "lag ik / track (ms) | calibration check | how |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results:
         ref, ik, raw, tr = r["ref"], r["ik"], r["ik_raw"], r["track"]
@@ -897,6 +918,7 @@ def write_report(results: list[dict], left: dict, log: list[str], path: Path, se
             f"{fmt(raw.rms_valid) if raw else 'refused'} | "
             f"{fmt(tr.rms_valid if tr else np.nan)} | {fmt(tr.rms_gimbal if tr else np.nan)} | "
             f"{fmt(tr.max_valid if tr else np.nan)} | "
+            f"{ik.lag_ms if ik else np.nan:.0f} / {tr.lag_ms if tr else np.nan:.0f} | "
             f"{fmt(r['geometry'].rms_valid if r['geometry'] else np.nan)} | "
             f"ik {r['ik_how']}; track {r['track_how']} |"
         )
