@@ -38,6 +38,12 @@ __all__ = [
     "noise_gaussian",
     "noise_drift",
     "noise_occlusion",
+    "FRAME_STATUS",
+    "MARKER_SPAN_M",
+    "LENGTH_SCALE_RANGE",
+    "MASS_SCALE_RANGE",
+    "check_marker_units",
+    "check_default_placement",
 ]
 
 __version__: str
