@@ -78,7 +78,7 @@ def test_pyomeca_ik_calibrated_from_the_recording_is_within_2_5_degrees(results)
 
 
 def test_racing_ik_calibrated_from_the_recording_gives_outputs(results):
-    # 6.0° on gimbal_ok frames measured (docs/realdata.md): no 3° bound met, none asserted.
+    # 3.5° on gimbal_ok frames measured (docs/realdata.md): the 3° bound is not met, none asserted.
     ik = results["racing"]["ik"]
     assert ik is not None and ik.finite and ik.coverage >= 0.98, results["racing"]["ik_how"]
 

@@ -14,9 +14,13 @@ card's ``frame_rate_hz`` (the suffix only finds the files). For a recording at r
 
 1. the member whose rate equals *r* (within :data:`RATE_TOLERANCE`) runs on the recording's own
    frames, exactly as a live stream at that rate would;
-2. otherwise the member with the lowest rate above *r* (the fastest one, for a recording faster
-   than every member) runs at its own rate on the recording *resampled to it*, and the outputs
-   are the ones at the recording's own frame times (:func:`run_model`, ``at_recording_frames``).
+2. otherwise the fastest member (``wrist-ik``, 1 kHz: the shortest window in seconds) runs at
+   its own rate on the recording *resampled to it*, and the outputs are the ones at the
+   recording's own frame times (:func:`run_model`, ``at_recording_frames``). Measured both ways
+   on the one real recording at such a rate (racing, 70 Hz, calibrated): the 1 kHz member 3.97°
+   geodesic RMS with an output on 99.3 % of its valid frames, the next faster (100 Hz, 100 ms
+   window) 6.11° and 95.8 %; on simulated trials at 70 Hz the 100 Hz member is better with noise
+   (1.2e-4 vs 2.0e-4 rad² at 1 %), equal on clean markers — real markers, fast and clean, decide.
    Nothing is written between frames, and a missing frame stays missing: a grid point takes a
    recording frame's markers exactly where it falls on one, the cubic Hermite between two frames
    uses those two (never a missing one's neighbours), and no grid point is made inside a time gap.
@@ -203,8 +207,8 @@ def pick_model(
     for m in members:
         if same_rate(rate_hz, m.frame_rate_hz):
             return m, "native"
-    above = [m for m in members if m.frame_rate_hz > rate_hz]
-    chosen = above[0] if above else members[-1]
+    # No member at this rate: the fastest (the module docstring says why, measured).
+    chosen = max(members, key=lambda m: m.frame_rate_hz)
     return chosen, ("resample" if resample_to_model else "at_frames")
 
 
