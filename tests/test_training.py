@@ -99,7 +99,9 @@ noise_levels = [0.0, 0.01]
     assert log and all(math.isfinite(e["val_loss"]) for e in log)
     # ONNX (with its scaling) agrees with the ikid file.
     ort = pytest.importorskip("onnxruntime")
-    rec = D.simulate_one({"name": "o", "protocol": "random", "seed": 12, "duration": 0.3})
+    # On postures inside the training range: beyond it ikid's runtime stops applying a
+    # correcting model's correction (the card's envelope; the ONNX graph is the network alone).
+    rec = D.simulate_one({"name": "o", "protocol": "random", "seed": 11, "duration": 0.3})
     x, _ = D.windows(rec, "ik", "angles", 5)
     got = ort.InferenceSession(str(tmp_path / "tiny-ik.onnx")).run(None, {"window": x})[0]
     np.testing.assert_allclose(got, model.predict(rec.markers), rtol=1e-5, atol=1e-6)

@@ -268,7 +268,9 @@ class WindowModel(nn.Module):
 
 
 def export_onnx(model: WindowModel, path: str | Path) -> None:
-    """Write ``model`` as ONNX: input ``window`` ``[batch, n_inputs]`` -> ``output`` (SI)."""
+    """Write ``model`` as ONNX: input ``window`` ``[batch, n_inputs]`` -> ``output`` (SI). The graph
+    is the network with its scaling and offset; ikid's runtime policies on top of it (status
+    bits, and a correcting model left uncorrected beyond its training envelope) are not in it."""
     example = torch.zeros(1, model.n_inputs)
     torch.onnx.export(
         model.eval(),
