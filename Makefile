@@ -85,7 +85,7 @@ fmt-check:
 clippy:
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 
-PY_SOURCES := python tests benches examples tools
+PY_SOURCES := python tests benches studies examples tools
 ruff: wheel
 	$(VENV)/bin/ruff check $(PY_SOURCES)
 	$(VENV)/bin/ruff format --check $(PY_SOURCES)
@@ -196,7 +196,7 @@ bench: wheel c
 # ikid beside onnxruntime, torch (eager, TorchScript) and NumPy on the same networks, one run:
 # a section of docs/performance.md.
 bench-peers: wheel c
-	$(PY) benches/peers.py
+	$(PY) studies/peers.py
 
 clean:
 	$(CARGO) clean
@@ -205,19 +205,19 @@ clean:
 # OpenSim's IK (on the .osim ikid writes) beside ikid's wrist-ik and reference_ik on the same
 # held-out trials at 0/1/5 % noise: a section of docs/opensim.md and target/opensim_ik.json.
 compare-opensim: wheel
-	$(PY) benches/opensim_ik.py
+	$(PY) studies/opensim_ik.py
 
 # ikid beside biorbd's extended Kalman filter (+ its least-squares IK and inverse dynamics) on the
 # same held-out frames, angles, torques and step latency: docs/ekf.md and target/ekf_peer.json
 # (~10 min on 2 cores; the eval extra brings biorbd).
 compare-ekf: wheel
-	$(PY) benches/ekf_peer.py
+	$(PY) studies/ekf_peer.py
 
 # ikid at 100, 250 and 1000 Hz (the wrist-ik model for each rate, the Tracker) beside biorbd's EKF
 # at the same rate on the same held-out frames: docs/rates.md and target/rates.json (~10 min on
 # 2 cores; not part of `make test`).
 compare-rates: wheel
-	$(PY) benches/rates.py
+	$(PY) studies/rates.py
 
 # Real recordings (../shared/realdata, or $$IKID_REALDATA) through the CLI: calibrate from the
 # recording, ik, track, scored against the independent reference angles: docs/realdata.md and

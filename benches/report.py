@@ -11,8 +11,8 @@ Side by side, in one run on one machine:
 from __future__ import annotations
 
 import json
-import platform
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -21,38 +21,21 @@ import numpy as np
 import ikid
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from studies import common  # noqa: E402
+from studies.common import frames_for, machine  # noqa: E402
+
 MODELS = ROOT / "target" / "bench-models"
 CRITERION = ROOT / "target" / "criterion"
 PUSHES = 200_000
 
 
 def rust_latency() -> dict[str, dict]:
-    cmd = [
-        "cargo",
-        "run",
-        "--release",
-        "-q",
-        "-p",
-        "ikid",
-        "--example",
-        "latency",
-        "--",
-        "--pushes",
-        str(PUSHES),
-        "--save-dir",
-        str(MODELS),
-    ]
-    out = subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True, text=True).stdout
-    rows = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    res = common.rust_latency("--pushes", str(PUSHES), "--save-dir", str(MODELS))
+    if res.returncode != 0:
+        raise SystemExit(f"examples/latency failed:\n{res.stderr}")
+    rows = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
     return {r["model"]: r for r in rows}
-
-
-def frames_for(model: ikid.Model, n: int) -> np.ndarray:
-    rng = np.random.default_rng(2)
-    if model.frame_kind != "markers":  # joint or tracker states
-        return rng.uniform(-1, 1, (n, model.frame_len)).astype(np.float32)
-    q = np.stack([rng.uniform(lo, hi, n) for _, _, (lo, hi) in ikid.COORDINATES], axis=1)
-    return ikid.forward_markers(q, 0.3).astype(np.float32)
 
 
 def python_push(model: ikid.Model, n: int) -> dict[str, float]:
@@ -153,22 +136,6 @@ def criterion_ns(*parts: str) -> float | None:
     if not path.exists():
         return None
     return json.loads(path.read_text())["median"]["point_estimate"]
-
-
-def machine() -> str:
-    try:
-        lscpu = subprocess.run(["lscpu"], capture_output=True, text=True).stdout
-        wanted = ("Model name", "CPU(s):", "L2 cache", "L3 cache", "Flags")
-        lines = [ln for ln in lscpu.splitlines() if ln.startswith(wanted)]
-        lines = [
-            ("Flags: avx2 fma" if "avx2" in ln and "fma" in ln else "Flags: no avx2/fma")
-            if ln.startswith("Flags")
-            else ln
-            for ln in lines
-        ]
-        return "; ".join(" ".join(ln.split()) for ln in lines)
-    except OSError:
-        return platform.processor()
 
 
 def main() -> None:

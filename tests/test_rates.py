@@ -14,7 +14,7 @@ from ikid import pipeline
 from ikid.cli import main as cli
 from ikid.io import read_storage, write_trc
 
-#: Held-out trajectory (benches/rates.py's test seeds start at 9500; training used < 9500).
+#: Held-out trajectory (studies/rates.py's test seeds start at 9500; training used < 9500).
 SEED = 9504
 
 

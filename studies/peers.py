@@ -34,8 +34,9 @@ from torch import nn
 import ikid
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benches.report import frames_for, machine  # noqa: E402
 from ikid.training.export import Affine, ModelSpec, WindowModel, export, export_onnx, load_torch  # noqa: E402
+from studies import common  # noqa: E402
+from studies.common import frames_for, machine  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "target" / "bench-peers"
@@ -146,27 +147,10 @@ def ort_session(path: Path, threads: int) -> ort.InferenceSession:
 
 
 def rust_push(path: Path) -> dict[str, float]:
-    cmd = [
-        "cargo",
-        "run",
-        "--release",
-        "-q",
-        "-p",
-        "ikid",
-        "--example",
-        "latency",
-        "--",
-        "--pushes",
-        "200000",
-        "--model",
-        str(path),
-    ]
-    line = (
-        subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True, text=True)
-        .stdout.strip()
-        .splitlines()[-1]
-    )
-    return json.loads(line)
+    res = common.rust_latency("--pushes", "200000", "--model", str(path))
+    if res.returncode != 0:
+        raise RuntimeError(f"examples/latency --model {path} failed:\n{res.stderr[-2000:]}")
+    return json.loads(res.stdout.strip().splitlines()[-1])
 
 
 def clock_ghz() -> float:

@@ -38,8 +38,8 @@ from ikid.training import data as D
 from ikid.training.evaluate import EVAL_SEED
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import machine  # noqa: E402  (benches/report.py)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from studies.common import machine  # noqa: E402
 
 DOC = ROOT / "docs" / "opensim.md"
 JSON_OUT = ROOT / "target" / "opensim_ik.json"
