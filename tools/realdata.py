@@ -949,9 +949,9 @@ def write_report(results: list[dict], left: dict, log: list[str], path: Path, se
         "geometry (the `angles` feature set: no network, no filter). It equals the reference's own spread "
         "(its Kabsch vs Gram-Schmidt clusters; ikid's technical frame is Gram-Schmidt-like), so what "
         "`ik` and `track` add beyond it is theirs, not the calibration's.",
-        "- `ik` runs at the recording's rate when the model takes it, else with `--resample` (the shipped "
-        "models are 1 kHz); outputs are compared at the reference's frame times (linear between output rows "
-        "when resampled).",
+        "- `ik` runs the IK family (`ikid.pipeline.pick_model`): the member at the recording's rate "
+        "(pyomeca: `wrist-ik-100hz`), else the 1 kHz member on the recording resampled, outputs at the "
+        "recording's own frames (racing, 70 Hz); they are compared at the reference's frame times.",
         "- `track`: calibrated when `ikid track` has `--calibration`, else uncalibrated (the body model's "
         "placement), as the table says; the shipped refiner only where its rate allows.",
         f"- diverged (last line): trials and probes whose track output is non-finite or more than "
