@@ -19,8 +19,9 @@ VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
 all: wheel
 
-# The venv with the build tool; the wheel's own extras (train, test) are installed from its
-# metadata, so pyproject.toml is the one list of Python dependencies.
+# The venv with the build tool; the wheel's own extras (test, eval) are installed from its
+# metadata and the training pipeline's dependencies from training/pyproject.toml, so those two
+# files are the lists of Python dependencies.
 $(VENV)/.created:
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install --quiet --upgrade pip
@@ -31,17 +32,25 @@ venv: $(VENV)/.created
 
 # Build the abi3 wheel in release mode and install it (with extras) into the venv: tests
 # run against the same wheel a user would pip install. Rebuilt only when a tracked source
-# of it changed (the stamp is newer than every one of them).
+# of it changed (the stamp is newer than every one of them); training/ is not one.
 WHEEL_STAMP := $(VENV)/.wheel-installed
 WHEEL_SOURCES := $(shell git ls-files crates python Cargo.toml Cargo.lock pyproject.toml README.md 2>/dev/null)
 $(WHEEL_STAMP): $(VENV)/.created $(WHEEL_SOURCES)
 	rm -f $(WHEELS)/ikid-*.whl
 	$(VENV)/bin/maturin build --release --quiet -o $(WHEELS)
 	$(PIP) install --quiet --force-reinstall --no-deps $(WHEELS)/ikid-*.whl
-	$(PIP) install --quiet "$$(ls $(WHEELS)/ikid-*.whl)[train,test,eval]"
+	$(PIP) install --quiet "$$(ls $(WHEELS)/ikid-*.whl)[test,eval]"
 	touch $@
 
-wheel: $(WHEEL_STAMP)
+# The training pipeline (training/, its own distribution ikid-training: torch, ONNX, matplotlib)
+# installed editable after the runtime it depends on, so tests and `make models` run the sources
+# as they are; reinstalled only when its metadata changes.
+TRAINING_STAMP := $(VENV)/.training-installed
+$(TRAINING_STAMP): training/pyproject.toml | $(WHEEL_STAMP)
+	$(PIP) install --quiet -e ./training
+	touch $@
+
+wheel: $(WHEEL_STAMP) $(TRAINING_STAMP)
 
 demo: wheel
 	$(PY) -m ikid.demo
@@ -51,19 +60,19 @@ demo: wheel
 data: wheel
 	$(VENV)/bin/ikid dataset -o data
 
-# Retrain the shipped models from scratch (<= 15 min on 2 cores) into python/ikid/models/;
-# rebuild the wheel afterwards to ship them.
+# Retrain the shipped models from scratch (<= 15 min on 2 cores; training/ikid_training) into
+# python/ikid/models/; rebuild the wheel afterwards to ship them.
 models: wheel
-	$(PY) -m ikid.training.models
+	$(PY) -m ikid_training.models
 
 # Retrain wrist-track, the Kalman tracker's refiner (~6 min on 2 cores), into python/ikid/models/.
 models-track: wheel
-	$(PY) -m ikid.training.refine
+	$(PY) -m ikid_training.refine
 
 # The evaluation report (docs/report.md + PNG plots) of the shipped models, beside the
 # classical reference and the thesis' numbers.
 report: wheel
-	$(PY) -m ikid.training.report
+	$(PY) -m ikid_training.report
 
 # Two tiers. `make check` (a few minutes once built): lint first (rustfmt, clippy, ruff, mypy,
 # the C header), then the Rust tests, the fast Python tests and the stub check. `make test`
@@ -85,13 +94,13 @@ fmt-check:
 clippy:
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 
-PY_SOURCES := python tests benches studies examples tools
+PY_SOURCES := python training tests benches studies examples tools
 ruff: wheel
 	$(VENV)/bin/ruff check $(PY_SOURCES)
 	$(VENV)/bin/ruff format --check $(PY_SOURCES)
 
 mypy: wheel
-	$(VENV)/bin/mypy python/ikid
+	$(VENV)/bin/mypy python/ikid training/ikid_training
 
 test-rust:
 	$(CARGO) test --workspace --exclude ikid-py --profile quick

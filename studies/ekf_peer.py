@@ -37,7 +37,7 @@ import numpy as np
 
 import ikid
 from ikid.interop.biorbd import write_biomod
-from ikid.training import data as D
+from ikid_training import data as D
 
 try:
     import biorbd
@@ -144,7 +144,7 @@ def training_use() -> tuple[set[int], set[float]]:
 
     seeds: set[int] = set()
     sizes: set[float] = set()
-    for path in sorted((ROOT / "python/ikid/training/configs").glob("*.toml")):
+    for path in sorted((ROOT / "training/ikid_training/configs").glob("*.toml")):
         d = tomllib.loads(path.read_text()).get("data")
         if not d or "seeds" not in d:
             continue  # a search config (its base is listed itself)
@@ -319,7 +319,7 @@ def least_squares_ik(rec: D.Recording, start: np.ndarray, iterations: int = 12) 
 
 
 def causal_mean(x: np.ndarray, n: int) -> np.ndarray:
-    from ikid.training.report import causal_mean as cm
+    from ikid_training.report import causal_mean as cm
 
     return cm(x, n)
 
@@ -337,7 +337,7 @@ def run_tracker(
 def ikid_estimates(
     rec: D.Recording, ik: ikid.Model, chain: ikid.Model, refiner: ikid.Model, jerk_noise: float
 ) -> dict[str, dict[str, np.ndarray]]:
-    from ikid.training.report import classical_chain
+    from ikid_training.report import classical_chain
 
     n = len(rec)
     ref = ikid.reference_ik(gaps_filled(rec.markers), **subject(rec))

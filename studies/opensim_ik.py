@@ -33,9 +33,9 @@ import numpy as np
 
 import ikid
 from ikid import io
+from ikid.evaluate import EVAL_SEED
 from ikid.interop import opensim as ios
-from ikid.training import data as D
-from ikid.training.evaluate import EVAL_SEED
+from ikid_training import data as D
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))

@@ -34,7 +34,7 @@ from torch import nn
 import ikid
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from ikid.training.export import Affine, ModelSpec, WindowModel, export, export_onnx, load_torch  # noqa: E402
+from ikid_training.export import Affine, ModelSpec, WindowModel, export, export_onnx, load_torch  # noqa: E402
 from studies import common  # noqa: E402
 from studies.common import frames_for, machine  # noqa: E402
 

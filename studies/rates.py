@@ -42,7 +42,7 @@ import numpy as np
 
 import ikid
 from ikid import pipeline
-from ikid.training import data as D
+from ikid_training import data as D
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -374,8 +374,8 @@ def markdown(res: dict[str, Any]) -> str:
         "these test trials: a 5-frame window (50 ms, wrist-ik's duration) 9.6e-6 / 1.5e-4 / 1.9e-3 rad² "
         "at 0 / 1 / 5 % noise, a 10-frame window (100 ms) 1.3e-5 / 1.2e-4 / 1.6e-3: at a low rate a window "
         "of wrist-ik's duration holds too few frames to average noise, so both per-rate models use 100 ms "
-        "(configs `python/ikid/training/configs/wrist-ik-100hz.toml`, `wrist-ik-250hz.toml`; trained with "
-        "`python -m ikid.training.train CONFIG`, ~5 min each on one core).",
+        "(configs `training/ikid_training/configs/wrist-ik-100hz.toml`, `wrist-ik-250hz.toml`; trained with "
+        "`python -m ikid_training.train CONFIG`, ~5 min each on one core).",
         "",
         "The frames left out at 100 Hz, clean markers: the core's gap filler takes a fast reach for a "
         "jump there (its jump limit is 8x the segment's RMS step *per frame*, learned from the frames "

@@ -13,6 +13,7 @@ import socket
 import subprocess
 import sys
 import time
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -230,7 +231,7 @@ def lab(tmp_path_factory) -> tuple[Path, Path]:
 
 
 def test_lab_recordings_read_markers_angles_and_torques(lab):
-    from ikid.training.data import load_lab_recordings
+    from ikid.recordings import load_lab_recordings
 
     root, mapping = lab
     recs = load_lab_recordings(root / "train", mapping)
@@ -243,7 +244,7 @@ def test_lab_recordings_read_markers_angles_and_torques(lab):
 
 
 def test_lab_folder_problems_are_named(lab, tmp_path):
-    from ikid.training.data import load_lab_recordings
+    from ikid.recordings import load_lab_recordings
 
     root, mapping = lab
     # A trial without its angles.
@@ -270,7 +271,7 @@ def test_lab_folder_problems_are_named(lab, tmp_path):
 
 
 def test_a_gap_the_filler_cannot_bridge_splits_the_trial(lab, tmp_path):
-    from ikid.training.data import load_lab_recordings
+    from ikid.recordings import load_lab_recordings
 
     t = ikid.simulate("random", seed=9930, duration=3.0)
     markers = t.markers.copy()
@@ -284,8 +285,8 @@ def test_a_gap_the_filler_cannot_bridge_splits_the_trial(lab, tmp_path):
 
 
 needs_torch = pytest.mark.skipif(
-    importlib.util.find_spec("torch") is None,
-    reason="training needs the training extra (make test installs it)",
+    importlib.util.find_spec("torch") is None or importlib.util.find_spec("ikid_training") is None,
+    reason="training needs ikid-training and torch (make wheel installs them)",
 )
 
 
@@ -340,7 +341,7 @@ def test_train_and_report_on_a_lab_folder_through_the_cli(lab, tmp_path, capsys)
         )
         == 0
     )
-    from ikid.training.data import load_lab_recordings
+    from ikid.recordings import load_lab_recordings
 
     rec = load_lab_recordings(root / "test", mapping)[0]
     text = report.read_text(encoding="utf-8")
@@ -400,6 +401,86 @@ def test_train_chain_needs_torques(lab, tmp_path, capsys):
     )
     assert "torques (a same-stem .sto)" in capsys.readouterr().err
     assert not (tmp_path / "c.safetensors").exists()
+
+
+#: Runs the CLI with ``ikid_training`` not importable (a meta-path finder refuses it), as for a
+#: user who installed the runtime wheel alone.
+WITHOUT_TRAINING = """
+import sys
+
+class NoTraining:
+    def find_spec(self, name, path=None, target=None):
+        if name.partition(".")[0] == "ikid_training":
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+        return None
+
+sys.meta_path.insert(0, NoTraining())
+from ikid.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def cli_without_training(*argv: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-c", WITHOUT_TRAINING, *argv], capture_output=True, text=True, timeout=120
+    )
+
+
+def test_train_without_the_training_pipeline_says_how_to_install_it(lab, tmp_path):
+    root, mapping = lab
+    hint = "pip install ./training"
+    for argv in (
+        ["train", "--config", "wrist-ik", "-o", str(tmp_path / "out")],
+        ["train", "--data", str(root / "train"), "--map", str(mapping), "-o", str(tmp_path / "m.st")],
+        ["report", "-o", str(tmp_path / "docs")],  # the shipped models' full report
+    ):
+        r = cli_without_training(*argv)
+        assert r.returncode == 2, (argv, r.stderr)
+        assert r.stderr.startswith("ikid: error: ") and "Traceback" not in r.stderr, r.stderr
+        assert "needs ikid-training" in r.stderr and hint in r.stderr, r.stderr
+        assert "No module named 'ikid_training'" in r.stderr, r.stderr
+    assert not (tmp_path / "out").exists() and not (tmp_path / "docs").exists()
+    # --help says so before anyone tries.
+    r = cli_without_training("train", "--help")
+    assert r.returncode == 0 and hint in r.stdout, r.stdout
+    # Scoring a model on a lab's trials is the runtime's own: no training pipeline needed.
+    report = tmp_path / "lab.md"
+    r = cli_without_training(
+        "report", "--data", str(root / "test"), "--map", str(mapping), "--clean-only", "-o", str(report)
+    )
+    assert r.returncode == 0, r.stderr
+    assert "| clean |" in report.read_text(encoding="utf-8")
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)  # a release build when no wheel is there yet
+def test_the_runtime_wheel_carries_no_training_code(tmp_path):
+    """The ``ikid`` wheel (``make wheel``'s, or one built here) has no training module, no
+    training config and no torch import; ``ikid_training`` is imported lazily or not at all."""
+    root = Path(__file__).resolve().parents[1]
+    wheels = sorted((root / "target" / "wheels").glob("ikid-*.whl"))
+    if not wheels:
+        maturin = Path(sys.executable).with_name("maturin")
+        subprocess.run(
+            [str(maturin), "build", "--release", "--quiet", "-o", str(tmp_path)], cwd=root, check=True
+        )
+        wheels = sorted(tmp_path.glob("ikid-*.whl"))
+    with zipfile.ZipFile(wheels[-1]) as z:
+        names = z.namelist()
+        sources = {n: z.read(n).decode("utf-8") for n in names if n.endswith((".py", ".pyi"))}
+        metadata = next(z.read(n).decode("utf-8") for n in names if n.endswith(".dist-info/METADATA"))
+    assert "ikid/cli.py" in sources and "ikid/evaluate.py" in sources  # the right archive
+    assert not [n for n in names if "training" in n.split("/")[:-1] or n.startswith("ikid_training")]
+    assert not [n for n in names if n.endswith(".toml")]  # no training config
+    assert not [n for n, text in sources.items() if re.search(r"^\s*(import|from)\s+torch\b", text, re.M)]
+    # ikid_training only inside a function (the CLI's train and full report), never at import.
+    top_level = re.compile(r"^(import|from)\s+ikid_training\b", re.M)
+    assert not [n for n, text in sources.items() if top_level.search(text)]
+    requires = [
+        line for line in metadata.splitlines() if line.startswith(("Requires-Dist:", "Provides-Extra:"))
+    ]
+    bad = [line for line in requires if "torch" in line or line.endswith(" train")]
+    assert requires and not bad, requires
 
 
 # --- bench ---------------------------------------------------------------------------------------
@@ -479,7 +560,7 @@ def test_demo_prints_the_errors_and_latency_of_what_it_streamed(capsys, tmp_path
 
 def test_import_ikid_and_the_cli_do_not_import_torch():
     code = (
-        "import sys, ikid, ikid.cli, ikid.training.data, ikid.training.evaluate; "
+        "import sys, ikid, ikid.cli, ikid.recordings, ikid.evaluate, ikid_training.data; "
         "print('torch' in sys.modules)"
     )
     assert (

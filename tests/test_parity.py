@@ -10,10 +10,10 @@ import pytest
 
 import ikid
 
-torch = pytest.importorskip("torch", reason="parity needs the training extra (make test installs it)")
+torch = pytest.importorskip("torch", reason="parity needs ikid-training (make wheel installs it)")
 from torch import nn  # noqa: E402
 
-from ikid.training.export import Affine, ModelSpec, WindowModel, export, export_onnx  # noqa: E402
+from ikid_training.export import Affine, ModelSpec, WindowModel, export, export_onnx  # noqa: E402
 
 #: Largest |ikid - torch| allowed, relative to the largest |torch output| of each column.
 RTOL = 1e-5

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import ikid
-from ikid.training import data as D
+from ikid_training import data as D
 
 
 @pytest.fixture(scope="module")

@@ -11,11 +11,11 @@ import pytest
 
 import ikid
 
-torch = pytest.importorskip("torch", reason="training needs the training extra (make test installs it)")
-from ikid.training import data as D  # noqa: E402
-from ikid.training.evaluate import errors, noisy  # noqa: E402
-from ikid.training.export import load_torch  # noqa: E402
-from ikid.training.train import load_config, run  # noqa: E402
+torch = pytest.importorskip("torch", reason="training needs ikid-training (make wheel installs it)")
+from ikid.evaluate import errors, noisy  # noqa: E402
+from ikid_training import data as D  # noqa: E402
+from ikid_training.export import load_torch  # noqa: E402
+from ikid_training.train import load_config, run  # noqa: E402
 
 SHIPPED = ["wrist-chain", "wrist-id", "wrist-ik"]
 
@@ -209,10 +209,10 @@ def test_wrist_track_matches_torch():
 
 
 def test_the_refiner_trainer_writes_a_refiner_the_tracker_takes(tmp_path):
-    """`python -m ikid.training.refine` end to end on a tiny budget: one trajectory per
+    """`python -m ikid_training.refine` end to end on a tiny budget: one trajectory per
     recording, never in the +-+ octant compare-ekf tests as unseen, and a model card that
     says so."""
-    from ikid.training import refine
+    from ikid_training import refine
 
     out = tmp_path / "tiny-track.safetensors"
     refine.main(

@@ -140,7 +140,7 @@ def load(name_or_path: str | os.PathLike[str]) -> Model:
         warnings.warn(
             f"{path}: written before model files carried a checksum of their weights, so a "
             "corrupted file cannot be told from a good one; re-save it "
-            "(python -m ikid.training.export --restamp FILE) to add one",
+            "(python -m ikid_training.export --restamp FILE, from ikid-training) to add one",
             stacklevel=2,
         )
     return model

@@ -951,11 +951,28 @@ class _Refused(Exception):
 BASE_CONFIG = {"ik": "wrist-ik", "chain": "wrist-chain", "id": "wrist-id"}
 
 
+#: How to get the training pipeline, a distribution of its own (``training/`` of a checkout).
+TRAINING_HINT = "pip install ./training (from an ikid source checkout; it brings torch)"
+
+
+def _training_package(what: str):
+    """The ``ikid_training`` package (imported only here, on demand), or an error telling how
+    to install it (exit 2)."""
+    try:
+        import ikid_training
+    except ImportError as e:
+        raise ikid.InputError(
+            f"{what} needs ikid-training, the training pipeline, a distribution of its own beside "
+            f"ikid (not installed: {e}); install it with {TRAINING_HINT}"
+        ) from None
+    return ikid_training
+
+
 def _config_path(name: str) -> Path:
-    """A shipped config's name (``ikid/training/configs``) or a TOML path, by the rule of
+    """A shipped config's name (``ikid_training/configs``) or a TOML path, by the rule of
     :func:`ikid.load`: a name with no path separator and no ``.toml`` suffix is a shipped
     config, even if a file or folder of that name is in the working directory."""
-    shipped_dir = Path(__file__).with_name("training") / "configs"
+    shipped_dir = Path(_training_package("ikid train").CONFIG_DIR)
     if ikid.is_model_name(name) and not name.endswith(".toml"):
         shipped = shipped_dir / f"{name}.toml"
         if not shipped.is_file():
@@ -972,11 +989,12 @@ def _config_path(name: str) -> Path:
 
 
 def _training():
+    _training_package("ikid train")
     try:
-        from ikid.training import train
-    except ImportError as e:
+        from ikid_training import train
+    except ImportError as e:  # installed without its dependencies (torch)
         raise ikid.InputError(
-            f"ikid train needs the training extra (torch): pip install 'ikid[train]' ({e})"
+            f"ikid train needs torch, a dependency of ikid-training ({e}); install it with {TRAINING_HINT}"
         ) from None
     return train
 
@@ -1023,16 +1041,18 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     if args.data is None:
+        _training_package("ikid report without --data (the shipped models' full report)")
         try:
-            from ikid.training import report
-        except ImportError as e:
+            from ikid_training import report
+        except ImportError as e:  # installed without its dependencies (matplotlib)
             raise ikid.InputError(
-                f"the full report needs the training extra (matplotlib): pip install 'ikid[train]' ({e})"
+                f"the full report needs matplotlib, a dependency of ikid-training ({e}); install it "
+                f"with {TRAINING_HINT}"
             ) from None
         report.main(["--out", args.output or "docs"])
         return 0
-    from ikid.training import data as D
-    from ikid.training.evaluate import evaluate_recordings, markdown
+    from ikid import recordings as D
+    from ikid.evaluate import evaluate_recordings, markdown
 
     model = _model_for(args.model, "ikid report --model", ("ik", "chain", "id"))
     recs = D.load_lab_recordings(args.data, args.map, model.frame_rate_hz if args.resample else None)
@@ -1421,10 +1441,12 @@ def main(argv: list[str] | None = None) -> int:
 
     p = sub.add_parser(
         "train",
-        help="train a model on a lab's trials (or a config); needs ikid[train]",
+        help="train a model on a lab's trials (or a config); needs ikid-training",
         description="Train a model: a lab's trials (marker files + same-stem .mot angles [+ .sto torques])\n"
         "through the same pipeline as the shipped models (80/10/10 split per trial, noise and\n"
-        "occlusion augmentation, early stopping), exported as .safetensors + .onnx.\n\n"
+        "occlusion augmentation, early stopping), exported as .safetensors + .onnx.\n"
+        "Needs the training pipeline (torch), a distribution of its own: pip install ./training\n"
+        "(from an ikid source checkout).\n\n"
         "  ikid train --data lab/ --map lab.toml --task ik -o models/lab-ik.safetensors\n"
         "  ikid train --data lab/ --task chain --minutes 10 -o models/lab-chain.safetensors\n"
         "  ikid train --config wrist-ik -o out/models    # a shipped config (simulated data)",
@@ -1460,7 +1482,8 @@ def main(argv: list[str] | None = None) -> int:
         "last 10 % of each trial and on all frames, clean and with 1 % / 5 % added noise,\n"
         "beside the classical per-frame solution on the same frames.\n\n"
         "  ikid report --model models/lab-ik.safetensors --data lab_test/ --map lab.toml -o lab.md\n"
-        "  ikid report -o docs        # the shipped models' report (needs ikid[train])",
+        "  ikid report -o docs        # the shipped models' report (needs ikid-training,\n"
+        "                             # pip install ./training from a source checkout)",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--model", default="wrist-ik")

@@ -308,12 +308,12 @@ def load_torch(path: str | Path) -> WindowModel:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m ikid.training.export --restamp FILE...``: give model files written before
+    """``python -m ikid_training.export --restamp FILE...``: give model files written before
     envelopes and checksums both, the envelope from their min-max scaling where it allows
     (:func:`envelope_from_scaling`; otherwise only the checksum)."""
     import argparse
 
-    p = argparse.ArgumentParser(prog="python -m ikid.training.export")
+    p = argparse.ArgumentParser(prog="python -m ikid_training.export")
     p.add_argument("--restamp", nargs="+", required=True, metavar="FILE")
     args = p.parse_args(argv)
     for f in args.restamp:

@@ -12,9 +12,9 @@ import shutil
 import time
 from pathlib import Path
 
-from ikid.training.train import load_config, run
+from ikid_training import CONFIG_DIR as CONFIGS
+from ikid_training.train import load_config, run
 
-CONFIGS = Path(__file__).with_name("configs")
 SHIPPED = ["wrist-ik", "wrist-chain", "wrist-id"]
 # Run from a source checkout: the shipped models live in the package sources, not in site-packages.
 PACKAGE_MODELS = Path("python/ikid/models")

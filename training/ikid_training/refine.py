@@ -1,4 +1,4 @@
-"""`python -m ikid.training.refine`: train the Tracker's refiner, shipped as ``wrist-track``.
+"""`python -m ikid_training.refine`: train the Tracker's refiner, shipped as ``wrist-track``.
 
 ``ikid.Tracker`` is an extended Kalman filter with a white-jerk motion model: it cannot know
 how wrists actually move, so it lags on fast moves and passes noise on slow ones. The refiner
@@ -31,9 +31,9 @@ import numpy as np
 import torch
 
 import ikid
-from ikid.training import data as D
-from ikid.training.export import Affine, ModelSpec, export
-from ikid.training.train import mlp
+from ikid_training import data as D
+from ikid_training.export import Affine, ModelSpec, export
+from ikid_training.train import mlp
 
 NAME = "wrist-track"
 # One trajectory per recording: trained on 9 trajectories seen at 9 (pose, size) pairs each, the
@@ -231,7 +231,9 @@ def main(argv: list[str] | None = None) -> None:
         "-o",
         "--output",
         type=Path,
-        default=Path(__file__).resolve().parents[1] / "models" / f"{NAME}.safetensors",
+        # Run from a source checkout (make models-track): the shipped models live in the
+        # runtime package's sources, not in site-packages.
+        default=Path("python/ikid/models") / f"{NAME}.safetensors",
     )
     parser.add_argument(
         "--minutes", type=float, default=8.0, help="training time budget (early stopping may end sooner)"
@@ -272,7 +274,7 @@ def main(argv: list[str] | None = None) -> None:
             "output": "standardised; the core gates it by the learned noise",
         },
         provenance={
-            "trainer": "ikid.training.refine",
+            "trainer": "ikid_training.refine",
             "simulator": ikid.SIMULATOR,
             "seeds": seeds,
             "shoulders_deg": SHOULDERS_DEG,

@@ -1,6 +1,6 @@
 """Grid or random search over training configs, driven by a TOML file.
 
-    python -m ikid.training.search python/ikid/training/configs/search-ik.toml --out out/search
+    python -m ikid_training.search training/ikid_training/configs/search-ik.toml --out out/search
 
 The file names a base config and, under ``[search]``, lists of values for dotted keys of it
 (``"model.window" = [5, 25, 50]``). ``mode = "grid"`` tries every combination, ``mode =
@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ikid.training.train import load_config, run
+from ikid_training.train import load_config, run
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -1,11 +1,11 @@
 """Train one model from a TOML config: simulate (or load) data, train an MLP with noise
 augmentation and early stopping, export ``.safetensors`` (+ ONNX) with a full model card.
 
-    python -m ikid.training.train python/ikid/training/configs/wrist-ik.toml --out out/models
+    python -m ikid_training.train training/ikid_training/configs/wrist-ik.toml --out out/models
 
 Config tables: ``[model]`` (name, task, feature_set, window, hidden), ``[data]`` (what to
 simulate, or ``folder`` of saved trials), ``[train]`` (seed, batch, lr, budget, early stopping,
-augmentation). See ``ikid/training/configs/`` for the shipped models' configs. Every run writes
+augmentation). See ``ikid_training/configs/`` for the shipped models' configs. Every run writes
 its config, a per-epoch log (JSON lines) and its result under ``<out>/runs/<name>/``.
 """
 
@@ -18,6 +18,7 @@ import json
 import math
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,8 +29,9 @@ from torch import nn
 from tqdm import tqdm
 
 import ikid
-from ikid.training import data as D
-from ikid.training.export import Affine, ModelSpec, WindowModel, envelope_of, export, export_onnx
+from ikid.evaluate import NOISE_LEVELS, errors, noisy, summary
+from ikid_training import data as D
+from ikid_training.export import Affine, ModelSpec, WindowModel, envelope_of, export, export_onnx
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -318,10 +320,19 @@ def spec_for(
     )
 
 
+def card_metrics(model: ikid.Model, recs: Sequence[D.Recording]) -> dict[str, Any]:
+    """Test-split metrics stored in the model card (thesis split; noise seeds not used in training)."""
+    unit = model.output_units[0]
+    if model.frame_kind == "joint_state":
+        return {"test": summary(*errors(model, recs, "test"), unit)}
+    return {
+        f"test_{name}": summary(*errors(model, noisy(recs, level), "test"), unit)
+        for name, level in NOISE_LEVELS.items()
+    }
+
+
 def run(cfg: dict[str, Any], out: Path, progress: bool = True, onnx: bool = True) -> tuple[ikid.Model, Path]:
     """Train and export one config; returns the loaded model and its path."""
-    from ikid.training.evaluate import card_metrics  # evaluation needs only ikid, not torch
-
     name = cfg["model"]["name"]
     run_dir = out / "runs" / name
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -1,6 +1,7 @@
-"""Scoring models on recordings, with the classical reference on the same frames.
+"""Scoring models on recordings, with the classical reference on the same frames
+(``ikid report --data``; training's model cards and ``make report`` score with it too).
 
-Only ``ikid`` and NumPy: shipped model files are evaluated exactly as users run them
+Only ``ikid`` and NumPy: model files are evaluated exactly as users run them
 (``Model.predict`` in the Rust core), never through torch.
 """
 
@@ -12,10 +13,8 @@ from typing import Any, Protocol
 import numpy as np
 
 import ikid
-from ikid.training import data as D
+from ikid import recordings as D
 
-#: The thesis' test numbers (MSE, rad² for angles; its chain torque MSE as printed, N·m² by its units).
-THESIS = {"ik_clean": 4.15e-5, "ik_1pct": 7e-4, "ik_5pct": 3.7e-3, "chain_torque_mse": 0.1727}
 #: Noise levels of the thesis (uniform, ± fraction of each marker coordinate's range).
 NOISE_LEVELS = {"clean": 0.0, "1%": 0.01, "5%": 0.05}
 EVAL_SEED = 7_000_000  # evaluation noise seeds, never used in training
@@ -95,17 +94,6 @@ def summary(err: np.ndarray, true: np.ndarray, unit: str) -> dict[str, Any]:
         out["rmse_deg"] = np.degrees(rmse).tolist()
     out["nrmse_pct_of_range"] = (100 * rmse / np.where(rng > 0, rng, 1)).tolist()
     return out
-
-
-def card_metrics(model: ikid.Model, recs: Sequence[D.Recording]) -> dict[str, Any]:
-    """Test-split metrics stored in the model card (thesis split; noise seeds not used in training)."""
-    unit = model.output_units[0]
-    if model.frame_kind == "joint_state":
-        return {"test": summary(*errors(model, recs, "test"), unit)}
-    return {
-        f"test_{name}": summary(*errors(model, noisy(recs, level), "test"), unit)
-        for name, level in NOISE_LEVELS.items()
-    }
 
 
 def evaluate_recordings(
