@@ -31,30 +31,18 @@ fn check_marker_units(frames: &Bound<'_, PyAny>) -> PyResult<()> {
 }
 
 /// A subject scaled from the default, each marker moved by `marker_shift` `(6, 3)` (metres,
-/// in its segment's frame); the one place Python reads the body model from.
+/// in its segment's frame): the core's [`BodyModel::subject`].
 pub(crate) fn subject(
     length_scale: f64,
     mass_scale: f64,
     marker_shift: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<BodyModel> {
-    let mut body = BodyModel::try_scaled(length_scale, mass_scale).py_err()?;
-    if let Some(shift) = marker_shift {
-        with_f64_rows(shift, "marker_shift", 3, |v, n| {
-            if n != body.marker_offsets.len() || v.iter().any(|x| !x.is_finite()) {
-                return Err(input(format!(
-                    "marker_shift: expected {} finite rows of 3 (metres), got {n} rows",
-                    body.marker_offsets.len()
-                )));
-            }
-            for (o, s) in body.marker_offsets.iter_mut().zip(v.chunks_exact(3)) {
-                for k in 0..3 {
-                    o[k] += s[k];
-                }
-            }
-            Ok(())
-        })?;
+    match marker_shift {
+        None => BodyModel::subject(length_scale, mass_scale, None).py_err(),
+        Some(shift) => with_f64_rows(shift, "marker_shift", 3, |v, _| {
+            BodyModel::subject(length_scale, mass_scale, Some(v)).py_err()
+        }),
     }
-    Ok(body)
 }
 
 fn segment_dict<'py>(py: Python<'py>, s: &SegmentParams) -> PyResult<Bound<'py, PyDict>> {

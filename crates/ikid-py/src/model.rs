@@ -316,7 +316,7 @@ impl Stream {
     /// the flag on an output that rests on filled positions.
     #[getter]
     fn filled_markers(&self) -> Vec<&'static str> {
-        marker_names(self.inner.filled_markers())
+        ikid::body::marker_names(self.inner.filled_markers()).collect()
     }
 
     /// The model this stream runs.
@@ -324,10 +324,6 @@ impl Stream {
     fn model(&self) -> Model {
         Model { inner: self.inner.model().clone() }
     }
-}
-
-fn marker_names(mask: u8) -> Vec<&'static str> {
-    ikid::body::MARKERS.iter().enumerate().filter(|(i, _)| mask & (1 << i) != 0).map(|(_, m)| m.name).collect()
 }
 
 /// Builds (and validates) a model from a card and torch-layout arrays; used by the exporter

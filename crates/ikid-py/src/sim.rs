@@ -4,7 +4,7 @@ use crate::conv::with_f64_rows;
 use crate::errors::{IntoPy, input};
 use ikid::body::{BodyModel, MARKER_FRAME_LEN};
 use ikid::noise;
-use ikid_sim::protocol::{Octants, Protocol};
+use ikid_sim::protocol::Protocol;
 use ikid_sim::{SimConfig, simulate as run};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
@@ -49,23 +49,7 @@ fn simulate<'py>(
     output_every: usize,
     octants: Option<Vec<String>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let protocol = match protocol {
-        "thesis" => Protocol::thesis(),
-        "random" => {
-            if !(duration > 0.0 && duration <= 36_000.0) {
-                return Err(input(format!("duration is {duration} s, expected 0 < duration ≤ 36000")));
-            }
-            let allowed = match &octants {
-                Some(signs) => Octants::parse(signs).map_err(|e| input(format!("octants: {e}")))?,
-                None => Octants::ALL,
-            };
-            Protocol::random_in(seed, duration, allowed)
-        }
-        other => return Err(input(format!("unknown protocol {other:?} (known: \"thesis\", \"random\")"))),
-    };
-    if octants.is_some() && protocol.name != "random" {
-        return Err(input("octants apply to the \"random\" protocol only"));
-    }
+    let protocol = Protocol::from_name(protocol, seed, duration, octants.as_deref()).map_err(sim_err)?;
     let config = SimConfig {
         body: BodyModel::try_scaled(length_scale, mass_scale).py_err()?,
         shoulder_flexion,

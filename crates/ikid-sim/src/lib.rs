@@ -31,6 +31,17 @@ pub enum Error {
         /// What is accepted.
         expected: String,
     },
+    /// A protocol name [`Protocol::from_name`](protocol::Protocol::from_name) does not know.
+    #[error("unknown protocol {name:?} (known: {known})")]
+    UnknownProtocol {
+        /// Name given.
+        name: String,
+        /// The known names, quoted and comma-separated.
+        known: String,
+    },
+    /// Joint-sign octants that do not parse, or given to a protocol that has none.
+    #[error("octants: {0}")]
+    Octants(String),
     /// An error from the core (e.g. a non-finite joint state).
     #[error(transparent)]
     Core(#[from] ikid::Error),

@@ -12,6 +12,12 @@ use ikid::rng::SplitMix;
 /// Fraction of the anatomical range targets may use.
 const RANGE_USE: f64 = 0.95;
 
+/// The protocols [`Protocol::from_name`] makes, by name.
+pub const PROTOCOLS: [&str; 2] = ["thesis", "random"];
+
+/// Longest random protocol [`Protocol::from_name`] makes, s (ten hours).
+pub const MAX_DURATION_S: f64 = 36_000.0;
+
 /// One transition from `from` to `to` starting at `start` (s) and lasting `duration` (s).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Movement {
@@ -163,6 +169,41 @@ impl Protocol {
         Self::build("random", steps)
     }
 
+    /// The protocol called `name` (one of [`PROTOCOLS`]), as a caller names it: `"thesis"`
+    /// ([`thesis`](Self::thesis); `seed` and `duration` unused) or `"random"`
+    /// ([`random_in`](Self::random_in) lasting at least `duration` s, 0 < `duration` ≤
+    /// [`MAX_DURATION_S`], its targets in the joint-sign `octants` when given, sign strings
+    /// such as `"+-+"`, see [`Octants::parse`]). Refused, naming the fault: another name, a
+    /// duration out of range, octants that do not parse or given to `"thesis"`.
+    pub fn from_name<S: AsRef<str>>(
+        name: &str,
+        seed: u64,
+        duration: f64,
+        octants: Option<&[S]>,
+    ) -> crate::Result<Protocol> {
+        match name {
+            "thesis" if octants.is_some() => Err(crate::Error::Octants("apply to the \"random\" protocol only".into())),
+            "thesis" => Ok(Self::thesis()),
+            "random" => {
+                crate::check(
+                    "duration",
+                    duration,
+                    duration > 0.0 && duration <= MAX_DURATION_S,
+                    &format!("expected 0 < duration ≤ {MAX_DURATION_S} s"),
+                )?;
+                let allowed = match octants {
+                    Some(signs) => Octants::parse(signs).map_err(crate::Error::Octants)?,
+                    None => Octants::ALL,
+                };
+                Ok(Self::random_in(seed, duration, allowed))
+            }
+            other => Err(crate::Error::UnknownProtocol {
+                name: other.into(),
+                known: PROTOCOLS.map(|p| format!("{p:?}")).join(", "),
+            }),
+        }
+    }
+
     /// Total duration, s.
     pub fn duration(&self) -> f64 {
         self.movements.last().map_or(0.0, |m| m.start + m.duration)
@@ -238,6 +279,31 @@ mod tests {
         assert!(Octants::parse(&["+-"]).is_err());
         assert!(Octants::parse(&["+x+"]).is_err());
         assert_eq!(Octants::parse(&["+++", "---"]).unwrap(), Octants(1 | 1 << 7));
+    }
+
+    #[test]
+    fn protocols_are_made_by_name_within_limits() {
+        let none: Option<&[&str]> = None;
+        assert_eq!(Protocol::from_name("thesis", 0, 0.0, none).unwrap(), Protocol::thesis());
+        assert_eq!(Protocol::from_name("random", 5, 10.0, none).unwrap(), Protocol::random(5, 10.0));
+        let held_out = Protocol::from_name("random", 1, 30.0, Some(&["+-+"])).unwrap();
+        assert_eq!(held_out, Protocol::random_in(1, 30.0, Octants::parse(&["+-+"]).unwrap()));
+        let message = |r: crate::Result<Protocol>| r.unwrap_err().to_string();
+        assert_eq!(
+            message(Protocol::from_name("dance", 0, 1.0, none)),
+            "unknown protocol \"dance\" (known: \"thesis\", \"random\")"
+        );
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY, MAX_DURATION_S + 1.0] {
+            assert!(message(Protocol::from_name("random", 0, bad, none)).starts_with("duration is"), "{bad}");
+        }
+        assert!(Protocol::from_name("random", 0, MAX_DURATION_S, none).is_ok());
+        assert!(message(Protocol::from_name("random", 0, 1.0, Some(&["+x+"]))).starts_with("octants: octant"));
+        let empty: &[&str] = &[];
+        assert_eq!(message(Protocol::from_name("random", 0, 1.0, Some(empty))), "octants: no octant given");
+        assert_eq!(
+            message(Protocol::from_name("thesis", 0, 1.0, Some(&["+++"]))),
+            "octants: apply to the \"random\" protocol only"
+        );
     }
 
     #[test]

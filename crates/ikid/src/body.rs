@@ -141,6 +141,33 @@ pub fn first_marker(segment: Segment) -> usize {
     }
 }
 
+/// The index in [`COORDINATES`] of the coordinate called `name` (e.g. `"ra_wr_e_f"`); an
+/// unknown name is refused, naming the known ones.
+pub fn coordinate_index(name: &str) -> crate::Result<usize> {
+    COORDINATES.iter().position(|c| c.name == name).ok_or_else(|| crate::Error::BadArgument {
+        what: "coordinate",
+        detail: format!("unknown coordinate {name:?} (known: {})", COORDINATES.map(|c| c.name).join(", ")),
+    })
+}
+
+/// The missing markers of a marker frame ([`MARKERS`] order, f32 or f64): bit `i` is set when
+/// marker `i` has a non-finite coordinate (NaN: not seen). The one missing-marker mask: the gap
+/// filler, the tracker and the bindings' flags all mean this.
+#[inline]
+pub fn missing_markers<T: Copy + Into<f64>>(frame: &[T]) -> u8 {
+    frame
+        .chunks_exact(3)
+        .take(N_MARKERS)
+        .enumerate()
+        .filter(|(_, xyz)| xyz.iter().any(|&v| !v.into().is_finite()))
+        .fold(0, |mask, (i, _)| mask | (1 << i))
+}
+
+/// The names of the markers in a mask (bit `i` = [`MARKERS`]`[i]`), in [`MARKERS`] order.
+pub fn marker_names(mask: u8) -> impl Iterator<Item = &'static str> {
+    MARKERS.iter().enumerate().filter(move |(i, _)| mask & (1 << i) != 0).map(|(_, m)| m.name)
+}
+
 /// Subjects' segment lengths relative to the default subject's that [`BodyModel::try_scaled`]
 /// accepts: a small child's to a very tall adult's, with room (a factor outside is a typo).
 pub const LENGTH_SCALE_RANGE: (f64, f64) = (0.3, 3.0);
@@ -374,6 +401,47 @@ impl BodyModel {
 }
 
 impl BodyModel {
+    /// A subject: the default one scaled by `length_scale` and `mass_scale` (checked, see
+    /// [`try_scaled`](Self::try_scaled)), each marker then moved by `marker_shift` when given
+    /// (see [`shift_markers`](Self::shift_markers)). What every binding builds a subject with.
+    pub fn subject(length_scale: f64, mass_scale: f64, marker_shift: Option<&[f64]>) -> crate::Result<Self> {
+        let mut body = Self::try_scaled(length_scale, mass_scale)?;
+        if let Some(shift) = marker_shift {
+            body.shift_markers(shift)?;
+        }
+        Ok(body)
+    }
+
+    /// Moves each marker by `shift`: [`N_MARKERS`] rows of `x, y, z` (metres, in the marker's
+    /// segment's frame, [`MARKERS`] order) added to its offset, for a lab whose placement differs
+    /// from the model's. Refused, changing nothing, unless it is 18 finite values.
+    pub fn shift_markers(&mut self, shift: &[f64]) -> crate::Result<()> {
+        use crate::Error;
+        if shift.len() != MARKER_FRAME_LEN {
+            return Err(Error::BadArgument {
+                what: "marker_shift",
+                detail: format!("expected {N_MARKERS} finite rows of 3 (metres), got {} values", shift.len()),
+            });
+        }
+        if let Some(i) = shift.iter().position(|v| !v.is_finite()) {
+            return Err(Error::BadArgument {
+                what: "marker_shift",
+                detail: format!(
+                    "{}.{} is {}, expected a finite shift in metres",
+                    MARKERS[i / 3].name,
+                    ["x", "y", "z"][i % 3],
+                    shift[i]
+                ),
+            });
+        }
+        for (offset, s) in self.marker_offsets.iter_mut().zip(shift.chunks_exact(3)) {
+            for (o, d) in offset.iter_mut().zip(s) {
+                *o += d;
+            }
+        }
+        Ok(())
+    }
+
     /// Marker frames for a whole trajectory: `q` holds `n` angle triples back to back
     /// (radians), the result `n` frames of [`MARKER_FRAME_LEN`] values (metres, lab frame).
     pub fn marker_frames(&self, q: &[f64], shoulder_flexion: f64) -> crate::Result<Vec<f64>> {
@@ -473,6 +541,48 @@ mod tests {
         // Forward flexion of 90° points the arm forward (+X).
         let raised = body.forearm_pose(std::f64::consts::FRAC_PI_2);
         assert!(raised.translation.vector.x > 0.5);
+    }
+
+    #[test]
+    fn subject_moves_each_marker_by_its_shift() {
+        let mut shift = [0.0; MARKER_FRAME_LEN];
+        shift[3 * 4..3 * 4 + 3].copy_from_slice(&[0.004, -0.01, 0.006]);
+        let body = BodyModel::subject(1.1, 1.2, Some(&shift)).unwrap();
+        let plain = BodyModel::scaled(1.1, 1.2);
+        for m in 0..N_MARKERS {
+            for k in 0..3 {
+                let moved = body.marker_offsets[m][k] - plain.marker_offsets[m][k];
+                assert!((moved - shift[3 * m + k]).abs() < 1e-15, "marker {m} axis {k}");
+            }
+        }
+        assert_eq!(BodyModel::subject(1.1, 1.2, None).unwrap(), plain);
+        let short = BodyModel::subject(1.0, 1.0, Some(&shift[..15])).unwrap_err();
+        assert!(short.to_string().starts_with("marker_shift: expected 6 finite rows"), "{short}");
+        shift[7] = f64::NAN;
+        let nan = BodyModel::subject(1.0, 1.0, Some(&shift)).unwrap_err();
+        assert_eq!(nan.to_string(), "marker_shift: FAP.y is NaN, expected a finite shift in metres");
+        assert!(BodyModel::subject(0.0, 1.0, None).is_err());
+    }
+
+    #[test]
+    fn coordinates_are_found_by_name() {
+        assert_eq!(coordinate_index("ra_wr_e_f").unwrap(), 1);
+        let e = coordinate_index("elbow").unwrap_err();
+        assert_eq!(e.kind(), crate::ErrorKind::Argument);
+        assert!(e.to_string().contains("unknown coordinate \"elbow\" (known: ra_wr_s_p, ra_wr_e_f"), "{e}");
+    }
+
+    #[test]
+    fn missing_marker_mask_and_names() {
+        let mut frame = [0.1f32; MARKER_FRAME_LEN];
+        assert_eq!(missing_markers(&frame), 0);
+        frame[4] = f32::NAN; // USP.y
+        frame[15] = f32::INFINITY; // MCB.x
+        assert_eq!(missing_markers(&frame), 0b10_0010);
+        let wide: [f64; MARKER_FRAME_LEN] = frame.map(f64::from);
+        assert_eq!(missing_markers(&wide), 0b10_0010);
+        assert_eq!(marker_names(0b10_0010).collect::<Vec<_>>(), ["USP", "MCB"]);
+        assert_eq!(marker_names(0).count(), 0);
     }
 
     #[test]
