@@ -336,3 +336,69 @@ def test_calibrate_command_from_landmarks_and_neutral_frames_of_a_task_trial(mot
     assert "the hand moves" in capsys.readouterr().err
     with pytest.raises(SystemExit, match="outside frames"):
         cli(base + ["--frames", f"0-{len(frames)}"])
+
+
+def circles(n: int = 3000, pronation: float = 0.0) -> np.ndarray:
+    """The wrist circling through flexion and deviation (irregularly), pronation held."""
+    t = np.linspace(0.0, 2 * np.pi, n)
+    return np.stack(
+        [np.full(n, pronation), 0.6 * np.sin(2 * t) + 0.2 * np.cos(t), 0.25 * np.cos(3 * t)], axis=1
+    )
+
+
+@pytest.mark.parametrize(("seed", "scale", "pronation"), [(21, 0.85, 0.0), (22, 1.15, 0.5)])
+def test_functional_axes_from_circles_restore_the_nominal_accuracy(motion, seed, scale, pronation, tmp_path):
+    """Neutral frames plus any movement mixing flexion and deviation (pronation held, at any
+    angle) calibrate misplaced markers of another size as well as the single-coordinate protocol
+    does, from Python and from `ikid calibrate --motion`; the file records the method."""
+    from ikid.calibration import calibrate_functional, calibration_info
+
+    subject = Subject(seed, scale)
+    model = ikid.load("wrist-ik")
+    neutral = subject.markers(np.zeros((200, 3)), 0.005, 2)
+    moving = subject.markers(circles(pronation=pronation), 0.005, 3)
+    cal = calibrate_functional(neutral, moving)
+    report = cal.report["functional"]
+    assert cal.method == "functional" and report["frames"] == len(moving)
+    assert abs(report["supination_held_deg"] - np.degrees(pronation)) < 1.0, report
+    assert report["flexion_range_deg"] > 60 and report["deviation_range_deg"] > 25, report
+    trial = subject.markers(motion, 0.005, 4)
+    nominal = mse(model, ikid.forward_markers(motion, SHOULDER), motion)
+    uncalibrated = mse(model, trial, motion)
+    calibrated = mse(model, trial, motion, cal)
+    assert calibrated < 2.0 * nominal < uncalibrated, (calibrated, nominal, uncalibrated)
+
+    labels = [f"L{i}" for i in range(6)]
+    both = np.concatenate([neutral, moving])
+    path = io.write_trc(tmp_path / "s.trc", np.arange(len(both)) / 1000.0, both, 1000.0, labels)
+    (tmp_path / "lab.toml").write_text(
+        MarkerMap({m: labels[i] for i, m in enumerate(ikid.marker_names())}).to_toml()
+    )
+    out = tmp_path / "s.json"
+    args = ["calibrate", "--static", str(path), "--frames", "0-199", "--motion", str(path)]
+    assert (
+        cli(
+            args
+            + ["--motion-frames", f"200-{len(both) - 1}", "--map", str(tmp_path / "lab.toml"), "-o", str(out)]
+        )
+        == 0
+    )
+    info = calibration_info(out)
+    assert info["method"] == "functional" and info["report"]["functional"]["frames"] == len(moving)
+    np.testing.assert_allclose(info["hand"], np.asarray(cal.hand), atol=1e-6)
+
+
+def test_too_little_or_the_wrong_movement_for_a_functional_fit_says_what_to_record():
+    from ikid.calibration import calibrate_functional
+
+    subject = Subject(23, 1.0)
+    neutral = subject.markers(np.zeros((50, 3)))
+    record = "flexion-extension and radial-ulnar deviation together"
+    with pytest.raises(ikid.IkidError, match=rf"at least 10° of each show both axes.*{record}"):
+        calibrate_functional(neutral, subject.markers(single(1)))  # flexion alone
+    turning = circles()
+    turning[:, 0] = 0.4 * np.sin(np.linspace(0, 6 * np.pi, len(turning)))
+    with pytest.raises(ikid.IkidError, match=rf"turned about the forearm's long axis by .* RMS.*{record}"):
+        calibrate_functional(neutral, subject.markers(turning))
+    with pytest.raises(ikid.IkidError, match="neutral frames"):
+        calibrate_functional(subject.markers(circles(50)), subject.markers(circles()))  # not a posture

@@ -2,6 +2,7 @@
 
     from ikid.calibration import calibrate_neutral, check_calibration_map
     cal = calibrate_neutral(frames[:10], landmarks[:10])          # landmarks + neutral frames
+    cal = calibrate_functional(frames[:10], circles)              # neutral + any flexion/deviation
     cal = ikid.calibrate(static_frames, {"ra_wr_e_f": flexion_frames, "ra_wr_s_p": pronation_frames})
     ikid.save_calibration(cal, "subject01.json", marker_map=lab_map)
     check_calibration_map("subject01.json", lab_map)             # the trial's map: refused if another
@@ -12,7 +13,9 @@ The measurement itself is the core's (``crates/ikid/src/calibration.rs``, :class
 - **landmarks**: the epicondyles and styloids give the forearm's ISB frame, the hand's equals
   the forearm's at the neutral posture (chosen frames of any trial);
 - **neutral**: the neutral posture alone (the forearm keeps the body model's placement);
-- **movements**: a static trial and single-coordinate movements (functional axes).
+- **functional**: the neutral posture plus any movement mixing flexion and deviation, the
+  forearm's rotation held (the two axes by least squares);
+- **movements**: a static trial and single-coordinate movements (one axis per trial).
 
 A left arm is mirrored into a right arm (lab z negated) when measured and when applied, so its
 angles keep their anatomical signs. The file records the method, the side and the marker map;
@@ -68,6 +71,18 @@ def calibrate_neutral(
         None if landmarks is None else np.asarray(landmarks, np.float64),
         None if landmark_frames is None else np.asarray(landmark_frames, np.float64),
         side,
+    )
+
+
+def calibrate_functional(neutral_frames, movement_frames, *, side: str = "right") -> Calibration:
+    """Measure a :class:`Calibration` from frames of the neutral posture ``(n, 18)`` and a
+    movement ``(m, 18)`` that bends the wrist through flexion-extension and radial-ulnar
+    deviation together (circles, or a task), the forearm's rotation held: the two axes by a
+    least-squares functional fit (NaN = missing; such frames are skipped). The report's
+    ``functional`` entry gives the ranges seen and the fit's residual. ``side``: "right" or
+    "left"."""
+    return Calibration.functional(
+        np.asarray(neutral_frames, np.float64), np.asarray(movement_frames, np.float64), side
     )
 
 

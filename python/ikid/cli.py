@@ -578,7 +578,7 @@ def _subject_size(args: argparse.Namespace) -> tuple[float, float, str]:
 def cmd_calibrate(args: argparse.Namespace) -> int:
     """Landmarks and/or neutral frames, or static + single-coordinate movement files -> a
     calibration JSON recording the method, the side and the marker map."""
-    from ikid.calibration import calibrate_neutral
+    from ikid.calibration import calibrate_functional, calibrate_neutral
     from ikid.io import MarkerMap, read_markers
 
     def _frame_selection(spec: str, n: int, source: str) -> np.ndarray:
@@ -612,9 +612,23 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         neutral = neutral[chosen]
     method = args.method
     if method == "auto":
-        method = "movements" if args.movement else ("landmarks" if mapping.landmarks else "neutral")
+        method = (
+            "movements"
+            if args.movement
+            else "functional"
+            if args.motion
+            else ("landmarks" if mapping.landmarks else "neutral")
+        )
     if method != "movements" and args.movement:
         raise SystemExit(f"ikid: error: --movement is for --method movements, not {method}")
+    if (method == "functional") != bool(args.motion):
+        raise SystemExit(
+            "ikid: error: --method functional needs --motion FILE (a movement mixing flexion and deviation)"
+            if method == "functional"
+            else f"ikid: error: --motion is for --method functional, not {method}"
+        )
+    if args.motion_frames and not args.motion:
+        raise SystemExit("ikid: error: --motion-frames selects frames of --motion; give --motion FILE")
     provenance: dict = {"static": args.static, "frames": args.frames}
     if method == "movements":
         if side != "right":
@@ -642,6 +656,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         beside = neutral if source is static else source.frames(mapping)[where]
         cal = calibrate_neutral(neutral, points, landmark_frames=beside, side=side)
         provenance["landmarks"] = args.landmarks or args.static
+    elif method == "functional":
+        motion = read_markers(args.motion)
+        moving = motion.frames(mapping)
+        if args.motion_frames:
+            moving = moving[_frame_selection(args.motion_frames, len(moving), args.motion)]
+        cal = calibrate_functional(neutral, moving, side=side)
+        provenance["motion"] = args.motion
+        provenance["motion_frames"] = args.motion_frames
     else:
         cal = calibrate_neutral(neutral, side=side)
     ikid.save_calibration(cal, args.output, marker_map=mapping, **provenance)
@@ -656,6 +678,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                 for k, v in r["movements"].items()
             )
             + f"; axis skew {r.get('axis_skew_deg', 0):.2f}°"
+        )
+    if r.get("functional"):
+        fn = r["functional"]
+        details.append(
+            f"functional fit over {fn['frames']} frames: flexion {fn['flexion_range_deg']:.0f}°, deviation "
+            f"{fn['deviation_range_deg']:.0f}°, pronation held at {-fn['supination_held_deg']:.0f}° "
+            f"(residual {fn['residual_deg']:.1f}° RMS)"
         )
     if r.get("landmarks"):
         lm = r["landmarks"]
@@ -1298,6 +1327,8 @@ def main(argv: list[str] | None = None) -> int:
         "  ikid calibrate --static s01_task.c3d --frames 0-9 --map lab.toml -o s01.json\n"
         "  # neutral posture only (no landmarks in the map, or --method neutral):\n"
         "  ikid calibrate --static s01_static.c3d --method neutral --map lab.toml -o s01.json\n"
+        "  # neutral frames + any movement bending the wrist both ways (functional axes):\n"
+        "  ikid calibrate --static s01_task.c3d --frames 0-9 --motion s01_circles.c3d --map lab.toml -o s01.json\n"
         "  # static trial + movements of one coordinate each:\n"
         "  ikid calibrate --static s01_static.c3d --movement ra_wr_e_f=s01_flex.c3d \\\n"
         "      --movement ra_wr_s_p=s01_pron.c3d --map lab.toml -o s01.json\n"
@@ -1307,6 +1338,10 @@ def main(argv: list[str] | None = None) -> int:
         "frame over the frames it is seen in; the hand's frame equals the forearm's at the neutral "
         "posture, which reads zero. "
         "neutral: the same, the forearm at the body model's placement. Clusters may sit at any orientation. "
+        "functional: the flexion axis (fixed in the forearm) and the deviation axis (fixed in the hand) fitted by "
+        "least squares to a movement mixing both, pronation held; the neutral frames read zero; the axes' signs "
+        "come from the forearm markers' placement (within 60 degrees of the body model's), the hand's cluster may "
+        "sit any way round. "
         'A left arm (side = "left" in the map, or --side left) is mirrored into a right arm: its angles keep '
         "their anatomical signs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -1324,11 +1359,18 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument(
         "--method",
-        choices=["auto", "landmarks", "neutral", "movements"],
+        choices=["auto", "landmarks", "neutral", "functional", "movements"],
         default="auto",
-        help="auto (default): movements if --movement is given, landmarks if the map names them, "
-        "else neutral",
+        help="auto (default): movements if --movement is given, functional if --motion is, landmarks if "
+        "the map names them, else neutral",
     )
+    p.add_argument(
+        "--motion",
+        metavar="FILE",
+        help="functional method: a marker file where the wrist bends through flexion-extension and "
+        "deviation together (circles, or a task), the forearm's rotation held",
+    )
+    p.add_argument("--motion-frames", metavar="LIST", help="frames of --motion to fit (default: all)")
     p.add_argument(
         "--landmarks",
         metavar="FILE",

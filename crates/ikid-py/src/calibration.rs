@@ -125,6 +125,25 @@ impl Calibration {
         Ok(Calibration { inner, method: report.method, report: Some(report) })
     }
 
+    /// Measures the calibration from frames of the neutral posture `(n, 18)` and a movement
+    /// `(m, 18)` mixing flexion-extension and deviation in any proportion, the forearm's
+    /// rotation held (a least-squares functional fit of the two axes; NaN = missing, such
+    /// frames skipped). `side`: "right" or "left". Releases the GIL.
+    #[staticmethod]
+    #[pyo3(signature = (neutral_frames, movement_frames, side = "right"))]
+    fn functional(
+        py: Python<'_>,
+        neutral_frames: &Bound<'_, PyAny>,
+        movement_frames: &Bound<'_, PyAny>,
+        side: &str,
+    ) -> PyResult<Self> {
+        let side = side_of(side)?;
+        let neutral = frames_of(neutral_frames, "neutral_frames")?;
+        let movement = frames_of(movement_frames, "movement_frames")?;
+        let (inner, report) = py.detach(|| ikid::Calibration::functional(&neutral, &movement, side)).py_err()?;
+        Ok(Calibration { inner, method: report.method, report: Some(report) })
+    }
+
     /// The body model's own placement (what an uncalibrated stream assumes).
     #[staticmethod]
     fn body_model() -> Self {
@@ -205,6 +224,18 @@ impl Calibration {
                 d.set_item("landmarks", ld)?;
             }
             None => d.set_item("landmarks", py.None())?,
+        }
+        match &r.functional {
+            Some(f) => {
+                let fd = PyDict::new(py);
+                fd.set_item("frames", f.frames)?;
+                fd.set_item("supination_held_deg", f.supination_held_deg)?;
+                fd.set_item("flexion_range_deg", f.flexion_range_deg)?;
+                fd.set_item("deviation_range_deg", f.deviation_range_deg)?;
+                fd.set_item("residual_deg", f.residual_deg)?;
+                d.set_item("functional", fd)?;
+            }
+            None => d.set_item("functional", py.None())?,
         }
         let moves = PyDict::new(py);
         for (j, range, purity) in &r.movements {

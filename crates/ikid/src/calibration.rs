@@ -72,6 +72,13 @@ pub const MAX_PLACEMENT_DEG: f64 = 60.0;
 pub const MIN_FOREARM_AXIS_M: f64 = 0.05;
 /// Shortest distance between the radial and the ulnar styloid, metres.
 pub const MIN_STYLOID_SPAN_M: f64 = 0.01;
+/// Largest RMS residual of a functional fit, degrees: more means the forearm turned
+/// (pronation-supination) during the movement, which a two-axis fit cannot describe.
+pub const MAX_FUNCTIONAL_RESIDUAL_DEG: f64 = 5.0;
+/// Smallest share of an axis along the body model's placement of it for the fit to take its
+/// sign from there (cos 60°: see [`MAX_PLACEMENT_DEG`]).
+const MIN_SIGN_SHARE: f64 = 0.5;
+
 /// Smallest angle between the styloid line and the forearm's long axis, degrees: below it the
 /// four landmarks are too close to one line to say which way is volar.
 pub const MIN_LANDMARK_ANGLE_DEG: f64 = 30.0;
@@ -130,6 +137,9 @@ pub enum Method {
     Landmarks,
     /// Neutral posture only; forearm at the body model's placement ([`Calibration::from_neutral`]).
     Neutral,
+    /// Neutral posture plus the flexion and deviation axes fitted to any movement mixing them
+    /// ([`Calibration::functional`]).
+    Functional,
 }
 
 impl Method {
@@ -141,6 +151,7 @@ impl Method {
             Method::Movements => "movements",
             Method::Landmarks => "landmarks",
             Method::Neutral => "neutral",
+            Method::Functional => "functional",
         }
     }
 }
@@ -207,6 +218,25 @@ pub struct CalibrationReport {
     pub neutral_spread_deg: f64,
     /// What the landmarks measured, for [`Method::Landmarks`].
     pub landmarks: Option<LandmarkReport>,
+    /// What the functional fit measured, for [`Method::Functional`].
+    pub functional: Option<FunctionalReport>,
+}
+
+/// The functional fit ([`Calibration::functional`]) as it came out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FunctionalReport {
+    /// Movement frames used (those with all six markers).
+    pub frames: usize,
+    /// The forearm's rotation the movement held, read with the fitted axes (supination
+    /// positive), degrees.
+    pub supination_held_deg: f64,
+    /// Range of flexion-extension over them, read with the fitted axes, degrees.
+    pub flexion_range_deg: f64,
+    /// Range of radial-ulnar deviation over them, degrees.
+    pub deviation_range_deg: f64,
+    /// RMS of the fit's residual, degrees: how far the hand turned about the forearm's long
+    /// axis (pronation-supination) during the movement, which the fit assumes held.
+    pub residual_deg: f64,
 }
 
 /// The forearm's landmarks as the calibration saw them.
@@ -303,6 +333,7 @@ impl Calibration {
             neutral_frames: statics.len(),
             neutral_spread_deg: spread,
             landmarks: None,
+            functional: None,
         };
         let mut measured = Vec::new();
         for &(j, frames) in movements {
@@ -354,13 +385,7 @@ impl Calibration {
                 report.axis_skew_deg
             )));
         }
-        // Orthogonal Procrustes: the rotation T_f maximising Σ a_jᵀ T_f t_j.
-        let n = measured.iter().fold(Matrix3::zeros(), |acc, (a, t)| acc + t * a.transpose());
-        let svd = n.svd(true, true);
-        let (u, v_t) = (svd.u.expect("requested"), svd.v_t.expect("requested"));
-        let d =
-            Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, (v_t.transpose() * u.transpose()).determinant().signum()));
-        let forearm = Rotation3::from_matrix(&(v_t.transpose() * d * u.transpose()));
+        let forearm = procrustes(&measured);
         let hand = forearm * neutral;
         report.placement_deg =
             [angle_deg(&(forearm * default.forearm.inverse())), angle_deg(&(hand * default.hand.inverse()))];
@@ -385,46 +410,7 @@ impl Calibration {
         landmarks: Option<LandmarkTrial<'_>>,
         side: Side,
     ) -> Result<(Self, CalibrationReport)> {
-        let mut frames = whole_frames(neutral, MARKER_FRAME_LEN, "neutral frames")?.to_vec();
-        side.to_right(&mut frames);
-        let n = frames.len() / MARKER_FRAME_LEN;
-        let mut relative = Vec::new();
-        let mut unseen = [0usize; 6];
-        for (i, f) in frames.chunks_exact(MARKER_FRAME_LEN).enumerate() {
-            let mut complete = true;
-            for (m, count) in unseen.iter_mut().enumerate() {
-                if !f[3 * m..3 * m + 3].iter().all(|v| v.is_finite()) {
-                    *count += 1;
-                    complete = false;
-                }
-            }
-            if complete {
-                let (_, b_f) = technical_frame(f, Segment::Forearm, i)?;
-                let (_, b_h) = technical_frame(f, Segment::Hand, i)?;
-                relative.push(Rotation3::from_matrix_unchecked(b_f.transpose() * b_h));
-            }
-        }
-        if relative.is_empty() {
-            let missing: Vec<String> = unseen
-                .iter()
-                .enumerate()
-                .filter(|&(_, &c)| c > 0)
-                .map(|(m, c)| format!("{} in {c}", body::MARKERS[m].name))
-                .collect();
-            return Err(bad(format!(
-                "no usable neutral frame: none of the {n} has all six markers (missing: {}); choose frames of \
-                 the neutral posture where every marker is seen, or record a static trial with all six",
-                if missing.is_empty() { "none, but there are no frames".to_string() } else { missing.join(", ") }
-            )));
-        }
-        let neutral = mean_rotation(&relative);
-        let spread = relative.iter().map(|s| angle_deg(&(s * neutral.inverse()))).fold(0.0, f64::max);
-        if spread > MAX_STATIC_SPREAD_DEG {
-            return Err(bad(format!(
-                "the hand moves {spread:.1}° within the neutral frames (at most {MAX_STATIC_SPREAD_DEG}°): choose \
-                 frames where the wrist holds one posture"
-            )));
-        }
+        let (neutral, neutral_frames, spread) = neutral_posture(neutral, side)?;
         let default = Self::body_model();
         let (method, forearm, landmark_report) = match landmarks {
             None => (Method::Neutral, default.forearm, None),
@@ -443,11 +429,166 @@ impl Calibration {
                 angle_deg(&(hand * default.hand.inverse())),
             ],
             axis_skew_deg: 0.0,
-            neutral_frames: relative.len(),
+            neutral_frames,
             neutral_spread_deg: spread,
             landmarks: landmark_report,
+            functional: None,
         };
         Ok((Calibration { forearm, hand, side }, report))
+    }
+
+    /// Measures the calibration from frames of the neutral posture (as [`from_neutral`](
+    /// Self::from_neutral)) and a movement of the wrist mixing flexion-extension and radial-
+    /// ulnar deviation in any proportion (circles, a task), the forearm's rotation
+    /// (pronation-supination) held: a least-squares functional method ([`Method::Functional`]).
+    ///
+    /// With `s_p` held, `R = Rot(z, e)·Rot(x, a)` up to a constant: the flexion axis `z` is
+    /// fixed in the forearm, the deviation axis `x` in the hand, and they stay perpendicular,
+    /// `zᵀRx = 0`, whatever `e` and `a` are. In technical coordinates every movement frame
+    /// `M_k = B_fᵀB_h` gives `uᵀ M_k v = 0` for `u = T_fᵀz`, `v = T_hᵀx`; the unit `u`, `v`
+    /// minimising `Σ (uᵀM_kv)²` are found by alternating least squares (each step a smallest
+    /// eigenvector). The neutral posture `N` gives `T_fᵀx = N v`; `u` lies in the forearm's
+    /// x-z plane (turned about its long axis by whatever pronation the movement held), so
+    /// `T_fᵀy ∝ u × N v`; `T_h = T_f N`. The residual (`asin(uᵀM_kv)`, RMS) is the change of
+    /// pronation-supination during the movement, which the fit cannot describe.
+    ///
+    /// Movement data carry no sign for an axis: both are taken from the body model's placement
+    /// of the forearm's markers, which they must be within [`MAX_PLACEMENT_DEG`] of (the hand's
+    /// cluster may sit any way round; a forearm cluster turned half a turn reads mirrored
+    /// angles: calibrate such a cluster from landmarks). Frames missing a marker
+    /// are skipped. Refused, with what to record, when the movement spans less than
+    /// [`MIN_MOVEMENT_DEG`] of flexion or of deviation, or the residual exceeds
+    /// [`MAX_FUNCTIONAL_RESIDUAL_DEG`].
+    pub fn functional(neutral: &[f32], movement: &[f32], side: Side) -> Result<(Self, CalibrationReport)> {
+        let (posture, neutral_frames, spread) = neutral_posture(neutral, side)?;
+        let mut frames = whole_frames(movement, MARKER_FRAME_LEN, "movement frames")?.to_vec();
+        side.to_right(&mut frames);
+        let mut moves = Vec::new();
+        for (i, f) in frames.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+            if f.iter().all(|v| v.is_finite()) {
+                let (_, b_f) = technical_frame(f, Segment::Forearm, i)?;
+                let (_, b_h) = technical_frame(f, Segment::Hand, i)?;
+                moves.push(b_f.transpose() * b_h);
+            }
+        }
+        let what_to_record = "record the wrist moving through flexion-extension and radial-ulnar deviation \
+                              together (circles, or a task that bends the wrist both ways) with the forearm's \
+                              rotation held, or calibrate from landmarks";
+        if moves.len() < MIN_STATIC_FRAMES {
+            return Err(bad(format!(
+                "the movement has {} frames with all six markers (at least {MIN_STATIC_FRAMES}); {what_to_record}",
+                moves.len()
+            )));
+        }
+        let (u, v, residual) = fit_universal_axes(&moves);
+        let default = Self::body_model();
+        // Signs from the body model's placement of the forearm: its z, and its x, which the
+        // hand's deviation axis is at neutral (so the hand's cluster may sit any way round).
+        let (model_z, model_x) = (Vector3::from(COORDINATES[1].axis), Vector3::from(COORDINATES[2].axis));
+        let forearm_hint = default.forearm.inverse();
+        let mut axes = [(u, forearm_hint * model_z, "flexion"), (posture * v, forearm_hint * model_x, "deviation")];
+        let shares = axes.map(|(axis, hint, _)| axis.dot(&hint));
+        for ((axis, _, _), share) in axes.iter_mut().zip(shares) {
+            if share < 0.0 {
+                *axis = -*axis;
+            }
+        }
+        let (u, x) = (axes[0].0, axes[1].0.normalize());
+        // The forearm's axes in its technical frame: x is the deviation axis at neutral; the
+        // flexion axis u lies in its x-z plane (turned about y by the pronation the movement
+        // held), so y = u × x.
+        let y = u.cross(&x);
+        if y.norm() < 0.5 {
+            return Err(bad(format!(
+                "the fitted flexion and deviation axes are {:.0}° apart at the neutral posture: are the neutral \
+                 frames the neutral posture? Else {what_to_record}",
+                u.angle(&x).to_degrees()
+            )));
+        }
+        let y = y.normalize();
+        let forearm = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, x.cross(&y)]).transpose());
+        let hand = forearm * posture;
+        let calibration = Calibration { forearm, hand, side };
+        let mut angles: [Vec<f64>; N_COORDINATES] = std::array::from_fn(|_| Vec::with_capacity(moves.len()));
+        for m in &moves {
+            let q = body::wrist_angles(&(forearm * Rotation3::from_matrix_unchecked(*m) * hand.inverse()));
+            for c in 0..N_COORDINATES {
+                angles[c].push(q[c]);
+            }
+        }
+        for a in &mut angles {
+            a.sort_unstable_by(f64::total_cmp);
+        }
+        let (lo, hi): ([f64; N_COORDINATES], [f64; N_COORDINATES]) =
+            (std::array::from_fn(|c| angles[c][0]), std::array::from_fn(|c| angles[c][moves.len() - 1]));
+        let range_deg = |c: usize| (hi[c] - lo[c]).to_degrees();
+        let report = FunctionalReport {
+            frames: moves.len(),
+            supination_held_deg: (0.5 * (hi[0] + lo[0])).to_degrees(),
+            flexion_range_deg: range_deg(1),
+            deviation_range_deg: range_deg(2),
+            residual_deg: residual.to_degrees(),
+        };
+        if report.flexion_range_deg.min(report.deviation_range_deg) < MIN_MOVEMENT_DEG {
+            // A movement about one axis fits a second axis anywhere in a plane: the two ranges
+            // read with the fitted axes say "one axis only", not which one.
+            return Err(bad(format!(
+                "the movement spans {:.1}° of flexion and {:.1}° of deviation read with the fitted axes (at \
+                 least {MIN_MOVEMENT_DEG}° of each show both axes); {what_to_record}",
+                report.flexion_range_deg, report.deviation_range_deg
+            )));
+        }
+        if report.residual_deg > MAX_FUNCTIONAL_RESIDUAL_DEG {
+            return Err(bad(format!(
+                "the hand turned about the forearm's long axis by {:.1}° RMS during the movement (at most \
+                 {MAX_FUNCTIONAL_RESIDUAL_DEG}°): the fit needs pronation-supination held; {what_to_record}",
+                report.residual_deg
+            )));
+        }
+        // Any two of the three coordinates moving alone fit a universal joint (pronation with
+        // flexion does): read with the wrong pair of axes, the movement bends the wrist where
+        // wrists do not go.
+        for c in [1, 2] {
+            let (range, n) = (COORDINATES[c].range, moves.len());
+            let (p2, p98) = (angles[c][n / 50], angles[c][n - 1 - n / 50]);
+            if p2 < range.0 - PLACEMENT_POSTURE_MARGIN_RAD || p98 > range.1 + PLACEMENT_POSTURE_MARGIN_RAD {
+                return Err(bad(format!(
+                    "read with the fitted axes, the movement takes {} from {:.0}° to {:.0}° (2nd to 98th \
+                     percentile), beyond what wrists do ({:.0}° to {:.0}°): it turned about another pair of axes \
+                     (pronation with flexion fits a two-axis joint too); {what_to_record}",
+                    COORDINATES[c].name,
+                    p2.to_degrees(),
+                    p98.to_degrees(),
+                    range.0.to_degrees(),
+                    range.1.to_degrees()
+                )));
+            }
+        }
+        for ((_, _, name), share) in axes.iter().zip(shares) {
+            if share.abs() < MIN_SIGN_SHARE {
+                return Err(bad(format!(
+                    "the fitted {name} axis is {:.0}° from the body model's placement of it in the forearm's \
+                     markers (at most {MAX_PLACEMENT_DEG}° tells its sign): are the forearm's markers labelled \
+                     right? A forearm cluster mounted any way round needs landmarks (epicondyles, styloids)",
+                    share.abs().clamp(-1.0, 1.0).acos().to_degrees()
+                )));
+            }
+        }
+        let report = CalibrationReport {
+            method: Method::Functional,
+            side,
+            movements: Vec::new(),
+            placement_deg: [
+                angle_deg(&(forearm * default.forearm.inverse())),
+                angle_deg(&(hand * default.hand.inverse())),
+            ],
+            axis_skew_deg: 0.0,
+            neutral_frames,
+            neutral_spread_deg: spread,
+            landmarks: None,
+            functional: Some(report),
+        };
+        Ok((calibration, report))
     }
 
     /// Moves each segment's markers, in place, to where the body model puts them on a
@@ -672,6 +813,101 @@ fn forearm_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Result<(Rotat
         length_scale: long.norm() / body::BodyModel::default().forearm.length,
     };
     Ok((Rotation3::from_matrix_unchecked(axes.transpose()), report))
+}
+
+/// The hand's rotation in the forearm (`B_fᵀB_h`, technical frames) at the neutral posture:
+/// the chordal mean over the frames with all six markers (a left arm's mirrored first), how
+/// many those were and the largest rotation from the mean among them (degrees). Refused when
+/// no frame is complete or the hand moves more than [`MAX_STATIC_SPREAD_DEG`].
+fn neutral_posture(neutral: &[f32], side: Side) -> Result<(Rotation3<f64>, usize, f64)> {
+    let mut frames = whole_frames(neutral, MARKER_FRAME_LEN, "neutral frames")?.to_vec();
+    side.to_right(&mut frames);
+    let n = frames.len() / MARKER_FRAME_LEN;
+    let mut relative = Vec::new();
+    let mut unseen = [0usize; 6];
+    for (i, f) in frames.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+        let mut complete = true;
+        for (m, count) in unseen.iter_mut().enumerate() {
+            if !f[3 * m..3 * m + 3].iter().all(|v| v.is_finite()) {
+                *count += 1;
+                complete = false;
+            }
+        }
+        if complete {
+            let (_, b_f) = technical_frame(f, Segment::Forearm, i)?;
+            let (_, b_h) = technical_frame(f, Segment::Hand, i)?;
+            relative.push(Rotation3::from_matrix_unchecked(b_f.transpose() * b_h));
+        }
+    }
+    if relative.is_empty() {
+        let missing: Vec<String> = unseen
+            .iter()
+            .enumerate()
+            .filter(|&(_, &c)| c > 0)
+            .map(|(m, c)| format!("{} in {c}", body::MARKERS[m].name))
+            .collect();
+        return Err(bad(format!(
+            "no usable neutral frame: none of the {n} has all six markers (missing: {}); choose frames of \
+             the neutral posture where every marker is seen, or record a static trial with all six",
+            if missing.is_empty() { "none, but there are no frames".to_string() } else { missing.join(", ") }
+        )));
+    }
+    let mean = mean_rotation(&relative);
+    let spread = relative.iter().map(|s| angle_deg(&(s * mean.inverse()))).fold(0.0, f64::max);
+    if spread > MAX_STATIC_SPREAD_DEG {
+        return Err(bad(format!(
+            "the hand moves {spread:.1}° within the neutral frames (at most {MAX_STATIC_SPREAD_DEG}°): choose \
+             frames where the wrist holds one posture"
+        )));
+    }
+    Ok((mean, relative.len(), spread))
+}
+
+/// Orthogonal Procrustes: the rotation `T` maximising `Σ aᵀ T t` over pairs `(a, t)` (model
+/// axis, measured axis in technical coordinates).
+fn procrustes(pairs: &[(Vector3<f64>, Vector3<f64>)]) -> Rotation3<f64> {
+    let n = pairs.iter().fold(Matrix3::zeros(), |acc, (a, t)| acc + t * a.transpose());
+    let svd = n.svd(true, true);
+    let (u, v_t) = (svd.u.expect("requested"), svd.v_t.expect("requested"));
+    let d = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, (v_t.transpose() * u.transpose()).determinant().signum()));
+    Rotation3::from_matrix(&(v_t.transpose() * d * u.transpose()))
+}
+
+/// The unit `u`, `v` minimising `Σ (uᵀ M_k v)²` (a universal joint: `u` fixed in the first
+/// segment, `v` in the second, perpendicular in every frame), by alternating least squares
+/// from several starts; with the RMS of `asin(uᵀM_kv)`, radians.
+fn fit_universal_axes(moves: &[Matrix3<f64>]) -> (Vector3<f64>, Vector3<f64>, f64) {
+    let smallest = |scatter: Matrix3<f64>| -> Vector3<f64> {
+        let eigen = SymmetricEigen::new(scatter);
+        eigen.eigenvectors.column(eigen.eigenvalues.imin()).into_owned()
+    };
+    let cost = |u: &Vector3<f64>, v: &Vector3<f64>| moves.iter().map(|m| u.dot(&(m * v)).powi(2)).sum::<f64>();
+    let mut best: Option<(Vector3<f64>, Vector3<f64>, f64)> = None;
+    for start in [Vector3::x(), Vector3::y(), Vector3::z()] {
+        let mut v = start;
+        let mut u = smallest(moves.iter().fold(Matrix3::zeros(), |acc, m| acc + (m * v) * (m * v).transpose()));
+        let mut last = f64::MAX;
+        for _ in 0..20000 {
+            v = smallest(moves.iter().fold(Matrix3::zeros(), |acc, m| {
+                let w = m.transpose() * u;
+                acc + w * w.transpose()
+            }));
+            u = smallest(moves.iter().fold(Matrix3::zeros(), |acc, m| acc + (m * v) * (m * v).transpose()));
+            let c = cost(&u, &v);
+            if last - c <= 1e-15 * moves.len() as f64 {
+                break;
+            }
+            last = c;
+        }
+        let c = cost(&u, &v);
+        if best.as_ref().is_none_or(|b| c < b.2) {
+            best = Some((u, v, c));
+        }
+    }
+    let (u, v, _) = best.expect("three starts");
+    let rms = (moves.iter().map(|m| u.dot(&(m * v)).clamp(-1.0, 1.0).asin().powi(2)).sum::<f64>() / moves.len() as f64)
+        .sqrt();
+    (u, v, rms)
 }
 
 /// `B_fᵀ B_h` of every frame.
@@ -1125,5 +1361,111 @@ mod tests {
             err(Calibration::from_trials(&gap, &[(1, &flex), (0, &flex)]))
                 .contains("static trial: frame 0: marker USP is missing")
         );
+    }
+
+    /// A wrist circling through flexion and deviation (irregularly: a task, not a protocol),
+    /// the forearm's rotation held at `s_p`.
+    fn circles(n: usize, s_p: f64, s_p_wobble: f64) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / n as f64 * std::f64::consts::TAU;
+                [s_p + s_p_wobble * (3.0 * t).sin(), 0.6 * (2.0 * t).sin() + 0.2 * t.cos(), 0.25 * (3.0 * t).cos()]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn functional_axes_from_mixed_movement_read_angles_exactly_for_any_held_pronation() {
+        for (seed, s_p) in [(1u64, 0.0), (2, 0.5), (3, -0.4)] {
+            let shift = random_shift(seed, 0.015);
+            let neutral = frames(&[[0.0; 3]; 12], &shift, 1.1, 0.3);
+            let mut movement = frames(&circles(300, s_p, 0.0), &shift, 1.1, 0.3);
+            movement[7 * MARKER_FRAME_LEN + 4] = f32::NAN; // a frame missing a marker is skipped
+            let (cal, report) = Calibration::functional(&neutral, &movement, Side::Right).unwrap();
+            let f = report.functional.as_ref().unwrap();
+            assert_eq!((report.method, f.frames), (Method::Functional, 299));
+            assert!(f.residual_deg < 0.01 && (f.supination_held_deg - s_p.to_degrees()).abs() < 0.01, "{f:?}");
+            assert!(f.flexion_range_deg > 60.0 && f.deviation_range_deg > 25.0, "{f:?}");
+            let q = [-0.4, 0.5, 0.25];
+            let mut frame = frames(&[q], &shift, 1.1, 0.3);
+            cal.apply(&mut frame, 0).unwrap();
+            let mut out = [0.0f32; 3];
+            FeatureSet::Angles.compute(&frame, &mut out, 0).unwrap();
+            for k in 0..3 {
+                assert!((out[k] as f64 - q[k]).abs() < 1e-4, "seed {seed}: {out:?} vs {q:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn functional_fit_of_a_left_arm_reads_its_anatomical_angles() {
+        let neutral = mirrored(&frames(&[[0.0; 3]; 12], &SHIFT, 1.0, 0.3));
+        let movement = mirrored(&frames(&circles(200, 0.2, 0.0), &SHIFT, 1.0, 0.3));
+        let (cal, _) = Calibration::functional(&neutral, &movement, Side::Left).unwrap();
+        let q = [0.3, -0.5, 0.2];
+        let out = angles_after(&cal, &mirrored(&frames(&[q], &SHIFT, 1.0, 0.3)));
+        for k in 0..3 {
+            assert!((out[k] as f64 - q[k]).abs() < 1e-4, "{out:?} vs {q:?}");
+        }
+    }
+
+    #[test]
+    fn too_little_movement_for_a_functional_fit_says_what_to_record() {
+        let neutral = frames(&[[0.0; 3]; 12], &SHIFT, 1.0, 0.3);
+        let err = |movement: &[f32]| Calibration::functional(&neutral, movement, Side::Right).unwrap_err().to_string();
+        // Flexion alone shows one axis only: the deviation axis could be any in a plane.
+        let flexion = err(&frames(&single(1, 200, 0.6), &SHIFT, 1.0, 0.3));
+        for one_axis in [flexion, err(&frames(&single(2, 200, 0.4), &SHIFT, 1.0, 0.3))] {
+            assert!(
+                one_axis.contains("at least 10° of each") && one_axis.contains("radial-ulnar deviation together"),
+                "{one_axis}"
+            );
+        }
+        // The forearm turning during the movement is what a two-axis fit cannot describe.
+        let turning = err(&frames(&circles(300, 0.0, 0.4), &SHIFT, 1.0, 0.3));
+        assert!(turning.contains("turned about the forearm's long axis") && turning.contains("RMS"), "{turning}");
+        // Pronation with flexion fits a two-axis joint as well; it must not pass as one.
+        let propulsion: Vec<[f64; 3]> = (0..300)
+            .map(|i| {
+                let t = i as f64 / 300.0 * std::f64::consts::TAU;
+                [0.8 * (2.0 * t).sin(), 0.6 * t.cos(), 0.0]
+            })
+            .collect();
+        let wrong_pair = err(&frames(&propulsion, &SHIFT, 1.0, 0.3));
+        assert!(wrong_pair.contains("calibration:"), "{wrong_pair}");
+        let few = err(&frames(&circles(5, 0.0, 0.0), &SHIFT, 1.0, 0.3));
+        assert!(few.contains("5 frames with all six markers"), "{few}");
+        // The hand's cluster may sit any way round; a forearm cluster turned a quarter turn
+        // leaves the axes without a sign.
+        let (neutral_turned, _) = neutral_session(12, &SHIFT, 120.0, [0.0; 3]);
+        let mut moving = Vec::new();
+        for q in circles(200, 0.1, 0.0) {
+            moving.extend(neutral_session(1, &SHIFT, 120.0, q).0);
+        }
+        let (cal, _) = Calibration::functional(&neutral_turned, &moving, Side::Right).unwrap();
+        let q = [0.2, 0.4, -0.1];
+        let out = angles_after(&cal, &neutral_session(1, &SHIFT, 120.0, q).0);
+        for k in 0..3 {
+            assert!((out[k] as f64 - q[k]).abs() < 1e-4, "hand cluster turned: {out:?} vs {q:?}");
+        }
+        let quarter = Rotation3::from_axis_angle(&Vector3::y_axis(), 1.5);
+        let turn_forearm = |f: Vec<f32>| -> Vec<f32> {
+            f.chunks_exact(MARKER_FRAME_LEN)
+                .flat_map(|f| {
+                    let c = Vector3::new(f[3] as f64, f[4] as f64, f[5] as f64);
+                    let mut g = f.to_vec();
+                    for m in [0, 2] {
+                        let p =
+                            c + quarter * (Vector3::new(f[3 * m] as f64, f[3 * m + 1] as f64, f[3 * m + 2] as f64) - c);
+                        g[3 * m..3 * m + 3].copy_from_slice(&[p.x as f32, p.y as f32, p.z as f32]);
+                    }
+                    g
+                })
+                .collect()
+        };
+        let sign = Calibration::functional(&turn_forearm(neutral), &turn_forearm(moving), Side::Right)
+            .unwrap_err()
+            .to_string();
+        assert!(sign.contains("needs landmarks"), "{sign}");
     }
 }
