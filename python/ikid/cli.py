@@ -1328,7 +1328,8 @@ def main(argv: list[str] | None = None) -> int:
         "  # neutral posture only (no landmarks in the map, or --method neutral):\n"
         "  ikid calibrate --static s01_static.c3d --method neutral --map lab.toml -o s01.json\n"
         "  # neutral frames + any movement bending the wrist both ways (functional axes):\n"
-        "  ikid calibrate --static s01_task.c3d --frames 0-9 --motion s01_circles.c3d --map lab.toml -o s01.json\n"
+        "  ikid calibrate --static s01_task.c3d --frames 0-9 --motion s01_circles.c3d \\\n"
+        "      --map lab.toml -o s01.json\n"
         "  # static trial + movements of one coordinate each:\n"
         "  ikid calibrate --static s01_static.c3d --movement ra_wr_e_f=s01_flex.c3d \\\n"
         "      --movement ra_wr_s_p=s01_pron.c3d --map lab.toml -o s01.json\n"
@@ -1338,10 +1339,10 @@ def main(argv: list[str] | None = None) -> int:
         "frame over the frames it is seen in; the hand's frame equals the forearm's at the neutral "
         "posture, which reads zero. "
         "neutral: the same, the forearm at the body model's placement. Clusters may sit at any orientation. "
-        "functional: the flexion axis (fixed in the forearm) and the deviation axis (fixed in the hand) fitted by "
-        "least squares to a movement mixing both, pronation held; the neutral frames read zero; the axes' signs "
-        "come from the forearm markers' placement (within 60 degrees of the body model's), the hand's cluster may "
-        "sit any way round. "
+        "functional: the flexion axis (fixed in the forearm) and the deviation axis (fixed in the hand) "
+        "fitted by least squares to a movement mixing both, pronation held; the neutral frames read zero; "
+        "the axes' signs come from the forearm markers' placement (within 60 degrees of the body model's), "
+        "the hand's cluster may sit any way round. "
         'A left arm (side = "left" in the map, or --side left) is mirrored into a right arm: its angles keep '
         "their anatomical signs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
