@@ -402,3 +402,51 @@ def test_too_little_or_the_wrong_movement_for_a_functional_fit_says_what_to_reco
         calibrate_functional(neutral, subject.markers(turning))
     with pytest.raises(ikid.IkidError, match="neutral frames"):
         calibrate_functional(subject.markers(circles(50)), subject.markers(circles()))  # not a posture
+
+
+def test_hand_landmarks_in_the_map_give_the_hands_own_frame(motion, tmp_path):
+    """A session that never holds the neutral posture: with the metacarpal heads named in the
+    map, `ikid calibrate` takes the hand's frame from them, and ik reads the true angles
+    (without them the held posture would read zero)."""
+    subject = ClusterSubject(31, 1.1, 150.0)
+    held = np.array([[0.3, -0.35, 0.15]])
+    n = 100
+    still = subject.markers(np.repeat(held, n, axis=0), 0.002, 6)
+    offsets = np.array([m["offset"] for m in ikid.body_model()["markers"]])
+    heads = []
+    for head in ([0.0, -0.07, 0.025], [0.0, -0.065, -0.025]):  # hand frame, default size
+        shift = np.zeros((6, 3))
+        shift[3] = subject.scale * (np.array(head) - offsets[3])
+        heads.append(ikid.forward_markers(held, SHOULDER, subject.scale, 1.0, shift)[0, 9:12])
+    points = np.concatenate([landmark_frames(subject, n), np.tile(np.concatenate(heads), (n, 1))], axis=1)
+    points = np.concatenate([points, np.full((len(motion), 18), np.nan)])
+    frames = np.concatenate([np.concatenate([still, subject.markers(motion, 0.002, 7)]), points], axis=1)
+    labels = [f"L{i}" for i in range(6)] + ["EPl", "EPm", "STr", "STu", "MH2", "MH5"]
+    path = io.write_trc(tmp_path / "s.trc", np.arange(len(frames)) / 1000.0, frames, 1000.0, labels)
+    toml = MarkerMap({m: labels[i] for i, m in enumerate(ikid.marker_names())}).to_toml()
+    lm = {"lateral_epicondyle": "EPl", "medial_epicondyle": "EPm", "radial_styloid": "STr"}
+    lm |= {"ulnar_styloid": "STu", "second_metacarpal_head": "MH2", "fifth_metacarpal_head": "MH5"}
+    for k, v in lm.items():
+        toml = toml.replace(f'# {k} = "LABEL"', f'{k} = "{v}"')
+    (tmp_path / "lab.toml").write_text(toml)
+    errors = {}
+    for tag, text in (("own", toml), ("neutral", toml.replace('second_metacarpal_head = "MH2"', ""))):
+        (tmp_path / f"{tag}.toml").write_text(
+            text.replace('fifth_metacarpal_head = "MH5"', "") if tag != "own" else text
+        )
+        common = ["--map", str(tmp_path / f"{tag}.toml")]
+        out = tmp_path / f"{tag}.json"
+        assert (
+            cli(["calibrate", "--static", str(path), "--frames", f"0-{n - 1}", "-o", str(out)] + common) == 0
+        )
+        assert (
+            cli(["ik", str(path), "-o", str(tmp_path / f"{tag}.mot"), "--calibration", str(out)] + common)
+            == 0
+        )
+        t, q = io.read_mot(tmp_path / f"{tag}.mot")
+        rows = np.round(t * 1000).astype(int) >= n
+        truth = motion[np.round(t * 1000).astype(int)[rows] - n]
+        errors[tag] = float(np.sqrt(np.mean((q[rows] - truth) ** 2)))
+    report = json.loads((tmp_path / "own.json").read_text())["report"]["landmarks"]["hand"]
+    assert report["frames"] == n and report["neutral_offset_deg"] > 20, report
+    assert np.degrees(errors["own"]) < 2.0 < 10.0 < np.degrees(errors["neutral"]), errors

@@ -90,6 +90,7 @@ def build_model(
 @final
 class Calibration:
     LANDMARKS: list[tuple[str, str]]
+    HAND_LANDMARKS: list[tuple[str, str]]
     @staticmethod
     def from_trials(static_frames: _Floats, movements: dict[str, _Floats]) -> Calibration: ...
     @staticmethod
@@ -98,6 +99,7 @@ class Calibration:
         landmarks: _Floats | None = None,
         landmark_frames: _Floats | None = None,
         side: str = "right",
+        hand_landmarks: _Floats | None = None,
     ) -> Calibration: ...
     @staticmethod
     def functional(neutral_frames: _Floats, movement_frames: _Floats, side: str = "right") -> Calibration: ...

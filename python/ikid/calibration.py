@@ -59,18 +59,21 @@ def calibrate(static_frames, movements: dict, *, fill: bool = True) -> Calibrati
 
 
 def calibrate_neutral(
-    neutral_frames, landmarks=None, *, landmark_frames=None, side: str = "right"
+    neutral_frames, landmarks=None, *, landmark_frames=None, side: str = "right", hand_landmarks=None
 ) -> Calibration:
     """Measure a :class:`Calibration` from frames of the neutral posture ``(n, 18)`` (a static
     trial, or chosen frames of any trial; NaN = missing, no filling needed) and, when given,
     the forearm's landmarks ``(m, 12)`` (lateral and medial epicondyle, radial and ulnar
     styloid, x y z each, metres, NaN = not seen) seen with ``landmark_frames`` ``(m, 18)``
-    (default: the neutral frames). ``side``: "right" or "left"."""
+    (default: the neutral frames). With ``hand_landmarks`` ``(m, 6)`` too (second and fifth
+    metacarpal heads, same frames) the hand's frame is its own rather than the forearm's at
+    the neutral frames. ``side``: "right" or "left"."""
     return Calibration.from_neutral(
         np.asarray(neutral_frames, np.float64),
         None if landmarks is None else np.asarray(landmarks, np.float64),
         None if landmark_frames is None else np.asarray(landmark_frames, np.float64),
         side,
+        None if hand_landmarks is None else np.asarray(hand_landmarks, np.float64),
     )
 
 

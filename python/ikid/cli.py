@@ -654,7 +654,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             [source.marker(lab) for lab in mapping.landmark_labels_in_order(source)], axis=1
         )[where]
         beside = neutral if source is static else source.frames(mapping)[where]
-        cal = calibrate_neutral(neutral, points, landmark_frames=beside, side=side)
+        hand_labels = mapping.hand_landmark_labels_in_order(source)
+        hand_points = (
+            None
+            if hand_labels is None
+            else np.concatenate([source.marker(lab) for lab in hand_labels], axis=1)[where]
+        )
+        cal = calibrate_neutral(
+            neutral, points, landmark_frames=beside, side=side, hand_landmarks=hand_points
+        )
         provenance["landmarks"] = args.landmarks or args.static
     elif method == "functional":
         motion = read_markers(args.motion)
@@ -688,6 +696,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         )
     if r.get("landmarks"):
         lm = r["landmarks"]
+        if lm.get("hand"):
+            details.append(
+                f"hand frame from its landmarks ({lm['hand']['frames']} frames; the neutral frames read "
+                f"{lm['hand']['neutral_offset_deg']:.1f}° from zero)"
+            )
         details.append(
             f"landmarks: forearm axis {lm['long_axis_mm']:.0f} mm, styloids "
             f"{lm['styloid_span_mm']:.0f} mm apart at {lm['styloid_axis_deg']:.0f}° to it, seen in "
@@ -1337,7 +1350,8 @@ def main(argv: list[str] | None = None) -> int:
         "landmarks: the forearm's ISB frame (y from the mid-styloids to the mid-epicondyles, "
         "x = y x (ulnar -> radial styloid), z = x x y), each landmark averaged in the forearm cluster's "
         "frame over the frames it is seen in; the hand's frame equals the forearm's at the neutral "
-        "posture, which reads zero. "
+        "posture, which reads zero, or, when the map names second_metacarpal_head and fifth_metacarpal_head, "
+        "is the hand's own (y from the mid-heads to the mid-styloids, as the forearm's). "
         "neutral: the same, the forearm at the body model's placement. Clusters may sit at any orientation. "
         "functional: the flexion axis (fixed in the forearm) and the deviation axis (fixed in the hand) "
         "fitted by least squares to a movement mixing both, pronation held; the neutral frames read zero; "

@@ -3,7 +3,9 @@
 use crate::conv::{with_f64_rows, with_floats};
 use crate::errors::{IntoPy, input};
 use ikid::body::{COORDINATES, MARKER_FRAME_LEN};
-use ikid::calibration::{LANDMARK_FRAME_LEN, LANDMARKS, LandmarkTrial, Method, Side};
+use ikid::calibration::{
+    HAND_LANDMARK_FRAME_LEN, HAND_LANDMARKS, LANDMARK_FRAME_LEN, LANDMARKS, LandmarkTrial, Method, Side,
+};
 use nalgebra::Matrix3;
 use numpy::{IntoPyArray, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
@@ -84,15 +86,18 @@ impl Calibration {
     /// `(m, 12)` (`Calibration.LANDMARKS` order, NaN = not seen) seen with the marker frames
     /// `landmark_frames` `(m, 18)` (default: the neutral frames): the ISB forearm frame, the
     /// hand equal to the forearm at neutral. Without landmarks the forearm keeps the body
-    /// model's placement. `side`: "right" or "left" (mirrored). Releases the GIL.
+    /// model's placement. `hand_landmarks` `(m, 6)` (`Calibration.HAND_LANDMARKS` order: the
+    /// second and fifth metacarpal heads; NaN = not seen), with the landmarks: the hand's own
+    /// frame. `side`: "right" or "left" (mirrored). Releases the GIL.
     #[staticmethod]
-    #[pyo3(signature = (neutral_frames, landmarks = None, landmark_frames = None, side = "right"))]
+    #[pyo3(signature = (neutral_frames, landmarks = None, landmark_frames = None, side = "right", hand_landmarks = None))]
     fn from_neutral(
         py: Python<'_>,
         neutral_frames: &Bound<'_, PyAny>,
         landmarks: Option<&Bound<'_, PyAny>>,
         landmark_frames: Option<&Bound<'_, PyAny>>,
         side: &str,
+        hand_landmarks: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let side = side_of(side)?;
         let neutral = frames_of(neutral_frames, "neutral_frames")?;
@@ -109,6 +114,22 @@ impl Calibration {
             })?),
             None => None,
         };
+        let hand_points = match (hand_landmarks, &points) {
+            (Some(h), Some(_)) => Some(with_floats(h, "hand_landmarks", 2, |values, shape| {
+                if shape[1] != HAND_LANDMARK_FRAME_LEN {
+                    return Err(input(format!(
+                        "hand_landmarks: {} columns, a hand landmark frame has {HAND_LANDMARK_FRAME_LEN} (x, y, z of {})",
+                        shape[1],
+                        HAND_LANDMARKS.map(|l| l.name).join(", ")
+                    )));
+                }
+                Ok(values.to_vec())
+            })?),
+            (Some(_), None) => {
+                return Err(input("hand_landmarks need the forearm's landmarks too (the styloids give the wrist)"));
+            }
+            (None, _) => None,
+        };
         let beside = match (landmark_frames, &points) {
             (Some(f), Some(_)) => Some(frames_of(f, "landmark_frames")?),
             (Some(_), None) => return Err(input("landmark_frames given without landmarks")),
@@ -116,9 +137,11 @@ impl Calibration {
         };
         let (inner, report) = py
             .detach(|| {
-                let trial = points
-                    .as_ref()
-                    .map(|l| LandmarkTrial { markers: beside.as_deref().unwrap_or(&neutral), landmarks: l });
+                let trial = points.as_ref().map(|l| LandmarkTrial {
+                    markers: beside.as_deref().unwrap_or(&neutral),
+                    landmarks: l,
+                    hand_landmarks: hand_points.as_deref(),
+                });
                 ikid::Calibration::from_neutral(&neutral, trial, side)
             })
             .py_err()?;
@@ -168,6 +191,13 @@ impl Calibration {
     #[allow(non_snake_case)]
     fn LANDMARKS() -> Vec<(&'static str, &'static str)> {
         LANDMARKS.iter().map(|l| (l.name, l.description)).collect()
+    }
+
+    /// The hand's optional landmarks `(name, description)`, in a hand landmark frame's order.
+    #[classattr]
+    #[allow(non_snake_case)]
+    fn HAND_LANDMARKS() -> Vec<(&'static str, &'static str)> {
+        HAND_LANDMARKS.iter().map(|l| (l.name, l.description)).collect()
     }
 
     /// "right" or "left": a left arm's frames are mirrored into a right arm's.
@@ -221,6 +251,17 @@ impl Calibration {
                 ld.set_item("epicondyle_span_mm", l.epicondyle_span_mm)?;
                 ld.set_item("styloid_axis_deg", l.styloid_axis_deg)?;
                 ld.set_item("length_scale", l.length_scale)?;
+                match &l.hand {
+                    Some(h) => {
+                        let hd = PyDict::new(py);
+                        hd.set_item("frames", h.frames)?;
+                        hd.set_item("long_axis_mm", h.long_axis_mm)?;
+                        hd.set_item("metacarpal_span_mm", h.metacarpal_span_mm)?;
+                        hd.set_item("neutral_offset_deg", h.neutral_offset_deg)?;
+                        ld.set_item("hand", hd)?;
+                    }
+                    None => ld.set_item("hand", py.None())?,
+                }
                 d.set_item("landmarks", ld)?;
             }
             None => d.set_item("landmarks", py.None())?,

@@ -176,6 +176,17 @@ pub const LANDMARKS: [Landmark; 4] = [
 /// Values in one landmark frame.
 pub const LANDMARK_FRAME_LEN: usize = 3 * LANDMARKS.len();
 
+/// The hand's landmarks, optional: with them the hand's anatomical frame is its own (ISB
+/// style, as the forearm's) rather than the forearm's at the neutral posture.
+pub const HAND_LANDMARKS: [Landmark; 2] = [
+    Landmark { name: "second_metacarpal_head", description: "head of the second metacarpal (index knuckle)" },
+    Landmark { name: "fifth_metacarpal_head", description: "head of the fifth metacarpal (little-finger knuckle)" },
+];
+/// Values in one hand landmark frame.
+pub const HAND_LANDMARK_FRAME_LEN: usize = 3 * HAND_LANDMARKS.len();
+/// Shortest distance from the mid-metacarpal heads to the mid-styloids, metres.
+pub const MIN_HAND_AXIS_M: f64 = 0.03;
+
 /// Landmarks seen beside the forearm's markers: `markers` are marker frames (only the
 /// forearm's three are read), `landmarks` the landmark frames of the same instants
 /// ([`LANDMARK_FRAME_LEN`] values each). NaN = not seen in that frame.
@@ -185,6 +196,9 @@ pub struct LandmarkTrial<'a> {
     pub markers: &'a [f32],
     /// Landmark frames, [`LANDMARK_FRAME_LEN`] values each, one per marker frame.
     pub landmarks: &'a [f32],
+    /// The hand's landmarks ([`HAND_LANDMARKS`]), [`HAND_LANDMARK_FRAME_LEN`] values per
+    /// marker frame, when recorded.
+    pub hand_landmarks: Option<&'a [f32]>,
 }
 
 /// Each segment's technical frame in its anatomical frame: `v_anatomical = T · v_technical`
@@ -257,6 +271,22 @@ pub struct LandmarkReport {
     /// [`BodyModel::scaled`](crate::body::BodyModel::scaled) takes as `length_factor` (its
     /// cube is the matching `mass_factor` for a subject of the default's build).
     pub length_scale: f64,
+    /// The hand's own landmarks, when given: the hand's frame came from them.
+    pub hand: Option<HandLandmarkReport>,
+}
+
+/// The hand's landmarks as the calibration saw them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HandLandmarkReport {
+    /// Frames with the hand's markers, both metacarpal heads and both styloids.
+    pub frames: usize,
+    /// Mid-metacarpal heads to the mid-styloids (the wrist), mm.
+    pub long_axis_mm: f64,
+    /// Second to fifth metacarpal head, mm.
+    pub metacarpal_span_mm: f64,
+    /// The hand's frame from its landmarks against the forearm's at the neutral frames,
+    /// degrees: the neutral posture as the anatomical frames read it.
+    pub neutral_offset_deg: f64,
 }
 
 impl Default for Calibration {
@@ -400,7 +430,10 @@ impl Calibration {
     /// Measures the calibration from frames of the neutral posture (a static trial, or chosen
     /// frames of any trial; all wrist angles read zero there) and, when given, the forearm's
     /// landmarks ([`Method::Landmarks`]); without them the forearm keeps the body model's
-    /// placement ([`Method::Neutral`]). Frames may miss markers (NaN): the hand's neutral
+    /// placement ([`Method::Neutral`]). With the hand's landmarks too (the second and fifth
+    /// metacarpal heads), the hand's frame is its own: `y` from the mid-heads to the
+    /// mid-styloids, `x = y × (fifth → second head)`, `z = x × y`, as the forearm's; the
+    /// neutral posture then reads what the anatomical frames say, not zero. Frames may miss markers (NaN): the hand's neutral
     /// posture is averaged over the frames with all six markers, each landmark over the
     /// frames where it and the forearm's three markers are seen. Clusters may sit at any
     /// orientation. `side` is the arm the frames show (a left one is mirrored, see the module
@@ -412,14 +445,22 @@ impl Calibration {
     ) -> Result<(Self, CalibrationReport)> {
         let (neutral, neutral_frames, spread) = neutral_posture(neutral, side)?;
         let default = Self::body_model();
-        let (method, forearm, landmark_report) = match landmarks {
+        let (method, forearm, mut landmark_report) = match landmarks {
             None => (Method::Neutral, default.forearm, None),
             Some(trial) => {
                 let (forearm, report) = forearm_from_landmarks(trial, side)?;
                 (Method::Landmarks, forearm, Some(report))
             }
         };
-        let hand = forearm * neutral;
+        let mut hand = forearm * neutral;
+        if let (Some(trial), Some(report)) = (landmarks, landmark_report.as_mut()) {
+            if trial.hand_landmarks.is_some() {
+                let (own, mut hand_report) = hand_from_landmarks(trial, side)?;
+                hand_report.neutral_offset_deg = angle_deg(&(own * hand.inverse()));
+                hand = own;
+                report.hand = Some(hand_report);
+            }
+        }
         let report = CalibrationReport {
             method,
             side,
@@ -811,6 +852,7 @@ fn forearm_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Result<(Rotat
         epicondyle_span_mm: 1e3 * (le - me).norm(),
         styloid_axis_deg,
         length_scale: long.norm() / body::BodyModel::default().forearm.length,
+        hand: None,
     };
     Ok((Rotation3::from_matrix_unchecked(axes.transpose()), report))
 }
@@ -908,6 +950,83 @@ fn fit_universal_axes(moves: &[Matrix3<f64>]) -> (Vector3<f64>, Vector3<f64>, f6
     let rms = (moves.iter().map(|m| u.dot(&(m * v)).clamp(-1.0, 1.0).asin().powi(2)).sum::<f64>() / moves.len() as f64)
         .sqrt();
     (u, v, rms)
+}
+
+/// The hand's anatomical frame from its landmarks and the styloids (mirrored into a right
+/// arm's for a left one): `T_h`, and what the landmarks measured (its neutral offset left 0).
+fn hand_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Result<(Rotation3<f64>, HandLandmarkReport)> {
+    let hand_points = trial.hand_landmarks.expect("called with hand landmarks");
+    let n = trial.markers.len() / MARKER_FRAME_LEN;
+    let mut hand_points = whole_frames(hand_points, HAND_LANDMARK_FRAME_LEN, "hand landmarks")?.to_vec();
+    if hand_points.len() / HAND_LANDMARK_FRAME_LEN != n {
+        return Err(bad(format!(
+            "{} hand landmark frames for {n} marker frames: give one per marker frame",
+            hand_points.len() / HAND_LANDMARK_FRAME_LEN
+        )));
+    }
+    let mut markers = trial.markers.to_vec();
+    let mut landmarks = trial.landmarks.to_vec();
+    side.to_right(&mut markers);
+    side.to_right(&mut landmarks);
+    side.to_right(&mut hand_points);
+    let point = |v: &[f32], k: usize| Vector3::new(v[3 * k] as f64, v[3 * k + 1] as f64, v[3 * k + 2] as f64);
+    let seen = |v: &[f32], k: usize| v[3 * k..3 * k + 3].iter().all(|x| x.is_finite());
+    let (mut wrist, mut second, mut fifth, mut count) = (Vector3::zeros(), Vector3::zeros(), Vector3::zeros(), 0usize);
+    for (i, ((f, l), h)) in markers
+        .chunks_exact(MARKER_FRAME_LEN)
+        .zip(landmarks.chunks_exact(LANDMARK_FRAME_LEN))
+        .zip(hand_points.chunks_exact(HAND_LANDMARK_FRAME_LEN))
+        .enumerate()
+    {
+        if !(f[9..].iter().all(|v| v.is_finite()) && seen(l, 2) && seen(l, 3) && seen(h, 0) && seen(h, 1)) {
+            continue;
+        }
+        let (origin, b) = technical_frame(f, Segment::Hand, i)?;
+        let local = |p: Vector3<f64>| b.transpose() * (p - origin);
+        wrist += local((point(l, 2) + point(l, 3)) / 2.0);
+        second += local(point(h, 0));
+        fifth += local(point(h, 1));
+        count += 1;
+    }
+    let what_to_record = "record the second and fifth metacarpal heads (knuckles) with the styloids and the \
+                          hand's three markers in the same frames, or leave the hand landmarks out (the hand then \
+                          equals the forearm at the neutral posture)";
+    if count == 0 {
+        return Err(bad(format!(
+            "no frame of the {n} has the hand's three markers, both metacarpal heads and both styloids; \
+             {what_to_record}"
+        )));
+    }
+    let (wrist, second, fifth) = (wrist / count as f64, second / count as f64, fifth / count as f64);
+    let long = wrist - (second + fifth) / 2.0;
+    let across = second - fifth;
+    if long.norm() < MIN_HAND_AXIS_M || across.norm() < MIN_STYLOID_SPAN_M {
+        return Err(bad(format!(
+            "the metacarpal heads are {:.0} mm from the mid-styloids and {:.1} mm apart (at least {:.0} and \
+             {:.0}): they do not span the hand; {what_to_record}",
+            1e3 * long.norm(),
+            1e3 * across.norm(),
+            1e3 * MIN_HAND_AXIS_M,
+            1e3 * MIN_STYLOID_SPAN_M
+        )));
+    }
+    let angle = long.angle(&across).to_degrees();
+    if angle.min(180.0 - angle) < MIN_LANDMARK_ANGLE_DEG {
+        return Err(bad(format!(
+            "the hand's landmarks are nearly collinear: the metacarpal heads' line is {angle:.0}° from the \
+             hand's long axis (at least {MIN_LANDMARK_ANGLE_DEG}° from it); {what_to_record}"
+        )));
+    }
+    let y = long.normalize();
+    let x = y.cross(&across).normalize();
+    let z = x.cross(&y);
+    let report = HandLandmarkReport {
+        frames: count,
+        long_axis_mm: 1e3 * long.norm(),
+        metacarpal_span_mm: 1e3 * across.norm(),
+        neutral_offset_deg: 0.0,
+    };
+    Ok((Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]).transpose()), report))
 }
 
 /// `B_fᵀ B_h` of every frame.
@@ -1203,7 +1322,7 @@ mod tests {
                 })
             })
             .collect();
-        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks };
+        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: None };
         let (_, report) = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap();
         let lm = report.landmarks.unwrap();
         assert!((lm.length_scale - scale).abs() < 1e-5, "{lm:?}");
@@ -1220,7 +1339,7 @@ mod tests {
         for i in 0..6 {
             landmarks[i * 12 + 6] = f32::NAN; // the radial styloid seen in half the frames only
         }
-        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks };
+        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: None };
         let (cal, report) = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap();
         assert_eq!(report.method, Method::Landmarks);
         assert_eq!(report.neutral_frames, 10, "two frames miss a marker");
@@ -1241,7 +1360,7 @@ mod tests {
         // A left arm in the same anatomical pose as a right one is the right one's mirror image.
         let (markers, landmarks) = neutral_session(10, &SHIFT, 40.0, [0.0; 3]);
         let (markers, landmarks) = (mirrored(&markers), mirrored(&landmarks));
-        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks };
+        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: None };
         let (cal, report) = Calibration::from_neutral(&markers, Some(trial), Side::Left).unwrap();
         assert_eq!((cal.side, report.side), (Side::Left, Side::Left));
         let q = [-0.4, 0.5, -0.2];
@@ -1281,7 +1400,7 @@ mod tests {
     fn bad_landmarks_and_neutral_frames_say_what_to_record() {
         let (markers, landmarks) = neutral_session(10, &SHIFT, 0.0, [0.0; 3]);
         let run = |m: &[f32], l: &[f32]| {
-            let trial = LandmarkTrial { markers: m, landmarks: l };
+            let trial = LandmarkTrial { markers: m, landmarks: l, hand_landmarks: None };
             Calibration::from_neutral(m, Some(trial), Side::Right).unwrap_err().to_string()
         };
         let mut gone = landmarks.clone();
@@ -1467,5 +1586,61 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(sign.contains("needs landmarks"), "{sign}");
+    }
+
+    #[test]
+    fn hand_landmarks_give_the_hands_own_frame_whatever_posture_the_session_held() {
+        // The session holds the wrist bent (not neutral): with the metacarpal heads the hand's
+        // frame is its own, so every posture reads its true angles; without them the held
+        // posture would read zero.
+        let held = [0.2, -0.3, 0.1];
+        let body = {
+            let mut b = body::BodyModel::scaled(1.1, 1.1);
+            let turn = Rotation3::from_axis_angle(&Vector3::y_axis(), 2.0);
+            for (m, (o, s)) in b.marker_offsets.iter_mut().zip(&SHIFT).enumerate() {
+                let moved = Vector3::from(*o) + Vector3::from(*s);
+                let moved = if m >= 3 { turn * moved } else { moved };
+                *o = [moved.x, moved.y, moved.z];
+            }
+            b
+        };
+        let pose = body.forearm_pose(0.5);
+        let at = |q: [f64; 3]| body.marker_frame(&q, &pose).map(|v| v as f32).to_vec();
+        let lab = |iso: &nalgebra::Isometry3<f64>, p: [f64; 3]| {
+            let p = iso * nalgebra::Point3::from(p.map(|c| c * 1.1));
+            [p.x as f32, p.y as f32, p.z as f32]
+        };
+        let hand_pose = pose * nalgebra::Isometry3::rotation(body::wrist_rotation(&held).scaled_axis());
+        let forearm_points: Vec<f32> = [[0.0, 0.26, 0.035], [0.0, 0.26, -0.035], [0.0, 0.0, 0.03], [0.0, 0.0, -0.03]]
+            .iter()
+            .flat_map(|p| lab(&pose, *p))
+            .collect();
+        let hand_points: Vec<f32> =
+            [[0.0, -0.07, 0.025], [0.0, -0.065, -0.025]].iter().flat_map(|p| lab(&hand_pose, *p)).collect();
+        let n = 8;
+        let markers: Vec<f32> = (0..n).flat_map(|_| at(held)).collect();
+        let landmarks: Vec<f32> = (0..n).flat_map(|_| forearm_points.clone()).collect();
+        let mut hands: Vec<f32> = (0..n).flat_map(|_| hand_points.clone()).collect();
+        hands[3] = f32::NAN; // a frame without a metacarpal head is skipped
+        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: Some(&hands) };
+        let (cal, report) = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap();
+        let hand = report.landmarks.as_ref().unwrap().hand.as_ref().unwrap();
+        assert_eq!(hand.frames, n - 1);
+        assert!((hand.neutral_offset_deg - angle_deg(&body::wrist_rotation(&held))).abs() < 1e-3, "{hand:?}");
+        for q in [held, [0.0; 3], [-0.5, 0.6, -0.2]] {
+            let out = angles_after(&cal, &at(q));
+            for k in 0..3 {
+                assert!((out[k] as f64 - q[k]).abs() < 1e-4, "{out:?} vs {q:?}");
+            }
+        }
+        // Collinear hand landmarks, or none seen with the hand's markers, say what to record.
+        let on_axis: Vec<f32> = (0..n).flat_map(|_| lab(&hand_pose, [0.0, -0.07, 0.0]).repeat(2)).collect();
+        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: Some(&on_axis) };
+        let e = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap_err().to_string();
+        assert!(e.contains("do not span the hand") && e.contains("metacarpal heads (knuckles)"), "{e}");
+        let unseen = vec![f32::NAN; n * HAND_LANDMARK_FRAME_LEN];
+        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: Some(&unseen) };
+        let e = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap_err().to_string();
+        assert!(e.contains("no frame of the 8 has the hand's three markers, both metacarpal heads"), "{e}");
     }
 }

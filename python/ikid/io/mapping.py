@@ -17,7 +17,8 @@ than these (they are ignored).
 Optionally, for ``ikid calibrate`` (see ``ikid.calibration``): the arm, and the labels of
 the forearm's anatomical landmarks (markers, or virtual points from a probing file), any of
 lateral_epicondyle, medial_epicondyle, radial_styloid, ulnar_styloid (all four for the
-landmark method)::
+landmark method), and the hand's second_metacarpal_head and fifth_metacarpal_head (both, or
+neither: with them the hand's frame is its own)::
 
     side = "right"       # or "left" (mirrored into a right arm); before the tables
     [markers]
@@ -97,7 +98,7 @@ class MarkerMap:
         if side not in ("right", "left"):
             raise FileFormatError(f'{source}: side = {side!r}; expected "right" or "left"')
         landmarks = table.get("landmarks", {})
-        known = landmark_names()
+        known = landmark_names() + hand_landmark_names()
         if not isinstance(landmarks, dict):
             raise FileFormatError(f"{source}: [landmarks] must be a table of landmark = label")
         unknown = sorted(set(landmarks) - set(known))
@@ -171,6 +172,31 @@ class MarkerMap:
             )
         return labels
 
+    def hand_landmark_labels_in_order(self, data: MarkerData) -> list[str] | None:
+        """The file's labels for the hand's two landmarks (``ikid.Calibration.HAND_LANDMARKS``
+        order), None when the map names neither; an error when it names one only or the file
+        lacks one."""
+        named = [k for k in hand_landmark_names() if k in self.landmarks]
+        if not named:
+            return None
+        if len(named) < len(hand_landmark_names()):
+            raise _native.InputError(
+                f"{self.source}: [landmarks] names {named[0]} but not the other hand landmark; the hand's "
+                f"frame needs both of {', '.join(hand_landmark_names())} (or neither)"
+            )
+        labels = [self.landmarks[k] for k in hand_landmark_names()]
+        absent = [
+            f"{lab} ({k})"
+            for k, lab in zip(hand_landmark_names(), labels, strict=True)
+            if lab not in data.labels
+        ]
+        if absent:
+            raise _native.InputError(
+                f"{data.source or 'markers'}: landmark label(s) {', '.join(absent)} not found; the file has "
+                f"{', '.join(data.labels) or 'no labels'}"
+            )
+        return labels
+
     def to_toml(self) -> str:
         descr = {m[0]: m[2] for m in _native.MARKERS}
         lines = [
@@ -179,13 +205,13 @@ class MarkerMap:
             "[markers]",
         ]
         lines += [f'{m} = "{lab}"  # {descr[m]}' for m, lab in self.labels.items()]
-        lm_descr = dict(_native.Calibration.LANDMARKS)
+        lm_descr = dict(_native.Calibration.LANDMARKS) | dict(_native.Calibration.HAND_LANDMARKS)
         lines += [
             "",
             "# optional, for `ikid calibrate` from anatomical landmarks: their labels",
             "[landmarks]",
         ]
-        for k in landmark_names():
+        for k in landmark_names() + hand_landmark_names():
             if k in self.landmarks:
                 lines.append(f'{k} = "{self.landmarks[k]}"  # {lm_descr[k]}')
             else:
@@ -194,5 +220,10 @@ class MarkerMap:
 
 
 def landmark_names() -> list[str]:
-    """The landmarks a marker map may name, in ``ikid.Calibration.LANDMARKS`` order."""
+    """The forearm's landmarks a marker map may name, in ``ikid.Calibration.LANDMARKS`` order."""
     return [name for name, _ in _native.Calibration.LANDMARKS]
+
+
+def hand_landmark_names() -> list[str]:
+    """The hand's optional landmarks, in ``ikid.Calibration.HAND_LANDMARKS`` order."""
+    return [name for name, _ in _native.Calibration.HAND_LANDMARKS]
