@@ -7,7 +7,9 @@ A second table does the same for the methods a real session allows (``ikid.calib
 calibrate_neutral``): landmarks (epicondyles and styloids, 1 mm noise each) + 100 neutral frames,
 and neutral frames alone, with the hand cluster also turned about the hand's long axis (0°, 90°,
 180°: a plate mounted any way round); the neutral method keeps the body model's forearm
-placement, so its error is the forearm markers' misplacement. ~1 min more.
+placement, so its error is the forearm markers' misplacement; functional (``calibrate_functional``):
+the same neutral frames plus 4 s of the wrist circling through flexion and deviation, pronation held
+at 0° or at 30° (the axes fitted by least squares). ~2 min more.
 
     .venv/bin/python examples/calibration_study.py
 """
@@ -76,14 +78,19 @@ LANDMARKS = np.array([[0.0, 0.26, 0.035], [0.0, 0.26, -0.035], [0.0, 0.005, 0.03
 
 
 def session_methods() -> None:
-    from ikid.calibration import calibrate_neutral
+    from ikid.calibration import calibrate_functional, calibrate_neutral
 
     rng = np.random.default_rng(6)
     model = ikid.load("wrist-ik")
     offsets = np.array([m["offset"] for m in ikid.body_model()["markers"]])
     print()
-    print("| size | hand cluster turn | noise | nominal | uncalibrated | landmarks | neutral only |")
-    print("|---|---|---|---|---|---|---|")
+    print(
+        "| size | hand cluster turn | noise | nominal | uncalibrated | landmarks | neutral only | functional "
+        "| functional, pronation held at 30° |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    t = np.linspace(0.0, 2 * np.pi, 4000)
+    circles = np.stack([0 * t, 0.6 * np.sin(2 * t) + 0.2 * np.cos(t), 0.25 * np.cos(3 * t)], axis=1)
     q = ikid.simulate("random", seed=9102, duration=20, shoulder_flexion=SHOULDER).q
     for scale in (0.8, 1.2):
         for turn in (0.0, 90.0, 180.0):
@@ -116,9 +123,13 @@ def session_methods() -> None:
                 moved = markers(q, 1)
                 by_landmarks = mse(moved, calibrate_neutral(neutral, landmarks))
                 by_neutral = mse(moved, calibrate_neutral(neutral))
+                by_motion = [
+                    mse(moved, calibrate_functional(neutral, markers(circles + [held, 0.0, 0.0], 3)))
+                    for held in (0.0, np.radians(30.0))
+                ]
                 print(
                     f"| {scale} | {turn:.0f}° | {noise:.0%} | {nominal:.3g} | {mse(moved):.3g} | "
-                    f"{by_landmarks:.3g} | {by_neutral:.3g} |",
+                    f"{by_landmarks:.3g} | {by_neutral:.3g} | {by_motion[0]:.3g} | {by_motion[1]:.3g} |",
                     flush=True,
                 )
 
