@@ -119,9 +119,11 @@ def test_stream_strict_stops_at_the_first_refused_frame(monkeypatch, capsys):
 
 def test_stream_at_another_rate_is_refused_with_the_reason(trial, monkeypatch, capsys):
     monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(trial.markers[:5])))
-    assert cli(["stream", "--rate", "250"]) == 2
+    assert cli(["stream", "--rate", "120"]) == 2  # the wrist-ik family has no 120 Hz member
     err = capsys.readouterr().err
-    assert "250 Hz" in err and "1000 Hz" in err and "not resampled" in err
+    assert (
+        "120 Hz" in err and "100 Hz (wrist-ik-100hz)" in err and "1000 Hz" in err and "not resampled" in err
+    )
     # Time stamps 0.4 ms apart (a 2.5 kHz source) are refused frame by frame, not mis-timed.
     monkeypatch.setattr(
         sys, "stdin", io.StringIO(csv_lines(trial.markers[:3], with_time=np.arange(3) * 4e-4))
@@ -282,6 +284,26 @@ def test_a_gap_the_filler_cannot_bridge_splits_the_trial(lab, tmp_path):
     assert [r.name for r in recs] == ["g@0", "g@1400"]
     assert [len(r) for r in recs] == [1000, len(t.time) - 1400]
     assert all(np.isfinite(r.markers).all() for r in recs)
+
+
+def test_lab_gaps_are_filled_at_the_trials_rate(tmp_path):
+    """``ikid report --data`` (and training) fill a lab's gaps with the core's filler at the
+    trials' own rate (its time constants are in seconds), not as if they were 1 kHz."""
+    from ikid.io import read_markers
+    from ikid.recordings import load_lab_recordings
+
+    t = ikid.simulate("random", seed=9931, duration=8.0, output_every=10).with_noise(
+        "uniform", 3, fraction=0.05
+    )
+    markers = t.markers.copy()
+    markers[500:520, 9:12] = np.nan  # MC2 missing for 0.2 s at 100 Hz
+    write_trc(tmp_path / "g.trc", t.time, markers, 100.0)
+    write_mot(tmp_path / "g.mot", t.time, t.q)
+    (rec,) = load_lab_recordings(tmp_path)
+    assert rec.meta["rate_hz"] == 100.0 and rec.meta["filled_frames"] == 20
+    read = read_markers(tmp_path / "g.trc").frames(None)
+    np.testing.assert_array_equal(rec.markers, ikid.fill_gaps(read, "keep", rate_hz=100.0)[0])
+    assert np.abs(rec.markers - ikid.fill_gaps(read, "keep", rate_hz=1000.0)[0]).max() > 1e-4
 
 
 needs_torch = pytest.mark.skipif(

@@ -105,8 +105,14 @@ def available_models() -> list[str]:
     return sorted(p.stem for p in _SHIPPED.glob("*.safetensors"))
 
 
-def load(name_or_path: str | os.PathLike[str]) -> Model:
+def load(name_or_path: str | os.PathLike[str], *, rate_hz: float | None = None) -> Model:
     """Load a shipped model by name (see :func:`available_models`) or a model file.
+
+    With ``rate_hz`` (the rate of the frames a stream will be fed), a shipped model's name
+    stands for its family (``wrist-ik`` for ``wrist-ik``, ``wrist-ik-100hz``, ...): the member
+    trained at that rate is loaded; a model with no member at that rate, or a file trained at
+    another one, is an :class:`InputError` listing the rates there are (a live stream is never
+    resampled: that would add latency). ``ikid.load("wrist-ik", rate_hz=100).stream()``.
 
     The rule, the same for every command that takes a model: a string with no path separator
     and no ``.safetensors`` suffix is a shipped model's name — ``"wrist-ik"`` is always the
@@ -118,6 +124,10 @@ def load(name_or_path: str | os.PathLike[str]) -> Model:
     name that is not shipped or a path that does not exist, and :class:`ModelFileError` if the
     file is not a valid ikid model.
     """
+    if rate_hz is not None:
+        from ikid.pipeline import model_at_rate
+
+        return model_at_rate(name_or_path, rate_hz)
     if is_model_name(name_or_path):
         name = str(name_or_path)
         shipped = _SHIPPED / f"{name}.safetensors"

@@ -200,11 +200,12 @@ TASKS = {
 }
 
 
-def _model_for(name: str, use: str, tasks: tuple[str, ...]) -> ikid.Model:
-    """``ikid.load(name)`` for ``use`` (e.g. ``"ikid ik --model"``), refused with an
-    :class:`ikid.ArgumentError` naming the model, its task and what ``use`` needs unless its
-    card's task is one of ``tasks`` and its frames and output units are that task's."""
-    model = ikid.load(name)
+def _model_for(name: str, use: str, tasks: tuple[str, ...], rate_hz: float | None = None) -> ikid.Model:
+    """``ikid.load(name, rate_hz=rate_hz)`` for ``use`` (e.g. ``"ikid ik --model"``; with a
+    rate, the family's member at it), refused with an :class:`ikid.ArgumentError` naming the
+    model, its task and what ``use`` needs unless its card's task is one of ``tasks`` and its
+    frames and output units are that task's."""
+    model = ikid.load(name, rate_hz=rate_hz)
     need = " or ".join(f"{t!r} ({TASKS[t][0]})" for t in tasks)
     if model.task not in tasks:
         gives = TASKS.get(model.task, ("an unknown task",))[0]
@@ -894,19 +895,15 @@ def cmd_stream(args: argparse.Namespace) -> int:
     full yet) or ``refused:<reason>`` (outputs empty). Nothing is skipped silently: the summary
     on stderr counts frames received, refused (by reason) and lost; exit status 0 if every
     frame was processed, 3 if frames were lost or refused, 2 on an error."""
-    from ikid.pipeline import refusal_reason, same_rate
+    from ikid.pipeline import refusal_reason
 
-    models = [_model_for(args.model, "ikid stream --model", ("ik", "chain"))]
+    models = [_model_for(args.model, "ikid stream --model", ("ik", "chain"), rate_hz=args.rate)]
     if args.torque_model:
-        models.append(_model_for(args.torque_model, "ikid stream --torque-model", ("chain",)))
+        models.append(
+            _model_for(args.torque_model, "ikid stream --torque-model", ("chain",), rate_hz=args.rate)
+        )
     rate = models[0].frame_rate_hz
     for m in models:
-        if args.rate is not None and not same_rate(args.rate, m.frame_rate_hz):
-            raise ikid.InputError(
-                f"the source runs at {args.rate:g} Hz but model {m.name!r} was trained at "
-                f"{m.frame_rate_hz:g} Hz; a live stream is not resampled (it would add latency): "
-                "record at the model's rate or train a model at yours (ikid train)"
-            )
         if m.frame_len != models[0].frame_len:
             raise ikid.InputError(f"models {models[0].name!r} and {m.name!r} read different frames")
     calibration = ikid.load_calibration(args.calibration) if args.calibration else None
@@ -1484,7 +1481,11 @@ def main(argv: list[str] | None = None) -> int:
         "counts the frames lost between; a number not after the last is refused",
     )
     p.add_argument(
-        "--rate", type=POSITIVE, default=None, help="the source's frame rate (Hz); refused if not the model's"
+        "--rate",
+        type=POSITIVE,
+        default=None,
+        help="the source's frame rate (Hz): the model family's member at that rate (wrist-ik at 100 -> "
+        "wrist-ik-100hz); refused if it has none (a live stream is not resampled)",
     )
     p.add_argument(
         "--missing-markers", choices=["fill", "refuse"], default=None, help="override the model's policy"

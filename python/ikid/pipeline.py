@@ -181,6 +181,26 @@ def family_members(name: str | os.PathLike[str]) -> list[_native.Model]:
     return sorted((ikid.load(n) for n in names), key=lambda m: m.frame_rate_hz)
 
 
+def model_at_rate(model: str | os.PathLike[str], rate_hz: float, source: str = "the stream") -> _native.Model:
+    """The model of ``model`` (a family name, a shipped name or a file) trained at ``rate_hz``,
+    for frames that cannot be resampled (a live stream); an :class:`ikid.InputError` listing
+    the rates there are otherwise."""
+    import ikid
+
+    if not (isinstance(rate_hz, (int, float)) and np.isfinite(rate_hz) and rate_hz > 0):
+        raise _native.ArgumentError(f"rate_hz: {rate_hz!r}: expected a rate in Hz greater than 0")
+    members = family_members(model) or [ikid.load(model)]
+    for m in members:
+        if same_rate(rate_hz, m.frame_rate_hz):
+            return m
+    rates = ", ".join(f"{m.frame_rate_hz:g} Hz ({m.name})" for m in members)
+    raise _native.InputError(
+        f"{source} runs at {rate_hz:g} Hz; {str(model)!r} has models at {rates}. A live stream is not "
+        "resampled (it would add latency): record at one of those rates, run the recording offline "
+        "(ikid ik resamples), or train a model at yours (ikid train, from ikid-training)"
+    )
+
+
 def pick_model(
     model: _native.Model | str | os.PathLike[str],
     rate_hz: float | None,
