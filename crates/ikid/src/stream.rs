@@ -71,7 +71,7 @@ impl Stream {
             filled: 0,
             incoming: vec![0.0; nf],
             input: vec![0.0; w * nf],
-            scratch: model.packed().scratch(),
+            scratch: model.net().scratch(),
             output: vec![0.0; model.n_outputs()],
             policy: model.missing_markers(),
             filler: GapFiller::at_rate(model.card().frame_rate_hz),
@@ -230,11 +230,7 @@ impl Stream {
         let tail = self.ring.len() - split;
         self.input[..tail].copy_from_slice(&self.ring[split..]);
         self.input[tail..].copy_from_slice(&self.ring[..split]);
-        self.model.packed().forward(&self.input, &mut self.scratch, &mut self.output);
-        self.model.add_offset(&self.input, &mut self.output);
-        if let Some(&value) = self.output.iter().find(|v| !v.is_finite()) {
-            return Err(Error::NonFiniteOutput { frame: index, value });
-        }
+        self.model.net().run(&self.input, &mut self.scratch, &mut self.output, index)?;
         let filled = if self.filled_mask != 0 { status::FILLED } else { 0 };
         self.status = filled | self.model.frame_status(&self.incoming, &self.output);
         Ok(Some(&self.output))

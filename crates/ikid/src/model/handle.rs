@@ -1,12 +1,13 @@
-//! The loaded model: its card, the network in both forms (the nalgebra oracle and the packed
-//! kernel), shared cheaply between streams and threads.
+//! The loaded model: its card, the network in both forms (the nalgebra oracle and the
+//! [`Network`] it runs: packed kernel, output offset, finiteness check), shared cheaply between
+//! streams and threads.
 
 use super::card::{Bounds, Envelope, ModelCard};
 use super::file;
 use crate::error::{Error, Result};
 use crate::features::FeatureSet;
 use crate::gaps::MissingMarkers;
-use crate::net::{Mlp, PackedMlp};
+use crate::net::{Mlp, Network, NewestFeatures};
 use crate::status;
 use std::path::Path;
 use std::sync::Arc;
@@ -23,7 +24,7 @@ struct Inner {
     card: ModelCard,
     feature_set: FeatureSet,
     mlp: Mlp,
-    packed: PackedMlp,
+    net: Network,
     limits: Option<Limits>,
 }
 
@@ -33,34 +34,31 @@ struct Inner {
 pub const ENVELOPE_MARGIN: f64 = 0.1;
 /// How far past its training range the mean of a window's features may go, in widths of that
 /// range, before a model that corrects the newest frame's features stops correcting them (see
-/// `add_offset`): 2 %, the margin at which simulated trials' own extremes stop triggering it.
+/// [`NewestFeatures`]): 2 %, the margin at which simulated trials' own extremes stop
+/// triggering it.
 pub const CORRECTION_MARGIN: f64 = 0.02;
 /// How far past its training range an output may go, in widths of that range, before it is
 /// [`status::IMPLAUSIBLE`]: twice the range the model ever learned to give.
 pub const IMPLAUSIBLE_MARGIN: f64 = 1.0;
 
-/// The card's envelope widened by the margins, as f32 to compare with the stream's values
-/// (`trained`: the input range widened by [`CORRECTION_MARGIN`]).
+/// The card's envelope widened by the margins, as f32 to compare with the stream's values.
 #[derive(Debug)]
 struct Limits {
     input: (Vec<f32>, Vec<f32>),
     output: (Vec<f32>, Vec<f32>),
-    trained: (Vec<f32>, Vec<f32>),
+}
+
+/// `b` widened on each side by `margin` of its width (and a hair more, for rounding), as f32.
+fn widen(b: &Bounds, margin: f64) -> (Vec<f32>, Vec<f32>) {
+    let pad = |i: usize| margin * (b.max[i] - b.min[i]) + 1e-6 * b.min[i].abs().max(b.max[i].abs()).max(1.0);
+    let lo = (0..b.min.len()).map(|i| (b.min[i] - pad(i)) as f32).collect();
+    let hi = (0..b.max.len()).map(|i| (b.max[i] + pad(i)) as f32).collect();
+    (lo, hi)
 }
 
 impl Limits {
     fn new(envelope: &Envelope) -> Self {
-        let widen = |b: &Bounds, margin: f64| {
-            let pad = |i: usize| margin * (b.max[i] - b.min[i]) + 1e-6 * b.min[i].abs().max(b.max[i].abs()).max(1.0);
-            let lo = (0..b.min.len()).map(|i| (b.min[i] - pad(i)) as f32).collect();
-            let hi = (0..b.max.len()).map(|i| (b.max[i] + pad(i)) as f32).collect();
-            (lo, hi)
-        };
-        Limits {
-            input: widen(&envelope.inputs, ENVELOPE_MARGIN),
-            output: widen(&envelope.outputs, IMPLAUSIBLE_MARGIN),
-            trained: widen(&envelope.inputs, CORRECTION_MARGIN),
-        }
+        Limits { input: widen(&envelope.inputs, ENVELOPE_MARGIN), output: widen(&envelope.outputs, IMPLAUSIBLE_MARGIN) }
     }
 }
 
@@ -94,17 +92,16 @@ impl Model {
     }
 
     fn assemble(card: ModelCard, feature_set: FeatureSet, mlp: Mlp) -> Result<Self> {
-        let packed = PackedMlp::new(&mlp);
-        // Finite tensors can still overflow once the scaling is folded in.
-        if let Some((layer, value)) = packed.first_non_finite() {
-            return Err(Error::NonFiniteWeight {
-                name: format!("layers.{layer}.weight (scaling folded in)"),
-                index: 0,
-                value,
-            });
-        }
+        // The card's output offset: the newest frame's features, corrected only inside the
+        // training range widened by CORRECTION_MARGIN (see `NewestFeatures`).
+        let offset = card.output_offset.is_some().then(|| NewestFeatures {
+            features: feature_set.feature_len(),
+            trained: card.envelope.as_ref().map(|e| widen(&e.inputs, CORRECTION_MARGIN)),
+        });
+        // Finite tensors can still overflow once the scaling is folded in: refused here.
+        let net = Network::new(&mlp, offset)?;
         let limits = card.envelope.as_ref().map(Limits::new);
-        Ok(Model { inner: Arc::new(Inner { card, feature_set, mlp, packed, limits }) })
+        Ok(Model { inner: Arc::new(Inner { card, feature_set, mlp, net, limits }) })
     }
 
     /// The model as the bytes of a `.safetensors` file.
@@ -167,8 +164,10 @@ impl Model {
         &self.inner.mlp
     }
 
-    pub(crate) fn packed(&self) -> &PackedMlp {
-        &self.inner.packed
+    /// The network this model runs (packed kernel, output offset, finiteness check): what a
+    /// stream and [`predict`](Self::predict) call.
+    pub fn net(&self) -> &Network {
+        &self.inner.net
     }
 
     /// How frames are turned into network inputs.
@@ -200,34 +199,5 @@ impl Model {
     /// `output_offset`; see [`NEWEST_FEATURES`](super::NEWEST_FEATURES)).
     pub fn adds_newest_features(&self) -> bool {
         self.inner.card.output_offset.is_some()
-    }
-
-    /// Adds the newest frame's features of `window` (whole frames' features, oldest first) to
-    /// `out` when the card asks for it (see [`adds_newest_features`](Self::adds_newest_features)).
-    ///
-    /// The network's correction was learned inside its training range only: when the window's
-    /// mean features (its posture, noise averaged out) lie outside the card's envelope by more
-    /// than [`CORRECTION_MARGIN`], the output is the newest frame's features alone (the
-    /// per-frame solution, exact on clean markers wherever they are). Measured on real
-    /// recordings calibrated from themselves with the 1 kHz model (racing: e_f to −80°, beyond
-    /// training): racing 6.0° → 4.0° geodesic RMS, pyomeca 2.2° → 2.0°; on simulated held-out
-    /// trials at 1 and 5 % noise the MSE is unchanged to 3 digits (no margin: +17 % and +40 %;
-    /// a per-frame rule: up to 2.6×, noisy frames stray past the clean training range).
-    /// Batch and stream both come here, so they stay equal.
-    pub(crate) fn add_offset(&self, window: &[f32], out: &mut [f32]) {
-        if self.adds_newest_features() {
-            let nf = self.feature_set().feature_len();
-            let newest = &window[window.len() - nf..];
-            let untrained = self.inner.limits.as_ref().is_some_and(|l| {
-                let frames = (window.len() / nf) as f32;
-                (0..nf).any(|k| {
-                    let mean = window.iter().skip(k).step_by(nf).sum::<f32>() / frames;
-                    !(mean >= l.trained.0[k] && mean <= l.trained.1[k])
-                })
-            });
-            for (o, f) in out.iter_mut().zip(newest) {
-                *o = if untrained { *f } else { *o + f };
-            }
-        }
     }
 }

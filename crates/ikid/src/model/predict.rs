@@ -86,9 +86,10 @@ impl Model {
                 Ok(())
             },
         )?;
-        let net = self.packed();
-        // Windows of consecutive frames are contiguous slices of the feature rows.
-        let window = |i: usize| &features[i * nf..(i + w) * nf];
+        let net = self.net();
+        // Windows of consecutive frames are contiguous slices of the feature rows; row r is the
+        // prediction for frame r + w - 1, the number its errors carry.
+        let window = |r: usize| &features[r * nf..(r + w) * nf];
         let scratch = || (net.scratch(), net.batch_scratch());
         for_each_claimed(
             out.chunks_mut(ROWS_PER_BLOCK * no),
@@ -98,26 +99,16 @@ impl Model {
                 let mut row = b * ROWS_PER_BLOCK;
                 let mut groups = chunk.chunks_exact_mut(BATCH * no);
                 for group in &mut groups {
-                    let mut rows = group.chunks_exact_mut(no);
-                    let outs = std::array::from_fn(|_| rows.next().expect("BATCH rows per group"));
-                    net.forward_batch(std::array::from_fn(|s| window(row + s)), batch_scratch, outs);
-                    for (s, out) in group.chunks_exact_mut(no).enumerate() {
-                        self.add_offset(window(row + s), out);
-                    }
+                    net.run_batch(std::array::from_fn(|s| window(row + s)), batch_scratch, group, row + w - 1)?;
                     row += BATCH;
                 }
                 for out in groups.into_remainder().chunks_exact_mut(no) {
-                    net.forward(window(row), scratch, out);
-                    self.add_offset(window(row), out);
+                    net.run(window(row), scratch, out, row + w - 1)?;
                     row += 1;
                 }
                 Ok(())
             },
         )?;
-        if let Some(i) = out.iter().position(|v| !v.is_finite()) {
-            // Output row r is the prediction for frame r + window - 1.
-            return Err(Error::NonFiniteOutput { frame: i / no + w - 1, value: out[i] });
-        }
         Ok(rows)
     }
 }

@@ -2,8 +2,8 @@
 //! 16-output panel of weights read from L2 serves four such groups.
 //!
 //! A single frame is bound by streaming the weights (see `kernel.rs`); a whole recording
-//! need not be. Layers wider than [`SMALL_BLOCK`](super::kernel::SMALL_BLOCK) keep a second
-//! copy of their weights (packed with the first, in `kernel.rs`) as panels of [`PANEL`]
+//! need not be. Layers wider than [`SMALL_BLOCK`](super::packed::SMALL_BLOCK) keep a second
+//! copy of their weights (packed with the first, in `packed.rs`) as panels of [`PANEL`]
 //! outputs, `[panel][input][PANEL]`, read back to back. For every input a panel's two weight
 //! vectors are multiplied into six samples' accumulators (12 of the 16 AVX registers), so the
 //! loop is bound by FMA throughput, not by loads; only `ceil(n_out / PANEL)` panels are computed. Narrower layers (the output layer)
@@ -21,7 +21,8 @@
 //! inputs in ascending order); that kernel merely skips inputs that are exactly zero, which
 //! leaves a finite sum unchanged. So `Model::predict` gives bit for bit what a `Stream` gives.
 
-use super::kernel::{PANEL, PackedLayer, PackedMlp, Scratch, forward_portable};
+use super::kernel::forward_portable;
+use super::packed::{PANEL, PackedLayer, PackedMlp, Scratch};
 
 /// Samples per batched forward pass: four register-blocked groups of six, so a weight panel
 /// read from L2 for the first group is reused from L1 by the others.
@@ -172,7 +173,7 @@ mod tests {
             (FeatureSet::Relative, &[70, 9]),
         ] {
             let model = random_model(set, 5, hidden, 3, 4);
-            let net = model.packed();
+            let net = model.net().packed();
             let nf = set.feature_len();
             let frames = random_frames(set, BATCH + 4, 5);
             let mut features = vec![0f32; (BATCH + 4) * nf];
