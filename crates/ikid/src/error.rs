@@ -286,10 +286,14 @@ impl Error {
             Error::MissingMarkers { markers, .. } | Error::OutlierMarker { markers, .. } => {
                 markers.split(", ").collect()
             }
-            Error::NonFiniteInput { field, .. } => {
-                let name = field.split('.').next().unwrap_or(field);
-                crate::body::MARKERS.iter().map(|m| m.name).filter(|m| *m == name).collect()
-            }
+            // A marker's values are named `NAME.x`, `NAME.y`, `NAME.z` (`FeatureSet::frame_names`,
+            // the reference IK, the tracker) and no other frame value ends in a single axis:
+            // the name says which marker, without this module reading the body model's list
+            // (`error` is the core's bottom layer; `features`' tests check every frame name).
+            Error::NonFiniteInput { field, .. } => match field.rsplit_once('.') {
+                Some((marker, "x" | "y" | "z")) if !marker.is_empty() && !marker.contains('.') => vec![marker],
+                _ => Vec::new(),
+            },
             _ => Vec::new(),
         }
     }

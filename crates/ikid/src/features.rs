@@ -469,6 +469,27 @@ mod tests {
     }
 
     #[test]
+    fn a_missing_value_names_its_marker_and_nothing_else_does() {
+        // `Error::markers` reads the marker from the value's name (`NAME.x|y|z`): every frame
+        // value of every feature set, refused, names its marker, and only marker values do.
+        for set in FEATURE_SETS {
+            for (i, name) in set.frame_names().iter().enumerate() {
+                let mut frame = match set.frame_kind() {
+                    FrameKind::Markers => frame_for([0.1, -0.2, 0.05], 0.3),
+                    _ => vec![0.1f32; set.frame_len()],
+                };
+                frame[i] = f32::NAN;
+                let err = set.check_frame(&frame, 0).unwrap_err();
+                let want: Vec<&str> = match set.frame_kind() {
+                    FrameKind::Markers => vec![body::MARKERS[i / 3].name],
+                    _ => vec![],
+                };
+                assert_eq!(err.markers(), want, "{} value {name}", set.name());
+            }
+        }
+    }
+
+    #[test]
     fn collinear_markers_are_refused() {
         let mut frame = frame_for([0.0; 3], 0.0);
         frame[9..18].copy_from_slice(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0]);

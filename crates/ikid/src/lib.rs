@@ -48,3 +48,169 @@ pub use tracker::{Tracker, TrackerOutput, TrackerSettings};
 
 /// This crate's version.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+#[cfg(test)]
+mod module_graph {
+    //! No module cycles in the core (docs/ARCHITECTURE.md, "Dependency rules"): the top-level
+    //! modules' dependencies, read from their sources, form a directed acyclic graph.
+
+    use std::collections::{BTreeMap, BTreeSet};
+    use std::path::Path;
+
+    /// A file's code without its comments and without its trailing test module(s): what the
+    /// crate itself is built from (tests may use anything, `testing` included).
+    fn code(text: &str) -> String {
+        let lines: Vec<&str> = text.lines().collect();
+        let mut end = lines.len();
+        for (i, line) in lines.iter().enumerate() {
+            if line.trim() == "#[cfg(test)]" {
+                let next = lines[i + 1..].iter().find(|l| !l.trim_start().starts_with("#[")).unwrap_or(&"");
+                let next = next.trim_start().trim_start_matches("pub ").trim_start_matches("pub(crate) ");
+                if next.starts_with("mod ") {
+                    end = i;
+                    break;
+                }
+            }
+        }
+        lines[..end].iter().map(|l| l.split("//").next().unwrap_or("")).collect::<Vec<_>>().join("\n")
+    }
+
+    /// The first path segment of every `crate::…` path in `code`, braces expanded
+    /// (`crate::{a::X, b}` gives `a` and `b`).
+    fn crate_paths(code: &str) -> BTreeSet<String> {
+        let ident = |s: &str| s.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect::<String>();
+        let mut out = BTreeSet::new();
+        for (at, _) in code.match_indices("crate::") {
+            let rest = &code[at + "crate::".len()..];
+            match rest.strip_prefix('{') {
+                Some(group) => {
+                    // The items at the group's own level: each starts the text, or follows a
+                    // comma outside nested braces.
+                    let (mut depth, mut start) = (0, true);
+                    for (i, c) in group.char_indices() {
+                        match c {
+                            '{' => depth += 1,
+                            '}' if depth == 0 => break,
+                            '}' => depth -= 1,
+                            ',' if depth == 0 => start = true,
+                            c if start && !c.is_whitespace() => {
+                                out.insert(ident(&group[i..]));
+                                start = false;
+                            }
+                            _ => {}
+                        }
+                    }
+                }
+                None => {
+                    out.insert(ident(rest));
+                }
+            }
+        }
+        out.retain(|s| !s.is_empty() && s != "self");
+        out
+    }
+
+    /// Top-level module → the top-level modules its code names (crate-root re-exports such as
+    /// `crate::Model` resolved to the module they come from).
+    fn graph() -> BTreeMap<String, BTreeSet<String>> {
+        let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+        let lib = std::fs::read_to_string(src.join("lib.rs")).expect("lib.rs");
+        let lib = code(&lib);
+        let mut reexports = BTreeMap::new();
+        for line in lib.lines().filter_map(|l| l.trim().strip_prefix("pub use ")) {
+            let (module, names) = line.trim_end_matches(';').split_once("::").expect("pub use module::names");
+            for name in names.trim_matches(|c| c == '{' || c == '}').split(',') {
+                reexports.insert(name.trim().to_string(), module.to_string());
+            }
+        }
+        let modules: Vec<String> = lib
+            .lines()
+            .filter_map(|l| l.trim().strip_prefix("pub mod ").or_else(|| l.trim().strip_prefix("mod ")))
+            .map(|m| m.trim_end_matches(';').to_string())
+            .collect();
+        let mut graph = BTreeMap::new();
+        for module in &modules {
+            // The module's own file, or every file of its folder; `super::` in a top-level file
+            // (or `super::super::` one level down) is the crate root.
+            let mut files = vec![(src.join(format!("{module}.rs")), "super::")];
+            if let Ok(dir) = std::fs::read_dir(src.join(module)) {
+                for entry in dir.flatten() {
+                    let path = entry.path();
+                    let root = if path.ends_with("mod.rs") { "super::" } else { "super::super::" };
+                    files.push((path, root));
+                }
+            }
+            let mut deps = BTreeSet::new();
+            for (path, root) in files.iter().filter(|(p, _)| p.is_file()) {
+                let text = code(&std::fs::read_to_string(path).expect("source file"));
+                let text = text.replace(root, "crate::");
+                for name in crate_paths(&text) {
+                    let target = reexports.get(&name).cloned().unwrap_or(name);
+                    if modules.contains(&target) && &target != module {
+                        deps.insert(target);
+                    }
+                }
+            }
+            graph.insert(module.clone(), deps);
+        }
+        graph
+    }
+
+    /// A cycle through the graph, as a path `a -> b -> … -> a`, if there is one.
+    fn cycle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
+        fn visit(
+            node: &str,
+            graph: &BTreeMap<String, BTreeSet<String>>,
+            path: &mut Vec<String>,
+            done: &mut BTreeSet<String>,
+        ) -> Option<Vec<String>> {
+            if let Some(i) = path.iter().position(|p| p == node) {
+                let mut found = path[i..].to_vec();
+                found.push(node.to_string());
+                return Some(found);
+            }
+            if done.contains(node) {
+                return None;
+            }
+            path.push(node.to_string());
+            for next in &graph[node] {
+                if let Some(found) = visit(next, graph, path, done) {
+                    return Some(found);
+                }
+            }
+            path.pop();
+            done.insert(node.to_string());
+            None
+        }
+        let mut done = BTreeSet::new();
+        graph.keys().find_map(|node| visit(node, graph, &mut Vec::new(), &mut done))
+    }
+
+    #[test]
+    fn the_reader_sees_paths_braces_and_tests() {
+        let text = "use crate::{body::X, error::{Error, Result}};\nuse super::net;\n// crate::tracker\n\
+                    fn f() { crate::Model::load(\"\"); }\n#[cfg(test)]\n#[allow(x)]\nmod tests { use crate::testing; }";
+        let names = crate_paths(&code(text).replace("super::", "crate::"));
+        let want = ["Model", "body", "error", "net"].map(String::from);
+        assert_eq!(names, BTreeSet::from(want));
+        let looped = BTreeMap::from([
+            ("a".to_string(), BTreeSet::from(["b".to_string()])),
+            ("b".to_string(), BTreeSet::from(["a".to_string()])),
+        ]);
+        assert_eq!(cycle(&looped).map(|c| c.join(" -> ")), Some("a -> b -> a".into()));
+    }
+
+    #[test]
+    fn the_core_has_no_module_cycles() {
+        let graph = graph();
+        // The reading found the modules and the edges everyone relies on.
+        for (from, to) in [("stream", "model"), ("model", "net"), ("tracker", "stream"), ("features", "body")] {
+            assert!(graph[from].contains(to), "{from} should depend on {to}: {graph:?}");
+        }
+        assert!(graph["net"].iter().all(|d| d == "error"), "net depends only on error: {:?}", graph["net"]);
+        assert!(graph["error"].is_empty(), "error is the bottom layer: {:?}", graph["error"]);
+        if let Some(found) = cycle(&graph) {
+            panic!("module cycle in the core: {}", found.join(" -> "));
+        }
+    }
+}
