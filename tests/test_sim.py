@@ -84,6 +84,26 @@ def test_files_open_as_opensim_expects(trial, tmp_path):
     assert back.metadata["noise"][0]["kind"] == "occlusion" and back.metadata["length_scale"] == 1.1
 
 
+def test_a_file_that_is_not_a_trial_archive_is_named(trial, tmp_path):
+    trial.save(tmp_path / "t")
+    whole = (tmp_path / "t.npz").read_bytes()
+    cases = {
+        "text.npz": b"time,q\n0,1\n",
+        "truncated.npz": whole[: len(whole) // 2],
+        "empty.npz": b"",
+        "array.npy": None,
+    }
+    for name, data in cases.items():
+        path = tmp_path / name
+        if data is None:
+            np.save(path, trial.q)
+        else:
+            path.write_bytes(data)
+        with pytest.raises(ikid.io.FileFormatError, match="not a trial archive") as caught:
+            ikid.Trial.load(path)
+        assert str(path) in str(caught.value), name
+
+
 def test_nan_is_never_written_silently(trial, tmp_path):
     q = trial.q.copy()
     q[7, 1] = np.nan

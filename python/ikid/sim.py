@@ -86,11 +86,26 @@ class Trial:
 
     @staticmethod
     def load(path: str | os.PathLike[str]) -> Trial:
-        with np.load(path) as z:
-            meta = json.loads(str(z["metadata"]))
-            return Trial(
-                z["time"], z["q"], z["qd"], z["qdd"], z["tau"], z["markers"], z["q_ref"], metadata=meta
-            )
+        """Read a trial written by :meth:`save` (its ``.npz``). Like every reader, only a
+        regular file within ikid's size limit is opened (:func:`ikid.io.markers.check_readable`:
+        a directory, a pipe or ``/dev/zero`` is an :class:`ikid.ReadError` at once); a file that
+        is not such an archive is a :class:`ikid.io.FileFormatError` naming it."""
+        import zipfile
+
+        from ikid.io.markers import FileFormatError, check_readable
+
+        path = Path(path)
+        check_readable(path, "a trial's .npz archive (Trial.save)")
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                meta = json.loads(str(z["metadata"]))
+                time, q, qd, qdd, tau, markers, q_ref = (
+                    z[k] for k in ("time", "q", "qd", "qdd", "tau", "markers", "q_ref")
+                )
+        except (ValueError, EOFError, KeyError, TypeError, zipfile.BadZipFile) as e:
+            # A .npy (no context manager), pickled data, a truncated archive, a missing array.
+            raise FileFormatError(f"{path}: not a trial archive written by Trial.save ({e})") from None
+        return Trial(time, q, qd, qdd, tau, markers, q_ref, metadata=meta)
 
 
 def _check_npz(path: Path, names: list[str]) -> None:
