@@ -145,9 +145,11 @@ def ikid_angles(rec: D.Recording, rate: float, ik_1k: ikid.Model, refiner: ikid.
         q1k[r1k.frame] = r1k.values
         out["wrist_ik_1k"] = q1k
     sub = {"length_scale": rec.meta["length_scale"], "mass_scale": rec.meta["mass_scale"]}
-    out["tracker"] = ikid.Tracker(rate_hz=rate, **sub).run(rec.markers)["q"]
+    bare = ikid.Tracker(rate_hz=rate, **sub).run(rec.markers)
+    out["tracker"], out["tau:tracker"] = bare["q"], bare["tau"]
     if rate == SIM_HZ:
-        out["tracker_refined"] = ikid.Tracker(rate_hz=rate, refiner=refiner, **sub).run(rec.markers)["q"]
+        refined = ikid.Tracker(rate_hz=rate, refiner=refiner, **sub).run(rec.markers)
+        out["tracker_refined"], out["tau:tracker_refined"] = refined["q"], refined["tau"]
     return out
 
 
@@ -225,6 +227,7 @@ def main() -> None:
             used_models.add(est.pop("model"))
             for name in ekf:
                 est[name] = res_ekf[name]["q"]
+                est[f"tau:{name}"] = res_ekf[name]["tau"]
             n = len(r)
             have = np.all([np.isfinite(v).all(axis=1) for v in est.values()], axis=0)
             skip = int(round(SKIP_S * rate))
@@ -234,7 +237,8 @@ def main() -> None:
                 keep[sl] = True
                 keep &= have
                 for name, q in est.items():
-                    e = q[keep] - r.q[keep]
+                    # Torques (tau:<method>) against the simulator's, angles against its angles.
+                    e = q[keep] - (r.tau if name.startswith("tau:") else r.q)[keep]
                     cell = sums.setdefault(scope, {}).setdefault(name, {}).setdefault(lvl, [0.0, 0])
                     cell[0] += float((e**2).sum())
                     cell[1] += int(e.size)
@@ -323,7 +327,29 @@ def markdown(res: dict[str, Any]) -> str:
                     + f"| {mse['tracker'][lvl] / better:.2f} |"
                 )
         lines.append("")
+    torque_methods = {k: v for k, v in METHODS.items() if k.startswith("tracker") or k.startswith("ekf")}
     lines += [
+        "## Torque MSE (N²m²), last 10 % of every trial",
+        "",
+        "The Tracker's torques (its own inverse dynamics of its filtered q, q̇, q̈) against biorbd's EKF "
+        "followed by biorbd's inverse dynamics, on the same frames; the simulator's torques are the truth. "
+        "(The IK networks give angles only.)",
+        "",
+        "| rate | noise | " + " | ".join(torque_methods.values()) + " | Tracker / better EKF |",
+        "|---|---|" + "---|" * (len(torque_methods) + 1),
+    ]
+    for rate, cell in res["rates"].items():
+        mse = cell["mse"]["last10"]
+        for lvl in noise:
+            vals = [mse.get(f"tau:{m}", {}).get(lvl) for m in torque_methods]
+            better = min(mse["tau:ekf_default"][lvl], mse["tau:ekf_tuned"][lvl])
+            lines.append(
+                f"| {rate} Hz | {lvl} | "
+                + " | ".join(fmt(v) for v in vals)
+                + f" | {mse['tau:tracker'][lvl] / better:.2f} |"
+            )
+    lines += [
+        "",
         "EKF setting tuned per rate (noise_factor; error_factor 1e-5): "
         + ", ".join(f"{rate} Hz: {cell['ekf_tuned'][0]:g}" for rate, cell in res["rates"].items())
         + ". Frames left out because a method gave no output there (a stream refused the frame): "
