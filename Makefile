@@ -202,8 +202,10 @@ bench: wheel c
 	$(CARGO) bench -p ikid --bench inference
 	$(PY) benches/report.py
 
-# ikid beside onnxruntime, torch (eager, TorchScript) and NumPy on the same networks, one run:
-# a section of docs/performance.md.
+# ikid beside onnxruntime, torch (eager, TorchScript) and NumPy on the same networks, and ikid's
+# Tracker (bare and with wrist-track) beside biorbd's EKF + inverse dynamics on the same held-out
+# frames (angle and torque RMS, per-frame latency), one run (~5 min): a section of
+# docs/performance.md and target/peers.json (`studies/peers.py --render` rewrites the section).
 bench-peers: wheel c
 	$(PY) studies/peers.py
 

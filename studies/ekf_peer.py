@@ -404,15 +404,13 @@ def scopes(n: int) -> dict[str, slice]:
 # --- latency -------------------------------------------------------------------------------------------
 
 
-def rust_latency() -> dict[str, Any]:
-    """Per-push p50/p99 of the two shipped models from Rust (crates/ikid/examples/latency.rs),
-    median over ``RUST_REPEATS`` runs (the machine is shared)."""
-    runs: dict[str, list[dict[str, Any]]] = {
-        "wrist-ik": [],
-        "wrist-chain": [],
-        "tracker": [],
-        "tracker_refined": [],
-    }
+def rust_latency(
+    names: tuple[str, ...] = ("wrist-ik", "wrist-chain", "tracker", "tracker_refined"),
+) -> dict[str, Any]:
+    """Per-push p50/p99 from Rust (crates/ikid/examples/latency.rs) of ``names``: shipped models
+    by name, ``tracker`` (bare) and ``tracker_refined`` (with wrist-track); median over
+    ``RUST_REPEATS`` runs (the machine is shared)."""
+    runs: dict[str, list[dict[str, Any]]] = {name: [] for name in names}
     for _ in range(RUST_REPEATS):
         for name in runs:
             what = (

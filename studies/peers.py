@@ -10,13 +10,18 @@ the one torch module is exported to ikid's file and to ONNX, then timed:
 * batch throughput (per sample, 4096 windows) with 1 and 2 threads: ikid `Model.predict`,
   onnxruntime, torch; NumPy with its BLAS's default threads;
 * the compute floor: 2 × multiply-adds / (cores × 32 f32 FLOPs per cycle (2 AVX2 FMA
-  units) × clock).
+  units) × clock);
+* the whole causal step, markers → angles and torques: ikid's Tracker (bare, and refined by the
+  shipped ``wrist-track``) beside biorbd's extended Kalman filter + inverse dynamics, on the same
+  held-out frames: angle and torque RMS, per-frame latency (the machinery of
+  ``studies/ekf_peer.py``, on a subset of its trials; ``make compare-ekf`` has the full study).
 
 Results: a section of docs/performance.md between the `peers` markers, and target/peers.json.
 """
 
 from __future__ import annotations
 
+import argparse
 import itertools
 import json
 import os
@@ -36,6 +41,7 @@ import ikid
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from ikid_training.export import Affine, ModelSpec, WindowModel, export, export_onnx, load_torch  # noqa: E402
 from studies import common  # noqa: E402
+from studies import ekf_peer as ekf  # noqa: E402  (needs biorbd: the eval extra)
 from studies.common import frames_for, machine  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,6 +49,10 @@ OUT = ROOT / "target" / "bench-peers"
 SINGLE = 20_000
 BATCH = 4096
 START, END = "<!-- peers:start -->", "<!-- peers:end -->"
+JSON = ROOT / "target" / "peers.json"
+# The tracker comparison: ekf_peer's random-family test trials of the default-size subject (one
+# per shoulder pose), at these noise levels, complete or with ekf_peer's occlusion bursts.
+TRACKER_CONDITIONS = [("0%", False), ("1%", False), ("5%", False), ("5%", True)]
 
 
 def thesis_nets() -> list[tuple[str, str, list[int]]]:
@@ -257,14 +267,142 @@ def measure(label: str, model: ikid.Model, net: nn.Sequential, onnx_path: Path) 
     return r
 
 
-def table(results: list[dict], ghz: float) -> list[str]:
-    cores = os.cpu_count() or 1
+def tracker_vs_ekf(workers: int = 2) -> dict:
+    """ikid's Tracker (``ikid.DEFAULT_JERK_NOISE``; bare, and refined by ``wrist-track``) and
+    biorbd's EKF (its default and the setting ekf_peer tunes on its validation trials) + biorbd's
+    inverse dynamics on the same frames: angle and torque RMS over every frame after ekf_peer's
+    ``SKIP`` of each trial, and per-frame latency (Python p50/p99/mean over rounds, the core's
+    loop, the Rust example)."""
+    every = ekf.trial_specs()
+    # Each trial keeps its index in ekf_peer's list: the same noise and occlusion seeds, so the
+    # very frames docs/ekf.md scores.
+    picked = [i for i, s in enumerate(every) if s["family"] == "random" and s["length_scale"] == 1.0]
+    specs, vspecs = [every[i] for i in picked], ekf.validation_specs()
+    ekf.check_held_out(specs + vspecs)
+    recs, val = ekf.simulate(specs), ekf.simulate(vspecs)
+    tuning = ekf.tune_ekf(val, workers)
+    settings = {"ekf_default": ekf.EKF_DEFAULT, "ekf_tuned": tuning["chosen"]}
+    data = {
+        (i, c): ekf.condition(rec, i, *c)
+        for i, rec in zip(picked, recs, strict=True)
+        for c in TRACKER_CONDITIONS
+    }
+    jobs = [{"key": key, "meta": r.meta, "markers": r.markers, "ekf": settings} for key, r in data.items()]
+    refiner, jerk = ikid.load("wrist-track"), ikid.DEFAULT_JERK_NOISE
+    squared: dict[str, dict[str, dict[str, list[np.ndarray]]]] = {}
+    for res in ekf.pool_map(ekf.biorbd_job, jobs, workers):
+        rec, (lvl, occluded) = data[res["key"]], res["key"][1]
+        estimates = {
+            **{m: res[m] for m in settings},
+            "tracker": ekf.run_tracker(rec, jerk),
+            "tracker_refined": ekf.run_tracker(rec, jerk, refiner),
+        }
+        scored = slice(ekf.SKIP, len(rec))
+        cond = f"{lvl}{' occluded' if occluded else ''}"
+        for method, est in estimates.items():
+            cell = squared.setdefault(method, {}).setdefault(cond, {"q": [], "tau": []})
+            for k in ("q", "tau"):
+                err = est[k][scored] - getattr(rec, k)[scored]
+                if not np.isfinite(err).all():
+                    raise RuntimeError(f"{method} on {rec.name} ({cond}): non-finite {k} where scored")
+                cell[k].append(err**2)
+    rms = {
+        method: {
+            cond: {
+                "angle_deg": float(np.degrees(np.sqrt(np.mean(np.concatenate(c["q"]))))),
+                "torque_nm": float(np.sqrt(np.mean(np.concatenate(c["tau"])))),
+            }
+            for cond, c in conds.items()
+        }
+        for method, conds in squared.items()
+    }
+    ik, chain = ikid.load("wrist-ik"), ikid.load("wrist-chain")
+    lat_rec = ekf.D.add_noise(recs[0], "uniform", 0.01, ekf.NOISE_SEED + 99)
+    return {
+        "trials": [r.name for r in recs],
+        "frames": int(sum(len(r) for r in recs)),
+        "skip": ekf.SKIP,
+        "ekf": settings,
+        "jerk_noise": jerk,
+        "rms": rms,
+        "latency": {
+            "python": ekf.python_latency(lat_rec, ik, chain, refiner, jerk),
+            "rust": ekf.rust_latency(("tracker", "tracker_refined")),
+        },
+    }
+
+
+def tracker_table(t: dict) -> list[str]:
+    conds = list(next(iter(t["rms"].values())))
+    py, rs = t["latency"]["python"], t["latency"]["rust"]
+    nf_t, ef_t = t["ekf"]["ekf_tuned"]
+    rows = [
+        ("ekf_default", "biorbd EKF (default) + ID", py["ekf_id"], None, None),
+        ("ekf_tuned", f"biorbd EKF (tuned: {nf_t:g}/{ef_t:g}) + ID", py["ekf_id"], None, None),
+        ("tracker", "ikid Tracker", py["tracker"], py["tracker_rust_loop"], rs["tracker"]),
+        (
+            "tracker_refined",
+            "ikid Tracker + wrist-track",
+            py["tracker_refined"],
+            py["tracker_refined_rust_loop"],
+            rs["tracker_refined"],
+        ),
+    ]
+    lines = [
+        "### Markers → angles and torques (one causal step): ikid's Tracker beside biorbd's EKF + ID",
+        "",
+        f"The same frames for every method: {len(t['trials'])} held-out simulated trials "
+        "(`studies/ekf_peer.py`'s random multi-DoF family, default-size subject, shoulder at 0°, 45° "
+        "and −20°; "
+        f"{t['frames']} frames at 1 kHz), uniform noise of ±0/1/5 % of each marker coordinate's range, "
+        "and 5 % with one marker occluded in bursts; RMS over every frame after the first "
+        f"{t['skip']} of each trial. biorbd: `KalmanReconsMarkers` (its default, and the noise/error "
+        "factors ekf_peer tunes on its validation trials) then `InverseDynamics`; ikid: `ikid.Tracker` at "
+        f"`DEFAULT_JERK_NOISE` ({t['jerk_noise']:g}), bare and refined by the shipped `wrist-track`, one "
+        f"`push` giving q, q̇, q̈ and τ. Latency per frame, one thread: Python p50 / p99 ({ekf.LATENCY_ROUNDS} "
+        f"rounds of {ekf.LATENCY_FRAMES} frames of one trial at 1 % noise, median over rounds; both "
+        "settings of the EKF cost the same), the core's loop (`Tracker.run`, mean) and the Rust example "
+        f"(`latency.rs --tracker`, p50 / p99, median of {ekf.RUST_REPEATS} runs). These are docs/ekf.md's "
+        "frames for these trials; `make compare-ekf` has the full study (all sizes, the networks, "
+        "biorbd's least-squares IK, the criteria).",
+        "",
+        "| method | angle RMS ° "
+        + " | ".join(conds)
+        + " | torque RMS N·m "
+        + " | ".join(conds)
+        + " | Python µs p50 / p99 | Rust loop µs (mean) | Rust µs p50 / p99 | EKF + ID / this (Python p50) |",
+        "|---|" + "---|" * (2 * len(conds) + 4),
+    ]
+    for key, label, p, loop, r in rows:
+        cells = [f"{t['rms'][key][c]['angle_deg']:.3f}" for c in conds]
+        cells += [f"{t['rms'][key][c]['torque_nm']:.4f}" for c in conds]
+        cells.append(f"{p['p50_us']:.1f} / {p['p99_us']:.1f}")
+        cells.append(f"{loop['mean_us']:.2f}" if loop else "")
+        cells.append(f"{r['p50_us']:.2f} / {r['p99_us']:.2f}" if r else "")
+        cells.append(f"{py['ekf_id']['p50_us'] / p['p50_us']:.1f}×" if key.startswith("tracker") else "")
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    if "5%" in conds and "5% occluded" in conds:
+        cost = {
+            k: t["rms"][k]["5% occluded"]["torque_nm"] / t["rms"][k]["5%"]["torque_nm"]
+            for k in ("ekf_default", "ekf_tuned", "tracker", "tracker_refined")
+        }
+        lines += [
+            "",
+            "One marker occluded in bursts at 5 % noise, torque RMS over complete markers': "
+            f"biorbd EKF {cost['ekf_default']:.2f}× (default) / {cost['ekf_tuned']:.2f}× (tuned), ikid "
+            f"Tracker {cost['tracker']:.2f}×, Tracker + wrist-track {cost['tracker_refined']:.2f}×.",
+        ]
+    return lines
+
+
+def table(summary: dict) -> list[str]:
+    results, ghz = summary["networks"], summary["clock_ghz"]
+    cores = summary["cores"]
     peak_1 = 32 * ghz * 1e9  # f32 FLOP/s on one core: 2 FMA units x 8 lanes x 2
     lines = [
-        f"Generated by `make bench-peers` on {time.strftime('%Y-%m-%d %H:%M')} — {machine()}; "
+        f"Generated by `make bench-peers` on {summary['generated']} — {summary['machine']}; "
         f"clock {ghz:.2f} GHz.",
-        f"onnxruntime {ort.__version__}, torch {torch.__version__}, numpy {np.__version__}, "
-        f"ikid {ikid.__version__}.",
+        ", ".join(f"{name} {version}" for name, version in summary["versions"].items()) + ".",
         "",
         "### Single frame (p50 / p99, µs; one thread)",
         "",
@@ -318,17 +456,41 @@ def table(results: list[dict], ghz: float) -> list[str]:
 
 
 def main() -> None:
-    results = [measure(*n) for n in networks()]
-    (ROOT / "target" / "peers.json").write_text(json.dumps(results, indent=2))
-    lines = table(results, clock_ghz())
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--render", action="store_true", help=f"only rewrite the doc's section from {JSON} of an earlier run"
+    )
+    if parser.parse_args().render:
+        summary = json.loads(JSON.read_text(encoding="utf-8"))
+    else:
+        summary = {
+            "generated": time.strftime("%Y-%m-%d %H:%M"),
+            "machine": machine(),
+            "clock_ghz": clock_ghz(),
+            "cores": os.cpu_count() or 1,
+            "versions": {
+                "onnxruntime": ort.__version__,
+                "torch": torch.__version__,
+                "numpy": np.__version__,
+                "biorbd": ekf.biorbd.__version__,
+                "ikid": ikid.__version__,
+            },
+            "networks": [measure(*n) for n in networks()],
+            "tracker": tracker_vs_ekf(),
+        }
+        JSON.write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    lines = [*table(summary), "", *tracker_table(summary["tracker"])]
     doc = ROOT / "docs" / "performance.md"
-    text = doc.read_text() if doc.exists() else "# Performance\n"
+    # UTF-8 whatever the locale (make may run under LANG=C): the page has µ, ², →.
+    text = doc.read_text(encoding="utf-8") if doc.exists() else "# Performance\n"
     section = "\n".join([START, "## Peers (`make bench-peers`)", "", *lines, END])
     if START in text:
         text = re.sub(re.escape(START) + ".*?" + re.escape(END), lambda _: section, text, flags=re.S)
     else:
         text = text.rstrip() + "\n\n" + section + "\n"
-    doc.write_text(text)
+    doc.write_text(text, encoding="utf-8")
     print("\n".join(lines))
 
 
