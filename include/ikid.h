@@ -26,6 +26,10 @@
 // Frame status bit: an output no wrist can give; write it as missing, not as a number.
 #define IKID_FRAME_IMPLAUSIBLE 32
 
+// Frame status bit: a correcting model's correction was withheld (its window's posture or
+// speed beyond training): the output is the frame's per-frame solution.
+#define IKID_FRAME_PER_FRAME 64
+
 // Result of every fallible libikid call.
 typedef enum ikid_status {
   // Success.

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import ikid
-from ikid import io
+from ikid import _native, io
 from ikid.cli import main as cli
 from ikid.pipeline import run_model
 
@@ -236,16 +236,21 @@ def test_ik_command_on_c3d_and_trc_equals_the_python_api(trial, tmp_path):
         units="mm",
     )
     model = ikid.load("wrist-ik")
+    w = model.window
     want = model.predict(trial.markers)  # rows for frames window-1 ... n-1
     for src in ("trial.c3d", "trial.trc", "trial.csv"):
         out = tmp_path / f"{src}.mot"
         assert cli(["ik", str(tmp_path / src), "-o", str(out), "--map", str(tmp_path / "lab.toml")]) == 0
         t, q = io.read_mot(out)
-        assert len(q) == len(want)
-        np.testing.assert_allclose(t, trial.time[model.window - 1 :], atol=1e-6)
+        # A row for every frame: while the first window fills, the frame's per-frame solution
+        # (its markers' own angles; the IK model corrects those), then the network's.
+        assert len(q) == len(trial.markers)
+        np.testing.assert_allclose(t, trial.time, atol=1e-6)
         # Same frames as read back from the file: equal to the printed precision.
         frames = io.read_markers(tmp_path / src).frames(io.MarkerMap.load(tmp_path / "lab.toml"))
-        np.testing.assert_allclose(q, model.predict(frames), atol=1e-8)
+        np.testing.assert_allclose(q[w - 1 :], model.predict(frames), atol=1e-8)
+        np.testing.assert_allclose(q[: w - 1], _native.compute_features(frames[: w - 1], "angles"), atol=1e-7)
+        q = q[w - 1 :]
         # And the original frames: within the file's rounding (float32 or 1e-6 mm).
         np.testing.assert_allclose(q, want, atol=2e-5)
 

@@ -82,11 +82,13 @@ def test_ik_on_a_100hz_file_runs_the_100hz_model_at_the_files_frames(tmp_path, c
     out = capsys.readouterr().out
     assert "model wrist-ik-100hz (100 Hz) at the recording's rate" in out
     window = ikid.load("wrist-ik-100hz").window
-    # One row per frame once the window is full, at exactly the file's frame times.
-    np.testing.assert_allclose(t, trial.time[window - 1 :], atol=1e-9)
-    assert not status.any()
+    # One row per frame, at exactly the file's frame times: the first window's per-frame
+    # solutions (flagged), then the network's (nothing unusual on this clean trial).
+    np.testing.assert_allclose(t, trial.time, atol=1e-9)
+    assert (status[: window - 1] == ikid.FRAME_STATUS["per_frame"]).all()
+    assert not status[window - 1 :].any()
     # Measured: angle MSE 4.7e-06 rad² (0.12° RMS) on this clean held-out trial; bound ~2x.
-    mse = float(np.mean((q - trial.q[window - 1 :]) ** 2))
+    mse = float(np.mean((q - trial.q) ** 2))
     assert mse < 1e-5, mse
 
 
@@ -100,17 +102,19 @@ def test_a_missing_sample_at_100hz_stays_one_frame(tmp_path):
     markers = trial.markers.copy()
     markers[k, 9:12] = np.nan  # MC2, one frame
     t, _, status = _ik(tmp_path, trial.time, markers, 100.0)
-    window = ikid.load("wrist-ik-100hz").window
-    np.testing.assert_allclose(t, trial.time[window - 1 :], atol=1e-9)  # every frame has its row
-    flagged = t[status != 0]
+    np.testing.assert_allclose(t, trial.time, atol=1e-9)  # every frame has its row
+    flagged = t[status & ikid.FRAME_STATUS["filled"] != 0]
     np.testing.assert_allclose(flagged, [trial.time[k]], atol=1e-9)  # only that frame is filled
 
     markers = trial.markers.copy()
     markers[k] = np.nan  # the whole frame
-    t, _, _ = _ik(tmp_path, trial.time, markers, 100.0)
-    rows = set(np.round(t * 100).astype(int).tolist())
-    lost = sorted(set(range(window - 1, len(trial.time))) - rows)
-    assert lost[0] == k and lost[-1] <= k + window - 1, lost
+    t, _, status = _ik(tmp_path, trial.time, markers, 100.0)
+    rows = np.round(t * 100).astype(int)
+    lost = sorted(set(range(len(trial.time))) - set(rows.tolist()))
+    assert lost == [k], lost  # that frame only: the refilling window gives per-frame solutions
+    window = ikid.load("wrist-ik-100hz").window
+    refill = (rows > k) & (rows < k + window)
+    assert (status[refill] & ikid.FRAME_STATUS["per_frame"] != 0).all()
     # Through --resample to 1 kHz, the same frame lost is more: input missing on both sides.
     r = pipeline.run_model(ikid.load("wrist-ik"), markers, trial.time, resample_to_model=True)
     missing_input = r.refused.total() - r.refused["window filling"]

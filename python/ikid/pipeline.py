@@ -243,13 +243,17 @@ def run_model(
     calibration: _native.Calibration | None = None,
     source: str = "frames",
     progress: bool = False,
+    early_outputs: bool | None = None,
 ) -> Run:
     """Run ``model`` over ``frames`` ``(n, frame_len)`` at ``time`` ``(n,)`` seconds; with a
     ``calibration`` (see :func:`ikid.calibrate`), for this subject's marker placement.
 
     ``model`` is a loaded model, a file, or a shipped name; a family name (``"wrist-ik"``) runs
     the family's model for the recording's rate (:func:`pick_model`; :attr:`Run.model_name` says
-    which). ``rate_hz`` defaults to the median of the time steps."""
+    which). ``rate_hz`` defaults to the median of the time steps. ``early_outputs`` (default:
+    whenever the model corrects its newest frame's features, as the IK models do): while a
+    window fills (the first frames, and after a time gap) each frame gets its per-frame
+    solution, flagged ``per_frame``, so every frame has an output."""
     frames = np.asarray(frames, np.float64)
     time = np.asarray(time, np.float64)
     if frames.ndim != 2 or time.shape != (len(frames),):
@@ -262,7 +266,13 @@ def run_model(
     model, how = pick_model(model, rate_hz, resample_to_model=resample_to_model, source=source)
     if rate_hz is None:
         rate_hz = model.frame_rate_hz
-    kw: dict[str, Any] = {"missing_markers": missing_markers, "calibration": calibration}
+    if early_outputs is None:
+        early_outputs = model.card.get("output_offset") is not None
+    kw: dict[str, Any] = {
+        "missing_markers": missing_markers,
+        "calibration": calibration,
+        "early_outputs": early_outputs,
+    }
     bar = _progress(len(frames), source) if progress else None
     try:
         if how == "at_frames":

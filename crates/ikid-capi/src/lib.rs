@@ -39,6 +39,9 @@ pub const IKID_FRAME_HELD: u32 = 8;
 pub const IKID_FRAME_OUTSIDE_TRAINING: u32 = 16;
 /// Frame status bit: an output no wrist can give; write it as missing, not as a number.
 pub const IKID_FRAME_IMPLAUSIBLE: u32 = 32;
+/// Frame status bit: a correcting model's correction was withheld (its window's posture or
+/// speed beyond training): the output is the frame's per-frame solution.
+pub const IKID_FRAME_PER_FRAME: u32 = 64;
 
 // cbindgen writes literals only: the values above are the core's (ikid::status), checked here.
 const _: () = {
@@ -49,5 +52,6 @@ const _: () = {
     assert!(IKID_FRAME_HELD == status::HELD as u32);
     assert!(IKID_FRAME_OUTSIDE_TRAINING == status::OUTSIDE_TRAINING as u32);
     assert!(IKID_FRAME_IMPLAUSIBLE == status::IMPLAUSIBLE as u32);
-    assert!(status::ALL.len() == 6);
+    assert!(IKID_FRAME_PER_FRAME == status::PER_FRAME as u32);
+    assert!(status::ALL.len() == 7);
 };

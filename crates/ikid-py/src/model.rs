@@ -188,10 +188,18 @@ impl Model {
 
     /// A new frame-by-frame stream over this model; `missing_markers` (`"refuse"` or
     /// `"fill"`) overrides the card's policy; `calibration` (a `Calibration`) moves each
-    /// frame's markers to the body model's placement before the network sees them.
-    #[pyo3(signature = (missing_markers = None, calibration = None))]
-    fn stream(&self, missing_markers: Option<&str>, calibration: Option<PyRef<'_, Calibration>>) -> PyResult<Stream> {
+    /// frame's markers to the body model's placement before the network sees them;
+    /// `early_outputs` (correcting models only): the per-frame solution, flagged `per_frame`,
+    /// for every frame while the window fills.
+    #[pyo3(signature = (missing_markers = None, calibration = None, early_outputs = false))]
+    fn stream(
+        &self,
+        missing_markers: Option<&str>,
+        calibration: Option<PyRef<'_, Calibration>>,
+        early_outputs: bool,
+    ) -> PyResult<Stream> {
         let mut inner = self.inner.stream();
+        inner.set_early_outputs(early_outputs).py_err()?;
         if let Some(name) = missing_markers {
             let policy = ikid::MissingMarkers::from_name(name).map_err(|e| input(e.to_string()))?;
             inner.set_missing_markers(policy).py_err()?;

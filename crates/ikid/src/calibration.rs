@@ -453,13 +453,13 @@ impl Calibration {
             }
         };
         let mut hand = forearm * neutral;
-        if let (Some(trial), Some(report)) = (landmarks, landmark_report.as_mut()) {
-            if trial.hand_landmarks.is_some() {
-                let (own, mut hand_report) = hand_from_landmarks(trial, side)?;
-                hand_report.neutral_offset_deg = angle_deg(&(own * hand.inverse()));
-                hand = own;
-                report.hand = Some(hand_report);
-            }
+        if let (Some(trial), Some(report)) = (landmarks, landmark_report.as_mut())
+            && trial.hand_landmarks.is_some()
+        {
+            let (own, mut hand_report) = hand_from_landmarks(trial, side)?;
+            hand_report.neutral_offset_deg = angle_deg(&(own * hand.inverse()));
+            hand = own;
+            report.hand = Some(hand_report);
         }
         let report = CalibrationReport {
             method,

@@ -29,14 +29,21 @@ pub const OUTSIDE_TRAINING: u8 = 16;
 /// [`RANGE_MARGIN_RAD`], or outside the model's output envelope by more than its own width).
 pub const IMPLAUSIBLE: u8 = 32;
 
+/// A correcting model's correction was not applied: the output is the per-frame solution (the
+/// newest frame's own features, e.g. its angles read from the markers alone), because the
+/// window's posture or its speed lies beyond what the model was trained on, or (a stream with
+/// [`early outputs`](crate::Stream::set_early_outputs)) the window is still filling.
+pub const PER_FRAME: u8 = 64;
+
 /// Every bit with its name (the CLI's legend and the bindings' constant tables).
-pub const ALL: [(u8, &str); 6] = [
+pub const ALL: [(u8, &str); 7] = [
     (FILLED, "filled"),
     (REJECTED_MARKER, "rejected_marker"),
     (RESTARTED, "restarted"),
     (HELD, "held"),
     (OUTSIDE_TRAINING, "outside_training"),
     (IMPLAUSIBLE, "implausible"),
+    (PER_FRAME, "per_frame"),
 ];
 
 /// How far beyond a coordinate's anatomical range ([`crate::body::COORDINATES`]) an angle may

@@ -52,6 +52,8 @@ pub struct Stream {
     pushed: usize,
     /// [`status`] bits of the last output.
     status: u8,
+    /// Give the per-frame solution while the window fills (correcting models only).
+    early_outputs: bool,
 }
 
 impl Model {
@@ -82,6 +84,7 @@ impl Stream {
             calibration: None,
             pushed: 0,
             status: 0,
+            early_outputs: false,
             model,
         }
     }
@@ -138,6 +141,31 @@ impl Stream {
     /// The calibration this stream applies, if any.
     pub fn calibration(&self) -> Option<&Calibration> {
         self.calibration.as_ref()
+    }
+
+    /// With `true`, a correcting model's stream (card `output_offset = "newest_features"`)
+    /// gives an output for every accepted frame while its window fills (from the first frame,
+    /// and again after a restart): the frame's per-frame solution, its own features (e.g. the
+    /// angles its markers give), flagged [`status::PER_FRAME`]. Offline runs use it so that
+    /// every frame has an output; a live stream may prefer to wait for the network. Refused
+    /// for a model without that offset (it has no per-frame solution).
+    pub fn set_early_outputs(&mut self, early: bool) -> Result<()> {
+        if early && self.model.net().offset().is_none() {
+            return Err(Error::BadArgument {
+                what: "early outputs",
+                detail: format!(
+                    "model {:?} does not correct its newest frame's features, so it has no per-frame solution to give",
+                    self.model.card().name
+                ),
+            });
+        }
+        self.early_outputs = early;
+        Ok(())
+    }
+
+    /// Whether this stream gives early outputs ([`set_early_outputs`](Self::set_early_outputs)).
+    pub fn early_outputs(&self) -> bool {
+        self.early_outputs
     }
 
     /// Markers filled in the last accepted frame (bit `i` = [`crate::body::MARKERS`]`[i]`; 0
@@ -222,17 +250,25 @@ impl Stream {
         self.ring[self.head * nf..(self.head + 1) * nf].copy_from_slice(&self.incoming);
         self.head = (self.head + 1) % w;
         self.filled = (self.filled + 1).min(w);
+        let filled = if self.filled_mask != 0 { status::FILLED } else { 0 };
         if self.filled < w {
-            return Ok(None);
+            if !self.early_outputs {
+                return Ok(None);
+            }
+            // The per-frame solution: the offset's features, as a withheld correction gives.
+            let n = self.output.len();
+            self.output.copy_from_slice(&self.incoming[..n]);
+            self.status = filled | status::PER_FRAME | self.model.frame_status(&self.incoming, &self.output);
+            return Ok(Some(&self.output));
         }
         // Unroll the ring oldest-first: rows head.. then ..head.
         let split = self.head * nf;
         let tail = self.ring.len() - split;
         self.input[..tail].copy_from_slice(&self.ring[split..]);
         self.input[tail..].copy_from_slice(&self.ring[..split]);
-        self.model.net().run(&self.input, &mut self.scratch, &mut self.output, index)?;
-        let filled = if self.filled_mask != 0 { status::FILLED } else { 0 };
-        self.status = filled | self.model.frame_status(&self.incoming, &self.output);
+        let corrected = self.model.net().run(&self.input, &mut self.scratch, &mut self.output, index)?;
+        let per_frame = if corrected { 0 } else { status::PER_FRAME };
+        self.status = filled | per_frame | self.model.frame_status(&self.incoming, &self.output);
         Ok(Some(&self.output))
     }
 
@@ -367,7 +403,8 @@ impl Stream {
 
     /// [`status`] bits of the last prediction (valid after a `push` that returned `Some`):
     /// [`status::FILLED`], [`status::OUTSIDE_TRAINING`] (the newest frame's features beyond
-    /// the model's training envelope), [`status::IMPLAUSIBLE`] (an output far beyond it).
+    /// the model's training envelope), [`status::IMPLAUSIBLE`] (an output far beyond it),
+    /// [`status::PER_FRAME`] (a correcting model's correction withheld, or an early output).
     pub fn status(&self) -> u8 {
         self.status
     }

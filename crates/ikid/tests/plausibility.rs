@@ -14,6 +14,7 @@ fn enveloped() -> Model {
     card.envelope = Some(Envelope {
         inputs: Bounds { min: vec![-1.0; 9], max: vec![1.0; 9] },
         outputs: Bounds { min: vec![-2.0; 3], max: vec![2.0; 3] },
+        window_spread: None,
     });
     Model::from_parts(card, m.mlp().clone()).unwrap()
 }
@@ -164,6 +165,7 @@ fn a_correcting_model_gives_the_per_frame_solution_where_its_window_is_beyond_tr
     card.envelope = Some(Envelope {
         inputs: Bounds { min: vec![-0.5; 3], max: vec![0.5; 3] },
         outputs: Bounds { min: vec![-0.5; 3], max: vec![0.5; 3] },
+        window_spread: None,
     });
     let model = Model::from_parts(card, plain.mlp().clone()).unwrap();
     let body = BodyModel::default();
@@ -186,4 +188,76 @@ fn a_correcting_model_gives_the_per_frame_solution_where_its_window_is_beyond_tr
         let last = frames.chunks_exact(18).filter_map(|f| stream.push(f).unwrap().map(<[f32]>::to_vec)).last();
         assert_eq!(last.unwrap(), out.to_vec(), "{q:?}");
     }
+}
+
+#[test]
+fn a_correcting_model_gives_the_per_frame_solution_where_its_window_moves_faster_than_training() {
+    // Trained (its card says) on windows whose flexion spread at most 0.2 rad: a window moving
+    // 0.3 rad gets the newest frame's angles alone, flagged per_frame; 0.21 (within the 10 %
+    // margin) is corrected.
+    let plain = random_model(FeatureSet::Angles, 6, &[16], 3, 22);
+    let mut card = plain.card().clone();
+    card.output_offset = Some(ikid::model::NEWEST_FEATURES.into());
+    card.envelope = Some(Envelope {
+        inputs: Bounds { min: vec![-1.0; 3], max: vec![1.0; 3] },
+        outputs: Bounds { min: vec![-1.0; 3], max: vec![1.0; 3] },
+        window_spread: Some(vec![0.5, 0.2, 0.5]),
+    });
+    let model = Model::from_parts(card, plain.mlp().clone()).unwrap();
+    let body = BodyModel::default();
+    for (sweep, corrected) in [(0.3, false), (0.21, true), (0.0, true)] {
+        let q: Vec<f64> = (0..6).flat_map(|i| [0.1, 0.1 + sweep * i as f64 / 5.0, 0.05]).collect();
+        let frames: Vec<f32> = body.marker_frames(&q, 0.0).unwrap().iter().map(|&v| v as f32).collect();
+        let mut plain_out = [0f32; 3];
+        plain.predict(&frames, &mut plain_out).unwrap();
+        let mut angles = [0f32; 3];
+        FeatureSet::Angles.compute(&frames[5 * 18..], &mut angles, 0).unwrap();
+        let mut stream = model.stream();
+        let last = frames.chunks_exact(18).filter_map(|f| stream.push(f).unwrap().map(<[f32]>::to_vec)).last();
+        let out = last.unwrap();
+        for k in 0..3 {
+            let want = if corrected { plain_out[k] + angles[k] } else { angles[k] };
+            assert_eq!(out[k].to_bits(), want.to_bits(), "sweep {sweep} output {k}");
+        }
+        assert_eq!(stream.status() & status::PER_FRAME != 0, !corrected, "sweep {sweep}");
+        let mut batch = [0f32; 3];
+        model.predict(&frames, &mut batch).unwrap();
+        assert_eq!(batch.to_vec(), out, "predict agrees, sweep {sweep}");
+    }
+    // A spread of the wrong length is refused when the model is read.
+    let mut card = model.card().clone();
+    card.envelope.as_mut().unwrap().window_spread = Some(vec![0.5; 2]);
+    let e = Model::from_parts(card, plain.mlp().clone()).unwrap_err().to_string();
+    assert!(e.contains("window_spread has 2 values, expected 3"), "{e}");
+}
+
+#[test]
+fn early_outputs_give_the_per_frame_solution_while_the_window_fills() {
+    let plain = random_model(FeatureSet::Angles, 6, &[16], 3, 23);
+    let mut card = plain.card().clone();
+    card.output_offset = Some(ikid::model::NEWEST_FEATURES.into());
+    let model = Model::from_parts(card, plain.mlp().clone()).unwrap();
+    let body = BodyModel::default();
+    let q: Vec<f64> = (0..8).flat_map(|i| [0.1, 0.02 * i as f64, -0.05]).collect();
+    let frames: Vec<f32> = body.marker_frames(&q, 0.0).unwrap().iter().map(|&v| v as f32).collect();
+    let mut late = model.stream();
+    let mut early = model.stream();
+    early.set_early_outputs(true).unwrap();
+    for (i, f) in frames.chunks_exact(18).enumerate() {
+        let waited = late.push(f).unwrap().map(<[f32]>::to_vec);
+        let got = early.push(f).unwrap().map(<[f32]>::to_vec).expect("an output for every frame");
+        if i < 5 {
+            assert!(waited.is_none());
+            let mut angles = [0f32; 3];
+            FeatureSet::Angles.compute(f, &mut angles, 0).unwrap();
+            assert_eq!(got, angles.to_vec(), "frame {i}: the frame's own angles");
+            assert_ne!(early.status() & status::PER_FRAME, 0, "frame {i} flagged");
+        } else {
+            assert_eq!(Some(got), waited, "frame {i}: the network once the window is full");
+            assert_eq!(early.status() & status::PER_FRAME, 0);
+        }
+    }
+    // A model with no per-frame solution refuses early outputs.
+    let e = plain.stream().set_early_outputs(true).unwrap_err().to_string();
+    assert!(e.contains("no per-frame solution"), "{e}");
 }

@@ -53,6 +53,11 @@ pub struct Envelope {
     pub inputs: Bounds,
     /// Per output.
     pub outputs: Bounds,
+    /// Per feature, the largest spread (max − min) within one training window: how fast the
+    /// model saw each feature move. A correcting model (`output_offset`) does not correct a
+    /// window that spreads further (see [`crate::net::NewestFeatures`]). Absent in older files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub window_spread: Option<Vec<f64>>,
 }
 
 /// The model card: what the network is, how to feed it, where it came from.
@@ -260,6 +265,21 @@ impl ModelCard {
                 }
                 if let Some(i) = (0..n).find(|&i| !bounds.max[i].is_finite()) {
                     return bad(format!("field \"envelope\".{what}[{i}] has a non-finite max"));
+                }
+            }
+            if let Some(spread) = &envelope.window_spread {
+                if spread.len() != set.feature_len() {
+                    return bad(format!(
+                        "field \"envelope\".window_spread has {} values, expected {} (one per feature)",
+                        spread.len(),
+                        set.feature_len()
+                    ));
+                }
+                if let Some(i) = spread.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+                    return bad(format!(
+                        "field \"envelope\".window_spread[{i}] is {}, expected a finite spread >= 0",
+                        spread[i]
+                    ));
                 }
             }
         }

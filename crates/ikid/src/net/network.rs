@@ -18,6 +18,10 @@ pub struct NewestFeatures {
     /// be added; outside it the output is the newest frame's features alone. `None`: always
     /// corrected.
     pub trained: Option<(Vec<f32>, Vec<f32>)>,
+    /// Per feature, the largest spread (max − min) within the window for the correction to be
+    /// added: a window moving faster than any the model was trained on gets the newest frame's
+    /// features alone. `None`: no limit.
+    pub spread: Option<Vec<f32>>,
 }
 
 /// A packed MLP with its output offset and the finiteness check: the one forward pass of a
@@ -66,12 +70,14 @@ impl Network {
     /// The outputs for one window (whole frames' features, oldest first) into `out`
     /// ([`PackedMlp::n_outputs`] values): forward pass, offset, check. A non-finite output is
     /// [`Error::NonFiniteOutput`] naming `frame` (the caller's number for the window's newest
-    /// frame); `out` then holds it. Does not allocate.
+    /// frame); `out` then holds it. Returns false if a correcting model's correction was
+    /// withheld (the output is the newest frame's features: see [`NewestFeatures`]), true
+    /// otherwise. Does not allocate.
     ///
     /// # Panics
     /// If a length does not match this network (callers check lengths first).
     #[inline]
-    pub fn run(&self, window: &[f32], scratch: &mut Scratch, out: &mut [f32], frame: usize) -> Result<()> {
+    pub fn run(&self, window: &[f32], scratch: &mut Scratch, out: &mut [f32], frame: usize) -> Result<bool> {
         self.packed.forward(window, scratch, out);
         self.finish(window, out, frame)
     }
@@ -100,15 +106,14 @@ impl Network {
         Ok(())
     }
 
-    /// Adds the offset to the network's outputs `out` for `window` and checks them.
+    /// Adds the offset to the network's outputs `out` for `window` and checks them; false if
+    /// the correction was withheld.
     #[inline]
-    fn finish(&self, window: &[f32], out: &mut [f32], frame: usize) -> Result<()> {
-        if let Some(offset) = &self.offset {
-            offset.apply(window, out);
-        }
+    fn finish(&self, window: &[f32], out: &mut [f32], frame: usize) -> Result<bool> {
+        let corrected = self.offset.as_ref().is_none_or(|offset| offset.apply(window, out));
         match out.iter().find(|v| !v.is_finite()) {
             Some(&value) => Err(Error::NonFiniteOutput { frame, value }),
-            None => Ok(()),
+            None => Ok(corrected),
         }
     }
 }
@@ -124,20 +129,37 @@ impl NewestFeatures {
     /// pyomeca 2.2° → 2.0°; on simulated held-out trials at 1 and 5 % noise the MSE is unchanged
     /// to 3 digits (no margin: +17 % and +40 %; a per-frame rule: up to 2.6×, noisy frames stray
     /// past the clean training range).
+    ///
+    /// Nor was it learned at every speed: a window whose features spread further than any
+    /// training window's ([`spread`](Self::spread)) gets the newest frame's features too. Real
+    /// wheelchair racing turns the forearm 60° in 40 ms, three times faster than any simulated
+    /// trial: corrected anyway, those returns cost 10–20° transients.
+    ///
+    /// Returns false when the correction was withheld.
     #[inline]
-    fn apply(&self, window: &[f32], out: &mut [f32]) {
+    fn apply(&self, window: &[f32], out: &mut [f32]) -> bool {
         let nf = self.features;
         let newest = &window[window.len() - nf..];
-        let untrained = self.trained.as_ref().is_some_and(|(lo, hi)| {
-            let frames = (window.len() / nf) as f32;
-            (0..nf).any(|k| {
-                let mean = window.iter().skip(k).step_by(nf).sum::<f32>() / frames;
-                !(mean >= lo[k] && mean <= hi[k])
-            })
+        let frames = (window.len() / nf) as f32;
+        let untrained = (0..nf).any(|k| {
+            let (mut sum, mut lo, mut hi) = (0.0f32, f32::INFINITY, f32::NEG_INFINITY);
+            for &v in window.iter().skip(k).step_by(nf) {
+                sum += v;
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+            let mean = sum / frames;
+            let beyond_posture = self.trained.as_ref().is_some_and(|(tlo, thi)| !(mean >= tlo[k] && mean <= thi[k]));
+            // Not within the limit (a NaN spread is not): beyond, as a NaN mean is.
+            let beyond_speed = self.spread.as_ref().is_some_and(|s| {
+                !matches!((hi - lo).partial_cmp(&s[k]), Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal))
+            });
+            beyond_posture || beyond_speed
         });
         for (o, f) in out.iter_mut().zip(newest) {
             *o = if untrained { *f } else { *o + f };
         }
+        !untrained
     }
 }
 
@@ -170,7 +192,7 @@ mod tests {
             (Some(wide), [plain[0] + newest[0], plain[1] + newest[1], plain[2] + newest[2]]),
             (Some(narrow), [newest[0], newest[1], newest[2]]),
         ] {
-            let (with, _, _) = network(Some(NewestFeatures { features: nf, trained }));
+            let (with, _, _) = network(Some(NewestFeatures { features: nf, trained, spread: None }));
             let mut out = [0f32; 3];
             with.run(window, &mut with.scratch(), &mut out, 4).unwrap();
             assert_eq!(out, want);
@@ -180,7 +202,7 @@ mod tests {
     #[test]
     fn run_batch_equals_run_and_names_the_first_bad_frame() {
         let nf = FeatureSet::Angles.feature_len();
-        let (net, mut features, _) = network(Some(NewestFeatures { features: nf, trained: None }));
+        let (net, mut features, _) = network(Some(NewestFeatures { features: nf, trained: None, spread: None }));
         let windows: [&[f32]; BATCH] = std::array::from_fn(|s| &features[s * nf..(s + 5) * nf]);
         let mut batched = vec![0f32; BATCH * 3];
         net.run_batch(windows, &mut net.batch_scratch(), &mut batched, 100).unwrap();
