@@ -125,6 +125,25 @@ def test_occlusion_bursts_hide_one_marker_at_a_time_after_the_warmup():
     assert np.abs(filled - rec.markers).max() < 1e-4  # clean: back within 0.1 mm
 
 
+def test_gaps_are_filled_at_the_recordings_rate():
+    """Training fills missing markers with the core's filler at the recording's own rate (its
+    time constants are in seconds), not as if every recording were 1 kHz."""
+    rec = D.simulate_one({"name": "g", "protocol": "random", "seed": 11, "duration": 8.0, "output_every": 10})
+    rec = D.add_noise(rec, "uniform", 0.05, 3)  # noisy: the joint-centre smoothing (10 ms) matters
+    assert rec.meta["rate_hz"] == 100.0
+    markers = rec.markers.copy()
+    markers[500:520, 9:12] = np.nan  # MC2 missing for 0.2 s
+    at_rate = ikid.fill_gaps(markers, unfillable="keep", rate_hz=100.0)[0]
+    as_1k = ikid.fill_gaps(markers, unfillable="keep", rate_hz=1000.0)[0]
+    assert np.abs(at_rate[500:520] - as_1k[500:520]).max() > 1e-4  # the rate changes the fill here
+    features = D.features(rec.with_markers(markers), "ik", "markers")
+    np.testing.assert_array_equal(features, ikid.compute_features(at_rate, "markers"))
+    # Occlusion puts back what the filler at this rate cannot fill (none here, after 2 s).
+    occluded = D.add_occlusion(rec, 1.0, 0.05, 0.3, seed=4, warmup_s=2.0)
+    missing = np.isnan(occluded.markers).any(axis=1)
+    assert missing.any() and (ikid.fill_gaps(occluded.markers, "keep", 100.0)[1][missing] != 0).all()
+
+
 def test_an_occlusion_config_trains_a_fill_model(tmp_path):
     cfg_path = tmp_path / "occ.toml"
     cfg_path.write_text("""

@@ -168,7 +168,7 @@ def load_lab_recordings(
             markers, q, tau = table[:, :18], table[:, 18:21], table[:, 21:24]
             rate = rate_hz
         rates[path.name] = rate
-        filled, _ = ikid.fill_gaps(markers, unfillable="keep")
+        filled, _ = ikid.fill_gaps(markers, unfillable="keep", rate_hz=rate)  # its time constants are in s
         usable = np.isfinite(filled).all(axis=1) & np.isfinite(q).all(axis=1)
         # Contiguous runs of usable frames.
         edges = np.flatnonzero(np.diff(np.concatenate([[0], usable.astype(np.int8), [0]])))

@@ -123,7 +123,7 @@ def add_occlusion(
         f += length + 1 + int(rng.exponential(gap_mean))
     # Bursts the gap filler cannot fill yet (joint centre not located) are put back: a stream
     # would refuse those frames, so they teach nothing.
-    _, filled = ikid.fill_gaps(markers, unfillable="keep")
+    _, filled = ikid.fill_gaps(markers, unfillable="keep", rate_hz=rate)
     unfillable = np.isnan(markers).any(axis=1) & (filled == 0)
     markers[unfillable] = rec.markers[unfillable]
     return rec.with_markers(
@@ -139,7 +139,9 @@ def features(rec: Recording, task: str, feature_set: str) -> np.ndarray:
     first filled by the core's gap filler, as a ``"fill"`` stream does."""
     frames = rec.frames(feature_set)
     if ikid.feature_set_info(feature_set)["frame_kind"] == "markers" and np.isnan(frames).any():
-        filled = ikid.fill_gaps(frames, unfillable="keep")[0]
+        # At the recording's rate: the filler's time constants are in seconds.
+        rate = float(rec.meta.get("rate_hz", 1000.0))
+        filled = ikid.fill_gaps(frames, unfillable="keep", rate_hz=rate)[0]
         # A complete frame the filler takes for a jump (at 100 Hz a fast reach can move 8x the
         # segment's RMS step in one frame) keeps its own markers: training learns the motion.
         frames = np.where(np.isnan(filled) & ~np.isnan(frames), frames, filled)

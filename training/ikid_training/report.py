@@ -243,7 +243,9 @@ def occlusion_section(rep: Report, model: ikid.Model, recs: list[D.Recording]) -
 
     def ref(r: D.Recording) -> np.ndarray:
         filled = (
-            r.with_markers(ikid.fill_gaps(r.markers)[0].astype(np.float64))
+            r.with_markers(
+                ikid.fill_gaps(r.markers, rate_hz=float(r.meta.get("rate_hz", 1000.0)))[0].astype(np.float64)
+            )
             if np.isnan(r.markers).any()
             else r
         )
