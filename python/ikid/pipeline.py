@@ -81,6 +81,9 @@ class Run:
     #: True if the recording was resampled to the model's rate and the outputs taken at the
     #: recording's own frame times (``rate_hz`` is then the recording's).
     at_recording_frames: bool = False
+    #: True for each output row given while the stream's window was filling (an early output:
+    #: the per-frame solution).
+    filling: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     def flagged(self, bit: str) -> int:
         """Output rows carrying status bit ``bit`` (an ``ikid.FRAME_STATUS`` name)."""
@@ -88,9 +91,14 @@ class Run:
 
     @property
     def clean(self) -> bool:
-        """True if every frame has an output and none is flagged: what ``--strict`` asks."""
+        """True if every frame has an output and none is flagged: what ``--strict`` asks. The
+        window's filling is not a flaw: its frames may lack an output, or carry the per-frame
+        solution (``per_frame`` and nothing else)."""
         lost = sum(n for reason, n in self.refused.items() if reason != "window filling")
-        return lost == 0 and not self.status.any()
+        flagged = self.status.copy()
+        if len(self.filling):
+            flagged[self.filling & (flagged == _native.FRAME_STATUS["per_frame"])] = 0
+        return lost == 0 and not flagged.any()
 
     def summary(self) -> str:
         parts = [f"{len(self.time)}/{self.n_frames} frames with output"]
@@ -98,6 +106,13 @@ class Run:
             parts.append(f"{int(self.filled.sum())} with a filled marker")
         if self.flagged("outside_training"):
             parts.append(f"{self.flagged('outside_training')} outside the model's training range (flagged)")
+        if self.flagged("per_frame"):
+            early = int(np.count_nonzero(self.filling)) if len(self.filling) else 0
+            beyond = self.flagged("per_frame") - early
+            parts.append(
+                f"{self.flagged('per_frame')} per-frame solutions (flagged: {early} while the window filled, "
+                f"{beyond} where the window's posture or speed was beyond training)"
+            )
         for reason, n in self.refused.most_common():
             example = self.examples.get(reason)
             explained = any(w in reason for w in _SELF_EXPLAINED) or not example
@@ -286,7 +301,7 @@ def run_model(
         for i, (t, frame) in enumerate(zip(time, frames, strict=True)):
             if bar is not None and i % 1000 == 999:
                 bar.update(1000)
-            tally.add(i, _push(stream, t, frame))
+            tally.add(i, _push(stream, t, frame, model.window))
         return tally.run(model, time, rate_hz, resampled_from, stream.gap_restarts)
     finally:
         if bar is not None:
@@ -302,16 +317,18 @@ class _Tally:
         self.index: list[int] = []
         self.filled: list[bool] = []
         self.status: list[int] = []
+        self.filling: list[bool] = []
         self.refused: Counter = Counter()
         self.examples: dict[str, str] = {}
 
     def add(self, i: int, outcome: tuple) -> None:
         if outcome[0] == "out":
-            _, values, filled, status = outcome
+            _, values, filled, status, filling = outcome
             self.rows.append(values)
             self.index.append(i)
             self.filled.append(filled)
             self.status.append(status)
+            self.filling.append(filling)
         else:
             _, reason, example = outcome
             self.refused[reason] += 1
@@ -336,12 +353,13 @@ class _Tally:
             model.name,
             model.frame_rate_hz,
             at_frames,
+            np.array(self.filling, bool),
         )
 
 
-def _push(stream: _native.Stream, t: float, frame: np.ndarray) -> tuple:
-    """One frame through ``stream``: ``("out", values, filled, status)`` or ``("none", reason,
-    example message or None)``."""
+def _push(stream: _native.Stream, t: float, frame: np.ndarray, window: int) -> tuple:
+    """One frame through ``stream``: ``("out", values, filled, status, filling)`` (``filling``:
+    an early output, the window not yet full) or ``("none", reason, example message or None)``."""
     try:
         out = stream.push(frame, time=float(t))
     except _native.InputError as e:
@@ -352,7 +370,7 @@ def _push(stream: _native.Stream, t: float, frame: np.ndarray) -> tuple:
         # Nothing no wrist can give is written as a number: the frame is counted instead.
         reason = "implausible outputs (far outside the model's training range), not written"
         return ("none", reason, np.array2string(np.asarray(out), precision=3))
-    return ("out", out, bool(stream.filled_markers), stream.status)
+    return ("out", out, bool(stream.filled_markers), stream.status, stream.filled < window)
 
 
 def _run_at_recording_frames(
@@ -385,7 +403,7 @@ def _run_at_recording_frames(
         frame_at = dict(zip(at.tolist(), members.tolist(), strict=True))
         stream = model.stream(**kw)
         for k in np.flatnonzero(valid):
-            outcome = _push(stream, grid_t[k], values[k])
+            outcome = _push(stream, grid_t[k], values[k], model.window)
             i = frame_at.get(int(k))
             if i is not None:
                 outcomes[i] = outcome

@@ -131,17 +131,31 @@ def card_for(spec: ModelSpec, activations: Sequence[str]) -> dict[str, Any]:
     }
 
 
-def envelope_of(windows: np.ndarray, feature_len: int, outputs: np.ndarray) -> dict[str, Any]:
+def envelope_of(
+    windows: np.ndarray, feature_len: int, outputs: np.ndarray, seen: Sequence[np.ndarray] = ()
+) -> dict[str, Any]:
     """The card's ``envelope``: each per-frame feature's range over every frame of the
     training ``windows`` ``(n, window × feature_len)``, and each output's over ``outputs``
-    ``(n, n_outputs)`` (SI, what the model gives)."""
+    ``(n, n_outputs)`` (SI, what the model gives); ``window_change`` (:func:`window_change`) over
+    ``windows`` and the windows in ``seen`` (e.g. the noisy ones the network trained on)."""
     per_frame = np.asarray(windows, np.float64).reshape(-1, feature_len)
     outputs = np.asarray(outputs, np.float64)
 
     def bounds(a: np.ndarray) -> dict[str, list[float]]:
         return {"min": a.min(0).tolist(), "max": a.max(0).tolist()}
 
-    return {"inputs": bounds(per_frame), "outputs": bounds(outputs)}
+    change = np.max([window_change(w, feature_len) for w in (windows, *seen)], axis=0)
+    return {"inputs": bounds(per_frame), "outputs": bounds(outputs), "window_change": change.tolist()}
+
+
+def window_change(windows: np.ndarray, feature_len: int) -> np.ndarray:
+    """Each feature's largest change of its mean from the older half of one of ``windows``
+    ``(n, window × feature_len)`` to its newer half (``window // 2`` frames each): how fast the
+    training data moved it, noise averaged out (the core's ``NewestFeatures`` compares a
+    window's against it)."""
+    w = np.asarray(windows, np.float64).reshape(len(windows), -1, feature_len)
+    half = max(w.shape[1] // 2, 1)
+    return np.abs(w[:, w.shape[1] - half :].mean(axis=1) - w[:, :half].mean(axis=1)).max(axis=0)
 
 
 def envelope_from_scaling(card: Mapping[str, Any], tensors: Mapping[str, np.ndarray]) -> dict[str, Any]:
@@ -315,6 +329,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     p = argparse.ArgumentParser(prog="python -m ikid_training.export")
     p.add_argument("--restamp", nargs="+", required=True, metavar="FILE")
+    p.add_argument(
+        "--change",
+        action="store_true",
+        help="also give the envelope its window_change, from the model's training data rebuilt from its "
+        "shipped config (ikid_training/configs/<name>.toml, the same seeds and noise as training)",
+    )
     args = p.parse_args(argv)
     for f in args.restamp:
         card = dict(_native.Model.load(Path(f)).card)
@@ -325,6 +345,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         except ValueError as e:
             print(f"{f}: no envelope ({e}); checksum only")
             envelope = None
+        if args.change and envelope is not None:
+            from ikid_training import CONFIG_DIR
+            from ikid_training.train import load_config, training_window_change
+
+            change = training_window_change(load_config(CONFIG_DIR / f"{card['name']}.toml"))
+            envelope = {**envelope, "window_change": change.tolist()}
+            print(f"{f}: window_change {np.round(change, 4).tolist()}")
         model = restamp(f, envelope)
         print(f"{f}: envelope {'yes' if model.card.get('envelope') else 'no'}, checksum {model.has_checksum}")
     return 0

@@ -31,7 +31,15 @@ from tqdm import tqdm
 import ikid
 from ikid.evaluate import NOISE_LEVELS, errors, noisy, summary
 from ikid_training import data as D
-from ikid_training.export import Affine, ModelSpec, WindowModel, envelope_of, export, export_onnx
+from ikid_training.export import (
+    Affine,
+    ModelSpec,
+    WindowModel,
+    envelope_of,
+    export,
+    export_onnx,
+    window_change,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -183,6 +191,23 @@ def newest_features(x: np.ndarray, feature_len: int, n: int) -> np.ndarray:
     return x[:, start : start + n]
 
 
+def training_window_change(cfg: dict[str, Any]) -> np.ndarray:
+    """The ``window_change`` :func:`train` writes into the card of ``cfg``'s model, from its
+    training data rebuilt (same recordings, seeds and noise): for models trained before cards
+    carried it (``python -m ikid_training.export --restamp FILE --change``)."""
+    m, t = cfg["model"], cfg["train"]
+    task, fs, window = m["task"], m["feature_set"], int(m.get("window", 5))
+    train_parts = [r.part("train") for r in build_recordings(cfg["data"])]
+    clean, _ = D.stack_windows(train_parts, task, fs, window, stride=7)
+    seen = [clean]
+    if m.get("output_offset"):
+        noisy, _ = D.stack_windows(
+            _noisy(train_parts, t, np.random.default_rng(t["seed"] + 2)), task, fs, window, stride=7
+        )
+        seen.append(noisy)
+    return np.max([window_change(w, D.feature_len(fs)) for w in seen], axis=0)
+
+
 def train(
     cfg: dict[str, Any], recs: list[D.Recording], log_path: Path | None = None, progress: bool = True
 ) -> Trained:
@@ -204,11 +229,14 @@ def train(
     # windows; outputs from the targets, noisy ones for a correction (on clean windows it is ~0).
     x0, y0 = D.stack_windows(train_parts, task, fs, window, stride=7)
     inp = Affine.minmax(x0.min(0), x0.max(0))
-    envelope = envelope_of(x0, D.feature_len(fs), y0)
+    clean = (x0, y0)
     if offset:
         x0, y0 = D.stack_windows(
             _noisy(train_parts, t, np.random.default_rng(t["seed"] + 2)), task, fs, window, stride=7
         )
+    # Ranges from the clean windows; how fast a window changes from the noisy ones too.
+    envelope = envelope_of(clean[0], D.feature_len(fs), clean[1], seen=(x0,) if offset else ())
+    del clean
     r0 = targets(x0, y0)
     out_fwd = Affine.minmax(r0.min(0), r0.max(0))
     del x0, y0, r0

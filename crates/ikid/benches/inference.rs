@@ -15,7 +15,7 @@ fn enveloped(set: FeatureSet, hidden: &[usize]) -> Model {
     let m = random_model(set, 5, hidden, 3, 1);
     let mut card = m.card().clone();
     let wide = |n: usize| Bounds { min: vec![-1e3; n], max: vec![1e3; n] };
-    card.envelope = Some(Envelope { inputs: wide(set.feature_len()), outputs: wide(3), window_spread: None });
+    card.envelope = Some(Envelope { inputs: wide(set.feature_len()), outputs: wide(3), window_change: None });
     Model::from_parts(card, m.mlp().clone()).expect("a valid card")
 }
 

@@ -53,11 +53,12 @@ pub struct Envelope {
     pub inputs: Bounds,
     /// Per output.
     pub outputs: Bounds,
-    /// Per feature, the largest spread (max − min) within one training window: how fast the
-    /// model saw each feature move. A correcting model (`output_offset`) does not correct a
-    /// window that spreads further (see [`crate::net::NewestFeatures`]). Absent in older files.
+    /// Per feature, the largest change of its mean from the older half of a training window to
+    /// the newer half (halves of `window / 2` frames): how fast the model saw each feature
+    /// move, noise averaged out. A correcting model (`output_offset`) does not correct a window
+    /// that changes faster (see [`crate::net::NewestFeatures`]). Absent in older files.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub window_spread: Option<Vec<f64>>,
+    pub window_change: Option<Vec<f64>>,
 }
 
 /// The model card: what the network is, how to feed it, where it came from.
@@ -267,18 +268,18 @@ impl ModelCard {
                     return bad(format!("field \"envelope\".{what}[{i}] has a non-finite max"));
                 }
             }
-            if let Some(spread) = &envelope.window_spread {
-                if spread.len() != set.feature_len() {
+            if let Some(change) = &envelope.window_change {
+                if change.len() != set.feature_len() {
                     return bad(format!(
-                        "field \"envelope\".window_spread has {} values, expected {} (one per feature)",
-                        spread.len(),
+                        "field \"envelope\".window_change has {} values, expected {} (one per feature)",
+                        change.len(),
                         set.feature_len()
                     ));
                 }
-                if let Some(i) = spread.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+                if let Some(i) = change.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
                     return bad(format!(
-                        "field \"envelope\".window_spread[{i}] is {}, expected a finite spread >= 0",
-                        spread[i]
+                        "field \"envelope\".window_change[{i}] is {}, expected a finite change >= 0",
+                        change[i]
                     ));
                 }
             }

@@ -38,8 +38,8 @@ pub const ENVELOPE_MARGIN: f64 = 0.1;
 /// triggering it.
 pub const CORRECTION_MARGIN: f64 = 0.02;
 /// How much faster than its fastest training window a correcting model's window may move before
-/// it stops correcting it (see [`NewestFeatures`]): 10 % of the largest spread seen.
-pub const SPREAD_MARGIN: f64 = 0.1;
+/// it stops correcting it (see [`NewestFeatures`]): 10 % of the largest change seen.
+pub const CHANGE_MARGIN: f64 = 0.1;
 /// How far past its training range an output may go, in widths of that range, before it is
 /// [`status::IMPLAUSIBLE`]: twice the range the model ever learned to give.
 pub const IMPLAUSIBLE_MARGIN: f64 = 1.0;
@@ -100,11 +100,11 @@ impl Model {
         let offset = card.output_offset.is_some().then(|| NewestFeatures {
             features: feature_set.feature_len(),
             trained: card.envelope.as_ref().map(|e| widen(&e.inputs, CORRECTION_MARGIN)),
-            spread: card
+            change: card
                 .envelope
                 .as_ref()
-                .and_then(|e| e.window_spread.as_ref())
-                .map(|s| s.iter().map(|v| (v * (1.0 + SPREAD_MARGIN)) as f32).collect()),
+                .and_then(|e| e.window_change.as_ref())
+                .map(|s| s.iter().map(|v| (v * (1.0 + CHANGE_MARGIN)) as f32).collect()),
         });
         // Finite tensors can still overflow once the scaling is folded in: refused here.
         let net = Network::new(&mlp, offset)?;
