@@ -23,4 +23,4 @@ pub use card::{
 };
 pub use file::{MAX_MODEL_FILE_BYTES, read_bounded, tensor_sha256, to_bytes};
 pub use handle::Model;
-pub use handle::{CORRECTION_MARGIN, ENVELOPE_MARGIN, IMPLAUSIBLE_MARGIN, CHANGE_MARGIN};
+pub use handle::{CHANGE_MARGIN, CORRECTION_MARGIN, ENVELOPE_MARGIN, IMPLAUSIBLE_MARGIN};
