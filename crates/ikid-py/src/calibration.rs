@@ -68,12 +68,7 @@ impl Calibration {
         let mut moves: Vec<(usize, Vec<f32>)> = Vec::new();
         for (key, value) in movements.iter() {
             let name: String = key.extract().map_err(|_| input("movements: keys must be coordinate names"))?;
-            let j = COORDINATES.iter().position(|c| c.name == name).ok_or_else(|| {
-                input(format!(
-                    "movements: unknown coordinate {name:?} (known: {})",
-                    COORDINATES.map(|c| c.name).join(", ")
-                ))
-            })?;
+            let j = ikid::body::coordinate_index(&name).map_err(|e| input(format!("movements: {e}")))?;
             moves.push((j, frames_of(&value, &format!("movements[{name:?}]"))?));
         }
         let refs: Vec<(usize, &[f32])> = moves.iter().map(|(j, f)| (*j, f.as_slice())).collect();
@@ -296,13 +291,7 @@ impl Calibration {
     fn apply<'py>(&self, py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let mut values = frames_of(frames, "frames")?;
         let n = values.len() / MARKER_FRAME_LEN;
-        py.detach(|| {
-            values.chunks_exact_mut(MARKER_FRAME_LEN).enumerate().try_for_each(|(i, f)| {
-                ikid::features::FeatureSet::Markers.check_frame(f, i)?;
-                self.inner.apply(f, i)
-            })
-        })
-        .py_err()?;
+        py.detach(|| self.inner.apply_rows(&mut values)).py_err()?;
         values.into_pyarray(py).reshape([n, MARKER_FRAME_LEN])
     }
 

@@ -632,6 +632,17 @@ impl Calibration {
         Ok((calibration, report))
     }
 
+    /// [`apply`](Self::apply) to every frame of `frames` (whole marker frames back to back),
+    /// each checked complete first; refused at the first frame that is not (named by its
+    /// index), the frames before it moved, it and those after as they were.
+    pub fn apply_rows(&self, frames: &mut [f32]) -> Result<()> {
+        let frames = whole_frames_mut(frames)?;
+        frames.chunks_exact_mut(MARKER_FRAME_LEN).enumerate().try_for_each(|(i, f)| {
+            crate::features::FeatureSet::Markers.check_frame(f, i)?;
+            self.apply(f, i)
+        })
+    }
+
     /// Moves each segment's markers, in place, to where the body model puts them on a
     /// segment in the same anatomical pose (origin: the segment's marker centroid; a left
     /// arm's first mirrored into a right arm's). Refuses frames whose segments have no
@@ -757,6 +768,16 @@ pub fn angle_deg(r: &Rotation3<f64>) -> f64 {
 
 fn bad(detail: String) -> Error {
     Error::BadArgument { what: "calibration", detail }
+}
+
+fn whole_frames_mut(values: &mut [f32]) -> Result<&mut [f32]> {
+    if !values.len().is_multiple_of(MARKER_FRAME_LEN) {
+        return Err(bad(format!(
+            "frames: {} values is not a whole number of {MARKER_FRAME_LEN}-value marker frames",
+            values.len()
+        )));
+    }
+    Ok(values)
 }
 
 fn whole_frames<'a>(values: &'a [f32], len: usize, what: &str) -> Result<&'a [f32]> {
@@ -1642,5 +1663,30 @@ mod tests {
         let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: Some(&unseen) };
         let e = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap_err().to_string();
         assert!(e.contains("no frame of the 8 has the hand's three markers, both metacarpal heads"), "{e}");
+    }
+
+    #[test]
+    fn apply_rows_moves_every_frame_and_names_the_first_incomplete_one() {
+        let (cal, _) = Calibration::functional(
+            &frames(&[[0.0; 3]; 12], &SHIFT, 1.0, 0.3),
+            &frames(&circles(200, 0.0, 0.0), &SHIFT, 1.0, 0.3),
+            Side::Right,
+        )
+        .unwrap();
+        let q = [[0.3, -0.2, 0.1], [-0.1, 0.4, -0.05]];
+        let mut rows = frames(&q, &SHIFT, 1.0, 0.3);
+        cal.apply_rows(&mut rows).unwrap();
+        for (k, f) in rows.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+            let mut out = [0f32; 3];
+            FeatureSet::Angles.compute(f, &mut out, 0).unwrap();
+            for c in 0..3 {
+                assert!((out[c] as f64 - q[k][c]).abs() < 1e-4, "row {k}: {out:?}");
+            }
+        }
+        let mut gap = frames(&q, &SHIFT, 1.0, 0.3);
+        gap[MARKER_FRAME_LEN + 4] = f32::NAN;
+        let e = cal.apply_rows(&mut gap).unwrap_err().to_string();
+        assert!(e.contains("frame 1") && e.contains("USP"), "{e}");
+        assert!(cal.apply_rows(&mut [0.0; 5]).unwrap_err().to_string().contains("not a whole number"));
     }
 }
