@@ -107,7 +107,7 @@ def linear_layers(net: nn.Module) -> list[tuple[nn.Linear, str]]:
 
 
 def card_for(spec: ModelSpec, activations: Sequence[str]) -> dict[str, Any]:
-    """The model card (see crates/ikid/src/model.rs for the schema)."""
+    """The model card (see crates/ikid/src/model/card.rs for the schema, which checks it)."""
     info = ikid.feature_set_info(spec.feature_set)
     units = spec.output_units or [TASK_UNITS[spec.task]] * len(spec.output_names)
     return {
