@@ -22,10 +22,16 @@
 //! else (two markers of a segment, one on each segment, or before the filler has seen enough
 //! wrist motion to locate the joint centre) is refused with an error that says which and why.
 //!
+//! A filler that knows the subject's calibration ([`GapFiller::set_calibration`]) starts from
+//! the joint centre the calibration implies (the body model's, placed by it) and fills from its
+//! first complete frame; the centre it learns takes over as the wrist moves (the seed weighs as
+//! much as [`SEED_FRAMES`] frames of the least motion that would locate the centre alone).
+//!
 //! Training runs the same filler over whole recordings (`ikid.fill_gaps`), so what a network
 //! learns from filled frames is exactly what the stream gives it at inference.
 
-use crate::body::{MARKER_FRAME_LEN, MARKERS, N_MARKERS, Segment, first_marker};
+use crate::body::{BodyModel, MARKER_FRAME_LEN, MARKERS, N_MARKERS, Segment, first_marker};
+use crate::calibration::{Calibration, Side};
 use crate::error::{Error, Result};
 use crate::features::technical_frame;
 use nalgebra::{Matrix3, Matrix6, SymmetricEigen, Vector3, Vector6};
@@ -94,6 +100,11 @@ pub const NOISE_FLOOR: f64 = 1e-8;
 /// not 100 ms of motion.
 pub const CENTRE_SMOOTHING_S: f64 = 0.01;
 
+/// Weight of a seeded joint centre ([`GapFiller::set_calibration`]) in the joint-centre fit:
+/// as much as this many complete frames of [`MIN_MOTION`] (±10° about every axis), so the
+/// centre the filler learns takes over once the wrist has moved about that much for as long.
+pub const SEED_FRAMES: f64 = 100.0;
+
 const SEGMENTS: [Segment; 2] = [Segment::Forearm, Segment::Hand];
 
 /// Causal gap filler for marker frames; see the [module docs](self). All state is inline:
@@ -133,6 +144,8 @@ pub struct GapFiller {
     /// metres per frame and frames.
     still_step: f64,
     centre_smoothing: f64,
+    /// The joint centre a calibration implies (forearm's, hand's technical frame), if any.
+    seed: Option<Vector6<f64>>,
 }
 
 /// Consecutive frames, each rigid and within the motion limit of the one before, that must all
@@ -187,7 +200,20 @@ impl GapFiller {
             candidate: None,
             candidate_frames: 0,
             reanchors: 0,
+            seed: None,
         }
+    }
+
+    /// Starts the joint centre from where `calibration` puts the body model's
+    /// ([`calibration_joint_centre`]): the filler then fills from its first complete frame, and
+    /// the centre it learns takes over as the wrist moves ([`SEED_FRAMES`]). `None` forgets the
+    /// seed (the centre is then located from motion alone). What was learned is kept.
+    pub fn set_calibration(&mut self, calibration: Option<&Calibration>) {
+        self.seed = calibration.map(|c| {
+            let (f, h) = calibration_joint_centre(c);
+            Vector6::new(f.x, f.y, f.z, h.x, h.y, h.z)
+        });
+        self.centre_is_current = false;
     }
 
     /// Complete frames learned from so far.
@@ -195,7 +221,8 @@ impl GapFiller {
         self.complete_frames
     }
 
-    /// Whether a missing marker can be filled now (enough complete frames and wrist motion).
+    /// Whether a missing marker can be filled now (enough complete frames and wrist motion, or
+    /// a complete frame and a calibration's joint centre).
     pub fn is_calibrated(&mut self) -> bool {
         self.joint_centre().is_some()
     }
@@ -565,6 +592,16 @@ impl GapFiller {
     }
 
     fn solve_centre(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        if let Some(seed) = self.seed {
+            // The seed fixes what motion has not shown yet; a frame is needed for the markers'
+            // places in their segments.
+            if self.complete_frames == 0 {
+                return None;
+            }
+            let weight = MIN_MOTION * SEED_FRAMES;
+            let x = (self.normal + Matrix6::identity() * weight).cholesky()?.solve(&(self.rhs + seed * weight));
+            return Some((x.fixed_rows::<3>(0).into_owned(), x.fixed_rows::<3>(3).into_owned()));
+        }
         if self.complete_frames < MIN_CALIBRATION_FRAMES {
             return None;
         }
@@ -579,6 +616,32 @@ impl GapFiller {
             * (self.rhs / self.complete_frames as f64);
         Some((x.fixed_rows::<3>(0).into_owned(), x.fixed_rows::<3>(3).into_owned()))
     }
+}
+
+/// Where `calibration` puts the body model's wrist centre (its segments' common origin) in each
+/// segment's technical frame ([`technical_frame`] of the markers as they come, before the
+/// calibration moves them), metres: the centre's place from the marker centroid in the default
+/// subject's anatomical frame, turned into the technical frame (`v_technical = Tᵀ·v_anatomical`),
+/// a left arm's mirrored back. Exact for the default subject's placement, as near as the
+/// subject's markers sit to the model's otherwise (a centimetre or two on a real arm: a start,
+/// which the filler's own fit then replaces).
+pub fn calibration_joint_centre(calibration: &Calibration) -> (Vector3<f64>, Vector3<f64>) {
+    let body = BodyModel::default();
+    let centre = |segment: Segment| {
+        let first = first_marker(segment);
+        let centroid = (first..first + 3).map(|k| Vector3::from(body.marker_offsets[k])).sum::<Vector3<f64>>() / 3.0;
+        let t = match segment {
+            Segment::Forearm => &calibration.forearm,
+            Segment::Hand => &calibration.hand,
+        };
+        let mut technical = t.inverse() * -centroid;
+        if calibration.side == Side::Left {
+            // A mirrored arm's technical frame is the raw one's with its third axis negated.
+            technical.z = -technical.z;
+        }
+        technical
+    };
+    (centre(Segment::Forearm), centre(Segment::Hand))
 }
 
 /// Runs a fresh [`GapFiller`] (at `rate_hz`) over a whole recording of marker frames: the
@@ -711,6 +774,87 @@ mod tests {
                 let (o, r) = technical_frame(f, segment, 0).unwrap();
                 assert!((r * c + o - wrist).norm() < 1e-5, "{segment:?}: {}", (r * c + o - wrist).norm());
             }
+        }
+    }
+
+    #[test]
+    fn a_calibration_places_the_body_models_joint_centre_on_either_arm() {
+        // The body model's own placement: the centre lands on the wrist (the segments' common
+        // origin) from either segment's technical frame, at any posture; a left arm (the right
+        // one mirrored, lab z negated) with the same matrices lands on the mirrored wrist.
+        let body = BodyModel::default();
+        let pose = body.forearm_pose(0.4);
+        let wrist = pose.translation.vector;
+        for side in [Side::Right, Side::Left] {
+            let model = Calibration::body_model();
+            let calibration =
+                Calibration::from_matrices_for(*model.forearm.matrix(), *model.hand.matrix(), side).unwrap();
+            let (c_f, c_h) = calibration_joint_centre(&calibration);
+            for q in [[0.0, 0.0, 0.0], [0.5, -0.7, 0.2], [-0.3, 0.9, -0.4]] {
+                let mut frame = body.marker_frame(&q, &pose).map(|v| v as f32);
+                let mut expected = wrist;
+                if side == Side::Left {
+                    side.to_right(&mut frame); // negates z: the same arm, mirrored
+                    expected.z = -expected.z;
+                }
+                for (segment, c) in [(Segment::Forearm, c_f), (Segment::Hand, c_h)] {
+                    let (o, r) = technical_frame(&frame, segment, 0).unwrap();
+                    let miss = (r * c + o - expected).norm();
+                    assert!(miss < 1e-6, "{side:?} {segment:?} at {q:?}: {miss} m");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_calibrated_filler_fills_from_its_first_complete_frame() {
+        // Uncalibrated, the filler refuses until the wrist has moved about every axis (past
+        // frame 100 of this 100 Hz trial); told the calibration, it fills from the second frame
+        // on: within 0.3 mm for the body model's placement (the prior's lag), 1 mm for a subject
+        // 15 % larger (the seed a centimetre off), and once the wrist has moved as well as
+        // without the seed.
+        for (scale, early_mm) in [(1.0, 0.3), (1.15, 1.0)] {
+            let body = BodyModel::scaled(scale, 1.0);
+            let frames = trial(&body, 0.2, 400);
+            let mut plain = GapFiller::at_rate(100.0);
+            let mut seeded = GapFiller::at_rate(100.0);
+            seeded.set_calibration(Some(&Calibration::body_model()));
+            assert!(!seeded.is_calibrated(), "a complete frame is needed first");
+            let mut worst_early: f32 = 0.0;
+            let mut worst_late: f32 = 0.0;
+            let mut plain_late: f32 = 0.0;
+            for (i, truth) in frames.iter().enumerate() {
+                let gone = if i % 4 == 1 { Some((i / 4) % N_MARKERS) } else { None };
+                let mut f = *truth;
+                if let Some(m) = gone {
+                    f[3 * m..3 * m + 3].fill(f32::NAN);
+                }
+                let mut g = f;
+                let unseeded = plain.fill(&mut g, i);
+                if i < 100 && gone.is_some() {
+                    assert!(unseeded.is_err(), "frame {i}: the plain filler has no centre yet");
+                }
+                if i >= 300 {
+                    plain_late = plain_late.max((0..18).map(|k| (g[k] - truth[k]).abs()).fold(0.0, f32::max));
+                }
+                let mask = seeded.fill(&mut f, i).unwrap();
+                assert_eq!(mask, gone.map_or(0, |m| 1 << m), "frame {i}");
+                let err = (0..18).map(|k| (f[k] - truth[k]).abs()).fold(0.0, f32::max);
+                if i < 100 {
+                    worst_early = worst_early.max(err);
+                } else if i >= 300 {
+                    worst_late = worst_late.max(err);
+                }
+            }
+            assert!(worst_early < early_mm * 1e-3, "scale {scale}: {} mm early", worst_early * 1e3);
+            assert!(
+                worst_late <= 1.2 * plain_late + 1e-6,
+                "scale {scale}: {} mm after the wrist has moved, {} mm without the calibration",
+                worst_late * 1e3,
+                plain_late * 1e3
+            );
+            seeded.set_calibration(None);
+            assert!(seeded.is_calibrated(), "what was learned stays");
         }
     }
 
