@@ -65,7 +65,9 @@ data: wheel
 models: wheel
 	$(PY) -m ikid_training.models
 
-# Retrain wrist-track, the Kalman tracker's refiner (~6 min on 2 cores), into python/ikid/models/.
+# Retrain wrist-track, the Kalman tracker's refiner (~9 min on 2 cores), into python/ikid/models/
+# (`python -m ikid_training.refine --rate 100` trains one at another rate; why none is shipped:
+# ikid_training/refine.py).
 models-track: wheel
 	$(PY) -m ikid_training.refine
 

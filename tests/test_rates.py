@@ -166,3 +166,16 @@ def test_a_stream_at_100_or_250hz_runs_the_familys_member_at_that_rate(monkeypat
         ikid.load("wrist-ik-100hz", rate_hz=1000)  # a member is itself, not its family
     with pytest.raises(ikid.ArgumentError, match="greater than 0"):
         ikid.load("wrist-ik", rate_hz=0)
+
+
+def test_track_at_100hz_runs_the_bare_filter_and_refuses_a_refiner_of_another_rate(tmp_path, capsys):
+    """`ikid track --refiner auto` (the default) takes the shipped refiner at the file's rate,
+    and there is none at 100 Hz (ikid_training/refine.py says why): the bare filter, said in
+    the summary; a refiner trained at another rate is refused naming both rates."""
+    t = _trial(10, seconds=3.0)
+    write_trc(tmp_path / "t.trc", t.time, t.markers, 100.0)
+    assert cli(["track", str(tmp_path / "t.trc"), "-o", str(tmp_path / "auto")]) == 0
+    assert "not refined" in capsys.readouterr().out
+    assert cli(["track", str(tmp_path / "t.trc"), "-o", str(tmp_path / "r"), "--refiner", "wrist-track"]) == 2
+    err = capsys.readouterr().err
+    assert "trained at 1000 Hz, the tracker runs at 100 Hz" in err, err

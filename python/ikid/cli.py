@@ -498,9 +498,11 @@ def cmd_track(args: argparse.Namespace) -> int:
     data = read_markers(args.input)
     refiner = None
     if args.refiner == "auto":
-        shipped = ikid.load("wrist-track")
-        refiner = (
-            shipped if abs(shipped.frame_rate_hz - data.rate_hz) <= 1e-3 * shipped.frame_rate_hz else None
+        from ikid.pipeline import family_members, same_rate
+
+        # The shipped refiner family's member at the recording's rate, if there is one.
+        refiner = next(
+            (m for m in family_members("wrist-track") if same_rate(data.rate_hz, m.frame_rate_hz)), None
         )
     elif args.refiner not in ("", "none"):
         refiner = _model_for(args.refiner, "ikid track --refiner", ("refine",))
@@ -1306,7 +1308,8 @@ def main(argv: list[str] | None = None) -> int:
         "--refiner",
         default="auto",
         help="refinement model, shipped name or file; 'none' for the bare filter; 'auto' (default): "
-        "wrist-track where the recording's rate is its own (1000 Hz), else none (the summary says which)",
+        "the shipped wrist-track family's member at the recording's rate (wrist-track: 1000 Hz), else none "
+        "(the summary says which; a refiner at another rate: python -m ikid_training.refine --rate)",
     )
     p.add_argument(
         "--jerk-noise",
