@@ -9,7 +9,7 @@
 //!   and `(R_h, o_h)` the technical frames of a complete frame, it minimises
 //!   `Σ |R_f c_f + o_f − R_h c_h − o_h|²` over `(c_f, c_h)`. The 6×6 normal equations are
 //!   accumulated frame by frame, so learning never stops and costs O(1) per frame. Noisy
-//!   markers enter them through a short running mean ([`CENTRE_SMOOTHING_FRAMES`]): noise in
+//!   markers enter them through a short running mean ([`CENTRE_SMOOTHING_S`]): noise in
 //!   the technical frames would otherwise pull the centre off.
 //!
 //! When one marker of a segment is missing and the other segment is whole, the whole segment
@@ -133,7 +133,7 @@ pub struct GapFiller {
     pair_mean: [f64; 6],
     pair_m2: [f64; 6],
     /// Running mean of the markers over consecutive complete frames, which the joint-centre
-    /// sums read ([`CENTRE_SMOOTHING_FRAMES`]); `None` after a gap.
+    /// sums read ([`CENTRE_SMOOTHING_S`]); `None` after a gap.
     smoothed: Option<[f64; MARKER_FRAME_LEN]>,
     /// The last frame refused only for having moved too far, and how many such frames in a
     /// row agree with each other ([`REANCHOR_FRAMES`]).
@@ -540,7 +540,7 @@ impl GapFiller {
         let (o_f, r_f) = technical_frame(frame, Segment::Forearm, frame_index)?;
         let (o_h, r_h) = technical_frame(frame, Segment::Hand, frame_index)?;
         // The joint centre learns from the running mean of the markers: per segment, a time
-        // constant of up to CENTRE_SMOOTHING_FRAMES as its noise rises above the floor.
+        // constant of up to CENTRE_SMOOTHING_S as its noise rises above the floor.
         let mut smoothed = [0.0; MARKER_FRAME_LEN];
         for (s, segment) in SEGMENTS.into_iter().enumerate() {
             let frames = centre_smoothing_frames(self.noise_variance(s), self.centre_smoothing);
@@ -862,7 +862,7 @@ mod tests {
     fn noisy_markers_do_not_pull_the_joint_centre_away() {
         // 1-kHz frames of the same motion with the thesis' 5 % uniform noise on the hand (the
         // forearm still, as in the simulator's trials). Fitted on each frame's raw markers the
-        // centre sits 0.63 mm off; averaged over CENTRE_SMOOTHING_FRAMES, 0.08 mm.
+        // centre sits 0.63 mm off; averaged over CENTRE_SMOOTHING_S, 0.08 mm.
         let body = BodyModel::default();
         let pose = body.forearm_pose(0.0);
         let n = 15_000;
