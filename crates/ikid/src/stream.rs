@@ -123,7 +123,9 @@ impl Stream {
 
     /// Calibrates the stream to the subject's marker placement (see [`Calibration`]): each
     /// frame, once filled, has its markers moved to the body model's placement before its
-    /// features are computed. `None` uses the markers as they come. Needs marker frames.
+    /// features are computed, and the gap filler starts from the joint centre the calibration
+    /// implies ([`GapFiller::set_calibration`]). `None` uses the markers as they come. Needs
+    /// marker frames.
     pub fn set_calibration(&mut self, calibration: Option<Calibration>) -> Result<()> {
         if calibration.is_some() && self.model.frame_len() != MARKER_FRAME_LEN {
             return Err(Error::BadArgument {
@@ -134,6 +136,9 @@ impl Stream {
                 ),
             });
         }
+        // The filler starts from where the calibration puts the wrist's centre: it fills from
+        // the first complete frame instead of waiting for the wrist to move about every axis.
+        self.filler.set_calibration(calibration.as_ref());
         self.calibration = calibration;
         Ok(())
     }
