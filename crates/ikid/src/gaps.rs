@@ -243,7 +243,7 @@ impl GapFiller {
         if frame.len() != MARKER_FRAME_LEN {
             return Err(Error::FrameLength { feature_set: "markers", found: frame.len(), expected: MARKER_FRAME_LEN });
         }
-        let missing = missing_mask(frame);
+        let missing = crate::body::missing_markers(frame);
         if missing == 0 {
             let outliers = self.outliers(frame);
             if outliers == 0 {
@@ -312,7 +312,7 @@ impl GapFiller {
     /// does): learns from it if it is complete and consistent; an error names a marker that
     /// jumped. Missing markers are left for the caller to refuse.
     pub fn check(&mut self, frame: &[f32], frame_index: usize) -> Result<()> {
-        if frame.len() != MARKER_FRAME_LEN || missing_mask(frame) != 0 {
+        if frame.len() != MARKER_FRAME_LEN || crate::body::missing_markers(frame) != 0 {
             return Ok(());
         }
         match self.outliers(frame) {
@@ -682,18 +682,9 @@ pub fn fill_gaps(frames: &[f32], keep_unfillable: bool, rate_hz: f64) -> Result<
     Ok((filled, masks))
 }
 
-/// Bit mask of the markers with any non-finite coordinate (bit `i` = [`MARKERS`]`[i]`).
-pub fn missing_mask(frame: &[f32]) -> u8 {
-    frame
-        .chunks_exact(3)
-        .enumerate()
-        .filter(|(_, xyz)| xyz.iter().any(|v| !v.is_finite()))
-        .fold(0, |mask, (i, _)| mask | (1 << i))
-}
-
 /// Marker names of a bit mask, comma-separated (for messages).
-pub fn mask_names(mask: u8) -> String {
-    MARKERS.iter().enumerate().filter(|(i, _)| mask & (1 << i) != 0).map(|(_, m)| m.name).collect::<Vec<_>>().join(", ")
+fn mask_names(mask: u8) -> String {
+    crate::body::marker_names(mask).collect::<Vec<_>>().join(", ")
 }
 
 fn marker(frame: &[f32], i: usize) -> Vector3<f64> {
