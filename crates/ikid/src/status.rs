@@ -26,7 +26,8 @@ pub const HELD: u8 = 8;
 /// envelope): the output is an extrapolation.
 pub const OUTSIDE_TRAINING: u8 = 16;
 /// An output no wrist can give (an angle beyond its coordinate's range by more than
-/// [`RANGE_MARGIN_RAD`], or outside the model's output envelope by more than its own width).
+/// [`RANGE_MARGIN_RAD`], a torque beyond [`torque_limit`], or outside the model's output
+/// envelope by more than its own width).
 pub const IMPLAUSIBLE: u8 = 32;
 
 /// A correcting model's correction was not applied: the output is the per-frame solution (the
@@ -58,6 +59,28 @@ pub fn angle_implausible(c: usize, q: f64) -> bool {
     !(q >= lo - RANGE_MARGIN_RAD && q <= hi + RANGE_MARGIN_RAD)
 }
 
+/// Largest joint torque about any wrist coordinate a wrist of the default subject
+/// ([`BodyModel::default`](crate::body::BodyModel::default), a 73 kg adult male) can take, N·m;
+/// a torque beyond it ([`torque_limit`] for another subject) is [`IMPLAUSIBLE`]. The strongest
+/// maximal isometric wrist moments measured in adult men are about 12 N·m (flexion; extension
+/// about 7, radial and ulnar deviation 9–11: Delp, Grierson & Buchanan 1996, J. Biomech.
+/// 29(10), 1371–1375; forearm rotation about 10). The bound is 2.5 times that, leaving room
+/// for strong subjects and for passive and impact loads: a tracker's torque beyond it is its
+/// own error (q̈ from marker jitter), not a wrist's.
+pub const TORQUE_LIMIT_NM: f64 = 30.0;
+
+/// [`TORQUE_LIMIT_NM`] for a subject whose masses are `mass_scale` times the default's: a
+/// muscle's force scales with its cross-section (its mass over its length) and its moment arm
+/// with length, so its moment with the mass alone (the length scale cancels).
+pub fn torque_limit(mass_scale: f64) -> f64 {
+    TORQUE_LIMIT_NM * mass_scale
+}
+
+/// True if the torque `tau` (N·m) is beyond `limit` ([`torque_limit`]) or not finite.
+pub fn torque_implausible(tau: f64, limit: f64) -> bool {
+    !tau.is_finite() || tau.abs() > limit
+}
+
 /// The names of the bits set in `status`, comma-separated ("" for 0).
 pub fn describe(status: u8) -> String {
     ALL.iter().filter(|(bit, _)| status & bit != 0).map(|(_, name)| *name).collect::<Vec<_>>().join(",")
@@ -87,5 +110,13 @@ mod tests {
         assert!(angle_implausible(0, -130f64.to_radians()));
         assert!(angle_implausible(1, f64::NAN));
         assert!(!angle_implausible(2, 0.0));
+    }
+
+    #[test]
+    fn torques_are_implausible_beyond_the_limit_scaled_by_mass() {
+        assert!(!torque_implausible(-29.0, torque_limit(1.0)));
+        assert!(torque_implausible(31.0, torque_limit(1.0)));
+        assert!(!torque_implausible(31.0, torque_limit(1.5)));
+        assert!(torque_implausible(f64::NAN, torque_limit(1.0)));
     }
 }

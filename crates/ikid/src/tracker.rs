@@ -4,14 +4,17 @@
 //!
 //! Per frame:
 //! 1. the forearm's pose is fitted to its three markers (Kabsch); with one missing or rejected,
-//!    to the two others and the wrist centre seen from the hand (else the last pose turned as
-//!    little as fits the two). The centre is learned from the subject's whole frames (a
-//!    functional joint centre, `JointCentre`, as a function of the hand's posture — no wrist is
-//!    a ball joint: a fixed centre leaves 2–4 mm on real wrists — and where it sat over the last
-//!    frames); it also closes the turn that two hand markers leave open (the hand measured by its
-//!    orientation: a third measurement, weighed by its fit). A segment fitted to two of its
-//!    markers takes them where they sat on it lately (skin markers slide: taken where they sat
-//!    when its shape was learned, they turned a real forearm 8° off);
+//!    to the two others, its roll about the line through them filtered (`Roll`): predicted from
+//!    how the forearm was seen to turn while whole, corrected by the wrist centre seen from the
+//!    hand as far as the learned hand-marker noise lets that centre tell (noisy hand markers
+//!    made it jitter by degrees a frame, the filter restart and the torques reach kN·m). The
+//!    centre is learned from the subject's whole frames (a functional joint centre,
+//!    `JointCentre`, as a function of the hand's posture — no wrist is a ball joint: a fixed
+//!    centre leaves 2–4 mm on real wrists — and where it sat over the last frames); it also
+//!    closes the turn that two hand markers leave open (the hand measured by its orientation: a
+//!    third measurement, weighed by its fit). A segment fitted to two of its markers takes them
+//!    where they sat on it lately (skin markers slide: taken where they sat when its shape was
+//!    learned, they turned a real forearm 8° off);
 //! 2. the state — `(q, q̇, q̈)` of the three wrist coordinates — is predicted with a
 //!    constant-acceleration model whose jerk is white noise of spectral density
 //!    [`TrackerSettings::jerk_noise`];
@@ -26,7 +29,8 @@
 //!    white-jerk model did not expect). e_f is kept within ±90° (past it, the other Euler
 //!    triple of the same rotation);
 //! 4. the torques follow from the state by Newton–Euler ([`reference::inverse_dynamics_at`],
-//!    gravity's direction from the fitted forearm).
+//!    gravity's direction from the fitted forearm); one beyond what a wrist can take
+//!    ([`status::torque_limit`]) marks the frame [`status::IMPLAUSIBLE`].
 //!
 //! Why it beats a fixed-noise filter (biorbd's `KalmanReconsMarkers`, measured in
 //! `docs/ekf.md`): marker noise differs between coordinates and between recordings (the thesis'
@@ -65,7 +69,7 @@
 //!
 //! Allocation-free: the state is fixed-size, so a push costs a few microseconds and no heap.
 
-use nalgebra::{Isometry3, Matrix3, Rotation3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix2, Matrix3, Rotation3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
 
 use crate::body::{self, BodyModel, COORDINATES, MARKER_FRAME_LEN, MARKERS, N_COORDINATES, Segment};
 use crate::calibration::{Calibration, Side};
@@ -317,6 +321,80 @@ pub struct Tracker {
     /// of the frames that measured the segment whole): the segment's pose from its other two
     /// markers is the one its three would give.
     live: [Vector3<f64>; body::N_MARKERS],
+    /// How the forearm turned while it was measured whole (see [`ForearmTurn`]) ...
+    turn: ForearmTurn,
+    /// ... and its roll about the line through two of its markers while one is missing.
+    roll: Roll,
+    /// [`status::torque_limit`] for this subject, N·m.
+    torque_limit: f64,
+}
+
+/// How the forearm turns between frames, learned from its whole (three-marker) poses: the
+/// second difference of its orientation (rad per frame, per frame) is its angular acceleration
+/// and its markers' noise; its mean square is how far its roll about the line through two of
+/// its markers may stray per frame while the third is missing (see [`Roll`]). A forearm fixed in
+/// the lab teaches ~0 (its roll is then held through a gap); a real one moving, what it does.
+#[derive(Debug, Clone, Copy)]
+struct ForearmTurn {
+    /// The last two whole poses' frame indices and orientations, newest first.
+    last: [(usize, UnitQuaternion<f64>); 2],
+    /// The newest turn per frame between them (rotation vector, rad, lab frame).
+    spin: Vector3<f64>,
+    /// Covariance of the second difference (rad², lab frame), and how many were seen.
+    variance: Matrix3<f64>,
+    samples: f64,
+}
+
+/// The forearm's roll about the line through its two present markers during a marker gap: a
+/// constant-rate Kalman filter whose acceleration noise is [`ForearmTurn::variance`] and whose
+/// measurement is the roll the wrist centre seen from the hand gives, as uncertain as the
+/// learned hand-marker noise makes that centre. Noisy hand markers on a forearm that does not
+/// turn leave its roll where it was; clean ones on a moving forearm are followed.
+#[derive(Debug, Clone, Copy)]
+struct Roll {
+    /// Whether a gap is under way (the state below is live).
+    active: bool,
+    /// Roll rate about the line, rad per frame ...
+    rate: f64,
+    /// ... and the covariance of (roll, rate).
+    p: Matrix2<f64>,
+}
+
+/// The roll filter's acceleration noise over the forearm's learned second-difference variance
+/// about the line ([`ForearmTurn::about`]): a forearm's acceleration lasts longer than a frame,
+/// so a white-acceleration model given the per-frame variance alone lets the roll drift too
+/// little over a gap. On the real recordings (docs/realdata.md, 200 ms gaps of FAP): 1× cost
+/// pyomeca 1.43× the gap-free error, 10× 1.35× (the centre followed frame by frame: 1.32×); a
+/// forearm fixed in the lab teaches ~0 either way.
+const ROLL_NOISE_GAIN: f64 = 10.0;
+
+/// Smallest variance of [`ForearmTurn::variance`] about any axis, rad² (a forearm fixed in the lab still lets its roll
+/// move by a hundredth of a millidegree per frame).
+const MIN_TURN_VARIANCE: f64 = 1e-14;
+
+impl ForearmTurn {
+    fn new() -> Self {
+        ForearmTurn {
+            last: [(usize::MAX, UnitQuaternion::identity()); 2],
+            spin: Vector3::zeros(),
+            variance: Matrix3::from_diagonal_element(MIN_TURN_VARIANCE),
+            samples: 0.0,
+        }
+    }
+}
+
+impl ForearmTurn {
+    /// The second difference's variance about the axis `axis` (rad², at least
+    /// [`MIN_TURN_VARIANCE`]): how the forearm turns about it.
+    fn about(&self, axis: &Vector3<f64>) -> f64 {
+        (axis.transpose() * self.variance * axis)[0].max(MIN_TURN_VARIANCE)
+    }
+}
+
+impl Roll {
+    fn idle() -> Self {
+        Roll { active: false, rate: 0.0, p: Matrix2::zeros() }
+    }
 }
 
 impl Tracker {
@@ -365,7 +443,12 @@ impl Tracker {
             centre: JointCentre::new(),
             model_offsets: [[0.0; 3]; body::N_MARKERS],
             live: [Vector3::zeros(); body::N_MARKERS],
+            turn: ForearmTurn::new(),
+            roll: Roll::idle(),
+            torque_limit: 0.0,
         };
+        // The subject's mass scale: its hand's mass over the default subject's.
+        tracker.torque_limit = status::torque_limit(tracker.body.hand.mass / BodyModel::default().hand.mass);
         tracker.model_offsets = tracker.body.marker_offsets;
         tracker.reset();
         Ok(tracker)
@@ -391,6 +474,8 @@ impl Tracker {
         self.centre = JointCentre::new();
         self.body.marker_offsets = self.model_offsets;
         self.live = self.model_offsets.map(Vector3::from);
+        self.turn = ForearmTurn::new();
+        self.roll = Roll::idle();
         if let Some(r) = self.refiner.as_mut() {
             r.reset();
         }
@@ -453,10 +538,11 @@ impl Tracker {
         self.centre.solve(min_frames)
     }
 
-    /// The forearm's pose from two of its markers (`usable`: frame-marker bits 0–2) and, for
-    /// the turn about the line through them, the wrist centre seen from the hand when the
-    /// hand's three markers are there (`hand`), else the last pose turned as little as fits
-    /// them. `None` without a last pose or a centre to use.
+    /// The forearm's pose from two of its markers (`usable`: frame-marker bits 0–2): the last
+    /// pose turned as little as fits them, then rolled about the line through them by its
+    /// [`Roll`] filter, which the wrist centre seen from the hand corrects when the hand's three
+    /// markers are there (`hand`). Returns the pose and the roll filter's new state; `None`
+    /// without a last pose or a centre to use.
     fn forearm_from_two(
         &self,
         frame: &[f64],
@@ -464,13 +550,15 @@ impl Tracker {
         hand: &[f64; N_HAND],
         centre: Option<WristCentre>,
         index: usize,
-    ) -> Option<Isometry3<f64>> {
+    ) -> Option<(Isometry3<f64>, Roll)> {
         let [a, b] = {
             let mut two = (0..3).filter(|k| usable & (1 << k) != 0);
             [two.next()?, two.next()?]
         };
         let offset = |k: usize| self.live[k];
         let point = |k: usize| Vector3::new(frame[3 * k], frame[3 * k + 1], frame[3 * k + 2]);
+        // The fit to the two markers and the wrist centre seen from the hand, with that centre.
+        let mut seen = None;
         if hand.iter().all(|v| !v.is_nan())
             && let Some(centre) = centre
         {
@@ -484,7 +572,6 @@ impl Tracker {
                     .state
                     .as_ref()
                     .map_or(Matrix3::identity(), |(x, _)| body::wrist_rotation(&[x[0], x[1], x[2]]).into_inner());
-                let mut pose = None;
                 for _ in 0..2 {
                     let fitted = fit_points(
                         &[offset(a), offset(b), centre.forearm_point(&relative)],
@@ -492,17 +579,84 @@ impl Tracker {
                         [1.0, 1.0, CENTRE_WEIGHT],
                     )?;
                     relative = (fitted.rotation.inverse() * hand_pose.rotation).to_rotation_matrix().into_inner();
-                    pose = Some(fitted);
+                    seen = Some((fitted, world, centre));
                 }
-                return pose;
             }
         }
-        let last = self.forearm?;
+        let Some(last) = self.forearm else {
+            return seen.map(|(pose, _, _)| (pose, Roll::idle()));
+        };
         let (was, now) = (last.rotation * (offset(b) - offset(a)), point(b) - point(a));
         let turn = UnitQuaternion::rotation_between(&was, &now).unwrap_or_else(UnitQuaternion::identity);
-        let rotation = turn * last.rotation;
+        let held = turn * last.rotation;
+        let line = nalgebra::Unit::try_new(now, 1e-9)?;
+        // The roll filter: predicted at its rate, its roll noise what the forearm was seen to do.
+        let mut roll = self.roll;
+        if !roll.active {
+            // A gap begins: rolling as the forearm last turned about this line.
+            let v = self.turn.about(&line);
+            roll = Roll { active: true, rate: self.turn.spin.dot(&line), p: Matrix2::new(v, 0.0, 0.0, v) };
+        }
+        let f = Matrix2::new(1.0, 1.0, 0.0, 1.0);
+        let q = ROLL_NOISE_GAIN * self.turn.about(&line) * Matrix2::new(0.25, 0.5, 0.5, 1.0);
+        let (mut angle, mut p) = (roll.rate, f * roll.p * f.transpose() + q);
+        let mut rate = roll.rate;
+        if let Some((fitted, world, centre)) = seen {
+            // The centre's roll: the turn from the held pose to the fitted one about the line ...
+            let measured = (fitted.rotation * held.inverse()).scaled_axis().dot(&line);
+            // ... as uncertain as the centre seen from the hand, over its distance from the line.
+            let arm = world - point(a);
+            let r2 = (arm - line.into_inner() * arm.dot(&line)).norm_squared();
+            let variance = (self.centre_noise_variance(&centre) / r2.max(1e-6)).max(1e-12);
+            let s = p[(0, 0)] + variance;
+            let gain = p.column(0) / s;
+            let innovation = wrap_angle(measured - angle);
+            angle += gain[0] * innovation;
+            rate += gain[1] * innovation;
+            p -= gain * p.row(0);
+            p = (p + p.transpose()) * 0.5;
+        }
+        let rotation = UnitQuaternion::from_axis_angle(&line, angle) * held;
         let translation = (point(a) + point(b)) / 2.0 - rotation * ((offset(a) + offset(b)) / 2.0);
-        Some(Isometry3::from_parts(Translation3::from(translation), rotation))
+        Some((Isometry3::from_parts(Translation3::from(translation), rotation), Roll { active: true, rate, p }))
+    }
+
+    /// The variance per coordinate of the wrist centre as the rigid fit of the hand's three
+    /// markers puts it (m²): the learned hand-marker noise, carried by the fit (its position
+    /// is their mean; its turn, over their spread, moves the centre by its distance from them),
+    /// plus the learned centre's own.
+    fn centre_noise_variance(&self, centre: &WristCentre) -> f64 {
+        let noise = self.noise_variance.iter().sum::<f64>() / N_HAND as f64;
+        let mean = (self.live[3] + self.live[4] + self.live[5]) / 3.0;
+        let spread: f64 = (3..6).map(|k| (self.live[k] - mean).norm_squared()).sum();
+        let lever = (centre.ch - mean).norm_squared();
+        noise * (1.0 / 3.0 + lever / spread.max(1e-6)) + centre.variance
+    }
+
+    /// Learns how the forearm turns ([`ForearmTurn`]) from its whole pose `pose` at frame `index`;
+    /// its roll filter is idle again.
+    fn learn_turn(&mut self, pose: &Isometry3<f64>, index: usize) {
+        self.roll = Roll::idle();
+        let t = &mut self.turn;
+        let [(i1, r1), (i2, r2)] = t.last;
+        if i1 != usize::MAX && i1 + 1 == index {
+            let spin = (pose.rotation * r1.inverse()).scaled_axis();
+            if i2 != usize::MAX && i2 + 2 == index {
+                let previous = (r1 * r2.inverse()).scaled_axis();
+                let d = spin - previous;
+                // Clipped as a marker's noise sample is (`NOISE_CLIP`): one glitch teaches little.
+                let clip = NOISE_CLIP * t.variance.trace();
+                let d = if d.norm_squared() > clip { d * (clip / d.norm_squared()).sqrt() } else { d };
+                let forget = 1.0 / (self.settings.noise_memory_s * self.settings.rate_hz);
+                let w = (1.0 / (t.samples + PRIOR_FRAMES)).max(forget);
+                t.variance += w * (d * d.transpose() - t.variance);
+                t.samples += 1.0;
+            }
+            t.spin = spin;
+        } else {
+            t.spin = Vector3::zeros();
+        }
+        t.last = [(index, pose.rotation), (i1, r1)];
     }
 
     /// Use `model` to refine every estimate (see the [module docs](self)), or none. The model
@@ -636,6 +790,7 @@ impl Tracker {
                     self.forearm_frame = index;
                     forearm_measured = true;
                     self.follow_placement(Segment::Forearm, &pose, frame);
+                    self.learn_turn(&pose, index);
                 } else {
                     forearm_usable = 0; // the whole forearm jumped: nothing of it is used
                 }
@@ -675,10 +830,12 @@ impl Tracker {
         if !forearm_measured
             && forearm_usable.count_ones() == 2
             && self.templated[Segment::Forearm as usize] | self.calibration.is_none()
-            && let Some(pose) = self.forearm_from_two(frame, forearm_usable, &hand, self.centre_memo(&mut memo), index)
+            && let Some((pose, roll)) =
+                self.forearm_from_two(frame, forearm_usable, &hand, self.centre_memo(&mut memo), index)
             && self.forearm_plausible(&pose, index, lost)
         {
             self.forearm = Some(pose);
+            self.roll = roll;
             self.forearm_frame = index;
             forearm_estimated = true;
         }
@@ -844,6 +1001,9 @@ impl Tracker {
             flags |= status::IMPLAUSIBLE;
         }
         let tau = reference::inverse_dynamics_at(&self.body, &forearm.rotation.to_rotation_matrix(), &state)?;
+        if tau.iter().any(|&t| status::torque_implausible(t, self.torque_limit)) {
+            flags |= status::IMPLAUSIBLE;
+        }
         Ok(Some(TrackerOutput { state, tau, missing, refined, status: flags, noise }))
     }
 
