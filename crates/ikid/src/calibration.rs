@@ -1527,10 +1527,7 @@ mod tests {
             assert!(f.residual_deg < 0.01 && (f.supination_held_deg - s_p.to_degrees()).abs() < 0.01, "{f:?}");
             assert!(f.flexion_range_deg > 60.0 && f.deviation_range_deg > 25.0, "{f:?}");
             let q = [-0.4, 0.5, 0.25];
-            let mut frame = frames(&[q], &shift, 1.1, 0.3);
-            cal.apply(&mut frame, 0).unwrap();
-            let mut out = [0.0f32; 3];
-            FeatureSet::Angles.compute(&frame, &mut out, 0).unwrap();
+            let out = angles_after(&cal, &frames(&[q], &shift, 1.1, 0.3));
             for k in 0..3 {
                 assert!((out[k] as f64 - q[k]).abs() < 1e-4, "seed {seed}: {out:?} vs {q:?}");
             }
