@@ -5,7 +5,7 @@
 For each recording in ``$IKID_REALDATA`` (default ``../shared/realdata`` beside the repo; see
 its README), as a lab would: write a marker map (``ikid map-template`` lists the labels),
 ``ikid calibrate`` from the recording itself (anatomical landmarks + the neutral frames its
-reference names), ``ikid ik`` (``--resample`` only when the model refuses the native rate)
+reference names), ``ikid ik`` (the IK family picks its model for the rate; ``--resample`` only if it refuses)
 and ``ikid track`` (``--calibration`` when it has one; the refiner only where its rate
 allows). Scores: geodesic RMS between the hand-in-forearm rotations on the reference's
 ``valid`` frames (racing also on ``gimbal_ok``), per-angle RMS, outputs per valid frame.
@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -302,7 +303,13 @@ def process(rec: Recording, folder: Path, work: Path, log: list[str]) -> dict:
         base = ["ik", str(trial), "-o", str(out), "--map", str(mapping)]
         base += ["--calibration", str(calibration)] if calibration else []
         done = run(base, log)
-        how = "native rate"
+        # What ik's summary says it ran: the member at the file's rate, or the 1 kHz member on the
+        # file resampled with outputs at the file's own frames.
+        how = (
+            "1 kHz model at the recording's frames"
+            if "outputs at the recording's frames" in done.stdout
+            else "model at the recording's rate"
+        )
         if done.returncode != 0 and "--resample" in done.stderr:
             done = run(base + ["--resample"], log)
             how = "--resample"
@@ -326,7 +333,8 @@ def process(rec: Recording, folder: Path, work: Path, log: list[str]) -> dict:
         base += ["--calibration", str(cal)]
         tracked_with = "calibrated"
     done = run(base, log)
-    refiner = "none (auto: the refiner is for 1000 Hz)" if "not refined" in done.stdout else "wrist-track"
+    refined = re.search(r"refined by (\S+);", done.stdout)
+    refiner = refined[1] if refined else "none (auto: no shipped refiner at this rate)"
     result["track_how"] = f"{tracked_with}, refiner {refiner}"
     if done.returncode == 0:
         t, q = read_mot(stem.with_suffix(".mot"))
