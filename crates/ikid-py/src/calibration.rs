@@ -296,13 +296,11 @@ impl Calibration {
     }
 
     fn __repr__(&self) -> String {
-        let b = ikid::Calibration::body_model();
+        let [forearm, hand] = self.inner.placement_deg();
         format!(
-            "Calibration({}, {} arm; forearm {:.1}°, hand {:.1}° from the body model's placement)",
+            "Calibration({}, {} arm; forearm {forearm:.1}°, hand {hand:.1}° from the body model's placement)",
             self.method.name(),
             self.inner.side.name(),
-            ikid::calibration::angle_deg(&(self.inner.forearm * b.forearm.inverse())),
-            ikid::calibration::angle_deg(&(self.inner.hand * b.hand.inverse()))
         )
     }
 }

@@ -306,6 +306,13 @@ impl Calibration {
         }
     }
 
+    /// How far each segment's measured placement lies from the body model's, forearm and hand,
+    /// degrees (what the report's `placement_deg` and the Python repr show).
+    pub fn placement_deg(&self) -> [f64; 2] {
+        let default = Self::body_model();
+        [angle_deg(&(self.forearm * default.forearm.inverse())), angle_deg(&(self.hand * default.hand.inverse()))]
+    }
+
     /// A right arm's calibration from its two rotation matrices (e.g. read back from a file);
     /// refuses matrices that are not rotations to 1e-6.
     pub fn from_matrices(forearm: Matrix3<f64>, hand: Matrix3<f64>) -> Result<Self> {
@@ -417,8 +424,7 @@ impl Calibration {
         }
         let forearm = procrustes(&measured);
         let hand = forearm * neutral;
-        report.placement_deg =
-            [angle_deg(&(forearm * default.forearm.inverse())), angle_deg(&(hand * default.hand.inverse()))];
+        report.placement_deg = Calibration { forearm, hand, side: Side::Right }.placement_deg();
         if let Some(worst) = report.placement_deg.iter().copied().find(|&a| a > MAX_PLACEMENT_DEG) {
             return Err(bad(format!(
                 "the markers sit {worst:.0}° from the body model's placement (at most {MAX_PLACEMENT_DEG}°): are they labelled right?"
@@ -465,10 +471,7 @@ impl Calibration {
             method,
             side,
             movements: Vec::new(),
-            placement_deg: [
-                angle_deg(&(forearm * default.forearm.inverse())),
-                angle_deg(&(hand * default.hand.inverse())),
-            ],
+            placement_deg: Calibration { forearm, hand, side }.placement_deg(),
             axis_skew_deg: 0.0,
             neutral_frames,
             neutral_spread_deg: spread,
@@ -619,10 +622,7 @@ impl Calibration {
             method: Method::Functional,
             side,
             movements: Vec::new(),
-            placement_deg: [
-                angle_deg(&(forearm * default.forearm.inverse())),
-                angle_deg(&(hand * default.hand.inverse())),
-            ],
+            placement_deg: Calibration { forearm, hand, side }.placement_deg(),
             axis_skew_deg: 0.0,
             neutral_frames,
             neutral_spread_deg: spread,
