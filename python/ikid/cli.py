@@ -680,7 +680,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     ikid.save_calibration(cal, args.output, marker_map=mapping, **provenance)
     r = cal.report or {}
     spread = r.get("neutral_spread_deg", 0.0)
-    details = [f"{r.get('neutral_frames', len(neutral))} neutral frames (spread {spread:.1f}°)"]
+    used = r.get("neutral_frames", len(neutral))
+    details = [
+        f"{used} of {len(neutral)} neutral frames used (spread {spread:.1f}°, marker noise "
+        f"{r.get('neutral_noise_deg', 0.0):.1f}° a frame, neutral posture ± {r.get('neutral_uncertainty_deg', 0.0):.2f}°)"
+    ]
     if r.get("movements"):
         details.append(
             "movements: "
@@ -695,7 +699,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         details.append(
             f"functional fit over {fn['frames']} frames: flexion {fn['flexion_range_deg']:.0f}°, deviation "
             f"{fn['deviation_range_deg']:.0f}°, pronation held at {-fn['supination_held_deg']:.0f}° "
-            f"(residual {fn['residual_deg']:.1f}° RMS)"
+            f"(residual {fn['residual_deg']:.1f}° RMS beside {fn['noise_deg']:.1f}° of marker noise)"
         )
     if r.get("landmarks"):
         lm = r["landmarks"]

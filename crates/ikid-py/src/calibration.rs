@@ -223,7 +223,8 @@ impl Calibration {
     /// What `from_trials`/`from_neutral` measured: method and side; per movement its range
     /// (degrees) and the share of it about one axis; the placement's difference from the body
     /// model's (degrees); the largest skew between measured axes (degrees); the neutral frames
-    /// used and their spread (degrees); the landmarks (frames each was seen in, distances in
+    /// used, their spread with the markers' noise averaged out, that noise per frame and the
+    /// standard error of the neutral posture taken (degrees); the landmarks (frames each was seen in, distances in
     /// mm, styloid line to long axis in degrees) or None. `None` for other calibrations.
     #[getter]
     fn report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
@@ -233,6 +234,8 @@ impl Calibration {
         d.set_item("side", r.side.name())?;
         d.set_item("neutral_frames", r.neutral_frames)?;
         d.set_item("neutral_spread_deg", r.neutral_spread_deg)?;
+        d.set_item("neutral_noise_deg", r.neutral_noise_deg)?;
+        d.set_item("neutral_uncertainty_deg", r.neutral_uncertainty_deg)?;
         match &r.landmarks {
             Some(l) => {
                 let ld = PyDict::new(py);
@@ -269,6 +272,7 @@ impl Calibration {
                 fd.set_item("flexion_range_deg", f.flexion_range_deg)?;
                 fd.set_item("deviation_range_deg", f.deviation_range_deg)?;
                 fd.set_item("residual_deg", f.residual_deg)?;
+                fd.set_item("noise_deg", f.noise_deg)?;
                 d.set_item("functional", fd)?;
             }
             None => d.set_item("functional", py.None())?,

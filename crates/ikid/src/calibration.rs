@@ -53,9 +53,16 @@ use crate::features::{technical_frame, technical_in_anatomical};
 
 /// Frames a static trial needs.
 pub const MIN_STATIC_FRAMES: usize = 10;
+/// Neutral frames a calibration needs (with all six markers): one frame's noise is the
+/// calibration's error, and its count is no evidence the posture was held.
+pub const MIN_NEUTRAL_FRAMES: usize = 5;
 /// Largest rotation of the hand (relative to the forearm) away from the static trial's mean
-/// allowed within it, degrees: more is not a static trial.
+/// allowed within it, degrees, the markers' noise averaged out (see [`HeldPosture`]): more is
+/// not a static trial.
 pub const MAX_STATIC_SPREAD_DEG: f64 = 5.0;
+/// How far the noise may leave a held posture's smoothed path, degrees: the window over
+/// which [`HeldPosture`] averages frames grows until the noise left in it is this small.
+const SMOOTHED_NOISE_DEG: f64 = 1.0;
 /// Smallest range of a calibration movement, degrees: less does not show its axis.
 pub const MIN_MOVEMENT_DEG: f64 = 10.0;
 /// Share of a movement's rotation that must lie along one axis.
@@ -228,8 +235,15 @@ pub struct CalibrationReport {
     pub axis_skew_deg: f64,
     /// Neutral (or static) frames used: those with all six markers.
     pub neutral_frames: usize,
-    /// Largest rotation of the hand (in the forearm) from their mean, degrees.
+    /// Largest rotation of the hand (in the forearm) from their mean, degrees, the markers'
+    /// noise averaged out (see [`HeldPosture`]).
     pub neutral_spread_deg: f64,
+    /// The markers' noise as it turns one frame's hand in the forearm, degrees RMS (from the
+    /// differences between consecutive neutral frames).
+    pub neutral_noise_deg: f64,
+    /// Standard error of the neutral posture the calibration took (the mean over the neutral
+    /// frames), degrees: how far the noise alone may have put it from the posture held.
+    pub neutral_uncertainty_deg: f64,
     /// What the landmarks measured, for [`Method::Landmarks`].
     pub landmarks: Option<LandmarkReport>,
     /// What the functional fit measured, for [`Method::Functional`].
@@ -248,9 +262,12 @@ pub struct FunctionalReport {
     pub flexion_range_deg: f64,
     /// Range of radial-ulnar deviation over them, degrees.
     pub deviation_range_deg: f64,
-    /// RMS of the fit's residual, degrees: how far the hand turned about the forearm's long
-    /// axis (pronation-supination) during the movement, which the fit assumes held.
+    /// RMS of the fit's residual, the markers' noise taken out, degrees: how far the hand turned
+    /// about the forearm's long axis (pronation-supination) during the movement, which the fit
+    /// assumes held.
     pub residual_deg: f64,
+    /// The markers' noise in that residual, degrees RMS (from consecutive frames' differences).
+    pub noise_deg: f64,
 }
 
 /// The forearm's landmarks as the calibration saw them.
@@ -344,13 +361,15 @@ impl Calibration {
                 statics.len()
             )));
         }
-        let neutral = mean_rotation(&statics);
-        let spread = statics.iter().map(|s| angle_deg(&(s * neutral.inverse()))).fold(0.0, f64::max);
-        if spread > MAX_STATIC_SPREAD_DEG {
+        let held = HeldPosture::of(&statics);
+        if held.spread_deg > MAX_STATIC_SPREAD_DEG {
             return Err(bad(format!(
-                "the hand moves {spread:.1}° within the static trial (at most {MAX_STATIC_SPREAD_DEG}°): it must hold the neutral pose"
+                "the hand moves {:.1}° within the static trial, its markers' noise ({:.1}° a frame) averaged out \
+                 (at most {MAX_STATIC_SPREAD_DEG}°): it must hold the neutral pose",
+                held.spread_deg, held.noise_deg
             )));
         }
+        let neutral = held.mean;
         let mut coords: Vec<usize> = movements.iter().map(|m| m.0).collect();
         coords.sort_unstable();
         coords.dedup();
@@ -368,7 +387,9 @@ impl Calibration {
             placement_deg: [0.0; 2],
             axis_skew_deg: 0.0,
             neutral_frames: statics.len(),
-            neutral_spread_deg: spread,
+            neutral_spread_deg: held.spread_deg,
+            neutral_noise_deg: held.noise_deg,
+            neutral_uncertainty_deg: held.uncertainty_deg,
             landmarks: None,
             functional: None,
         };
@@ -449,10 +470,15 @@ impl Calibration {
         landmarks: Option<LandmarkTrial<'_>>,
         side: Side,
     ) -> Result<(Self, CalibrationReport)> {
-        let (neutral, neutral_frames, spread) = neutral_posture(neutral, side)?;
+        let frames = neutral;
+        let held = neutral_posture(frames, side)?;
+        let neutral = held.mean;
         let default = Self::body_model();
         let (method, forearm, mut landmark_report) = match landmarks {
-            None => (Method::Neutral, default.forearm, None),
+            None => {
+                check_forearm_placement(frames)?;
+                (Method::Neutral, default.forearm, None)
+            }
             Some(trial) => {
                 let (forearm, report) = forearm_from_landmarks(trial, side)?;
                 (Method::Landmarks, forearm, Some(report))
@@ -473,8 +499,10 @@ impl Calibration {
             movements: Vec::new(),
             placement_deg: Calibration { forearm, hand, side }.placement_deg(),
             axis_skew_deg: 0.0,
-            neutral_frames,
-            neutral_spread_deg: spread,
+            neutral_frames: held.frames,
+            neutral_spread_deg: held.spread_deg,
+            neutral_noise_deg: held.noise_deg,
+            neutral_uncertainty_deg: held.uncertainty_deg,
             landmarks: landmark_report,
             functional: None,
         };
@@ -504,7 +532,8 @@ impl Calibration {
     /// [`MIN_MOVEMENT_DEG`] of flexion or of deviation, or the residual exceeds
     /// [`MAX_FUNCTIONAL_RESIDUAL_DEG`].
     pub fn functional(neutral: &[f32], movement: &[f32], side: Side) -> Result<(Self, CalibrationReport)> {
-        let (posture, neutral_frames, spread) = neutral_posture(neutral, side)?;
+        let held = neutral_posture(neutral, side)?;
+        let posture = held.mean;
         let mut frames = whole_frames(movement, MARKER_FRAME_LEN, "movement frames")?.to_vec();
         side.to_right(&mut frames);
         let mut moves = Vec::new();
@@ -524,7 +553,7 @@ impl Calibration {
                 moves.len()
             )));
         }
-        let (u, v, residual) = fit_universal_axes(&moves);
+        let (u, v, residual, noise) = fit_universal_axes(&moves);
         let default = Self::body_model();
         // Signs from the body model's placement of the forearm: its z, and its x, which the
         // hand's deviation axis is at neutral (so the hand's cluster may sit any way round).
@@ -572,6 +601,7 @@ impl Calibration {
             flexion_range_deg: range_deg(1),
             deviation_range_deg: range_deg(2),
             residual_deg: residual.to_degrees(),
+            noise_deg: noise.to_degrees(),
         };
         if report.flexion_range_deg.min(report.deviation_range_deg) < MIN_MOVEMENT_DEG {
             // A movement about one axis fits a second axis anywhere in a plane: the two ranges
@@ -624,8 +654,10 @@ impl Calibration {
             movements: Vec::new(),
             placement_deg: Calibration { forearm, hand, side }.placement_deg(),
             axis_skew_deg: 0.0,
-            neutral_frames,
-            neutral_spread_deg: spread,
+            neutral_frames: held.frames,
+            neutral_spread_deg: held.spread_deg,
+            neutral_noise_deg: held.noise_deg,
+            neutral_uncertainty_deg: held.uncertainty_deg,
             landmarks: None,
             functional: Some(report),
         };
@@ -879,10 +911,10 @@ fn forearm_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Result<(Rotat
 }
 
 /// The hand's rotation in the forearm (`B_fᵀB_h`, technical frames) at the neutral posture:
-/// the chordal mean over the frames with all six markers (a left arm's mirrored first), how
-/// many those were and the largest rotation from the mean among them (degrees). Refused when
-/// no frame is complete or the hand moves more than [`MAX_STATIC_SPREAD_DEG`].
-fn neutral_posture(neutral: &[f32], side: Side) -> Result<(Rotation3<f64>, usize, f64)> {
+/// held over the frames with all six markers (a left arm's mirrored first; [`HeldPosture`]).
+/// Refused when fewer than [`MIN_NEUTRAL_FRAMES`] are complete or the hand moves more than
+/// [`MAX_STATIC_SPREAD_DEG`].
+fn neutral_posture(neutral: &[f32], side: Side) -> Result<HeldPosture> {
     let mut frames = whole_frames(neutral, MARKER_FRAME_LEN, "neutral frames")?.to_vec();
     side.to_right(&mut frames);
     let n = frames.len() / MARKER_FRAME_LEN;
@@ -915,15 +947,141 @@ fn neutral_posture(neutral: &[f32], side: Side) -> Result<(Rotation3<f64>, usize
             if missing.is_empty() { "none, but there are no frames".to_string() } else { missing.join(", ") }
         )));
     }
-    let mean = mean_rotation(&relative);
-    let spread = relative.iter().map(|s| angle_deg(&(s * mean.inverse()))).fold(0.0, f64::max);
-    if spread > MAX_STATIC_SPREAD_DEG {
+    if relative.len() < MIN_NEUTRAL_FRAMES {
         return Err(bad(format!(
-            "the hand moves {spread:.1}° within the neutral frames (at most {MAX_STATIC_SPREAD_DEG}°): choose \
-             frames where the wrist holds one posture"
+            "{} of the {n} neutral frames have all six markers (at least {MIN_NEUTRAL_FRAMES} are needed: one \
+             frame's noise would be the calibration's error); choose more frames of the neutral posture where \
+             every marker is seen, or record a static trial of a second or more",
+            relative.len()
         )));
     }
-    Ok((mean, relative.len(), spread))
+    let held = HeldPosture::of(&relative);
+    if held.spread_deg > MAX_STATIC_SPREAD_DEG {
+        return Err(bad(format!(
+            "the hand moves {:.1}° within the neutral frames, its markers' noise ({:.1}° a frame) averaged out \
+             (at most {MAX_STATIC_SPREAD_DEG}°): choose frames where the wrist holds one posture",
+            held.spread_deg, held.noise_deg
+        )));
+    }
+    Ok(held)
+}
+
+/// A posture held over consecutive frames, told apart from the markers' noise: the mean of
+/// the hand's rotations in the forearm, how far the posture itself moved, the noise and how
+/// uncertain the mean is. A frame's rotation is the posture plus noise; noise differs from
+/// frame to frame while a held posture does not, so half the mean square of consecutive
+/// differences measures the noise (`noise_deg`), and the frames' moving average over a window
+/// long enough to bring that noise below [`SMOOTHED_NOISE_DEG`] measures the posture's
+/// movement (`spread_deg`, its largest distance from the mean; the raw frames' on clean
+/// markers). Taken as the largest distance of single frames, 5 % marker noise read as 13–15°
+/// of movement in a trial that held still.
+#[derive(Debug, Clone, Copy)]
+struct HeldPosture {
+    mean: Rotation3<f64>,
+    frames: usize,
+    spread_deg: f64,
+    noise_deg: f64,
+    uncertainty_deg: f64,
+}
+
+impl HeldPosture {
+    /// Of `rotations` in time order (at least one).
+    fn of(rotations: &[Rotation3<f64>]) -> Self {
+        let mean = mean_rotation(rotations);
+        let n = rotations.len();
+        let offsets: Vec<Vector3<f64>> = rotations
+            .iter()
+            .map(|r| UnitQuaternion::from_rotation_matrix(&(mean.inverse() * r)).scaled_axis())
+            .collect();
+        let noise_var = consecutive_noise_variance(offsets.windows(2).map(|w| (w[1] - w[0]).norm_squared()), 3);
+        // Frames averaged: enough to bring the noise left below SMOOTHED_NOISE_DEG, at most a
+        // third of them (so that a movement within the trial still shows).
+        let target = SMOOTHED_NOISE_DEG.to_radians().powi(2);
+        let window = ((noise_var / target).ceil() as usize).clamp(1, (n / 3).max(1));
+        let mut sum: Vector3<f64> = offsets[..window].iter().sum();
+        let mut spread = (sum / window as f64).norm();
+        for i in window..n {
+            sum += offsets[i] - offsets[i - window];
+            spread = spread.max((sum / window as f64).norm());
+        }
+        HeldPosture {
+            mean,
+            frames: n,
+            spread_deg: spread.to_degrees(),
+            noise_deg: noise_var.sqrt().to_degrees(),
+            uncertainty_deg: (noise_var / n as f64).sqrt().to_degrees(),
+        }
+    }
+}
+
+/// Refuses neutral frames whose forearm markers do not sit where the body model puts RSP, USP
+/// and FAP — the neutral method keeps that placement for the forearm, so it cannot know any
+/// other: the median distance between two of the forearm's markers must be the model's, for a
+/// subject of any size the scale of the triangle fits within [`SUBJECT_SCALES`], each within
+/// [`PLACEMENT_DISTANCE_SHARE`] (+ [`PLACEMENT_DISTANCE_SLACK_M`]), as the uncalibrated path
+/// checks. A cluster (a plate's 4 cm sides against the model's 17 cm) is refused with what to
+/// record instead.
+fn check_forearm_placement(frames: &[f32]) -> Result<()> {
+    let body = body::BodyModel::default();
+    let complete: Vec<&[f32]> =
+        frames.chunks_exact(MARKER_FRAME_LEN).filter(|f| f[..9].iter().all(|v| v.is_finite())).collect();
+    if complete.is_empty() {
+        return Ok(()); // neutral_posture has refused these frames already
+    }
+    let pairs = [(0, 1), (0, 2), (1, 2)];
+    let point = |f: &[f32], m: usize| Vector3::new(f[3 * m] as f64, f[3 * m + 1] as f64, f[3 * m + 2] as f64);
+    let seen: [f64; 3] = pairs.map(|(i, j)| {
+        let mut d: Vec<f64> = complete.iter().map(|f| (point(f, i) - point(f, j)).norm()).collect();
+        let mid = d.len() / 2;
+        *d.select_nth_unstable_by(mid, f64::total_cmp).1
+    });
+    let model: [f64; 3] =
+        pairs.map(|(i, j)| (Vector3::from(body.marker_offsets[i]) - Vector3::from(body.marker_offsets[j])).norm());
+    let fitted = seen.iter().zip(&model).map(|(s, m)| s * m).sum::<f64>() / model.iter().map(|m| m * m).sum::<f64>();
+    let scale = fitted.clamp(SUBJECT_SCALES.0, SUBJECT_SCALES.1);
+    for (k, (i, j)) in pairs.into_iter().enumerate() {
+        let expected = scale * model[k];
+        if (seen[k] - expected).abs() > PLACEMENT_DISTANCE_SHARE * expected + PLACEMENT_DISTANCE_SLACK_M {
+            return Err(bad(format!(
+                "the neutral method keeps the body model's placement of the forearm's markers, and these do not \
+                 sit there: {} and {} are {:.0} mm apart where the model puts them {:.0} mm apart (for a subject \
+                 {scale:.2}× its size), so the forearm's axes cannot be known from them. Record the epicondyles \
+                 and styloids (markers in a static trial, or points probed relative to the forearm's markers) \
+                 and calibrate with --method landmarks, or record the wrist moving through flexion and \
+                 deviation together with the forearm still (--method functional)",
+                body::MARKERS[i].name,
+                body::MARKERS[j].name,
+                1e3 * seen[k],
+                1e3 * expected
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Sizes of subjects the neutral method's placement check allows, as the body model's length
+/// factor: from a small adult's forearm to a tall one's.
+pub const SUBJECT_SCALES: (f64, f64) = (0.75, 1.35);
+
+/// The noise variance (summed over `dims` dimensions) of values whose consecutive
+/// differences have the squared lengths `squares`: half their median, over the median of χ²
+/// with `dims` degrees of freedom per degree of freedom (Gaussian noise). The median, so that
+/// a frame where the posture really moved, or a glitch, reads as neither noise nor no noise.
+/// 0 without differences.
+fn consecutive_noise_variance(squares: impl Iterator<Item = f64>, dims: usize) -> f64 {
+    let mut squares: Vec<f64> = squares.collect();
+    if squares.is_empty() {
+        return 0.0;
+    }
+    let mid = squares.len() / 2;
+    let median = *squares.select_nth_unstable_by(mid, f64::total_cmp).1;
+    // Median of χ²(k) / k for k = 1, 2, 3.
+    let chi2_median_per_dof = match dims {
+        1 => 0.4549,
+        2 => std::f64::consts::LN_2,
+        _ => 0.7887,
+    };
+    median / 2.0 / chi2_median_per_dof
 }
 
 /// Orthogonal Procrustes: the rotation `T` maximising `Σ aᵀ T t` over pairs `(a, t)` (model
@@ -938,8 +1096,9 @@ fn procrustes(pairs: &[(Vector3<f64>, Vector3<f64>)]) -> Rotation3<f64> {
 
 /// The unit `u`, `v` minimising `Σ (uᵀ M_k v)²` (a universal joint: `u` fixed in the first
 /// segment, `v` in the second, perpendicular in every frame), by alternating least squares
-/// from several starts; with the RMS of `asin(uᵀM_kv)`, radians.
-fn fit_universal_axes(moves: &[Matrix3<f64>]) -> (Vector3<f64>, Vector3<f64>, f64) {
+/// from several starts; with the RMS of `asin(uᵀM_kv)` that is not the markers' noise (the
+/// turn the fit cannot describe), and the noise's, radians.
+fn fit_universal_axes(moves: &[Matrix3<f64>]) -> (Vector3<f64>, Vector3<f64>, f64, f64) {
     let smallest = |scatter: Matrix3<f64>| -> Vector3<f64> {
         let eigen = SymmetricEigen::new(scatter);
         eigen.eigenvectors.column(eigen.eigenvalues.imin()).into_owned()
@@ -968,9 +1127,13 @@ fn fit_universal_axes(moves: &[Matrix3<f64>]) -> (Vector3<f64>, Vector3<f64>, f6
         }
     }
     let (u, v, _) = best.expect("three starts");
-    let rms = (moves.iter().map(|m| u.dot(&(m * v)).clamp(-1.0, 1.0).asin().powi(2)).sum::<f64>() / moves.len() as f64)
-        .sqrt();
-    (u, v, rms)
+    let residuals: Vec<f64> = moves.iter().map(|m| u.dot(&(m * v)).clamp(-1.0, 1.0).asin()).collect();
+    let n = residuals.len() as f64;
+    let mean_square = residuals.iter().map(|r| r * r).sum::<f64>() / n;
+    // The markers' noise differs between consecutive frames, a turn of the forearm hardly:
+    // half the mean square of the differences is the noise's share of the residual.
+    let noise = consecutive_noise_variance(residuals.windows(2).map(|w| (w[1] - w[0]).powi(2)), 1);
+    (u, v, (mean_square - noise).max(0.0).sqrt(), noise.sqrt())
 }
 
 /// The hand's anatomical frame from its landmarks and the styloids (mirrored into a right
@@ -1465,8 +1628,130 @@ mod tests {
         let (far, _) = neutral_session(1, &SHIFT, 0.0, [0.0, 0.3, 0.0]);
         moving[..18].copy_from_slice(&far);
         let err = Calibration::from_neutral(&moving, None, Side::Right).unwrap_err().to_string();
-        assert!(err.contains("within the neutral frames (at most 5°)"), "{err}");
+        assert!(err.contains("within the neutral frames, its markers' noise (0.0° a frame)"), "{err}");
+        assert!(err.contains("(at most 5°): choose frames where the wrist holds one posture"), "{err}");
         assert!(Calibration::from_neutral(&[], None, Side::Right).unwrap_err().to_string().contains("whole number"));
+    }
+
+    /// `frames` with uniform noise of ±`amplitude` metres on every coordinate.
+    fn noisy(frames: &[f32], amplitude: f64, seed: u64) -> Vec<f32> {
+        let mut rng = crate::rng::SplitMix::new(seed);
+        frames.iter().map(|v| v + rng.uniform(-amplitude, amplitude) as f32).collect()
+    }
+
+    /// Angle, degrees, between each frame's hand-in-forearm rotation in `a` and in `b`.
+    fn relative_turns_deg(a: &[f32], b: &[f32]) -> Vec<f64> {
+        let rel = |f: &[f32]| {
+            let (_, b_f) = technical_frame(f, Segment::Forearm, 0).unwrap();
+            let (_, b_h) = technical_frame(f, Segment::Hand, 0).unwrap();
+            Rotation3::from_matrix_unchecked(b_f.transpose() * b_h)
+        };
+        a.chunks_exact(MARKER_FRAME_LEN)
+            .zip(b.chunks_exact(MARKER_FRAME_LEN))
+            .map(|(x, y)| angle_deg(&(rel(x) * rel(y).inverse())))
+            .collect()
+    }
+
+    #[test]
+    fn a_noisy_static_trial_is_averaged_and_says_how_uncertain_it_is() {
+        let q = [0.1, 0.2, -0.05];
+        let clean = frames(&[q; 1000], &SHIFT, 1.0, 0.3);
+        let (clean_cal, _) = Calibration::from_neutral(&clean, None, Side::Right).unwrap();
+        let held = noisy(&clean, 0.002, 7);
+        // The oracle: each noisy frame's hand against the same frame's without noise.
+        let turns = relative_turns_deg(&held, &clean);
+        let rms = (turns.iter().map(|t| t * t).sum::<f64>() / turns.len() as f64).sqrt();
+        let largest = turns.iter().copied().fold(0.0, f64::max);
+        assert!(largest > 2.0 * MAX_STATIC_SPREAD_DEG, "single frames turn by up to {largest:.1}°");
+        let (cal, report) = Calibration::from_neutral(&held, None, Side::Right).unwrap();
+        assert_eq!(report.neutral_frames, 1000);
+        assert!(report.neutral_spread_deg < 0.5 * MAX_STATIC_SPREAD_DEG, "{report:?}");
+        assert!((report.neutral_noise_deg / rms - 1.0).abs() < 0.25, "noise {rms:.2}°: {report:?}");
+        let error = angle_deg(&(cal.hand * clean_cal.hand.inverse()));
+        assert!((report.neutral_uncertainty_deg - rms / 1000f64.sqrt()).abs() < 0.3 * rms / 1000f64.sqrt());
+        assert!(error < 3.0 * report.neutral_uncertainty_deg, "{error:.3}° off: {report:?}");
+        // The same noise on a hand that bends 8° and back within the trial: movement, refused.
+        let bending: Vec<[f64; 3]> =
+            (0..1000).map(|i| [q[0], q[1] + 0.14 * (i as f64 / 1000.0 * std::f64::consts::PI).sin(), q[2]]).collect();
+        let bent = noisy(&frames(&bending, &SHIFT, 1.0, 0.3), 0.002, 7);
+        let err = Calibration::from_neutral(&bent, None, Side::Right).unwrap_err().to_string();
+        assert!(err.contains("the hand moves") && err.contains("averaged out (at most 5°)"), "{err}");
+        // And a static trial of the movements method alike.
+        let moves: Vec<(usize, Vec<f32>)> =
+            (0..2).map(|j| (j, frames(&single(j, 200, 0.6), &SHIFT, 1.0, 0.3))).collect();
+        let refs: Vec<(usize, &[f32])> = moves.iter().map(|(j, f)| (*j, f.as_slice())).collect();
+        let still = noisy(&frames(&[[0.0; 3]; 1000], &SHIFT, 1.0, 0.3), 0.002, 8);
+        let (_, report) = Calibration::from_trials(&still, &refs).unwrap();
+        assert!(report.neutral_spread_deg < 0.5 * MAX_STATIC_SPREAD_DEG && report.neutral_uncertainty_deg > 0.0);
+        let err = Calibration::from_trials(&bent, &refs).unwrap_err().to_string();
+        assert!(err.contains("within the static trial"), "{err}");
+    }
+
+    #[test]
+    fn too_few_neutral_frames_are_refused_with_their_count() {
+        let clean = frames(&[[0.0; 3]; MIN_NEUTRAL_FRAMES], &SHIFT, 1.0, 0.0);
+        assert!(Calibration::from_neutral(&clean, None, Side::Right).is_ok());
+        let err = Calibration::from_neutral(&clean[MARKER_FRAME_LEN..], None, Side::Right).unwrap_err().to_string();
+        assert!(err.contains("4 of the 4 neutral frames have all six markers (at least 5 are needed"), "{err}");
+        let one = &clean[..MARKER_FRAME_LEN];
+        let err = Calibration::from_neutral(one, None, Side::Right).unwrap_err().to_string();
+        assert!(err.contains("1 of the 1 neutral frames"), "{err}");
+    }
+
+    #[test]
+    fn the_neutral_method_refuses_a_forearm_placement_it_cannot_know() {
+        // A forearm plate: the three markers 3 cm from their centroid, where the body model
+        // spreads RSP, USP and FAP over 17 cm.
+        let mut body = body::BodyModel::default();
+        let centroid: Vector3<f64> = (0..3).map(|m| Vector3::from(body.marker_offsets[m])).sum::<Vector3<f64>>() / 3.0;
+        for m in 0..3 {
+            let o = Vector3::from(body.marker_offsets[m]);
+            body.marker_offsets[m] = (centroid + (o - centroid).normalize() * 0.03).into();
+        }
+        let pose = body.forearm_pose(0.2);
+        let plate: Vec<f32> = (0..20).flat_map(|_| body.marker_frame(&[0.0; 3], &pose).map(|v| v as f32)).collect();
+        let err = Calibration::from_neutral(&plate, None, Side::Right).unwrap_err().to_string();
+        assert!(err.contains("the neutral method keeps the body model's placement of the forearm's markers"), "{err}");
+        assert!(err.contains("--method landmarks") && err.contains("--method functional"), "{err}");
+        // With landmarks the same plate is calibrated (its frame comes from them).
+        let landmarks: Vec<f32> = (0..20)
+            .flat_map(|_| {
+                let offsets = landmark_offsets(1.0);
+                offsets
+                    .iter()
+                    .flat_map(|o| {
+                        let p = pose * nalgebra::Point3::from(Vector3::from(*o));
+                        [p.x as f32, p.y as f32, p.z as f32]
+                    })
+                    .collect::<Vec<f32>>()
+            })
+            .collect();
+        let trial = LandmarkTrial { markers: &plate, landmarks: &landmarks, hand_landmarks: None };
+        assert!(Calibration::from_neutral(&plate, Some(trial), Side::Right).is_ok());
+        // The model's placement on subjects from small to tall, and markers a little off, pass.
+        for scale in [0.8, 1.0, 1.3] {
+            let ok = frames(&[[0.0; 3]; 10], &SHIFT, scale, 0.0);
+            assert!(Calibration::from_neutral(&ok, None, Side::Right).is_ok(), "scale {scale}");
+        }
+    }
+
+    #[test]
+    fn a_noisy_functional_movement_is_fitted_with_the_noise_taken_out_of_its_residual() {
+        let shift = random_shift(5, 0.01);
+        let neutral = noisy(&frames(&[[0.0; 3]; 300], &shift, 1.0, 0.3), 0.003, 11);
+        let movement = noisy(&frames(&circles(3000, 0.3, 0.0), &shift, 1.0, 0.3), 0.003, 12);
+        let (cal, report) = Calibration::functional(&neutral, &movement, Side::Right).unwrap();
+        let f = report.functional.as_ref().unwrap();
+        assert!(f.noise_deg > 2.0 && f.residual_deg < 0.3 * MAX_FUNCTIONAL_RESIDUAL_DEG, "{f:?}");
+        let q = [-0.4, 0.5, 0.25];
+        let out = angles_after(&cal, &frames(&[q], &shift, 1.0, 0.3));
+        for k in 0..3 {
+            assert!((out[k] as f64 - q[k]).abs() < 0.03, "{out:?} vs {q:?}");
+        }
+        // A forearm that turns while the wrist circles is still refused through the noise.
+        let turning = noisy(&frames(&circles(3000, 0.3, 0.3), &shift, 1.0, 0.3), 0.003, 12);
+        let err = Calibration::functional(&neutral, &turning, Side::Right).unwrap_err().to_string();
+        assert!(err.contains("the hand turned about the forearm's long axis"), "{err}");
     }
 
     #[test]
