@@ -1,0 +1,458 @@
+"""The exam's driver (`make exam`, ``python -m studies.exam``): ikid judged on wrist models it
+did not make (issue #28, item 1).
+
+    .venv/bin/python -m studies.exam            # the full exam (~10-15 min on 2 cores)
+    .venv/bin/python -m studies.exam --quick    # one model, one pose, short trials
+    .venv/bin/python -m studies.exam --keep DIR # keep every generated file there
+
+For each model (``models.py``) and shoulder pose: a task trial, a static and a functional
+trial (``motion.py``) simulated by OpenSim at 1 kHz; for each marker layout and artefact
+(``markers.py``) the files a lab would have (TRC, a marker map), every method run on them
+(``runs.py``) and scored against the model's own truth (``truth.py``) on the last 10 % of the
+task trial, as the thesis scores. Writes docs/exam.md and target/exam.json; the last line of
+stdout is the ``exam:`` summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import multiprocessing
+import shutil
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from ikid.io import write_trc
+from studies.exam import markers as MK
+from studies.exam import motion, runs
+from studies.exam.biomod import write_biomod
+from studies.exam.models import MODELS, build_osim, forearm_length, ulna_in_lab
+from studies.exam.truth import Mapping, opensim_hand_rotations
+
+ROOT = Path(__file__).resolve().parents[2]
+
+RATE = 1000.0
+POSES_DEG = (0.0, 45.0, -20.0)
+TASK_S, STATIC_S, FUNCTIONAL_S = 20.0, 3.0, 8.0
+QUICK = {"task": 8.0, "static": 2.0, "functional": 6.0}
+# Seeds: 28_000_000 + 1000·model + 100·pose + kind. Far from every training seed (configs use
+# 0-3004, studies 7.5e6-7.6e6 and 9500-9591); tests/test_exam.py checks it against them all.
+SEED_BASE = 28_000_000
+METHODS = {
+    "track": "ikid track (default refiner)",
+    "track_none": "ikid track --refiner none",
+    "ik": "ikid ik",
+    "ekf": "biorbd EKF (+ID)",
+    "opensim": "OpenSim IK (+ID, 6 Hz)",
+}
+TORQUE_METHODS = ("track", "track_none", "ekf", "opensim")
+
+
+def seeds_of(model_index: int, pose_index: int) -> dict[str, int]:
+    base = SEED_BASE + 1000 * model_index + 100 * pose_index
+    return {
+        "task": base,
+        "static": base + 1,
+        "functional": base + 2,
+        "layout": base + 3,
+        "sta": base + 4,
+        "noise": base + 5,
+        "dropout": base + 6,
+    }
+
+
+def all_seeds() -> list[int]:
+    """Every seed the exam uses (for the test that training cannot reach them)."""
+    return sorted(
+        {s for m in range(len(MODELS)) for p in range(len(POSES_DEG)) for s in seeds_of(m, p).values()}
+    )
+
+
+def ikid_default_hand_mass() -> float:
+    """ikid's default subject's hand mass: what ``--mass-scale`` is a ratio to."""
+    import ikid
+
+    return float(ikid.body_model()["segments"]["hand"]["mass"])
+
+
+def ikid_default_forearm_length() -> float:
+    import ikid
+
+    return float(ikid.body_model()["segments"]["forearm"]["length"])
+
+
+def session_job(job: dict) -> list[dict]:
+    """One model, pose and layout: simulate, lay markers and artefacts, run and score all."""
+    model = MODELS[job["model"]]()
+    seeds, durations, pose = job["seeds"], job["durations"], math.radians(job["pose_deg"])
+    work = Path(job["work"]) / f"{model.name}_{job['pose_deg']:+.0f}_{job['layout']}"
+    work.mkdir(parents=True, exist_ok=True)
+    mapping = Mapping(model)
+    traj = {
+        "task": motion.task(model, seeds["task"], durations["task"], RATE),
+        "static": motion.static(model, seeds["static"], durations["static"], RATE),
+        "functional": motion.functional(model, seeds["functional"], durations["functional"], RATE),
+    }
+    pts = MK.layout(model, job["layout"], seeds["layout"])
+    lms = MK.landmark_points(model)
+    osim_path = build_osim(model, pose, pts, str(work / "model.osim"))
+    biomod = write_biomod(model, pose, pts, work / "model.bioMod")
+    sta = MK.SoftTissue(model, len(pts), seeds["sta"]) if job["layout"] == "skin" else None
+
+    # OpenSim's kinematics: the hand's pose per frame; the ulna is fixed.
+    clean: dict[str, np.ndarray] = {}
+    truth_q = np.empty(0)
+    for kind, q in traj.items():
+        r_ulna_hand, (r_lab, t_lab) = opensim_hand_rotations(osim_path, q)
+        ulna = ulna_in_lab(model, pose)
+        frames = MK.marker_frames(pts, q, ulna, (r_lab, t_lab), sta)
+        if kind == "static":
+            frames = np.hstack([frames, MK.marker_frames(lms, q, ulna, (r_lab, t_lab))])
+        clean[kind] = frames
+        if kind == "task":
+            truth_q = mapping.from_hand_rotations(r_ulna_hand)
+    n = len(traj["task"])
+    scored = slice(int(round(0.9 * n)), n)
+    first_os = max(0, scored.start - int(RATE))
+
+    # Truth torques: OpenSim's inverse dynamics at the true coordinates, mapped to ikid's.
+    from ikid.interop.opensim import inverse_dynamics
+
+    q_s = traj["task"][scored]
+    qd, qdd = motion.derivatives(traj["task"], RATE)
+    tau_model = inverse_dynamics(osim_path, q_s, qd[scored], qdd[scored])
+    truth_tau = mapping.torques(q_s, tau_model)
+
+    scales = (
+        forearm_length(model) / ikid_default_forearm_length(),
+        model.link_of(model.hand).inertial.mass / ikid_default_hand_mass(),
+    )
+    labels = list(pts)
+    results = []
+    for artefact in MK.ARTEFACTS:
+        folder = work / artefact
+        folder.mkdir(exist_ok=True)
+        rng = np.random.default_rng(seeds["noise"] + 17 * MK.ARTEFACTS.index(artefact))
+        data = {k: v.copy() for k, v in clean.items()}
+        if artefact.startswith("noise"):
+            amp = MK.noise_amplitude(clean["task"], 0.01 if artefact == "noise1" else 0.05)
+            for k in data:
+                amp_k = np.concatenate([amp, np.zeros(data[k].shape[1] - len(amp))])
+                data[k] = MK.add_noise(data[k], amp_k, rng)
+        elif artefact == "dropout":
+            drng = np.random.default_rng(seeds["dropout"])
+            marker = int(drng.integers(0, 6))
+            data["task"] = MK.drop(data["task"], marker, MK.dropouts(n, RATE, drng, scored.start))
+            for k in ("static", "functional"):
+                m = len(data[k])
+                data[k] = MK.drop(data[k], marker, [(m // 2, m // 2 + int(0.2 * RATE))])
+        for kind, frames in data.items():
+            names = labels + (list(lms) if kind == "static" else [])
+            write_trc(folder / f"{kind}.trc", np.arange(len(frames)) / RATE, frames, RATE, names)
+        tail = data["task"][first_os:]
+        write_trc(folder / "task_tail.trc", (first_os + np.arange(len(tail))) / RATE, tail, RATE, labels)
+        (folder / "map.toml").write_text(_map_toml(labels))
+
+        methods = ("landmarks", "functional", "neutral") if job["layout"] == "anatomical" else ("landmarks",)
+        est = runs.run_ikid(folder, n, RATE, scales, methods)
+        ekf = runs.run_ekf(biomod, data["task"], RATE)
+        osr = runs.run_opensim(Path(osim_path), folder / "task_tail.trc", n, RATE, first_os)
+        row = {
+            "model": model.name,
+            "pose_deg": job["pose_deg"],
+            "layout": job["layout"],
+            "artefact": artefact,
+            "frames": n,
+            "scored_frames": scored.stop - scored.start,
+            "scales": scales,
+            "methods": {},
+            "calibrations": {},
+        }
+        for key in ("track", "track_none", "ik"):
+            r = est[key]
+            if "error" in r:
+                row["methods"][key] = {"error": r["error"], "rows_pct": 0.0}
+                continue
+            tau = r["tau"][scored] if "tau" in r else None
+            row["methods"][key] = score(r["q"][scored], truth_q[scored], tau, truth_tau, r["seconds"] / n)
+            row["methods"][key]["flags"] = int((r["status"][scored] != 0).sum())
+        for name, r in (("ekf", ekf), ("opensim", osr)):
+            q_ikid = _mapped(mapping, r["q"][scored])
+            tau_ikid = _mapped_tau(mapping, r["q"][scored], r["tau"][scored])
+            secs = r["seconds"] / (n if name == "ekf" else max(1, r["frames"]))
+            row["methods"][name] = score(q_ikid, truth_q[scored], tau_ikid, truth_tau, secs)
+        for method, c in est["calibrations"].items():
+            entry = {"accepted": c["accepted"], "message": c["message"]}
+            if "q" in c:
+                entry["track_none"] = score(c["q"][scored], truth_q[scored], None, truth_tau, 0.0)
+            row["calibrations"][method] = entry
+        results.append(row)
+        if not job["keep"]:
+            shutil.rmtree(folder, ignore_errors=True)
+    return results
+
+
+def _map_toml(labels: list[str]) -> str:
+    lines = ['side = "right"', "[markers]"]
+    lines += [f'{ikid_name} = "{lab}"' for ikid_name, lab in zip(MK.IKID_ORDER, labels, strict=True)]
+    lines += ["[landmarks]"] + [f'{k} = "{v}"' for k, v in MK.LANDMARKS.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _mapped(mapping: Mapping, q_model: np.ndarray) -> np.ndarray:
+    out = np.full_like(q_model, np.nan)
+    ok = np.isfinite(q_model).all(axis=1)
+    if ok.any():
+        out[ok] = mapping.angles(q_model[ok])
+    return out
+
+
+def _mapped_tau(mapping: Mapping, q_model: np.ndarray, tau_model: np.ndarray) -> np.ndarray:
+    out = np.full_like(tau_model, np.nan)
+    ok = np.isfinite(q_model).all(axis=1) & np.isfinite(tau_model).all(axis=1)
+    if ok.any():
+        out[ok] = mapping.torques(q_model[ok], tau_model[ok])
+    return out
+
+
+def score(q, q_true, tau, tau_true, seconds_per_frame: float) -> dict:
+    """Angle MSE (rad²) and RMSE per coordinate (deg), torque RMSE (N·m, all and per
+    coordinate), rows written (% of the scored frames with an output), time per frame (µs)."""
+    ok = np.isfinite(q).all(axis=1)
+    e = q[ok] - q_true[ok]
+    out = {
+        "rows_pct": 100.0 * ok.mean(),
+        "angle_mse": float(np.mean(e**2)) if ok.any() else math.nan,
+        "angle_rmse_deg": np.degrees(np.sqrt(np.mean(e**2, axis=0))).tolist() if ok.any() else [math.nan] * 3,
+        "us_per_frame": 1e6 * seconds_per_frame,
+    }
+    if tau is not None:
+        okt = np.isfinite(tau).all(axis=1)
+        et = tau[okt] - tau_true[okt]
+        out["torque_rmse"] = float(np.sqrt(np.mean(et**2))) if okt.any() else math.nan
+        out["torque_rmse_coord"] = np.sqrt(np.mean(et**2, axis=0)).tolist() if okt.any() else [math.nan] * 3
+    return out
+
+
+# --- aggregation and the page ------------------------------------------------------------------
+
+
+def conditions(rows: list[dict]) -> dict[tuple[str, str, str], dict]:
+    """Per model × layout × artefact, each method's scores averaged over the poses (MSE and
+    RMSE² means, so the mean MSE is the MSE of the pooled frames); rows_pct: the worst pose."""
+    groups: dict[tuple[str, str, str], list[dict]] = {}
+    for r in rows:
+        groups.setdefault((r["model"], r["layout"], r["artefact"]), []).append(r)
+    out = {}
+    for key, rs in groups.items():
+        agg: dict = {"poses": len(rs), "methods": {}, "calibrations": {}}
+        for m in METHODS:
+            vals = [r["methods"].get(m, {}) for r in rs]
+            entry = {"rows_pct": min(v.get("rows_pct", 0.0) for v in vals)}
+            for k in ("angle_mse", "us_per_frame"):
+                xs = [v[k] for v in vals if k in v and np.isfinite(v[k])]
+                entry[k] = float(np.mean(xs)) if len(xs) == len(vals) else math.nan
+            per = [v.get("angle_rmse_deg") for v in vals]
+            entry["angle_rmse_deg"] = (
+                np.sqrt(np.mean(np.square(per), axis=0)).tolist() if all(p is not None for p in per) else None
+            )
+            if m in TORQUE_METHODS:
+                xs = [v.get("torque_rmse", math.nan) for v in vals]
+                entry["torque_rmse"] = float(np.sqrt(np.mean(np.square(xs))))
+            if m.startswith(("track", "ik")):
+                entry["flags"] = int(sum(v.get("flags", 0) for v in vals))
+            agg["methods"][m] = entry
+        for method in rs[0]["calibrations"]:
+            cs = [r["calibrations"][method] for r in rs]
+            mses = [c["track_none"]["angle_mse"] for c in cs if "track_none" in c]
+            agg["calibrations"][method] = {
+                "accepted": sum(c["accepted"] for c in cs),
+                "of": len(cs),
+                "track_none_mse": float(np.mean(mses)) if mses else math.nan,
+                "refusals": sorted({c["message"][0] for c in cs if c["message"]})[:2],
+            }
+        out[key] = agg
+    return out
+
+
+def ratio(a: float, b: float) -> float:
+    return a / b if np.isfinite(a) and np.isfinite(b) and b > 0 else math.inf
+
+
+def summary_line(conds: dict) -> tuple[str, dict]:
+    worst = {
+        "track_angles": 0.0,
+        "track_torques": 0.0,
+        "ik_angles": 0.0,
+        "refiner_worse": 0,
+        "rows_missing": 0.0,
+    }
+    for c in conds.values():
+        m = c["methods"]
+        worst["track_angles"] = max(
+            worst["track_angles"], ratio(m["track"]["angle_mse"], m["ekf"]["angle_mse"])
+        )
+        worst["track_torques"] = max(
+            worst["track_torques"], ratio(m["track"].get("torque_rmse", math.nan), m["ekf"]["torque_rmse"])
+        )
+        worst["ik_angles"] = max(worst["ik_angles"], ratio(m["ik"]["angle_mse"], m["ekf"]["angle_mse"]))
+        if not m["track"]["angle_mse"] <= m["track_none"]["angle_mse"]:
+            worst["refiner_worse"] += 1
+        for k in ("track", "track_none", "ik"):
+            worst["rows_missing"] = max(worst["rows_missing"], 100.0 - m[k]["rows_pct"])
+    line = (
+        f"exam: models={len({k[0] for k in conds})} track_angles={worst['track_angles']:.2f} "
+        f"track_torques={worst['track_torques']:.2f} ik_angles={worst['ik_angles']:.2f} "
+        f"refiner_worse={worst['refiner_worse']} rows_missing={worst['rows_missing']:.1f}"
+    )
+    return line, worst
+
+
+def fmt(v) -> str:
+    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+        return "—"
+    return f"{v:.2g}" if abs(v) < 0.01 or abs(v) >= 1000 else f"{v:.3g}"
+
+
+def markdown(res: dict) -> str:
+    conds = res["conditions"]
+    out = [
+        "# The exam: ikid on wrist models it did not make",
+        "",
+        "<!-- Generated by `make exam` (studies/exam); edit the generator, not this page. -->",
+        "",
+        f"Run: {res['when']}, {res['seconds']:.0f} s on {res['machine']}"
+        + (" (--quick)." if res["quick"] else "."),
+        "",
+        (Path(__file__).parent / "page_intro.md").read_text().strip(),
+        "",
+        "## Results",
+        "",
+        "Per model × layout × artefact, mean over the shoulder poses "
+        f"({', '.join(f'{p:g}°' for p in res['poses_deg'])}), scored on the last 10 % of each "
+        f"{res['durations']['task']:g} s task trial at {RATE:g} Hz. Angle MSE in rad² (RMSE per "
+        "coordinate s_p / e_f / ad_ab in degrees), torque RMSE in N·m over the three coordinates, "
+        "rows: % of the scored frames with an output (worst pose), flags: scored rows with a non-zero "
+        "`ikid_status`, µs/frame: wall time per frame of the trial (ikid: the whole command, process "
+        "start included; EKF: its steps and ID from Python; OpenSim: the IK tool on the frames it solved).",
+        "",
+    ]
+    for key in sorted(conds):
+        c = conds[key]
+        out += [f"### {key[0]} · {key[1]} · {key[2]}", ""]
+        out += [
+            "| method | angle MSE | RMSE ° (s_p / e_f / ad_ab) | torque RMSE | rows % | flags | µs/frame |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for m, label in METHODS.items():
+            e = c["methods"][m]
+            rm = e.get("angle_rmse_deg")
+            rms = " / ".join(f"{x:.2f}" for x in rm) if rm else "—"
+            out.append(
+                f"| {label} | {fmt(e['angle_mse'])} | {rms} | {fmt(e.get('torque_rmse'))} | "
+                f"{e['rows_pct']:.1f} | {e.get('flags', '—')} | {fmt(e['us_per_frame'])} |"
+            )
+        out.append("")
+    out += [
+        "## Calibration from the exam's own trials",
+        "",
+        "Anatomical layout: each `ikid calibrate` method on the condition's static (and "
+        "functional) trial; accepted / poses, and the angle MSE of `ikid track --refiner none` "
+        "with it (mean over the poses that were accepted).",
+        "",
+        "| model | artefact | landmarks | functional | neutral | refusal (first) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for key in sorted(conds):
+        cal = conds[key]["calibrations"]
+        if key[1] != "anatomical" or not cal:
+            continue
+        cells = [
+            f"{cal[m]['accepted']}/{cal[m]['of']}: {fmt(cal[m]['track_none_mse'])}" if m in cal else "—"
+            for m in ("landmarks", "functional", "neutral")
+        ]
+        refusal = next((r for m in cal for r in cal[m]["refusals"]), "")
+        out.append(f"| {key[0]} | {key[2]} | {' | '.join(cells)} | {refusal[:160]} |")
+    out += [
+        "",
+        "## Summary",
+        "",
+        "Worst ratios over the conditions (ikid over the EKF; MSE for angles, "
+        "RMSE for torques), conditions where the refiner's angles are worse than none's, and the "
+        "largest share of scored frames without an ikid output:",
+        "",
+        "```",
+        res["line"],
+        "```",
+        "",
+    ]
+    return "\n".join(out)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(prog="python -m studies.exam", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="one model, one pose, short trials")
+    parser.add_argument("--keep", metavar="DIR", help="keep every generated file in DIR")
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    parser.add_argument("--doc", default=str(ROOT / "docs" / "exam.md"), help="page to write")
+    parser.add_argument("--json", default=str(ROOT / "target" / "exam.json"), help="numbers to write")
+    args = parser.parse_args()
+    start = time.perf_counter()
+    models = list(MODELS)[:1] if args.quick else list(MODELS)
+    poses = POSES_DEG[:1] if args.quick else POSES_DEG
+    durations = QUICK if args.quick else {"task": TASK_S, "static": STATIC_S, "functional": FUNCTIONAL_S}
+    work = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="ikid-exam-"))
+    jobs = [
+        {
+            "model": m,
+            "pose_deg": p,
+            "layout": lay,
+            "seeds": seeds_of(list(MODELS).index(m), POSES_DEG.index(p)),
+            "durations": durations,
+            "work": str(work),
+            "keep": bool(args.keep),
+        }
+        for m in models
+        for p in poses
+        for lay in MK.LAYOUTS
+    ]
+    rows: list[dict] = []
+    # spawn: the parent may hold the core's threads, which fork does not copy safely.
+    with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        for job, res in zip(jobs, pool.map(session_job, jobs), strict=True):
+            print(
+                f"done: {job['model']} {job['pose_deg']:+.0f}° {job['layout']}", file=sys.stderr, flush=True
+            )
+            rows.extend(res)
+    if not args.keep:
+        shutil.rmtree(work, ignore_errors=True)
+    conds = conditions(rows)
+    line, worst = summary_line(conds)
+    from studies.common import machine
+
+    res = {
+        "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "seconds": time.perf_counter() - start,
+        "machine": machine(),
+        "quick": args.quick,
+        "poses_deg": list(poses),
+        "durations": durations,
+        "rate_hz": RATE,
+        "seeds": all_seeds(),
+        "rows": rows,
+        "conditions": {" · ".join(k): v for k, v in conds.items()},
+        "worst": worst,
+        "line": line,
+    }
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(res, indent=1, default=float))
+    page = markdown({**res, "conditions": conds})
+    Path(args.doc).write_text(page)
+    print(page)
+    print(line)

@@ -1,0 +1,134 @@
+"""The exam (studies/exam, `make exam`): out of training's reach, and its truth and peers exact.
+
+(a) Training cannot reach the exam: its seeds lie far beyond every seed a training config or
+script can produce, and nothing under training/ or python/ikid imports the exam or names its
+models. (b) The truth mapping, checked by an independent oracle: OpenSim's markers at known
+coordinates, calibrated by ikid's landmark method and solved by ikid's per-frame reference IK,
+give the mapped truth angles. (c) The bioMod writer: biorbd's marker positions equal OpenSim's.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+osim = pytest.importorskip("opensim", reason="the exam needs OpenSim (pip install 'ikid[eval]')")
+
+import ikid  # noqa: E402
+from ikid.interop.opensim import marker_positions  # noqa: E402
+from studies.exam import exam  # noqa: E402
+from studies.exam import markers as MK  # noqa: E402
+from studies.exam.biomod import write_biomod  # noqa: E402
+from studies.exam.models import MODELS, build_osim  # noqa: E402
+from studies.exam.truth import Mapping  # noqa: E402
+
+TRAINING = ROOT / "training"
+
+
+def _config_seeds() -> list[int]:
+    """Every integer under a key naming a seed in the training configs."""
+    found: list[int] = []
+
+    def walk(node):
+        if isinstance(node, dict):
+            for k, v in node.items():
+                if "seed" in k.lower():
+                    found.extend(v if isinstance(v, list) else [v])
+                walk(v)
+
+    for cfg in sorted((TRAINING / "ikid_training" / "configs").glob("*.toml")):
+        walk(tomllib.loads(cfg.read_text()))
+    return [int(s) for s in found]
+
+
+def _script_seed_constants() -> list[int]:
+    """Integer literals the training and tuning scripts assign to, or add to, a seed."""
+    pattern = re.compile(
+        r"(?i)(?:seed\w*\s*[=:]\s*|seed\w*\s*\+\s*|([0-9][0-9_]*)\s*\+\s*\w*seed)([0-9][0-9_]*)?"
+    )
+    found: list[int] = []
+    for path in sorted(TRAINING.rglob("*.py")) + [ROOT / "python" / "ikid" / "sim.py"]:
+        for m in pattern.finditer(path.read_text()):
+            for g in m.groups():
+                if g:
+                    found.append(int(g.replace("_", "")))
+    return found
+
+
+def test_training_cannot_reach_the_exams_seeds_or_models():
+    training = _config_seeds() + _script_seed_constants()
+    assert training, "found no training seeds: the search patterns no longer match the scripts"
+    exam_seeds = exam.all_seeds()
+    # A training seed s reaches s + (combinations, offsets, per-recording strides): refine.py's
+    # noise seeds go to 31_000 + 1000 x recordings. Far more than any of that is left free.
+    reach = 10 * max(training) + 1_000_000
+    assert min(exam_seeds) > reach, (min(exam_seeds), reach)
+    assert not set(exam_seeds) & set(training)
+    for folder in (TRAINING, ROOT / "python" / "ikid"):
+        for path in folder.rglob("*.py"):
+            text = path.read_text()
+            assert "studies.exam" not in text and "studies/exam" not in text, path
+            for name in MODELS:
+                assert name not in text, f"{path} names the exam's model {name}"
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_truth_mapping_agrees_with_ikids_landmark_calibration_and_reference_ik(tmp_path, name):
+    model = MODELS[name]()
+    pts = MK.layout(model, "anatomical", 0)
+    lms = MK.landmark_points(model)
+    path = build_osim(model, 0.4, {**pts, **lms}, str(tmp_path / "m.osim"))
+    rng = np.random.default_rng(5)
+    lo, hi = model.ranges().T
+    q0 = np.array(model.neutral)
+    q = np.vstack(
+        [np.repeat(q0[None], 5, 0), rng.uniform(q0 + 0.7 * (lo - q0), q0 + 0.7 * (hi - q0), (40, 3))]
+    )
+    xyz = marker_positions(path, q)  # OpenSim's kinematics: markers then landmarks
+    frames, landmarks = xyz[:, :18], xyz[:, 18:]
+    cal = ikid.calibration.calibrate_neutral(frames[:5], landmarks[:5])
+    got = ikid.reference_ik(cal.apply(frames).astype(np.float64))
+    want = Mapping(model).angles(q)
+    # The calibrated frames pass through float32 (Calibration.apply): ~1e-6 rad of rounding.
+    np.testing.assert_allclose(got, want, atol=5e-6)
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_biomod_puts_the_markers_where_opensim_does(tmp_path, name):
+    biorbd = pytest.importorskip(
+        "biorbd", reason="the exam's EKF peer needs biorbd (pip install 'ikid[eval]')"
+    )
+    model = MODELS[name]()
+    pts = MK.layout(model, "cluster", 3)
+    path = build_osim(model, -0.3, pts, str(tmp_path / "m.osim"))
+    bio = biorbd.Model(str(write_biomod(model, -0.3, pts, tmp_path / "m.bioMod")))
+    rng = np.random.default_rng(8)
+    lo, hi = model.ranges().T
+    q = rng.uniform(lo, hi, (10, 3))
+    want = marker_positions(path, q)
+    got = np.array([np.concatenate([m.to_array() for m in bio.markers(row)]) for row in q])
+    np.testing.assert_allclose(got, want, atol=1e-9)
+
+
+def test_torque_mapping_is_virtual_work():
+    """τ_ikid · δq_ikid = τ_model · δq_model for a small move: the map conserves power."""
+    model = MODELS["gonzalez1997"]()
+    mapping = Mapping(model)
+    q = np.array([[0.3, -0.4, 0.2]])
+    tau_model = np.array([[0.5, -1.2, 0.7]])
+    tau = mapping.torques(q, tau_model)
+    dq = np.array([[1e-5, -2e-5, 1.5e-5]])
+    d_ikid = mapping.angles(q + dq) - mapping.angles(q)
+    assert float(np.sum(tau * d_ikid)) == pytest.approx(float(np.sum(tau_model * dq)), rel=1e-4)
