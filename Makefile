@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf compare-rates realdata
+.PHONY: all venv wheel demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf compare-rates realdata exam
 
 all: wheel
 
@@ -231,6 +231,14 @@ compare-ekf: wheel
 # 2 cores; not part of `make test`).
 compare-rates: wheel
 	$(PY) studies/rates.py
+
+# The exam (issue #28): ikid on wrist models it did not make — two published models simulated by
+# OpenSim (Rajagopal 2016 / MoBL-ARMS, Gonzalez 1997), three marker layouts, clean / 1 % / 5 % noise
+# / dropouts, calibrated by `ikid calibrate` from the exam's own trials — beside biorbd's EKF + ID
+# and OpenSim IK + ID on the same frames: docs/exam.md and target/exam.json; the last line is
+# exam: models=... rows_missing=... (~12 min on 2 cores; `$(PY) -m studies.exam --quick`: ~1 min).
+exam: wheel
+	$(PY) -m studies.exam
 
 # Real recordings (../shared/realdata, or $$IKID_REALDATA) through the CLI: calibrate from the
 # recording, ik, track, scored against the independent reference angles: docs/realdata.md and
