@@ -38,6 +38,7 @@ from studies.exam.truth import Mapping, opensim_hand_rotations
 ROOT = Path(__file__).resolve().parents[2]
 
 RATE = 1000.0
+LOW_RATE_DIV = 10  # the one condition at 100 Hz (anatomical layout, 1 % noise)
 POSES_DEG = (0.0, 45.0, -20.0)
 TASK_S, STATIC_S, FUNCTIONAL_S = 20.0, 3.0, 8.0
 QUICK = {"task": 8.0, "static": 2.0, "functional": 6.0}
@@ -119,7 +120,6 @@ def session_job(job: dict) -> list[dict]:
             truth_q = mapping.from_hand_rotations(r_ulna_hand)
     n = len(traj["task"])
     scored = slice(int(round(0.9 * n)), n)
-    first_os = max(0, scored.start - int(RATE))
 
     # Truth torques: OpenSim's inverse dynamics at the true coordinates, mapped to ikid's.
     from ikid.interop.opensim import inverse_dynamics
@@ -133,69 +133,127 @@ def session_job(job: dict) -> list[dict]:
         forearm_length(model) / ikid_default_forearm_length(),
         model.link_of(model.hand).inertial.mass / ikid_default_hand_mass(),
     )
-    labels = list(pts)
-    results = []
-    for artefact in MK.ARTEFACTS:
-        folder = work / artefact
-        folder.mkdir(exist_ok=True)
-        rng = np.random.default_rng(seeds["noise"] + 17 * MK.ARTEFACTS.index(artefact))
-        data = {k: v.copy() for k, v in clean.items()}
-        if artefact.startswith("noise"):
-            amp = MK.noise_amplitude(clean["task"], 0.01 if artefact == "noise1" else 0.05)
-            for k in data:
-                amp_k = np.concatenate([amp, np.zeros(data[k].shape[1] - len(amp))])
-                data[k] = MK.add_noise(data[k], amp_k, rng)
-        elif artefact == "dropout":
-            drng = np.random.default_rng(seeds["dropout"])
-            marker = int(drng.integers(0, 6))
-            data["task"] = MK.drop(data["task"], marker, MK.dropouts(n, RATE, drng, scored.start))
-            for k in ("static", "functional"):
-                m = len(data[k])
-                data[k] = MK.drop(data[k], marker, [(m // 2, m // 2 + int(0.2 * RATE))])
-        for kind, frames in data.items():
-            names = labels + (list(lms) if kind == "static" else [])
-            write_trc(folder / f"{kind}.trc", np.arange(len(frames)) / RATE, frames, RATE, names)
-        tail = data["task"][first_os:]
-        write_trc(folder / "task_tail.trc", (first_os + np.arange(len(tail))) / RATE, tail, RATE, labels)
-        (folder / "map.toml").write_text(_map_toml(labels))
-
-        methods = ("landmarks", "functional", "neutral") if job["layout"] == "anatomical" else ("landmarks",)
-        est = runs.run_ikid(folder, n, RATE, scales, methods)
-        ekf = runs.run_ekf(biomod, data["task"], RATE)
-        osr = runs.run_opensim(Path(osim_path), folder / "task_tail.trc", n, RATE, first_os)
-        row = {
-            "model": model.name,
-            "pose_deg": job["pose_deg"],
-            "layout": job["layout"],
-            "artefact": artefact,
-            "frames": n,
-            "scored_frames": scored.stop - scored.start,
-            "scales": scales,
-            "methods": {},
-            "calibrations": {},
-        }
-        for key in ("track", "track_none", "ik"):
-            r = est[key]
-            if "error" in r:
-                row["methods"][key] = {"error": r["error"], "rows_pct": 0.0}
-                continue
-            tau = r["tau"][scored] if "tau" in r else None
-            row["methods"][key] = score(r["q"][scored], truth_q[scored], tau, truth_tau, r["seconds"] / n)
-            row["methods"][key]["flags"] = int((r["status"][scored] != 0).sum())
-        for name, r in (("ekf", ekf), ("opensim", osr)):
-            q_ikid = _mapped(mapping, r["q"][scored])
-            tau_ikid = _mapped_tau(mapping, r["q"][scored], r["tau"][scored])
-            secs = r["seconds"] / (n if name == "ekf" else max(1, r["frames"]))
-            row["methods"][name] = score(q_ikid, truth_q[scored], tau_ikid, truth_tau, secs)
-        for method, c in est["calibrations"].items():
-            entry = {"accepted": c["accepted"], "message": c["message"]}
-            if "q" in c:
-                entry["track_none"] = score(c["q"][scored], truth_q[scored], None, truth_tau, 0.0)
-            row["calibrations"][method] = entry
-        results.append(row)
-        if not job["keep"]:
-            shutil.rmtree(folder, ignore_errors=True)
+    check_biomod(biomod, traj["task"][:: len(traj["task"]) // 5], clean["task"][:: len(traj["task"]) // 5])
+    ctx = {
+        "job": job,
+        "model": model,
+        "mapping": mapping,
+        "clean": clean,
+        "truth_q": truth_q,
+        "truth_tau": truth_tau,
+        "scales": scales,
+        "labels": list(pts),
+        "lms": list(lms),
+        "work": work,
+        "osim": Path(osim_path),
+        "biomod": biomod,
+        "seeds": seeds,
+    }
+    artefacts = [(a, 1) for a in MK.ARTEFACTS]
+    if job["layout"] == "anatomical":
+        artefacts.append(("noise1", LOW_RATE_DIV))  # one condition at a lab's rate
+    results = [condition(ctx, artefact, div) for artefact, div in artefacts]
     return results
+
+
+def check_biomod(biomod: Path, q: np.ndarray, markers: np.ndarray) -> None:
+    """biorbd's forward kinematics must put the markers where OpenSim's did (to 1 µm)."""
+    import biorbd
+
+    bio = biorbd.Model(str(biomod))
+    got = np.array([np.concatenate([m.to_array() for m in bio.markers(row)]) for row in q])
+    worst = float(np.abs(got - markers[:, : got.shape[1]]).max())
+    if worst > 1e-6:
+        raise RuntimeError(f"{biomod}: biorbd's markers are {worst * 1e3:.3f} mm from OpenSim's")
+
+
+def condition(ctx: dict, artefact: str, div: int) -> dict:
+    """One artefact on one model, pose and layout, at the 1 kHz rate over ``div``: the files,
+    every method, the scores."""
+    job, model, mapping, seeds = ctx["job"], ctx["model"], ctx["mapping"], ctx["seeds"]
+    rate = RATE / div
+    name = artefact if div == 1 else f"{artefact}_{rate:g}hz"
+    folder = ctx["work"] / name
+    folder.mkdir(exist_ok=True)
+    clean = ctx["clean"]
+    n_full = len(clean["task"])
+    rng = np.random.default_rng(seeds["noise"] + 17 * MK.ARTEFACTS.index(artefact))
+    data = {k: v.copy() for k, v in clean.items()}
+    if artefact.startswith("noise"):
+        amp = MK.noise_amplitude(clean["task"], 0.01 if artefact == "noise1" else 0.05)
+        for k in data:
+            amp_k = np.concatenate([amp, np.zeros(data[k].shape[1] - len(amp))])
+            data[k] = MK.add_noise(data[k], amp_k, rng)
+    elif artefact == "dropout":
+        drng = np.random.default_rng(seeds["dropout"])
+        marker = int(drng.integers(0, 6))
+        bursts = MK.dropouts(n_full, RATE, drng, int(round(0.9 * n_full)))
+        data["task"] = MK.drop(data["task"], marker, bursts)
+        for k in ("static", "functional"):
+            m = len(data[k])
+            data[k] = MK.drop(data[k], marker, [(m // 2, m // 2 + int(0.2 * RATE))])
+    # A lab recording at a lower rate sees every div-th frame of the same movement.
+    data = {k: v[::div] for k, v in data.items()}
+    truth_q = ctx["truth_q"][::div]
+    n = len(data["task"])
+    scored = slice(int(round(0.9 * n)), n)
+    truth_tau = ctx["truth_tau"][::div]
+    if len(truth_tau) != scored.stop - scored.start:
+        raise RuntimeError(
+            f"{name}: {len(truth_tau)} true torques for {scored.stop - scored.start} scored frames"
+        )
+    first_os = max(0, scored.start - int(rate))
+    labels, lms = ctx["labels"], ctx["lms"]
+    for kind, frames in data.items():
+        names = labels + (lms if kind == "static" else [])
+        write_trc(folder / f"{kind}.trc", np.arange(len(frames)) / rate, frames, rate, names)
+    tail = data["task"][first_os:]
+    write_trc(folder / "task_tail.trc", (first_os + np.arange(len(tail))) / rate, tail, rate, labels)
+    (folder / "map.toml").write_text(_map_toml(labels))
+
+    methods = ("landmarks", "functional", "neutral") if job["layout"] == "anatomical" else ("landmarks",)
+    neutral_frames = f"0-{int(rate) - 1}"  # the static trial's first second
+    est = runs.run_ikid(folder, n, rate, ctx["scales"], methods, neutral_frames)
+    ekf = runs.run_ekf(ctx["biomod"], data["task"], rate)
+    osr = runs.run_opensim(ctx["osim"], folder / "task_tail.trc", n, rate, first_os)
+    row = {
+        "model": model.name,
+        "pose_deg": job["pose_deg"],
+        "layout": job["layout"],
+        "artefact": name,
+        "rate_hz": rate,
+        "frames": n,
+        "scored_frames": scored.stop - scored.start,
+        "truth_torque_rms": np.sqrt(np.mean(truth_tau**2, axis=0)).tolist(),
+        "truth_torque_max": np.abs(truth_tau).max(axis=0).tolist(),
+        "scales": ctx["scales"],
+        "methods": {},
+        "calibrations": {},
+    }
+    for key in ("track", "track_none", "ik"):
+        r = est[key]
+        if "error" in r:
+            row["methods"][key] = {"error": r["error"], "rows_pct": 0.0}
+            continue
+        tau = r["tau"][scored] if "tau" in r else None
+        row["methods"][key] = score(r["q"][scored], truth_q[scored], tau, truth_tau, r["seconds"] / n)
+        row["methods"][key]["flags"] = int((r["status"][scored] != 0).sum())
+        row["methods"][key]["summary"] = r.get("summary", "")
+    for key, r in (("ekf", ekf), ("opensim", osr)):
+        q_ikid = _mapped(mapping, r["q"][scored])
+        tau_ikid = _mapped_tau(mapping, r["q"][scored], r["tau"][scored])
+        secs = r["seconds"] / (n if key == "ekf" else max(1, r["frames"]))
+        row["methods"][key] = score(q_ikid, truth_q[scored], tau_ikid, truth_tau, secs)
+    for method, c in est["calibrations"].items():
+        entry = {"accepted": c["accepted"], "message": c["message"]}
+        if "q" in c:
+            entry["track_none"] = score(c["q"][scored], truth_q[scored], None, truth_tau, 0.0)
+        elif method == methods[0] and "angle_mse" in row["methods"]["track_none"]:
+            entry["track_none"] = row["methods"]["track_none"]  # the runs above used it
+        row["calibrations"][method] = entry
+    if not job["keep"]:
+        shutil.rmtree(folder, ignore_errors=True)
+    return row
 
 
 def _map_toml(labels: list[str]) -> str:
@@ -252,6 +310,11 @@ def conditions(rows: list[dict]) -> dict[tuple[str, str, str], dict]:
     out = {}
     for key, rs in groups.items():
         agg: dict = {"poses": len(rs), "methods": {}, "calibrations": {}}
+        if all("truth_torque_rms" in r for r in rs):
+            agg["truth_torque_rms"] = np.sqrt(
+                np.mean([np.square(r["truth_torque_rms"]) for r in rs], 0)
+            ).tolist()
+            agg["truth_torque_max"] = np.max([r["truth_torque_max"] for r in rs], 0).tolist()
         for m in METHODS:
             vals = [r["methods"].get(m, {}) for r in rs]
             entry = {"rows_pct": min(v.get("rows_pct", 0.0) for v in vals)}
@@ -321,7 +384,8 @@ def fmt(v) -> str:
 
 
 def markdown(res: dict) -> str:
-    conds = res["conditions"]
+    """The page, from the results as ``target/exam.json`` holds them."""
+    conds = {tuple(k.split(" · ")): v for k, v in res["conditions"].items()}
     out = [
         "# The exam: ikid on wrist models it did not make",
         "",
@@ -342,10 +406,36 @@ def markdown(res: dict) -> str:
         "`ikid_status`, µs/frame: wall time per frame of the trial (ikid: the whole command, process "
         "start included; EKF: its steps and ID from Python; OpenSim: the IK tool on the frames it solved).",
         "",
+        "Overview, angle MSE (rad²) and torque RMSE (N·m):",
+        "",
+        "| model | layout | artefact | track | track, no refiner | ik | EKF | OpenSim IK "
+        "| τ track | τ no refiner | τ EKF+ID | τ OpenSim ID |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for key in sorted(conds):
+    order = {a: i for i, a in enumerate(MK.ARTEFACTS)} | {lay: i for i, lay in enumerate(MK.LAYOUTS)}
+    keys = sorted(conds, key=lambda k: (k[0], order.get(k[1], 9), order.get(k[2], 9)))
+    for key in keys:
+        m = conds[key]["methods"]
+        out.append(
+            f"| {' | '.join(key)} | "
+            + " | ".join(fmt(m[k]["angle_mse"]) for k in METHODS)
+            + " | "
+            + " | ".join(fmt(m[k].get("torque_rmse")) for k in TORQUE_METHODS)
+            + " |"
+        )
+    out += ["", "### Per condition", ""]
+    for key in keys:
         c = conds[key]
-        out += [f"### {key[0]} · {key[1]} · {key[2]}", ""]
+        out += [f"#### {key[0]} · {key[1]} · {key[2]}", ""]
+        if "truth_torque_rms" in c:
+            out += [
+                "True torques (s_p / e_f / ad_ab): RMS "
+                + " / ".join(f"{v:.3f}" for v in c["truth_torque_rms"])
+                + " N·m, largest "
+                + " / ".join(f"{v:.3f}" for v in c["truth_torque_max"])
+                + " N·m.",
+                "",
+            ]
         out += [
             "| method | angle MSE | RMSE ° (s_p / e_f / ad_ab) | torque RMSE | rows % | flags | µs/frame |",
             "|---|---|---|---|---|---|---|",
@@ -369,7 +459,7 @@ def markdown(res: dict) -> str:
         "| model | artefact | landmarks | functional | neutral | refusal (first) |",
         "|---|---|---|---|---|---|",
     ]
-    for key in sorted(conds):
+    for key in keys:
         cal = conds[key]["calibrations"]
         if key[1] != "anatomical" or not cal:
             continue
@@ -395,6 +485,50 @@ def markdown(res: dict) -> str:
     return "\n".join(out)
 
 
+def findings(conds: dict) -> list[str]:
+    """What the numbers say, computed from them: medians over models and layouts per artefact."""
+
+    def med(values) -> float:
+        vals = [v for v in values if np.isfinite(v)]
+        return float(np.median(vals)) if vals else math.nan
+
+    out = ["", "What the numbers say (medians over the models and layouts of each artefact):", ""]
+    for art in MK.ARTEFACTS:
+        cs = [c["methods"] for k, c in conds.items() if k[2] == art]
+        if not cs:
+            continue
+        r = {
+            m: med(ratio(c[m]["angle_mse"], c["ekf"]["angle_mse"]) for c in cs)
+            for m in ("track", "track_none", "ik", "opensim")
+        }
+        rt = {
+            m: med(ratio(c[m].get("torque_rmse", math.nan), c["ekf"]["torque_rmse"]) for c in cs)
+            for m in ("track", "track_none", "opensim")
+        }
+        worse = sum(not c["track"]["angle_mse"] <= c["track_none"]["angle_mse"] for c in cs)
+        out.append(
+            f"- {art}: angle MSE over the EKF's — track {fmt(r['track'])}×, no refiner "
+            f"{fmt(r['track_none'])}×, ik {fmt(r['ik'])}×, OpenSim IK {fmt(r['opensim'])}×; torque RMSE over "
+            f"the EKF+ID's — track {fmt(rt['track'])}×, no refiner {fmt(rt['track_none'])}×, OpenSim ID "
+            f"{fmt(rt['opensim'])}×; the refiner worse than none in {worse} of {len(cs)} conditions."
+        )
+    for model in sorted({k[0] for k in conds}):
+        cal = {k[2]: c["calibrations"] for k, c in conds.items() if k[0] == model and k[1] == "anatomical"}
+        if "clean" not in cal or "noise5" not in cal:
+            continue
+        parts = []
+        for method in ("landmarks", "functional", "neutral"):
+            a, b = cal["clean"].get(method), cal["noise5"].get(method)
+            if a is None or b is None:
+                continue
+            parts.append(
+                f"{method} accepted {b['accepted']}/{b['of']} at 5 % (track, no refiner: "
+                f"{fmt(b['track_none_mse'])} against {fmt(a['track_none_mse'])} clean)"
+            )
+        out.append(f"- {model}, calibration: " + "; ".join(parts) + ".")
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(prog="python -m studies.exam", description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="one model, one pose, short trials")
@@ -402,7 +536,13 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     parser.add_argument("--doc", default=str(ROOT / "docs" / "exam.md"), help="page to write")
     parser.add_argument("--json", default=str(ROOT / "target" / "exam.json"), help="numbers to write")
+    parser.add_argument("--render", metavar="JSON", help="only rewrite the page from a run's numbers")
     args = parser.parse_args()
+    if args.render:
+        res = json.loads(Path(args.render).read_text())
+        Path(args.doc).write_text(markdown(res))
+        print(res["line"])
+        return
     start = time.perf_counter()
     models = list(MODELS)[:1] if args.quick else list(MODELS)
     poses = POSES_DEG[:1] if args.quick else POSES_DEG
@@ -452,7 +592,6 @@ def main() -> None:
     }
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(res, indent=1, default=float))
-    page = markdown({**res, "conditions": conds})
+    page = markdown(res)
     Path(args.doc).write_text(page)
-    print(page)
-    print(line)
+    print(page, end="")  # its last line is the exam: line

@@ -53,10 +53,16 @@ def read_rows(path: Path, names: list[str], n: int, rate: float, degrees_ok: boo
 
 
 def run_ikid(
-    folder: Path, n: int, rate: float, scales: tuple[float, float], methods: tuple[str, ...] = ("landmarks",)
+    folder: Path,
+    n: int,
+    rate: float,
+    scales: tuple[float, float],
+    methods: tuple[str, ...] = ("landmarks",),
+    neutral_frames: str = "0-999",
 ) -> dict:
     """Calibrate with each of ``methods`` (the first one feeds every run), then track, track
-    --refiner none and ik with it. ``folder`` holds task.trc, static.trc, functional.trc, map.toml."""
+    --refiner none and ik with it. ``folder`` holds task.trc, static.trc, functional.trc, map.toml;
+    ``neutral_frames``: the static trial's frames the functional method takes as neutral."""
     f = folder
     out: dict = {"calibrations": {}}
     common = ["--map", str(f / "map.toml")]
@@ -71,7 +77,7 @@ def run_ikid(
             str(f / f"cal_{method}.json"),
         ]
         if method == "functional":
-            args += ["--motion", str(f / "functional.trc"), "--frames", "0-999"]
+            args += ["--motion", str(f / "functional.trc"), "--frames", neutral_frames]
         done, secs = ikid_cmd(args + common)
         out["calibrations"][method] = {
             "accepted": done.returncode == 0,
