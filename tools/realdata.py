@@ -617,7 +617,9 @@ def median_posture_frames(data, markers: dict[str, str], k: int = 10) -> list[in
 
 def left_arm(folder: Path, work: Path, right: dict, log: list[str]) -> dict:
     """The racing recording's left arm: calibrated from neutral frames (the right arm's), tracked;
-    no reference there, so: finite, no 360° jumps, in range, and e_f against the right arm's."""
+    no reference there, so: finite, no 360° jumps, in range, and e_f against the right arm's. Its
+    plates and lateral epicondyle do not give the forearm's axes, so the calibration may be refused
+    (what to record said): then nothing is tracked."""
     import ikid
     from ikid.io import read_markers
 
@@ -657,6 +659,13 @@ def left_arm(folder: Path, work: Path, right: dict, log: list[str]) -> dict:
     out["calibrate_out"] = (done.stdout + done.stderr).strip()
     out["calibrated"] = done.returncode == 0
     out["neutral_how"] = how
+    if not out["calibrated"]:
+        # Refused (the neutral method cannot know where plates sit on the forearm): nothing is
+        # tracked, so nothing is written and nothing diverged.
+        nan = float("nan")
+        out.update(run=None, in_range=nan, written=0.0, jumps=(nan, nan), diverged=False)
+        out.update(ef_correlation=nan, ef_frames=0)
+        return out
     got = track_file(
         trial, mapping, cal if done.returncode == 0 else None, work / "racing_left_track", n, log
     )
@@ -840,6 +849,16 @@ def probe_report(results: list[dict], left: dict) -> list[str]:
             f"- calibration from {how} ({frames}): {msg.splitlines()[-1] if msg else ''}"
             for how, frames, msg in left["attempts"]
         ],
+    ]
+    if left["run"] is None:
+        return lines + [
+            "- **refused**: the left arm's plates and lateral epicondyle give the forearm no axes the "
+            "neutral method can know (it keeps the body model's placement of RSP, USP and FAP), so "
+            "nothing is tracked and nothing written; the refusal says what to record (landmarks, or a "
+            "functional movement).",
+            "",
+        ]
+    return lines + [
         f"- written rows: {100 * left['written']:.1f} % of frames; within range ± {RANGE_MARGIN_DEG:g}°: "
         f"{100 * left['in_range']:.1f} %",
         f"- largest step between consecutive outputs: {left['jumps'][0]:.1f}° per angle, "
@@ -850,7 +869,6 @@ def probe_report(results: list[dict], left: dict) -> list[str]:
         "![racing left arm](realdata/racing_left.png)",
         "",
     ]
-    return lines
 
 
 def count_diverged(results: list[dict], left: dict) -> int:
@@ -888,6 +906,10 @@ def probe_summary(results: list[dict], left: dict) -> list[str]:
             f"{name}: track uncalibrated: exit {u.returncode}"
             f"{', says to calibrate' if 'calibrate' in u.message else ', NO calibrate message'}"
         )
+    if left["run"] is None:
+        why = left["calibrate_out"].splitlines()[-1]
+        lines.append(f"racing left arm: calibration refused, nothing written: {why}")
+        return lines
     lines.append(
         f"racing left arm: {'calibrated' if left['calibrated'] else 'NOT calibrated'}; "
         f"in range ±{RANGE_MARGIN_DEG:g}° {100 * left['in_range']:.1f} % of frames; "
@@ -1019,11 +1041,12 @@ def main(argv: list[str] | None = None) -> int:
         doc = Path(args.doc)
         for r in results:
             plot(r, doc.parent / "realdata" / f"{r['rec'].name}.png")
-        plot_left(
-            left,
-            next(r for r in results if r["rec"].name == "racing"),
-            doc.parent / "realdata" / "racing_left.png",
-        )
+        if left["run"] is not None:
+            plot_left(
+                left,
+                next(r for r in results if r["rec"].name == "racing"),
+                doc.parent / "realdata" / "racing_left.png",
+            )
         write_report(results, left, log, doc, time.perf_counter() - t0)
     by = {r["rec"].name: r for r in results}
     n_div = count_diverged(results, left)

@@ -681,9 +681,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     r = cal.report or {}
     spread = r.get("neutral_spread_deg", 0.0)
     used = r.get("neutral_frames", len(neutral))
+    noise, uncertainty = r.get("neutral_noise_deg", 0.0), r.get("neutral_uncertainty_deg", 0.0)
     details = [
         f"{used} of {len(neutral)} neutral frames used (spread {spread:.1f}°, marker noise "
-        f"{r.get('neutral_noise_deg', 0.0):.1f}° a frame, neutral posture ± {r.get('neutral_uncertainty_deg', 0.0):.2f}°)"
+        f"{noise:.1f}° a frame, neutral posture ± {uncertainty:.2f}°)"
     ]
     if r.get("movements"):
         details.append(
@@ -1356,7 +1357,9 @@ def main(argv: list[str] | None = None) -> int:
         "frame over the frames it is seen in; the hand's frame equals the forearm's at the neutral "
         "posture, which reads zero, or, when the map names second_metacarpal_head and fifth_metacarpal_head, "
         "is the hand's own (y from the mid-heads to the mid-styloids, as the forearm's). "
-        "neutral: the same, the forearm at the body model's placement. Clusters may sit at any orientation. "
+        "With landmarks, clusters may sit at any orientation. "
+        "neutral: the same, the forearm at the body model's placement: refused (saying what to record) when "
+        "the forearm's markers are not spread as the model's RSP, USP and FAP (clusters, plates). "
         "functional: the flexion axis (fixed in the forearm) and the deviation axis (fixed in the hand) "
         "fitted by least squares to a movement mixing both, pronation held; the neutral frames read zero; "
         "the axes' signs come from the forearm markers' placement (within 60 degrees of the body model's), "
