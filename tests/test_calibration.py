@@ -450,3 +450,39 @@ def test_hand_landmarks_in_the_map_give_the_hands_own_frame(motion, tmp_path):
     report = json.loads((tmp_path / "own.json").read_text())["report"]["landmarks"]["hand"]
     assert report["frames"] == n and report["neutral_offset_deg"] > 20, report
     assert np.degrees(errors["own"]) < 2.0 < 10.0 < np.degrees(errors["neutral"]), errors
+
+
+def test_a_calibration_of_the_other_arm_an_edited_side_or_a_repeated_key_is_refused(tmp_path):
+    # Each was applied without a word: the other arm's calibration read rows 57-72° off.
+    from ikid.calibration import calibrate_neutral, check_calibration_map, load_calibration
+
+    subject = ClusterSubject(8, 1.1, 30.0)
+    left_map = MarkerMap.from_dict({"side": "left", "markers": {m: m for m in ikid.marker_names()}}, "left.toml")
+    left_cal = calibrate_neutral(
+        subject.markers(np.zeros((50, 3))) * MIRROR,
+        landmark_frames(subject, 50) * np.tile([1.0, 1.0, -1.0], 4),
+        side="left",
+    )
+    path = ikid.save_calibration(left_cal, tmp_path / "left.json", marker_map=left_map)
+    check_calibration_map(path, left_map)  # its own arm's trial: fine
+    with pytest.raises(ikid.InputError, match="a calibration of the left arm, for a trial whose marker map"):
+        check_calibration_map(path, MarkerMap.identity())
+    # "side" edited in the file: it no longer agrees with the map it was measured with.
+    doc = json.loads(path.read_text())
+    doc["side"] = "right"
+    (tmp_path / "edited.json").write_text(json.dumps(doc))
+    with pytest.raises(ikid.InputError, match="says side 'right' but was measured with a marker map of the left"):
+        load_calibration(tmp_path / "edited.json")
+    # A key named twice (json keeps the last one silently).
+    text = path.read_text()
+    twice = text.replace('"forearm":', '"forearm": ' + json.dumps(np.eye(3).tolist()) + ', "forearm":', 1)
+    assert twice != text
+    (tmp_path / "twice.json").write_text(twice)
+    with pytest.raises(ikid.InputError, match="the key 'forearm' appears twice in one object"):
+        load_calibration(tmp_path / "twice.json")
+    # Through the CLI: a right trial with the left arm's calibration exits 2, nothing written.
+    trial = tmp_path / "right.trc"
+    ikid.io.write_trc(trial, np.arange(200) / 1000.0, subject.markers(np.zeros((200, 3))), 1000.0)
+    out = tmp_path / "out"
+    assert cli(["ik", str(trial), "--calibration", str(path), "-o", str(out)]) == 2
+    assert not list(tmp_path.glob("out*"))

@@ -108,6 +108,7 @@ def save_calibration(
         "side": calibration.side,
         "marker_map": {
             "source": marker_map.source,
+            "side": marker_map.side,
             "markers": dict(marker_map.labels),
             "landmarks": dict(marker_map.landmarks),
         },
@@ -125,9 +126,14 @@ def calibration_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     ``provenance``, the matrices."""
     path = Path(path)
     try:
-        doc = json.loads(read_text(path, "a calibration file is JSON text"))
+        doc = json.loads(read_text(path, "a calibration file is JSON text"), object_pairs_hook=_unique_keys)
     except (json.JSONDecodeError, FileFormatError) as e:
         raise InputError(f"{path}: not a calibration file ({e})") from None
+    except _DuplicateKey as e:
+        raise InputError(
+            f"{path}: the key {e.args[0]!r} appears twice in one object; a calibration file names each "
+            "field once (which one was meant cannot be known): write it again with `ikid calibrate`"
+        ) from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise InputError(f'{path}: not an ikid calibration (expected "format": "{FORMAT}")')
     if doc.get("format_version") not in READABLE_VERSIONS:
@@ -138,6 +144,28 @@ def calibration_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     doc.setdefault("method", "movements")
     doc.setdefault("side", "right")
     doc.setdefault("marker_map", None)
+    recorded_side = (doc["marker_map"] or {}).get("side")
+    if recorded_side is not None and recorded_side != doc["side"]:
+        raise InputError(
+            f"{path}: the calibration says side {doc['side']!r} but was measured with a marker map of the "
+            f"{recorded_side} arm; a calibration of one arm read as the other turns every angle (edited by "
+            "hand?): calibrate again with `ikid calibrate`"
+        )
+    return doc
+
+
+class _DuplicateKey(Exception):
+    pass
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object that names each key once (Python's json keeps the last of a repeated key
+    without a word)."""
+    doc: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in doc:
+            raise _DuplicateKey(key)
+        doc[key] = value
     return doc
 
 
@@ -147,10 +175,18 @@ def check_calibration_map(path: str | os.PathLike[str], marker_map: MarkerMap | 
     ikid marker must have the same label. A version-1 file (no map recorded) passes."""
     from ikid.io.mapping import MarkerMap
 
-    recorded = calibration_info(path)["marker_map"]
+    info = calibration_info(path)
+    recorded = info["marker_map"]
+    marker_map = marker_map or MarkerMap.identity()
+    if info["side"] != marker_map.side:
+        raise InputError(
+            f"{path}: a calibration of the {info['side']} arm, for a trial whose marker map "
+            f"({marker_map.source}) is of the {marker_map.side} arm: read as the other arm, every angle "
+            "turns (flexion changes sign). Give the calibration of this arm, or calibrate it with `ikid "
+            'calibrate` and this map (side = "left" or "right" in the map)'
+        )
     if recorded is None:
         return
-    marker_map = marker_map or MarkerMap.identity()
     theirs = recorded.get("markers", {})
     differ = [
         f"{m} is {lab!r} here, {theirs.get(m)!r} in the calibration"
