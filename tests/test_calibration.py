@@ -457,7 +457,8 @@ def test_a_calibration_of_the_other_arm_an_edited_side_or_a_repeated_key_is_refu
     from ikid.calibration import calibrate_neutral, check_calibration_map, load_calibration
 
     subject = ClusterSubject(8, 1.1, 30.0)
-    left_map = MarkerMap.from_dict({"side": "left", "markers": {m: m for m in ikid.marker_names()}}, "left.toml")
+    own_labels = {m: m for m in ikid.marker_names()}
+    left_map = MarkerMap.from_dict({"side": "left", "markers": own_labels}, "left.toml")
     left_cal = calibrate_neutral(
         subject.markers(np.zeros((50, 3))) * MIRROR,
         landmark_frames(subject, 50) * np.tile([1.0, 1.0, -1.0], 4),
@@ -471,7 +472,8 @@ def test_a_calibration_of_the_other_arm_an_edited_side_or_a_repeated_key_is_refu
     doc = json.loads(path.read_text())
     doc["side"] = "right"
     (tmp_path / "edited.json").write_text(json.dumps(doc))
-    with pytest.raises(ikid.InputError, match="says side 'right' but was measured with a marker map of the left"):
+    edited = "says side 'right' but was measured with a marker map of the left"
+    with pytest.raises(ikid.InputError, match=edited):
         load_calibration(tmp_path / "edited.json")
     # A key named twice (json keeps the last one silently).
     text = path.read_text()
