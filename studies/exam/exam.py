@@ -208,7 +208,9 @@ def condition(ctx: dict, artefact: str, div: int) -> dict:
         names = labels + (lms if kind == "static" else [])
         write_trc(folder / f"{kind}.trc", np.arange(len(frames)) / rate, frames, rate, names)
     tail = data["task"][first_os:]
-    write_trc(folder / "task_tail.trc", (first_os + np.arange(len(tail))) / rate, tail, rate, labels)
+    runs.write_trc_opensim(
+        folder / "task_tail.trc", (first_os + np.arange(len(tail))) / rate, tail, rate, labels
+    )
     (folder / "map.toml").write_text(_map_toml(labels))
 
     methods = ("landmarks", "functional", "neutral") if job["layout"] == "anatomical" else ("landmarks",)

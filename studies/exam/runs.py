@@ -179,6 +179,27 @@ def _quiet():
             os.close(saved)
 
 
+def write_trc_opensim(
+    path: Path, time_s: np.ndarray, markers: np.ndarray, rate: float, labels: list[str]
+) -> Path:
+    """A TRC written by OpenSim's own ``TRCFileAdapter`` (mm; a missing marker is ``nan``, which
+    its IK leaves out). Not ikid's ``write_trc``: OpenSim 4.6 refuses ikid's file when the last
+    marker of a row is missing (its empty trailing cells read as a short row)."""
+    import opensim as osim
+
+    table = osim.TimeSeriesTableVec3()
+    table.setColumnLabels(labels)
+    for t, frame in zip(time_s, markers, strict=True):
+        row = osim.RowVectorVec3(len(labels))
+        for k in range(len(labels)):
+            row[k] = osim.Vec3(*(1000.0 * float(v) for v in frame[3 * k : 3 * k + 3]))
+        table.appendRow(float(t), row)
+    table.addTableMetaDataString("DataRate", f"{rate:g}")
+    table.addTableMetaDataString("Units", "mm")
+    osim.TRCFileAdapter().write(table, str(path))
+    return path
+
+
 def run_opensim(osim: Path, trc: Path, n: int, rate: float, first: int) -> dict:
     """OpenSim IK on frames ``first``.. of the trial file, then ID on the 6 Hz low-passed result."""
     from scipy.interpolate import CubicSpline
