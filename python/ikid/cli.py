@@ -26,6 +26,7 @@ import argparse
 import json
 import math
 import os
+import stat
 import sys
 import time
 import traceback
@@ -175,20 +176,79 @@ def _is_folder(output: str) -> bool:
     return output.endswith(("/", os.sep)) or Path(output).is_dir()
 
 
-def _stem(output: str, name: str, suffixes: tuple[str, ...] = (".mot", ".sto")) -> Path:
-    """The output stem for ``-o OUTPUT``: ``OUTPUT/name`` when it names a folder (created if
-    need be), else ``OUTPUT`` without one of ``suffixes`` (its folder created)."""
+def _stem(output: str, name: str, suffixes: tuple[str, ...] = (".mot", ".sto"), create: bool = True) -> Path:
+    """The output stem for ``-o OUTPUT``: ``OUTPUT/name`` when it names a folder, else
+    ``OUTPUT`` without one of ``suffixes``; the folder is created if need be (unless not
+    ``create``: a command names its outputs before it has checked anything)."""
     out = Path(output)
     if _is_folder(output):
-        out.mkdir(parents=True, exist_ok=True)
-        return out / name
-    out.parent.mkdir(parents=True, exist_ok=True)
-    return out.with_suffix("") if out.suffix.lower() in suffixes else out
+        stem = out / name
+    else:
+        stem = out.with_suffix("") if out.suffix.lower() in suffixes else out
+    if create:
+        stem.parent.mkdir(parents=True, exist_ok=True)
+    return stem
 
 
 def _named(stem: Path, ext: str) -> Path:
     """``stem`` + ``ext``, even if the stem holds a dot (``trial.v2``)."""
     return stem.with_name(stem.name + ext)
+
+
+def _file_id(file) -> tuple[int, int] | None:
+    """(device, inode) of a path (links resolved) or of an open descriptor that is a regular
+    file; None for what does not exist or is not a file (a terminal, a pipe)."""
+    try:
+        st = os.fstat(file) if isinstance(file, int) else os.stat(file)
+    except (OSError, ValueError):
+        return None
+    return (st.st_dev, st.st_ino) if stat.S_ISREG(st.st_mode) else None
+
+
+def _stdout_fd() -> int | None:
+    """Standard output's descriptor, or None when it has none (replaced by a test harness)."""
+    try:
+        return sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def _refuse_over_inputs(outputs: list, inputs: list, given: str | None = None, option: str = "-o") -> None:
+    """The one check every writing command makes before it reads or writes anything: no
+    output may be one of its inputs (the same file after resolving links, hard or symbolic,
+    by device and inode), or ikid would replace what it read with what it computed (``ikid id
+    t.mot -o t.mot``). Raises :class:`ikid.ArgumentError` (exit 2) naming both; nothing is
+    written. ``outputs`` and ``inputs`` are paths (``None`` skipped) or descriptors (standard
+    output); ``option`` and its value ``given`` are what the outputs were named by."""
+    seen: dict[tuple[int, int], str | os.PathLike[str] | int] = {}
+    for inp in inputs:
+        if inp is not None and (key := _file_id(inp)) is not None:
+            seen.setdefault(key, inp)
+    for out in outputs:
+        if out is None or (key := _file_id(out)) is None or key not in seen:
+            continue
+        inp = seen[key]
+        if isinstance(inp, int):
+            what = "standard output is the input, standard input (the same file)"
+            fix = "print to another file (or none)"
+        elif isinstance(out, int):
+            what = f"standard output is the input {inp}"
+            fix = "print to another file (or none)"
+        else:
+            same = "" if str(out) == str(inp) else " (the same file)"
+            named = f"{option} {given}" if given is not None else option
+            what = (
+                f"{named} is the input {inp}{same}"
+                if given is not None and str(out) == str(given)
+                else f"{named}: the output {out} is the input {inp}{same}"
+            )
+            fix = f"give {option} another file"
+        raise ikid.ArgumentError(f"{what}; ikid never writes over an input: {fix}")
+
+
+def _model_file(name: str | None) -> str | None:
+    """A model option's value when it names a file (not a shipped model's name)."""
+    return None if name is None or ikid.is_model_name(name) else name
 
 
 #: What a model of each task gives, the frames it reads and the unit of its outputs.
@@ -457,6 +517,12 @@ def cmd_process(args: argparse.Namespace) -> int:
             "outputs": (mot, _named(stem, ".sto")),
         }
         jobs.append((str(path), opt))
+    written = [o for _, opt in jobs for o in opt["outputs"][: 2 if torque_model else 1]]
+    _refuse_over_inputs(
+        written,
+        [*inputs, args.map, args.calibration, _model_file(args.model), _model_file(torque_model)],
+        given=args.output,
+    )
     if len(jobs) == 1:
         rows = [_process_one(jobs[0])]
     else:
@@ -495,6 +561,13 @@ def cmd_track(args: argparse.Namespace) -> int:
     Every row carries its status bits; a row no wrist can give is not written but counted."""
     from ikid.io import MarkerMap, read_markers, write_mot, write_sto
 
+    stem = _stem(args.output, Path(args.input).stem, create=False)
+    refiner_file = None if args.refiner in ("auto", "", "none") else _model_file(args.refiner)
+    _refuse_over_inputs(
+        [_named(stem, ".mot"), _named(stem, ".sto")],
+        [args.input, args.map, args.calibration, refiner_file],
+        given=args.output,
+    )
     data = read_markers(args.input)
     refiner = None
     if args.refiner == "auto":
@@ -528,7 +601,7 @@ def cmd_track(args: argparse.Namespace) -> int:
     keep = np.arange(len(frames)) >= k
     implausible = keep & (status & bits["implausible"] != 0)
     keep &= ~implausible  # nothing no wrist can do is written as a number
-    stem = _stem(args.output, Path(args.input).stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
     with atomic_outputs():  # the pair replaces the old pair, or neither is replaced
         mot = write_mot(_named(stem, ".mot"), data.time[keep], out["q"][keep], status=status[keep])
         sto = write_sto(_named(stem, ".sto"), data.time[keep], out["tau"][keep], status=status[keep])
@@ -602,6 +675,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             chosen += range(first, last + 1)
         return np.array(sorted(set(chosen)), np.int64)
 
+    movement_files = [spec.partition("=")[2] or None for spec in args.movement]
+    _refuse_over_inputs(
+        [args.output],
+        [args.static, args.landmarks, args.motion, args.map, *movement_files],
+        given=args.output,
+    )
     mapping = MarkerMap.load(args.map) if args.map else MarkerMap.identity()
     side = args.side or mapping.side
     static = read_markers(args.static)
@@ -724,6 +803,7 @@ def cmd_map_template(args: argparse.Namespace) -> int:
 
     text = MarkerMap.identity().to_toml()
     if args.input:
+        _refuse_over_inputs([_stdout_fd()], [args.input])
         labels = read_markers(args.input).labels
         text = f"# labels in {args.input}: {', '.join(labels)}\n" + text
     print(text, end="")
@@ -740,6 +820,14 @@ def cmd_id(args: argparse.Namespace) -> int:
     from ikid.io import read_mot, resample, write_sto
     from ikid.pipeline import check_rate, run_model
 
+    output = (
+        _named(_stem(args.output, Path(args.input).stem, create=False), ".sto")
+        if _is_folder(args.output)
+        else Path(args.output)
+    )
+    _refuse_over_inputs(
+        [output], [args.input, None if args.reference else _model_file(args.model)], given=args.output
+    )
     time_s, q = read_mot(args.input)
     if len(time_s) < 3:
         raise ikid.InputError(
@@ -776,9 +864,9 @@ def cmd_id(args: argparse.Namespace) -> int:
         if len(run.time) == 0:
             raise ikid.InputError(f"{args.input}: no frame gave torques: {run.summary()}")
         out_time, tau, summary, status = run.time, run.values, run.summary(), run.status
-    output = Path(args.output)
+    output.parent.mkdir(parents=True, exist_ok=True)
     path = write_sto(
-        _named(_stem(args.output, Path(args.input).stem), ".sto") if _is_folder(args.output) else output,
+        output,
         out_time,
         tau,
         status=None if args.reference else status,
@@ -904,6 +992,16 @@ def cmd_stream(args: argparse.Namespace) -> int:
     frame was processed, 3 if frames were lost or refused, 2 on an error."""
     from ikid.pipeline import refusal_reason
 
+    stdin = None
+    if args.udp is None:
+        try:
+            stdin = sys.stdin.fileno()
+        except (AttributeError, OSError, ValueError):
+            pass
+    _refuse_over_inputs(
+        [_stdout_fd()],
+        [stdin, args.calibration, _model_file(args.model), _model_file(args.torque_model)],
+    )
     models = [_model_for(args.model, "ikid stream --model", ("ik", "chain"), rate_hz=args.rate)]
     if args.torque_model:
         models.append(
@@ -1081,6 +1179,17 @@ def cmd_train(args: argparse.Namespace) -> int:
             cfg["model"]["hidden"] = [int(w) for w in args.hidden.split(",")]
         except ValueError:
             raise ikid.InputError(f"--hidden {args.hidden!r}: expected widths like 128,128") from None
+    name = cfg["model"]["name"]
+    lab = Path(args.data) if args.data is not None else None
+    _refuse_over_inputs(
+        [out_dir / f"{name}.safetensors", out_dir / f"{name}.onnx"],
+        [
+            _config_path(args.config) if args.config else None,
+            args.map,
+            *(sorted(lab.iterdir()) if lab is not None and lab.is_dir() else []),
+        ],
+        given=args.output,
+    )
     train.run(cfg, out_dir, progress=sys.stderr.isatty(), onnx=not args.no_onnx)
     return 0
 
@@ -1101,6 +1210,19 @@ def cmd_report(args: argparse.Namespace) -> int:
     from ikid.evaluate import evaluate_recordings, markdown
 
     model = _model_for(args.model, "ikid report --model", ("ik", "chain", "id"))
+    out = None
+    if args.output:
+        out = (
+            _named(_stem(args.output, model.name, (".md",), create=False), ".md")
+            if _is_folder(args.output)
+            else Path(args.output)
+        )
+        data_files = sorted(Path(args.data).iterdir()) if Path(args.data).is_dir() else []
+        _refuse_over_inputs(
+            [out, out.with_suffix(".json")],
+            [_model_file(args.model), args.map, *data_files],
+            given=args.output,
+        )
     recs = D.load_lab_recordings(args.data, args.map, model.frame_rate_hz if args.resample else None)
     rates = {r.meta["rate_hz"] for r in recs}
     from ikid.pipeline import check_rate
@@ -1111,12 +1233,8 @@ def cmd_report(args: argparse.Namespace) -> int:
     result = evaluate_recordings(model, recs, levels)
     text = f"# ikid report: `{model.name}` on {args.data}\n\n" + markdown(result)
     print(text, end="")
-    if args.output:
-        out = (
-            _named(_stem(args.output, model.name, (".md",)), ".md")
-            if _is_folder(args.output)
-            else Path(args.output)
-        )
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
         with atomic_outputs():  # the report and its numbers replace the old pair together
             write_text_atomic(out, text)
             write_text_atomic(out.with_suffix(".json"), json.dumps(result, indent=1))

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from faults.corpus import MARKER_KINDS, Corpus
-from faults.framework import PYTHON, Cli, Run, Verdict
+from faults.framework import IKID, PYTHON, Cli, Run, Verdict
 
 BAD_VALUES = ("0", "-1", "nan", "inf", "1e308")
 BAD_NONNEG = ("nan", "inf", "1e308")
@@ -965,6 +965,90 @@ def _read_port(proc: subprocess.Popen) -> int:
     return int(line.strip().rsplit(":", 1)[1])
 
 
+# --- outputs over inputs (issue #31 item 1) ------------------------------------------------------
+
+
+def over_inputs(b: Builder) -> None:
+    """Every writing command with an output that is one of its inputs: the same name, a
+    symbolic link to it, a hard link to it. Each must fail naming that input (the runner checks
+    that every file in the probe's folder, the input first, is byte for byte as it was)."""
+    c, base = b.c, b.c.base
+    inputs = ("trial.trc", "trial.mot", "static.trc", "map.toml", "cal.json")
+    commands = {
+        # name: (argv, the input it must not replace, the output's name as the command derives it)
+        "id": (["id", "trial.mot", "-o", "OUT"], "trial.mot", "out.sto"),
+        "calibrate": (
+            ["calibrate", "--static", "static.trc", "--method", "neutral", "-o", "OUT"],
+            "static.trc",
+            "c.json",
+        ),
+        "calibrate-map": (
+            ["calibrate", "--static", "static.trc", "--map", "map.toml", "-o", "OUT"],
+            "map.toml",
+            "c.json",
+        ),
+        "ik": (["ik", "trial.trc", "-o", "OUT"], "trial.trc", "out.mot"),
+        "ik-calibration": (
+            ["ik", "trial.trc", "--calibration", "cal.json", "-o", "OUT"],
+            "cal.json",
+            "out.mot",
+        ),
+        "run": (["run", "trial.trc", "-o", "out"], "trial.trc", "out.sto"),
+        "track": (["track", "trial.trc", "-o", "out"], "trial.trc", "out.mot"),
+        "report": (["report", "--data", "lab", "--clean-only", "-o", "OUT"], "lab/a.mot", "out.md"),
+        "train": (
+            ["train", "--data", "lab", "--map", "map.toml", "--no-onnx", "-o", "OUT"],
+            "map.toml",
+            "m.safetensors",
+        ),
+    }
+    same_name = {"id", "calibrate", "calibrate-map"}
+    for name, (argv, target, derived) in commands.items():
+        for how in ("same", "symlink", "hardlink"):
+            if how == "same" and name not in same_name:
+                continue
+            d = b.dir(f"over-input-{name}-{how}")
+            for f in inputs:
+                shutil.copyfile(base / f, d / f)
+            (d / "lab").mkdir()
+            shutil.copyfile(base / "trial.trc", d / "lab" / "a.trc")
+            shutil.copyfile(base / "trial.mot", d / "lab" / "a.mot")
+            out = target
+            if how == "symlink":
+                (d / derived).symlink_to(target)
+                out = derived
+            elif how == "hardlink":
+                os.link(d / target, d / derived)
+                out = derived
+            b.add(
+                f"{name}/output-over-input-{how}",
+                [out if a == "OUT" else a for a in argv],
+                d,
+                expect="error",
+                names=[f"is the input {target}"],
+                new_files_ok=False,
+                timeout=40.0,
+            )
+    # Standard output into the input: `ikid map-template t.trc >> t.trc`, `ikid stream < f >> f`.
+    ikid = " ".join(f"'{a}'" for a in map(str, IKID))
+    for name, shell in (
+        ("map-template", f"{ikid} map-template trial.trc >> trial.trc"),
+        ("stream", f"{ikid} stream < trial.csv >> trial.csv"),
+    ):
+        d = b.dir(f"over-input-{name}-stdout")
+        shutil.copyfile(base / "trial.trc", d / "trial.trc")
+        shutil.copyfile(c.ref / "long_frames.csv", d / "trial.csv")
+        b.add(
+            f"{name}/stdout-into-its-input",
+            ["sh", "-c", shell],
+            d,
+            expect="error",
+            names=["standard output is the input"],
+            new_files_ok=False,
+            raw=True,
+        )
+
+
 # --- a night's batch -----------------------------------------------------------------------------
 
 
@@ -1023,7 +1107,7 @@ def batch(b: Builder) -> None:
 
 def probes(corpus: Corpus) -> list[Cli]:
     b = Builder(corpus)
-    for part in (processing, options, outputs, weights, stream, batch):
+    for part in (processing, options, outputs, weights, stream, batch, over_inputs):
         part(b)
     return b.out
 
