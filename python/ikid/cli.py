@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 
 import ikid
-from ikid import _native
-from ikid.io._atomic import atomic_outputs, write_text_atomic
+from ikid import _batch, _native
+from ikid.io._atomic import atomic_outputs, remove_temporaries, write_text_atomic
 from ikid.sim import Trial, simulate
 
 #: The thesis' shoulder flexion angles, degrees.
@@ -481,9 +481,9 @@ def _cause(file: str, error: str) -> str:
 
 
 def cmd_process(args: argparse.Namespace) -> int:
-    """`ik` and `run`: marker files -> .mot (+ .sto), one file or many in parallel."""
-    from concurrent.futures import ProcessPoolExecutor
-
+    """`ik` and `run`: marker files -> .mot (+ .sto), one file or many in parallel (see
+    :mod:`ikid._batch`: results printed as each file ends; a worker that dies fails its file
+    only; SIGINT/SIGTERM stop every worker and list the files done and not done)."""
     inputs = _inputs(args.inputs)
     many = len(inputs) > 1 or any(Path(p).is_dir() for p in args.inputs)
     torque_model = getattr(args, "torque_model", None)
@@ -517,34 +517,61 @@ def cmd_process(args: argparse.Namespace) -> int:
             "outputs": (mot, _named(stem, ".sto")),
         }
         jobs.append((str(path), opt))
-    written = [o for _, opt in jobs for o in opt["outputs"][: 2 if torque_model else 1]]
     _refuse_over_inputs(
-        written,
+        [o for _, opt in jobs for o in _job_outputs(opt)],
         [*inputs, args.map, args.calibration, _model_file(args.model), _model_file(torque_model)],
         given=args.output,
     )
-    if len(jobs) == 1:
-        rows = [_process_one(jobs[0])]
-    else:
-        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            rows = list(pool.map(_process_one, jobs))
-    for row in rows:
+    skipped = []
+    if args.resume:
+        skipped = [f for f, opt in jobs if _whole(_job_outputs(opt), [f, args.map, args.calibration])]
+        for f in skipped:
+            print(f"{f}: skipped (--resume: its outputs are whole and newer than its inputs)", flush=True)
+        jobs = [(f, opt) for f, opt in jobs if f not in skipped]
+    rows: dict[int, dict] = {}
+
+    def report(index: int, row: dict) -> None:
+        """A file's result, printed as soon as it is known."""
+        rows[index] = row
         if row["ok"]:
-            print(f"{row['file']}: {row['summary']} ({row['seconds']:.2f} s) -> {', '.join(row['written'])}")
+            line = f"{row['file']}: {row['summary']} ({row['seconds']:.2f} s) -> {', '.join(row['written'])}"
+            print(line, flush=True)
         else:
-            print(row.get("traceback", "") + f"ikid: error: {row['error']}", file=sys.stderr)
-    failed = [r for r in rows if not r["ok"]]
+            print(row.get("traceback", "") + f"ikid: error: {row['error']}", file=sys.stderr, flush=True)
+
+    def died(index: int, how: str) -> None:
+        file = jobs[index][0]
+        error = f"{file}: the process working on it died ({how}); nothing was written for it"
+        report(index, {"file": file, "ok": False, "error": error})
+
+    started = time.time()
+    if len(jobs) == 1:
+        report(0, _process_one(jobs[0]))  # in this process; SIGINT/SIGTERM end it in main()
+        outcome = _batch.Outcome()
+    else:
+        outcome = _batch.run_jobs(_process_one, jobs, args.jobs or os.cpu_count() or 1, report, died)
+    # A worker killed outright may leave a temporary file beside an output: none stays.
+    for index, (_, opt) in enumerate(jobs):
+        if not rows.get(index, {}).get("ok"):
+            for path in _job_outputs(opt):
+                remove_temporaries(path, started)
+    ended = [rows[k] for k in sorted(rows)]
+    failed = [r for r in ended if not r["ok"]]
+    if outcome.stopped_by:
+        _stopped_summary(args, outcome, [f for f, _ in jobs], ended, skipped)
+        return outcome.exit_status
     if many:
         # The summary: every file that gave no output, with its cause.
         print(
-            f"{len(rows) - len(failed)}/{len(rows)} files processed, {len(failed)} failed"
+            f"{len(ended) - len(failed)}/{len(ended)} files processed, {len(failed)} failed"
+            + (f", {len(skipped)} skipped (--resume)" if skipped else "")
             + (":" if failed else "")
         )
         for r in failed:
             print(f"  {r['file']}: {_cause(r['file'], r['error'])}")
     if failed:
         return 2
-    unclean = [r["file"] for r in rows if not r["clean"]]
+    unclean = [r["file"] for r in ended if not r["clean"]]
     if args.strict and unclean:
         print(
             f"ikid: --strict: {len(unclean)} file(s) with refused, implausible or flagged frames: "
@@ -553,6 +580,52 @@ def cmd_process(args: argparse.Namespace) -> int:
         )
         return 3
     return 0
+
+
+def _job_outputs(opt: dict) -> list[Path]:
+    """The files one `ik`/`run` job writes: the .mot, and the .sto when it computes torques."""
+    return list(opt["outputs"][: 2 if opt["torque_model"] else 1])
+
+
+def _whole(outputs: list[Path], inputs: list) -> bool:
+    """``--resume``: True if every output exists, reads as a complete table (rows and header
+    agree) and is newer than every input given (the marker file, map and calibration), so a
+    run that was stopped, or ended, wrote it from these inputs."""
+    from ikid.io import read_storage
+
+    newest = max((os.stat(p).st_mtime for p in inputs if p is not None and os.path.exists(p)), default=0.0)
+    for path in outputs:
+        try:
+            if not path.is_file() or path.stat().st_mtime < newest or len(read_storage(path).time) == 0:
+                return False
+        except (ikid.IkidError, OSError, ValueError):
+            return False
+    return True
+
+
+def _stopped_summary(
+    args: argparse.Namespace, outcome, files: list[str], ended: list[dict], skipped: list
+) -> None:
+    """What a batch stopped by a signal did: the files done (written, or failed), those not
+    done, and the command that resumes it."""
+    import shlex
+
+    written = [r["file"] for r in ended if r["ok"]]
+    failed = [r["file"] for r in ended if not r["ok"]]
+    not_done = [files[k] for k in outcome.not_done]
+    argv = list(getattr(args, "argv", None) or [])
+    resume = "ikid " + shlex.join(argv if "--resume" in argv else [*argv, "--resume"])
+    lines = [
+        f"ikid: stopped by {outcome.stopped_by}: {len(written) + len(failed)} of {len(files)} files done, "
+        f"{len(not_done)} not done (nothing written for them: their old outputs, if any, are as they were)",
+        f"  done: {', '.join(written) or 'none'}",
+    ]
+    if failed:
+        lines.append(f"  failed (named above): {', '.join(failed)}")
+    if skipped:
+        lines.append(f"  skipped (--resume, done before): {len(skipped)}")
+    lines += [f"  not done: {', '.join(not_done)}", f"  to resume: {resume}"]
+    print("\n".join(lines), file=sys.stderr, flush=True)
 
 
 def cmd_track(args: argparse.Namespace) -> int:
@@ -1360,6 +1433,12 @@ def main(argv: list[str] | None = None) -> int:
         )
         p.add_argument("--jobs", type=POSITIVE_INT, default=None, help="parallel files (default: all cores)")
         p.add_argument(
+            "--resume",
+            action="store_true",
+            help="skip the files whose outputs are whole and newer than their inputs (marker file, map, "
+            "calibration): a stopped batch goes on where it stopped",
+        )
+        p.add_argument(
             "--strict",
             action="store_true",
             help="exit 3 if any frame was refused, or any output flagged (the ikid_status column)",
@@ -1705,19 +1784,31 @@ def main(argv: list[str] | None = None) -> int:
 
     if argv is None:
         argv = sys.argv[1:]
-    try:
-        if argv[:1] == ["demo"]:  # its own options (see `ikid demo --help`)
-            from ikid.demo import main as demo
+    # SIGINT (Ctrl-C) and SIGTERM (kill) end every command the same way: Stopped raised where
+    # the command is, files under way removed on the way out (atomic writes), a line saying so,
+    # exit 128 + the signal's number; a batch lists what it did first (ikid._batch).
+    with _batch.stop_on_signals():
+        try:
+            if argv[:1] == ["demo"]:  # its own options (see `ikid demo --help`)
+                from ikid.demo import main as demo
 
-            demo(argv[1:])
-            return 0
-        args = parser.parse_args(argv)
-        return args.func(args)
-    except (ikid.IkidError, OSError) as e:
-        # What a user can act on (a bad file, option or model; a failed write) is a message naming
-        # it; anything else is a bug and keeps its traceback.
-        print(f"ikid: error: {e}", file=sys.stderr)
-        return 2
+                demo(argv[1:])
+                return 0
+            args = parser.parse_args(argv)
+            args.argv = list(argv)
+            return args.func(args)
+        except (ikid.IkidError, OSError) as e:
+            # What a user can act on (a bad file, option or model; a failed write) is a message naming
+            # it; anything else is a bug and keeps its traceback.
+            print(f"ikid: error: {e}", file=sys.stderr)
+            return 2
+        except _batch.Stopped as stop:
+            print(
+                f"ikid: stopped by {stop.name}; the outputs under way were not written (any old ones are "
+                "as they were)",
+                file=sys.stderr,
+            )
+            return stop.exit_status
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -1105,9 +1106,113 @@ def batch(b: Builder) -> None:
     )
 
 
+# --- a batch stopped by a signal, or losing a worker (issue #31 item 2) -----------------------------
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(entry.name))
+    return found
+
+
+def _until(what, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not what():
+        if time.monotonic() > deadline:
+            raise TimeoutError("the batch never got there")
+        time.sleep(0.02)
+
+
+def stopped_batches(b: Builder) -> None:
+    """`ikid run DIR -o OUT --jobs 2` over eight 4 s trials, stopped by Ctrl-C (SIGINT to the
+    group) or `kill` (SIGTERM to the parent) after its first file, or with one worker killed
+    by SIGKILL (the out-of-memory killer). Each must end with a named status (130, 143, 2), no
+    traceback, no process of the batch left once it exits, no temporary file (the runner's
+    snapshot), and say which files were done, which not, and how to resume; a lost worker
+    fails its own file only."""
+    import ikid.io
+
+    long = b.c.long
+    for case in ("SIGINT", "SIGTERM", "worker-SIGKILL"):
+        d = b.dir(f"run-batch-{case}")
+        (d / "in").mkdir()
+        for k in range(8):
+            ikid.io.write_trc(d / "in" / f"t{k}.trc", long["time"], long["markers"], 1000.0)
+        out = d / "out"
+        seen: dict = {}
+
+        def written(out: Path = out) -> int:
+            return sum(not p.name.startswith(".") for p in out.glob("*.sto")) if out.is_dir() else 0
+
+        def interact(proc: subprocess.Popen, case=case, seen=seen, written=written) -> None:
+            if case == "worker-SIGKILL":
+                _until(lambda: _children(proc.pid) or proc.poll() is not None)
+                seen["workers"] = _children(proc.pid)
+                if seen["workers"]:
+                    os.kill(seen["workers"][0], signal.SIGKILL)
+            else:
+                _until(lambda: written() > 0 or proc.poll() is not None)
+                seen["workers"] = _children(proc.pid)
+                if case == "SIGINT":
+                    os.killpg(proc.pid, signal.SIGINT)  # a terminal's Ctrl-C: the whole group
+                else:
+                    proc.send_signal(signal.SIGTERM)  # `kill PID`: the parent alone
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                return  # the runner reports the hang
+            try:
+                os.killpg(proc.pid, 0)
+                seen["left"] = True
+            except ProcessLookupError:
+                seen["left"] = False
+
+        def check(r: Run, v: Verdict, case=case, seen=seen, written=written) -> None:
+            if not seen.get("workers"):
+                v.add("harness", "no worker was running when the signal was to be sent")
+            if seen.get("left", True):
+                v.traceback("a process of the batch outlived it (orphaned workers)")
+            if case == "worker-SIGKILL":
+                died = [line for line in r.stderr.splitlines() if "died (killed by SIGKILL" in line]
+                if r.returncode != 2 or len(died) != 1:
+                    v.silent(
+                        f"exit {r.returncode}, {len(died)} files named as lost with their worker (want 2, 1)"
+                    )
+                if written() != 7:
+                    v.silent(f"{written()} of the 7 other files written")
+                return
+            want = 130 if case == "SIGINT" else 143
+            if r.returncode != want:
+                v.silent(f"exit {r.returncode} after {case}, expected {want}")
+            for needle in ("  done: ", "  not done: ", "  to resume: ikid run "):
+                if needle not in r.stderr:
+                    v.silent(f"after {case} the summary lacks {needle.strip()!r}")
+
+        b.out.append(
+            Cli(
+                name=f"cli/run/batch-{case}",
+                argv=["run", "in", "-o", "out", "--jobs", "2"],
+                cwd=d,
+                expect="error",
+                names=["died (killed by SIGKILL" if case == "worker-SIGKILL" else f"stopped by {case}"],
+                interact=interact,
+                check_any=check,
+                timeout=60.0,
+            )
+        )
+
+
 def probes(corpus: Corpus) -> list[Cli]:
     b = Builder(corpus)
-    for part in (processing, options, outputs, weights, stream, batch, over_inputs):
+    for part in (processing, options, outputs, weights, stream, batch, over_inputs, stopped_batches):
         part(b)
     return b.out
 

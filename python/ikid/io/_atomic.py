@@ -17,6 +17,7 @@ put back.
 from __future__ import annotations
 
 import errno
+import glob
 import os
 import secrets
 import tempfile
@@ -222,6 +223,27 @@ def _put_back(kept: list[tuple[Path, Path | None]]) -> None:
                 os.replace(old, target)
         except OSError:  # pragma: no cover - best effort; the original error is raised
             pass
+
+
+def remove_temporaries(path: str | os.PathLike[str], since: float) -> list[Path]:
+    """Remove the temporary files a writer of ``path`` left beside it, modified at or after
+    ``since`` (``time.time()``; less a second, the file system's clock steps): what a process
+    killed outright (SIGKILL, which no clean-up sees) leaves while writing. Older ones are left
+    alone. Returns the files removed."""
+    path = Path(path)
+    removed: list[Path] = []
+    try:
+        candidates = list((path.parent or Path(".")).glob(f".{glob.escape(path.name)}.*"))
+    except OSError:
+        return removed
+    for tmp in candidates:
+        try:
+            if tmp.is_file() and not tmp.is_symlink() and tmp.stat().st_mtime >= since - 1.0:
+                tmp.unlink()
+                removed.append(tmp)
+        except OSError:
+            pass
+    return removed
 
 
 def _temp_beside(path: Path, suffix: str) -> Path:
