@@ -112,6 +112,9 @@ def run_ikid(
             out[key] = {"error": (done.stderr or done.stdout).strip()[-400:]}
             continue
         res = {"seconds": secs, "summary": done.stdout.strip()[-400:]}
+        if not Path(target if key == "ik" else str(stem) + ".mot").exists():  # no frame had an output
+            out[key] = {"error": f"no output written: {(done.stdout + done.stderr).strip()[-400:]}"}
+            continue
         mot = read_rows(Path(str(stem) + ".mot"), coordinate_names(), n, rate)
         res["q"], res["status"] = mot["values"], mot["status"]
         if key != "ik":
@@ -143,8 +146,9 @@ def run_ikid(
     return out
 
 
-def run_ekf(biomod: Path, markers: np.ndarray, rate: float) -> dict:
-    """biorbd's EKF, frame by frame, then its inverse dynamics; NaN markers are occluded."""
+def run_ekf(biomod: Path, markers: np.ndarray, rate: float, id_from: int = 0) -> dict:
+    """biorbd's EKF, frame by frame, and its inverse dynamics on the frames from ``id_from`` (the
+    scored ones: the rest would only cost time); NaN markers are occluded."""
     import biorbd
 
     model = biorbd.Model(str(biomod))
@@ -160,7 +164,7 @@ def run_ekf(biomod: Path, markers: np.ndarray, rate: float) -> dict:
     for i in range(n):
         kalman.reconstructFrame(model, markers[i], q, qd, qdd)
         out["q"][i] = q.to_array()
-        out["tau"][i] = model.InverseDynamics(q, qd, qdd).to_array()
+        out["tau"][i] = model.InverseDynamics(q, qd, qdd).to_array() if i >= id_from else np.nan
     out["seconds"] = time.perf_counter() - start
     return out
 
