@@ -17,7 +17,7 @@ q̇, q̈ and log10 of the mean hand-marker noise it learned; not q, so it learns
 move rather than where these ones were) that predicts the tracker's
 error in q and q̈; the core scales its output by the gate σ / (σ + ``ikid.REFINER_GATE_NOISE``)
 (σ the learned noise), so clean markers are left as the filter has them. The core applies it after the filter
-(``Tracker(refiner=...)``; crates/ikid/src/tracker.rs).
+(``Tracker(refiner=...)``; crates/ikid/src/tracker/).
 
 Data: simulated random multi-DoF trajectories, one per recording (seeds from 2100, none used by
 any test set; one trajectory seen in many poses teaches the network that trajectory, not how

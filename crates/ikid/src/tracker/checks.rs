@@ -1,0 +1,397 @@
+//! What a marker must pass before it is used: its segment's rigid shape as learned, a forearm
+//! that did not jump faster than a forearm moves, three hand markers that agree with their
+//! shape; and the bits that say which markers are missing or rejected.
+
+use nalgebra::{Isometry3, Vector3};
+
+use super::{HAND_START, N_HAND, Step, Tracker};
+use crate::body::{self, Segment};
+use crate::status;
+
+/// How far a distance between two markers of one segment may stray from what the tracker
+/// learned it to be, m, plus [`RIGID_TOLERANCE_REL`] of it: more and a marker is not where
+/// that segment could put it (a glitch, a swapped label, another object's marker).
+pub const RIGID_TOLERANCE_M: f64 = 0.015;
+/// Relative part of the rigid tolerance ([`RIGID_TOLERANCE_M`]): skin markers stretch.
+pub const RIGID_TOLERANCE_REL: f64 = 0.15;
+/// Fastest a forearm moves, m/s, plus [`JUMP_TOLERANCE_M`]: a faster jump is a glitch.
+pub const MAX_SEGMENT_SPEED: f64 = 20.0;
+/// Slack on the forearm's jump check, m.
+pub const JUMP_TOLERANCE_M: f64 = 0.05;
+/// Largest jump of the forearm taken as real once it persists (the subject relabelled, a
+/// camera re-calibrated, the first frames the odd ones), m: the size of a capture volume. A
+/// farther jump (a frame 1 km off, coordinates in the wrong units) stays rejected however long
+/// it lasts.
+pub const MAX_RELOCATION_M: f64 = 20.0;
+/// How far a hand marker may sit from the rigid fit of the hand's shape to its three markers,
+/// m, for the three to count as agreeing with one another.
+pub const FIT_TOLERANCE_M: f64 = 0.005;
+
+impl Tracker {
+    /// Step 2, the hand's markers: NaN where missing or breaking the hand's rigid shape (a
+    /// calibration's template taken or averaged from a whole, rigid hand).
+    pub(super) fn check_hand(&mut self, step: &mut Step) {
+        let frame = &step.frame[..];
+        step.hand = std::array::from_fn(|i| frame[HAND_START + i]);
+        let (rejected, relearned) = self.check_rigid(Segment::Hand, frame, step.lost);
+        if relearned {
+            step.flags |= status::RESTARTED;
+            self.templated[Segment::Hand as usize] = false;
+        }
+        if rejected == 0 && step.missing >> 3 == 0 && self.templating(Segment::Hand) {
+            self.take_template(Segment::Hand, frame);
+        }
+        reject_hand_markers(&mut step.hand, rejected >> 3);
+        if rejected != 0 {
+            step.flags |= status::REJECTED_MARKER;
+        }
+        step.hand_complete = step.hand.iter().all(|v| !v.is_nan());
+    }
+
+    /// Whether the three markers of `hand` sit where the hand's shape puts them, each within
+    /// [`FIT_TOLERANCE_M`] of the rigid fit of the shape to them (none of them an outlier).
+    pub(super) fn hand_fits(&self, hand: &[f64; N_HAND], index: usize) -> bool {
+        self.fit_residual(hand, index).is_some_and(|r| {
+            r.chunks_exact(3).all(|m| m.iter().map(|v| v * v).sum::<f64>() <= FIT_TOLERANCE_M * FIT_TOLERANCE_M)
+        })
+    }
+
+    /// Checks a segment's present markers against the distances between them learned so far
+    /// (learning them on the first complete frame, then following them slowly). Returns the
+    /// frame-marker bits of the markers rejected, and whether a new shape was learned (its
+    /// template must be taken again; see [`RigidShape`]). One broken distance rejects the
+    /// marker of its pair that moved against the third marker since the shape was last kept
+    /// (both when that does not tell), two the marker they share, three all.
+    pub(super) fn check_rigid(&mut self, segment: Segment, frame: &[f64], lost: usize) -> (u8, bool) {
+        let s = segment as usize;
+        let first = body::first_marker(segment);
+        let points: [Vector3<f64>; 3] = std::array::from_fn(|k| {
+            Vector3::new(frame[3 * (first + k)], frame[3 * (first + k) + 1], frame[3 * (first + k) + 2])
+        });
+        let distances: [f64; 3] = SHAPE_PAIRS.map(|(a, b)| (points[a] - points[b]).norm());
+        let complete = distances.iter().all(|&d| d > 0.0);
+        let shape = &mut self.shapes[s];
+        let Some(learned) = shape.learned else {
+            if complete {
+                *shape = RigidShape { learned: Some(distances), support: 1.0, last: points, ..RigidShape::new() };
+            }
+            return (0, false);
+        };
+        let broken: [bool; 3] = std::array::from_fn(|i| !d_agrees(distances[i], learned[i]));
+        let n_broken = broken.iter().filter(|&&b| b).count();
+        if n_broken == 0 {
+            shape.candidate = None;
+            shape.candidate_frames = 0;
+            let forget = 1.0 / self.settings.rate_hz; // a one-second memory
+            let w = (1.0 / (shape.support + 1.0)).max(forget);
+            let mut kept = learned;
+            for (l, d) in kept.iter_mut().zip(distances) {
+                if !d.is_nan() {
+                    *l += w * (d - *l);
+                }
+            }
+            shape.learned = Some(kept);
+            shape.support += 1.0;
+            if complete {
+                shape.last = points;
+            }
+            return (0, false);
+        }
+        if complete {
+            // Another shape: taken once as many consecutive complete frames agree on it as
+            // agreed with the one learned (at least `lost`), at once if it is the shape the
+            // template was taken from (a marker coming back). A marker off its place for less
+            // long than it was in place stays rejected however long it lasts.
+            match shape.candidate {
+                Some(c) if shapes_agree(&distances, &c) => shape.candidate_frames += 1,
+                _ => {
+                    shape.candidate = Some(distances);
+                    shape.candidate_frames = 1;
+                }
+            }
+            let back = shape.template.is_some_and(|t| shapes_agree(&distances, &t));
+            let needed = if back { 1 } else { lost.max(shape.support as usize) };
+            if shape.candidate_frames >= needed {
+                let frames = shape.candidate_frames;
+                *shape = RigidShape {
+                    learned: Some(distances),
+                    support: frames as f64,
+                    template: shape.template,
+                    last: points,
+                    ..RigidShape::new()
+                };
+                return (0, !back);
+            }
+        }
+        let mut bad = 0u8;
+        for (i, &(a, b)) in SHAPE_PAIRS.iter().enumerate() {
+            if broken[i] {
+                bad |= 1 << a | 1 << b;
+            }
+        }
+        match n_broken {
+            1 => {
+                let i = broken.iter().position(|&b| b).unwrap_or(0);
+                let (a, b) = SHAPE_PAIRS[i];
+                let c = 3 - a - b;
+                // How far each moved against the third since the shape was last kept.
+                let moved = |k: usize| ((points[k] - points[c]) - (shape.last[k] - shape.last[c])).norm();
+                let (ma, mb) = (moved(a), moved(b));
+                if ma > 2.0 * mb {
+                    bad = 1 << a;
+                } else if mb > 2.0 * ma {
+                    bad = 1 << b;
+                }
+            }
+            2 => {
+                let shared =
+                    (0..3).find(|&k| SHAPE_PAIRS.iter().zip(broken).all(|(&(a, b), br)| !br || a == k || b == k));
+                if let Some(k) = shared {
+                    bad = 1 << k;
+                }
+            }
+            _ => {}
+        }
+        (bad << first, false)
+    }
+
+    /// Whether the forearm's newly fitted pose is one it could have reached since its last
+    /// measured one (accepting it anyway once the jump has persisted `lost` frames).
+    pub(super) fn forearm_plausible(&mut self, pose: &Isometry3<f64>, index: usize, lost: usize) -> bool {
+        let Some(last) = self.forearm else { return true };
+        let elapsed = (index - self.forearm_frame) as f64 / self.settings.rate_hz;
+        let jump = (pose.translation.vector - last.translation.vector).norm();
+        if jump <= MAX_SEGMENT_SPEED * elapsed + JUMP_TOLERANCE_M {
+            self.forearm_jumps = 0;
+            return true;
+        }
+        self.forearm_jumps += 1;
+        if self.forearm_jumps >= lost && jump <= MAX_RELOCATION_M {
+            self.forearm_jumps = 0;
+            return true;
+        }
+        false
+    }
+}
+
+/// Marker pairs of a segment whose distances make its shape (indices within the segment).
+const SHAPE_PAIRS: [(usize, usize); 3] = [(0, 1), (0, 2), (1, 2)];
+
+/// Whether a distance `d` between two markers is the learned `l`, within the rigid tolerance
+/// ([`RIGID_TOLERANCE_M`], [`RIGID_TOLERANCE_REL`]); a NaN distance (a marker missing) agrees.
+fn d_agrees(d: f64, l: f64) -> bool {
+    d.is_nan() || (d - l).abs() <= RIGID_TOLERANCE_M + RIGID_TOLERANCE_REL * l
+}
+
+/// Whether two shapes (the three distances of a segment) are one within the rigid tolerance.
+fn shapes_agree(a: &[f64; 3], b: &[f64; 3]) -> bool {
+    (0..3).all(|i| d_agrees(a[i], b[i]))
+}
+
+/// What the tracker knows of one segment's rigid shape (see `Tracker::check_rigid`).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct RigidShape {
+    /// The distances between its markers (01, 02, 12) as learned, and how many frames agreed.
+    pub(super) learned: Option<[f64; 3]>,
+    support: f64,
+    /// Another shape, seen in consecutive complete frames that agree with one another, and how many.
+    candidate: Option<[f64; 3]>,
+    candidate_frames: usize,
+    /// The shape the segment's template was taken from (with a calibration).
+    pub(super) template: Option<[f64; 3]>,
+    /// The segment's markers in the last complete frame that kept the shape.
+    last: [Vector3<f64>; 3],
+}
+
+impl RigidShape {
+    pub(super) fn new() -> Self {
+        RigidShape {
+            learned: None,
+            support: 0.0,
+            candidate: None,
+            candidate_frames: 0,
+            template: None,
+            last: [Vector3::repeat(f64::NAN); 3],
+        }
+    }
+}
+
+/// Frame-marker bits of the forearm's markers.
+pub(super) const FOREARM_MARKERS: u8 = 0b000_111;
+
+/// Sets hand markers `bits` (0–2) of `hand` to NaN: not used.
+pub(super) fn reject_hand_markers(hand: &mut [f64; N_HAND], bits: u8) {
+    for m in 0..3 {
+        if bits & (1 << m) != 0 {
+            hand[3 * m..3 * m + 3].fill(f64::NAN);
+        }
+    }
+}
+
+/// Bits 0–2: hand markers with all three coordinates present.
+pub(super) fn hand_markers_present(hand: &[f64; N_HAND]) -> u8 {
+    (0..3).filter(|&m| hand[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())).fold(0, |b, m| b | 1 << m)
+}
+
+/// Bit `i` set: marker `i` of `frame` ([`MARKERS`](crate::body::MARKERS) order) has a NaN coordinate.
+pub fn missing_markers(frame: &[f64]) -> u8 {
+    frame
+        .chunks_exact(3)
+        .enumerate()
+        .filter(|(_, xyz)| xyz.iter().any(|v| v.is_nan()))
+        .fold(0, |bits, (m, _)| bits | 1 << m)
+}
+
+#[cfg(test)]
+#[allow(clippy::needless_range_loop)] // the checks index truth and estimate side by side
+mod tests {
+    use super::super::testkit::*;
+    use super::super::*;
+    use super::*;
+    use crate::body::BodyModel;
+
+    #[test]
+    fn a_burst_a_kilometre_off_stays_rejected_and_a_real_relocation_is_taken() {
+        let body = BodyModel::default();
+        let q = trajectory(2000, 1000.0);
+        let clean = frames(&body, &q, 0.2);
+        let (good, _, _) = track(&clean, 1000.0);
+        for (shift, taken) in [(1000.0, false), (1.0, true)] {
+            // 100 frames (more than LOST_S): the 1 km ones stay rejected and flagged, then the
+            // tracker goes on as if they never came; the 1 m ones are a relocation, taken.
+            let mut f = clean.clone();
+            for v in &mut f[1000 * MARKER_FRAME_LEN..1100 * MARKER_FRAME_LEN] {
+                *v += shift;
+            }
+            let (est, status, _) = track(&f, 1000.0);
+            let flagged = status[1000..1100].iter().filter(|s| *s & status::REJECTED_MARKER != 0).count();
+            if taken {
+                assert!(flagged < 100, "{shift} m: {flagged} of 100 rejected");
+            } else {
+                assert_eq!(flagged, 100, "{shift} m");
+                let after = worst_deg(&good[1200..], &est[1200..]); // 100 ms after the burst
+                assert!(after < 0.01, "{after}° off after the burst");
+            }
+        }
+    }
+
+    #[test]
+    fn a_frame_shifted_by_a_kilometre_is_rejected_and_poisons_nothing() {
+        // Issue #22 case 1: it used to teach the tracker 18 m of noise and leave it 871° off.
+        let body = BodyModel::default();
+        let q = trajectory(3000, 1000.0);
+        let clean = frames(&body, &q, 0.2);
+        let mut glitched = clean.clone();
+        for v in &mut glitched[1000 * MARKER_FRAME_LEN..1001 * MARKER_FRAME_LEN] {
+            *v += 1000.0;
+        }
+        let (good, _, clean_tracker) = track(&clean, 1000.0);
+        let (bad, status, tracker) = track(&glitched, 1000.0);
+        assert!(status[1000] & status::REJECTED_MARKER != 0 && status[1000] & status::HELD != 0, "{}", status[1000]);
+        assert_eq!(status[999] & status::REJECTED_MARKER, 0);
+        assert!(worst_deg(&good[1001..], &bad[1001..]) < 0.01, "{}", worst_deg(&good[1001..], &bad[1001..]));
+        // The noise learned is the clean run's, not the glitch's.
+        let (a, b) = (tracker.marker_noise(), clean_tracker.marker_noise());
+        assert!(a.iter().zip(b).all(|(x, y)| *x < 2.0 * y + 1e-6), "{a:?} vs {b:?}");
+        assert_eq!(tracker.restarts(), 0);
+    }
+
+    #[test]
+    fn a_marker_off_its_place_for_longer_than_lost_stays_rejected_and_is_taken_back() {
+        // MC5 and then USP 10 cm off for 200 ms (20 frames, LOST_S is 3): every frame flagged
+        // rejected_marker, the estimate as without them throughout, nothing flagged once they
+        // are back. (The shape used to be re-learned after LOST_S from the garbage, its
+        // template taken from it: rows unflagged, a restart, and the wrong placement after.)
+        let body = BodyModel::default();
+        let rate = 100.0;
+        let q = trajectory(600, rate);
+        let clean = frames(&body, &q, 0.2);
+        let (good, _, _) = track_calibrated(&clean, rate);
+        for (marker, at) in [(4, 200), (1, 400)] {
+            let mut f = clean.clone();
+            for i in at..at + 20 {
+                f[i * MARKER_FRAME_LEN + 3 * marker] += 0.06;
+                f[i * MARKER_FRAME_LEN + 3 * marker + 1] -= 0.08;
+            }
+            let (est, status, tracker) = track_calibrated(&f, rate);
+            assert!(status[at..at + 20].iter().all(|s| s & status::REJECTED_MARKER != 0), "marker {marker}");
+            assert!(status.iter().all(|s| s & status::RESTARTED == 0), "marker {marker}: {:?}", &status[at..]);
+            assert!(status[at + 20..].iter().all(|&s| s == 0), "marker {marker}: {:?}", &status[at + 20..]);
+            let off = worst_turn_deg(&good[at..], &est[at..]);
+            assert!(off < 0.5, "marker {marker}: {off}° from the clean run");
+            assert_eq!(tracker.restarts(), 0);
+        }
+    }
+
+    #[test]
+    fn one_broken_distance_rejects_the_marker_that_moved() {
+        // USP moved 3 cm away from RSP, keeping its distance to FAP: only RSP–USP breaks. The
+        // marker that moved against FAP is USP, so RSP and FAP still fit the forearm (it was
+        // held before: both markers of the broken pair were rejected).
+        let body = BodyModel::default();
+        let q = trajectory(800, 1000.0);
+        let mut f = frames(&body, &q, 0.2);
+        for i in 400..450 {
+            let m = |k: usize| Vector3::new(f[i * 18 + 3 * k], f[i * 18 + 3 * k + 1], f[i * 18 + 3 * k + 2]);
+            let (rsp, usp, fap) = (m(0), m(1), m(2));
+            let arm = usp - fap;
+            let away = -((rsp - usp) - arm * (rsp - usp).dot(&arm) / arm.norm_squared()).normalize();
+            // Turned about FAP (its distance to it kept) away from RSP until RSP–USP breaks
+            // by a centimetre more than the tolerance.
+            let broken = |p: Vector3<f64>| {
+                let (d, l) = ((p - rsp).norm(), (usp - rsp).norm());
+                d - l > RIGID_TOLERANCE_M + RIGID_TOLERANCE_REL * l + 0.01
+            };
+            let moved = (1..90)
+                .map(|deg| {
+                    let a = f64::from(deg).to_radians();
+                    fap + (arm * a.cos() + away * arm.norm() * a.sin())
+                })
+                .find(|&p| broken(p))
+                .unwrap();
+            assert!(((moved - fap).norm() - arm.norm()).abs() < 1e-9);
+            f[i * 18 + 3..i * 18 + 6].copy_from_slice(moved.as_slice());
+        }
+        let (est, status, _) = track(&f, 1000.0);
+        for s in &status[400..450] {
+            assert!(s & status::REJECTED_MARKER != 0 && s & status::HELD == 0, "{}", status::describe(*s));
+        }
+        assert!(worst_deg(&q[400..], &est[400..]) < 0.05, "{}", worst_deg(&q[400..], &est[400..]));
+    }
+
+    #[test]
+    fn garbage_frames_are_flagged_and_tracking_recovers_within_100_ms() {
+        let body = BodyModel::default();
+        let q = trajectory(2000, 1000.0);
+        let clean = frames(&body, &q, 0.0);
+        let mut rng = crate::rng::SplitMix::new(7);
+        for scale in [1.0, 0.05] {
+            let mut f = clean.clone();
+            // 50 ms of random frames: metres apart, or hand-sized (5 cm) noise.
+            for v in &mut f[500 * MARKER_FRAME_LEN..550 * MARKER_FRAME_LEN] {
+                *v = scale * rng.normal();
+            }
+            let (est, status, _) = track(&f, 1000.0);
+            assert!(status[500..550].iter().all(|s| s & (status::REJECTED_MARKER | status::HELD) != 0), "{scale}");
+            let after = worst_deg(&q[650..], &est[650..]);
+            assert!(after < 0.1, "scale {scale}: {after}° off 100 ms after the garbage");
+            assert!(status[700..].iter().all(|&s| s == 0), "scale {scale}");
+        }
+    }
+
+    #[test]
+    fn one_hand_marker_off_its_segment_is_rejected_alone() {
+        let body = BodyModel::default();
+        let q = trajectory(1000, 1000.0);
+        let mut f = frames(&body, &q, 0.0);
+        let mc5_x = 3 * 4;
+        for frame in 600..650 {
+            f[frame * MARKER_FRAME_LEN + mc5_x] += 0.08; // MC5 8 cm off: a swapped or ghost marker
+        }
+        let (est, status, tracker) = track(&f, 1000.0);
+        assert!(status[600..650].iter().all(|s| s & status::REJECTED_MARKER != 0));
+        // MC2 and MCB alone keep the estimate on the wrist.
+        assert!(worst_deg(&q[600..], &est[600..]) < 0.05, "{}", worst_deg(&q[600..], &est[600..]));
+        assert_eq!(tracker.restarts(), 0);
+    }
+}

@@ -1,0 +1,570 @@
+//! The filter itself: the constant-acceleration motion model, the gate on the hand markers,
+//! the iterated correction by them (with the manoeuvre test), holding and restarting, and the
+//! angles kept on one branch.
+
+use nalgebra::{Isometry3, Matrix3, Vector3};
+
+use super::centre::WristCentre;
+use super::checks::{hand_markers_present, reject_hand_markers};
+use super::{HandPrediction, N_HAND, StateMatrix, StateVector, Step, Tracker, TrackerSettings};
+use crate::body::{self, COORDINATES, N_COORDINATES, Segment};
+use crate::error::{Error, Result};
+use crate::reference;
+use crate::status;
+
+/// Hand marker innovations beyond this squared Mahalanobis distance (3 dof: p ≈ 1e-6) ...
+pub const GATE_CHI2: f64 = 30.0;
+/// ... and longer than this, m, are rejected as implausible for one frame.
+pub const GATE_FLOOR_M: f64 = 0.02;
+/// Squared Mahalanobis distance of the hand markers from the prediction, per coordinate, beyond
+/// which the prediction's covariance is scaled up to match it (a manoeuvre).
+pub const MANOEUVRE_NIS: f64 = 3.0;
+/// The correction is linearised again at the corrected state while it moves an angle by more
+/// than this, rad ...
+pub const RELINEARISE_RAD: f64 = 1e-3;
+/// ... at most this many times in all.
+pub const MAX_ITERATIONS: usize = 5;
+
+/// The constant-acceleration motion model at `settings`' rate: per coordinate, x = (q, q̇, q̈),
+/// x' = F x, with white jerk of spectral density [`TrackerSettings::jerk_noise`] over one step.
+/// Returns the transition and the process noise.
+pub(super) fn motion_model(settings: &TrackerSettings) -> (StateMatrix, StateMatrix) {
+    let dt = 1.0 / settings.rate_hz;
+    let s = settings.jerk_noise;
+    // Per coordinate: x = (q, q̇, q̈), x' = F x, white jerk of density s over one step.
+    let f = Matrix3::new(1.0, dt, dt * dt / 2.0, 0.0, 1.0, dt, 0.0, 0.0, 1.0);
+    let (d2, d3, d4, d5) = (dt * dt, dt.powi(3), dt.powi(4), dt.powi(5));
+    let q = s * Matrix3::new(d5 / 20.0, d4 / 8.0, d3 / 6.0, d4 / 8.0, d3 / 3.0, d2 / 2.0, d3 / 6.0, d2 / 2.0, dt);
+    let mut transition = StateMatrix::zeros();
+    let mut process_noise = StateMatrix::zeros();
+    for c in 0..N_COORDINATES {
+        for i in 0..3 {
+            for j in 0..3 {
+                transition[(3 * i + c, 3 * j + c)] = f[(i, j)];
+                process_noise[(3 * i + c, 3 * j + c)] = q[(i, j)];
+            }
+        }
+    }
+    (transition, process_noise)
+}
+
+impl Tracker {
+    /// Standard deviations of the filter's current estimate of q and of q̈ (rad, rad/s²);
+    /// zeros before it starts.
+    pub fn state_std(&self) -> ([f64; N_COORDINATES], [f64; N_COORDINATES]) {
+        match &self.state {
+            None => ([0.0; N_COORDINATES], [0.0; N_COORDINATES]),
+            Some((_, p)) => (
+                std::array::from_fn(|c| p[(c, c)].max(0.0).sqrt()),
+                std::array::from_fn(|c| p[(6 + c, 6 + c)].max(0.0).sqrt()),
+            ),
+        }
+    }
+
+    /// The state predicted to this frame, or (before the filter started) this frame's own
+    /// solution when both segments are whole (and placed): `None` without one.
+    pub(super) fn predict_or_start(&self, step: &Step, forearm: &Isometry3<f64>) -> Option<(StateVector, StateMatrix)> {
+        match self.state {
+            Some((x, p)) => {
+                Some((self.transition * x, self.transition * p * self.transition.transpose() + self.process_noise))
+            }
+            None => {
+                let placed = self.calibration.is_none() || self.templated == [true; 2];
+                let start = if step.forearm_measured && step.hand_complete && placed {
+                    self.frame_solution(forearm, &step.frame, step.index)
+                } else {
+                    None
+                };
+                let x = start?;
+                Some((x, self.initial_covariance()))
+            }
+        }
+    }
+
+    /// Step 3: gates the hand markers on the prediction, and restarts from the hand's own pose
+    /// when the wrist is lost.
+    pub(super) fn gate_or_restart(
+        &mut self,
+        step: &mut Step,
+        forearm: &Isometry3<f64>,
+        x: &mut StateVector,
+        p: &mut StateMatrix,
+    ) {
+        let (index, lost) = (step.index, step.lost);
+        let present = hand_markers_present(&step.hand);
+        let ungated = step.hand;
+        let gated = self.gate(forearm, &step.hand, x, p);
+        reject_hand_markers(&mut step.hand, gated);
+        if gated != 0 {
+            step.flags |= status::REJECTED_MARKER;
+        }
+        let used = hand_markers_present(&step.hand);
+        self.gated_streak = if present != 0 && used == 0 { self.gated_streak + 1 } else { 0 };
+        // Every hand marker present agreeing with the hand's shape (three fitting it, or two and
+        // the wrist centre), yet gated: the markers agree with one another, not with the filter
+        // — the filter is what is wrong (a fast move it could not follow, a gap it coasted
+        // through), so restart now rather than after `lost`, from the hand's own pose.
+        let own = if step.forearm_seen && (gated != 0 || self.gated_streak >= lost) {
+            let centre = if present.count_ones() == 2 { self.centre_memo(&mut step.memo) } else { None };
+            self.hand_pose(forearm, &ungated, x, centre, index)
+        } else {
+            None
+        };
+        let fits = gated != 0
+            && match own {
+                Some(_) if present == 0b111 => self.hand_fits(&ungated, index),
+                Some((_, miss)) => self.centre_memo(&mut step.memo).is_some_and(|c| miss <= c.tolerance()),
+                None => false,
+            };
+        if (self.gated_streak >= lost || fits)
+            && let Some((pose, _)) = own
+        {
+            (*x, *p) = (self.solution(forearm, &pose), self.initial_covariance());
+            step.hand = ungated;
+            self.gated_streak = 0;
+            self.restarts += 1;
+            self.settling = lost;
+            if let Some(r) = self.refiner.as_mut() {
+                r.reset();
+            }
+        }
+    }
+
+    /// Without any hand marker to correct it, the state is carried forward at its last velocity
+    /// (an acceleration nothing confirms is not extrapolated), and once that has lasted
+    /// [`LOST_S`](super::LOST_S), held; and the frames after a restart or a long hold are
+    /// flagged while q̇ and q̈ (so the torques) settle.
+    pub(super) fn coast_or_settle(&mut self, step: &mut Step, x: &mut StateVector) {
+        let lost = step.lost;
+        let coasted = self.coast_streak;
+        self.coast_streak = if hand_markers_present(&step.hand) == 0 { self.coast_streak + 1 } else { 0 };
+        if self.coast_streak == 0 && coasted >= lost {
+            // Corrected again after holding: the velocities and accelerations start over.
+            self.settling = self.settling.max(lost);
+        }
+        if self.settling > 0 {
+            // A restart and the frames after it while q̇ and q̈ (so the torques) settle.
+            step.flags |= status::RESTARTED;
+            self.settling -= 1;
+        }
+        if self.coast_streak > 0 {
+            step.flags |= status::HELD;
+        }
+        if self.coast_streak > 0
+            && let Some((last, _)) = &self.state
+        {
+            // Carried forward without a correction: at the last velocity (an acceleration
+            // nothing confirms is not extrapolated), and once that has lasted `lost`, held.
+            let dt = if self.coast_streak < lost { 1.0 / self.settings.rate_hz } else { 0.0 };
+            for c in 0..N_COORDINATES {
+                x[c] = last[c] + dt * last[3 + c];
+                x[3 + c] = if dt > 0.0 { last[3 + c] } else { 0.0 };
+                x[6 + c] = 0.0;
+            }
+        }
+        if step.missing != 0 {
+            step.flags |= status::FILLED;
+        }
+    }
+
+    /// Keeps the corrected state (and returns it): each angle within one turn and e_f within
+    /// ±90°; a state that is not finite resets the tracker and is an error.
+    pub(super) fn keep_state(
+        &mut self,
+        mut x: StateVector,
+        mut p: StateMatrix,
+        index: usize,
+    ) -> Result<(StateVector, StateMatrix)> {
+        // One turn is one posture: keep each angle in (−π, π] so that a restart or a long
+        // gap can never leave the estimate a whole turn off; and e_f within ±90°.
+        principal_branch(&mut x, &mut p);
+        for c in 0..N_COORDINATES {
+            x[c] = wrap_angle(x[c]);
+        }
+        if x.iter().any(|v| !v.is_finite()) {
+            self.reset();
+            let value = x.iter().find(|v| !v.is_finite()).copied().unwrap_or(f64::NAN) as f32;
+            return Err(Error::NonFiniteOutput { frame: index, value });
+        }
+        self.state = Some((x, p));
+        Ok((x, p))
+    }
+
+    /// Wide enough for any wrist motion: angles within ~0.1 rad of the first frame's fit,
+    /// velocities to ~30 rad/s, accelerations to ~300 rad/s².
+    pub(super) fn initial_covariance(&self) -> StateMatrix {
+        let mut p = StateMatrix::zeros();
+        for c in 0..N_COORDINATES {
+            p[(c, c)] = 1e-2;
+            p[(3 + c, 3 + c)] = 1e3;
+            p[(6 + c, 6 + c)] = 1e5;
+        }
+        p
+    }
+
+    /// The state at this frame's own solution (the hand's fitted pose in the forearm's; at
+    /// rest), or `None` if the hand's markers do not give one.
+    fn frame_solution(&self, forearm: &Isometry3<f64>, frame: &[f64], index: usize) -> Option<StateVector> {
+        let hand_pose = reference::fit_segment(&self.body, frame, Segment::Hand, index).ok()?;
+        let q0 = body::wrist_angles(&(forearm.rotation.inverse() * hand_pose.rotation).to_rotation_matrix());
+        let mut x = StateVector::zeros();
+        x.fixed_rows_mut::<3>(0).copy_from(&Vector3::from(q0));
+        Some(x)
+    }
+
+    /// The state at the hand's pose `hand` in `forearm` (at rest).
+    pub(super) fn solution(&self, forearm: &Isometry3<f64>, hand: &Isometry3<f64>) -> StateVector {
+        let q0 = body::wrist_angles(&(forearm.rotation.inverse() * hand.rotation).to_rotation_matrix());
+        let mut x = StateVector::zeros();
+        x.fixed_rows_mut::<3>(0).copy_from(&Vector3::from(q0));
+        x
+    }
+
+    /// Hand markers (bits 0–2) whose innovation at the prediction is implausible: beyond
+    /// [`GATE_CHI2`] of its predicted covariance and longer than [`GATE_FLOOR_M`].
+    fn gate(&self, forearm: &Isometry3<f64>, hand: &[f64; N_HAND], x: &StateVector, p: &StateMatrix) -> u8 {
+        let Some((predicted, jac)) = self.hand_prediction(forearm, &x.fixed_rows::<3>(0).into_owned(), hand, None)
+        else {
+            return 0;
+        };
+        let p_q = p.fixed_view::<3, 3>(0, 0).into_owned();
+        let mut gated = 0u8;
+        for m in 0..3 {
+            let z = Vector3::new(hand[3 * m], hand[3 * m + 1], hand[3 * m + 2]);
+            if z.iter().any(|v| v.is_nan()) {
+                continue;
+            }
+            let nu = z - predicted[m];
+            if nu.norm() <= GATE_FLOOR_M {
+                continue;
+            }
+            let j = Matrix3::from_columns(&jac[m]);
+            let r = Matrix3::from_diagonal(&Vector3::from_fn(|k, _| self.noise_variance[3 * m + k]));
+            let s = j * p_q * j.transpose() + r;
+            let d2 = s.try_inverse().map_or(f64::INFINITY, |inv| (nu.transpose() * inv * nu)[0]);
+            // A NaN distance (a singular covariance) gates too.
+            if d2.is_nan() || d2 > GATE_CHI2 {
+                gated |= 1 << m;
+            }
+        }
+        gated
+    }
+
+    /// The hand markers' predicted positions at the state `x`, and each one's Jacobian columns
+    /// (its motion per radian of each coordinate). With [`TrackerSettings::relative_hand`],
+    /// relative to the centroid of the markers present in `hand` (the measured centroid is
+    /// taken as it is: only the hand's orientation is predicted); `None` there with fewer than
+    /// two present, which carry no orientation.
+    fn hand_prediction(
+        &self,
+        forearm: &Isometry3<f64>,
+        q: &Vector3<f64>,
+        hand: &[f64; N_HAND],
+        extra: Option<Vector3<f64>>,
+    ) -> Option<HandPrediction> {
+        // World axes of the three joints at the prediction: a point p of the hand moves by
+        // w_i × (p − centre) per radian of coordinate i. The chain's product is the hand's
+        // orientation in the lab (the forearm's times `body::wrist_rotation`).
+        let mut rotation = forearm.rotation.to_rotation_matrix();
+        let mut axes = [Vector3::zeros(); N_COORDINATES];
+        for (i, axis) in axes.iter_mut().enumerate() {
+            let local = Vector3::from(COORDINATES[i].axis);
+            *axis = rotation * local;
+            rotation *= nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(local), q[i]);
+        }
+        // A marker missing: the others where they sat lately (skin markers slide on the segment).
+        let partial = hand_markers_present(hand) != 0b111;
+        let offset = |m: usize| if partial { self.live[3 + m] } else { Vector3::from(self.body.marker_offsets[3 + m]) };
+        let (centre, reference) = if self.relative_hand() {
+            let present = hand_markers_present(hand);
+            let n = present.count_ones();
+            if n < 2 {
+                return None;
+            }
+            let (mut measured, mut local) = (Vector3::zeros(), Vector3::zeros());
+            for m in (0..3).filter(|m| present & (1 << m) != 0) {
+                measured += Vector3::new(hand[3 * m], hand[3 * m + 1], hand[3 * m + 2]);
+                local += offset(m);
+            }
+            let n = f64::from(n);
+            (measured / n, local / n)
+        } else {
+            (forearm.translation.vector, Vector3::zeros())
+        };
+        let arms: [Vector3<f64>; 4] = std::array::from_fn(|m| match m {
+            3 => extra.map_or(Vector3::zeros(), |e| rotation * (e - reference)),
+            _ => rotation * (offset(m) - reference),
+        });
+        Some((arms.map(|a| centre + a), arms.map(|a| axes.map(|w| w.cross(&a)))))
+    }
+
+    /// The Kalman correction by the present hand marker coordinates, one scalar at a time (the
+    /// noise is independent between coordinates), linearised at the prediction and then, while
+    /// the correction moves an angle by more than [`RELINEARISE_RAD`], again at the corrected
+    /// state (an iterated EKF, at most [`MAX_ITERATIONS`] times): a large correction — a fast
+    /// move at a low frame rate, or near gimbal lock — is not overshot.
+    pub(super) fn correct(
+        &self,
+        forearm: &Isometry3<f64>,
+        hand: &[f64; N_HAND],
+        centre: Option<WristCentre>,
+        start: Option<Vector3<f64>>,
+        x: &mut StateVector,
+        p: &mut StateMatrix,
+    ) {
+        let (prior, mut prior_p) = (*x, *p);
+        let mut at = start.unwrap_or(Vector3::new(x[0], x[1], x[2]));
+        let mut inflated = false;
+        let mut iteration = 0;
+        while iteration < MAX_ITERATIONS {
+            let Some((predicted, jac)) = self.hand_prediction(forearm, &at, hand, centre.map(|c| c.ch)) else {
+                return;
+            };
+            // The forearm's point where the hand's centre sits, at this posture.
+            let world = centre.map(|c| {
+                let relative = body::wrist_rotation(&[at[0], at[1], at[2]]).into_inner();
+                (forearm * nalgebra::Point3::from(c.forearm_point(&relative))).coords
+            });
+            let (mut xi, mut pi) = (prior, prior_p);
+            let (mut nis, mut used) = (0.0, 0.0);
+            for m in 0..4 {
+                for k in 0..3 {
+                    // The fourth: the wrist centre (the forearm's point, where the hand's would be).
+                    let (z, variance) = match (m, world, centre) {
+                        (3, Some(world), Some(c)) => (world[k], c.variance),
+                        (3, _, _) => break,
+                        _ => (hand[3 * m + k], self.noise_variance[3 * m + k]),
+                    };
+                    if z.is_nan() {
+                        continue;
+                    }
+                    // h_row · (x − at) accounts for the corrections already made, and for the
+                    // linearisation point's distance from the prediction.
+                    let h = [jac[m][0][k], jac[m][1][k], jac[m][2][k]];
+                    let moved: f64 = (0..3).map(|i| h[i] * (xi[i] - at[i])).sum();
+                    let innovation = z - predicted[m][k] - moved;
+                    // ph = P hᵀ (h touches only the angles).
+                    let ph: StateVector = pi.column(0) * h[0] + pi.column(1) * h[1] + pi.column(2) * h[2];
+                    let s = h[0] * ph[0] + h[1] * ph[1] + h[2] * ph[2] + variance;
+                    nis += innovation * innovation / s;
+                    used += 1.0;
+                    let gain = ph / s;
+                    xi += gain * innovation;
+                    pi -= gain * ph.transpose();
+                }
+            }
+            if iteration == 0 && !inflated && nis > MANOEUVRE_NIS * used {
+                // The markers are further from the prediction than its covariance allows: the
+                // hand moved as the motion model did not expect (an impact, a fast turn at a low
+                // frame rate). Trust the prediction less, by as much as it missed.
+                prior_p *= nis / used;
+                inflated = true;
+                continue;
+            }
+            // Keep P symmetric against rounding.
+            *p = (pi + pi.transpose()) * 0.5;
+            *x = xi;
+            let step = (0..3).map(|i| (xi[i] - at[i]).abs()).fold(0.0, f64::max);
+            if step.is_nan() || step <= RELINEARISE_RAD {
+                return;
+            }
+            at = Vector3::new(xi[0], xi[1], xi[2]);
+            iteration += 1;
+        }
+    }
+}
+
+/// Moves a state whose e_f is beyond ±90° (past gimbal lock) to the other Euler triple of the
+/// same rotation, `(s_p + π, ±π − e_f, ad_ab + π)`, the one [`body::wrist_angles`] gives and
+/// the one a restart starts from: e_f's velocity and acceleration change sign, the others'
+/// do not (and so the covariance's e_f rows and columns).
+fn principal_branch(x: &mut StateVector, p: &mut StateMatrix) {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    let b = wrap_angle(x[1]);
+    if b.abs() <= FRAC_PI_2 {
+        return;
+    }
+    x[0] += PI;
+    x[1] = PI.copysign(b) - b;
+    x[2] += PI;
+    for i in [4, 7] {
+        x[i] = -x[i];
+    }
+    for i in [1, 4, 7] {
+        let mut row = p.row_mut(i);
+        row *= -1.0;
+        let mut col = p.column_mut(i);
+        col *= -1.0;
+    }
+}
+
+/// Of the two Euler triples of the rotation whose angles are `solution`'s first three, moved by
+/// whole turns, the one nearest the angles of `x`.
+pub(super) fn nearest_triple(solution: &StateVector, x: &StateVector) -> Vector3<f64> {
+    use std::f64::consts::PI;
+    let near = |q: [f64; 3]| Vector3::from_fn(|i, _| x[i] + wrap_angle(q[i] - x[i]));
+    let a = near([solution[0], solution[1], solution[2]]);
+    let b = near([solution[0] + PI, PI - solution[1], solution[2] + PI]);
+    let distance = |q: &Vector3<f64>| (0..3).map(|i| (q[i] - x[i]).powi(2)).sum::<f64>();
+    if distance(&b) < distance(&a) { b } else { a }
+}
+
+/// `a` (rad) moved by whole turns into (−π, π].
+pub(super) fn wrap_angle(a: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    if a > -PI && a <= PI { a } else { a - TAU * ((a - PI) / TAU).ceil() }
+}
+
+#[cfg(test)]
+#[allow(clippy::needless_range_loop)] // the checks index truth and estimate side by side
+mod tests {
+    use super::super::testkit::*;
+    use super::super::*;
+    use super::*;
+    use crate::body::BodyModel;
+
+    use crate::reference::{self, JointState};
+
+    use std::f64::consts::{PI, TAU};
+
+    #[test]
+    fn without_a_correction_the_angles_go_on_at_their_last_velocity_then_hold() {
+        // Ten frames a kilometre off (all rejected): the first LOST_S of them carry the angles
+        // forward at the last velocity, no acceleration extrapolated (at 70 Hz a racing wrist's
+        // acceleration extrapolated over three frames ran 145° off), then hold them.
+        let rate = 70.0;
+        let body = BodyModel::default();
+        let q = fast_trajectory(300, rate);
+        let clean = frames(&body, &q, 0.2);
+        let (good, _, _) = track(&clean, rate);
+        let mut f = clean.clone();
+        for v in &mut f[150 * MARKER_FRAME_LEN..160 * MARKER_FRAME_LEN] {
+            *v += 1000.0;
+        }
+        let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+        let mut tracker = Tracker::new(body, settings).unwrap();
+        let out: Vec<TrackerOutput> =
+            f.chunks_exact(MARKER_FRAME_LEN).map(|frame| tracker.push(frame).unwrap().unwrap()).collect();
+        let lost = tracker.lost_frames();
+        let last = out[149].state;
+        for (k, o) in out[150..160].iter().enumerate() {
+            assert!(o.status & status::HELD != 0);
+            assert_eq!(o.state.qdd, [0.0; 3], "frame {}", 150 + k);
+            let moving = k + 1 < lost;
+            for c in 0..3 {
+                let expected = if moving { last.qd[c] } else { 0.0 };
+                assert_eq!(o.state.qd[c], expected, "frame {} coordinate {c}", 150 + k);
+                let steps = (k + 1).min(lost - 1) as f64;
+                assert!((o.state.q[c] - (last.q[c] + steps * last.qd[c] / rate)).abs() < 1e-12, "frame {}", 150 + k);
+            }
+        }
+        // Back on the clean run's estimate within 100 ms.
+        let after = worst_deg(&good[167..], &out[167..].iter().map(|o| o.state.q).collect::<Vec<_>>());
+        assert!(after < 0.1, "{after}° off the clean run");
+    }
+
+    #[test]
+    fn a_lost_hand_is_restarted_from_its_own_solution_and_flagged() {
+        // The hand jumps by 60° of flexion for good (a relabelling, or a tracker thrown off): the
+        // gate rejects it at first, then the tracker restarts on the new posture.
+        let body = BodyModel::default();
+        let mut q = trajectory(1000, 1000.0);
+        for qi in &mut q[400..] {
+            qi[1] += 60f64.to_radians();
+        }
+        let f = frames(&body, &q, 0.0);
+        let (est, status, tracker) = track(&f, 1000.0);
+        assert_eq!(tracker.restarts(), 1);
+        let restart = status.iter().position(|s| s & status::RESTARTED != 0).unwrap();
+        assert!((400..400 + 3 * 30).contains(&restart), "{restart}");
+        assert!(worst_deg(&q[restart + 50..], &est[restart + 50..]) < 0.05);
+    }
+
+    #[test]
+    fn angles_stay_within_one_turn() {
+        for (a, wrapped) in [(3.5, 3.5 - TAU), (-3.5, TAU - 3.5), (PI, PI), (-PI, PI), (7.0 * PI, PI), (0.3, 0.3)] {
+            assert!((wrap_angle(a) - wrapped).abs() < 1e-12, "{a}");
+        }
+        // A pronation past ±180° (absurd, but what a lost filter reports) comes back as the
+        // same posture, never a whole turn off.
+        assert!(status::angle_implausible(0, wrap_angle(4.0)));
+    }
+
+    #[test]
+    fn clean_markers_are_followed_closely_with_derivatives() {
+        let body = BodyModel::default();
+        let q = trajectory(3000, 1000.0);
+        let f = frames(&body, &q, 0.3);
+        let mut tracker = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut last = None;
+        for frame in f.chunks_exact(MARKER_FRAME_LEN) {
+            last = tracker.push(frame).unwrap();
+        }
+        let out = last.unwrap();
+        let t: f64 = 2.999;
+        let truth_qd = [0.6 * 1.3 * (1.3 * t).cos(), -0.5 * 0.9 * (0.9 * t + 0.4).cos(), -0.2 * 1.7 * (1.7 * t).sin()];
+        for c in 0..3 {
+            assert!((out.state.q[c] - q[2999][c]).abs() < 1e-5, "q {c}: {} vs {}", out.state.q[c], q[2999][c]);
+            assert!((out.state.qd[c] - truth_qd[c]).abs() < 1e-2, "qd {c}: {} vs {}", out.state.qd[c], truth_qd[c]);
+        }
+        assert_eq!(out.missing, 0);
+        // Torques equal Newton–Euler at the true state, up to the state's error.
+        let truth = JointState { q: q[2999], qd: truth_qd, qdd: out.state.qdd };
+        let tau = reference::inverse_dynamics(&body, 0.3, &truth).unwrap();
+        for c in 0..3 {
+            assert!((out.tau[c] - tau[c]).abs() < 1e-4, "tau {c}: {} vs {}", out.tau[c], tau[c]);
+        }
+    }
+
+    #[test]
+    fn missing_markers_correct_nothing_and_are_reported() {
+        let body = BodyModel::default();
+        let q = trajectory(2000, 1000.0);
+        let mut f = frames(&body, &q, 0.0);
+        // MC5 (marker 4) missing from frame 1000 to 1199, the forearm's FAP (marker 2) at 1500.
+        for i in 1000..1200 {
+            f[i * MARKER_FRAME_LEN + 12..i * MARKER_FRAME_LEN + 15].fill(f64::NAN);
+        }
+        f[1500 * MARKER_FRAME_LEN + 6] = f64::NAN;
+        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+            let out = tracker.push(frame).unwrap().unwrap();
+            let expect = if (1000..1200).contains(&i) {
+                1 << 4
+            } else if i == 1500 {
+                1 << 2
+            } else {
+                0
+            };
+            assert_eq!(out.missing, expect, "frame {i}");
+            for c in 0..3 {
+                // Two hand markers and the wrist centre still fix the hand: no loss on clean data.
+                let error = (out.state.q[c] - q[i][c]).abs();
+                assert!(i < 200 || error < 1e-5, "frame {i} coordinate {c}: {error}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_filter_starts_open_to_any_velocity_and_acceleration() {
+        // Started mid-movement (every coordinate turning at 1–2 rad/s): the documented initial
+        // uncertainty (velocities to ~30 rad/s, accelerations to ~300 rad/s²) lets the filter
+        // find the velocity within 20 ms on clean markers; the accelerations' uncertainty is
+        // untouched by the first frame (markers see angles only): √1e5 rad/s².
+        let body = BodyModel::default();
+        let v = [1.5, -1.0, 2.0];
+        let q: Vec<[f64; 3]> = (0..40).map(|i| std::array::from_fn(|c| 0.1 + v[c] * i as f64 * 1e-3)).collect();
+        let f = frames(&body, &q, 0.2);
+        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        tracker.push(&f[..MARKER_FRAME_LEN]).unwrap().unwrap();
+        assert_eq!(tracker.state_std().1, [1e5f64.sqrt(); 3]);
+        let mut last = None;
+        for frame in f.chunks_exact(MARKER_FRAME_LEN).skip(1).take(20) {
+            last = tracker.push(frame).unwrap();
+        }
+        let qd = last.unwrap().state.qd;
+        for c in 0..3 {
+            assert!((qd[c] - v[c]).abs() < 0.05, "coordinate {c}: {} vs {}", qd[c], v[c]);
+        }
+    }
+}

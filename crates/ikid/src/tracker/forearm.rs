@@ -1,0 +1,287 @@
+//! The forearm's pose: fitted to its three markers, or through a marker gap from the two
+//! others, its roll about the line through them filtered ([`Roll`]) from how it was seen to
+//! turn while whole ([`ForearmTurn`]) and the wrist centre seen from the hand.
+
+use nalgebra::{Isometry3, Matrix2, Matrix3, Translation3, UnitQuaternion, Vector3};
+
+use super::centre::{CENTRE_WEIGHT, WristCentre};
+use super::checks::FOREARM_MARKERS;
+use super::ekf::wrap_angle;
+use super::placement::fit_points;
+use super::variance::{NOISE_CLIP, PRIOR_FRAMES};
+use super::{HAND_START, N_HAND, Step, Tracker};
+use crate::body::{self, MARKER_FRAME_LEN, Segment};
+use crate::reference;
+use crate::status;
+
+/// How the forearm turns between frames, learned from its whole (three-marker) poses: the
+/// second difference of its orientation (rad per frame, per frame) is its angular acceleration
+/// and its markers' noise; its mean square is how far its roll about the line through two of
+/// its markers may stray per frame while the third is missing (see [`Roll`]). A forearm fixed in
+/// the lab teaches ~0 (its roll is then held through a gap); a real one moving, what it does.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ForearmTurn {
+    /// The last two whole poses' frame indices and orientations, newest first.
+    last: [(usize, UnitQuaternion<f64>); 2],
+    /// The newest turn per frame between them (rotation vector, rad, lab frame).
+    spin: Vector3<f64>,
+    /// Covariance of the second difference (rad², lab frame), and how many were seen.
+    variance: Matrix3<f64>,
+    samples: f64,
+}
+
+/// The forearm's roll about the line through its two present markers during a marker gap: a
+/// constant-rate Kalman filter whose acceleration noise is [`ForearmTurn::variance`] and whose
+/// measurement is the roll the wrist centre seen from the hand gives, as uncertain as the
+/// learned hand-marker noise makes that centre. Noisy hand markers on a forearm that does not
+/// turn leave its roll where it was; clean ones on a moving forearm are followed.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Roll {
+    /// Whether a gap is under way (the state below is live).
+    active: bool,
+    /// Roll rate about the line, rad per frame ...
+    rate: f64,
+    /// ... and the covariance of (roll, rate).
+    p: Matrix2<f64>,
+}
+
+/// The roll filter's acceleration noise over the forearm's learned second-difference variance
+/// about the line ([`ForearmTurn::about`]): a forearm's acceleration lasts longer than a frame,
+/// so a white-acceleration model given the per-frame variance alone lets the roll drift too
+/// little over a gap. On the real recordings (docs/realdata.md, 200 ms gaps of FAP): 1× cost
+/// pyomeca 1.43× the gap-free error, 10× 1.35× (the centre followed frame by frame: 1.32×); a
+/// forearm fixed in the lab teaches ~0 either way.
+const ROLL_NOISE_GAIN: f64 = 10.0;
+
+/// Smallest variance of [`ForearmTurn::variance`] about any axis, rad² (a forearm fixed in the lab still lets its roll
+/// move by a hundredth of a millidegree per frame).
+const MIN_TURN_VARIANCE: f64 = 1e-14;
+
+impl ForearmTurn {
+    pub(super) fn new() -> Self {
+        ForearmTurn {
+            last: [(usize::MAX, UnitQuaternion::identity()); 2],
+            spin: Vector3::zeros(),
+            variance: Matrix3::from_diagonal_element(MIN_TURN_VARIANCE),
+            samples: 0.0,
+        }
+    }
+
+    /// The second difference's variance about the axis `axis` (rad², at least
+    /// [`MIN_TURN_VARIANCE`]): how the forearm turns about it.
+    pub(super) fn about(&self, axis: &Vector3<f64>) -> f64 {
+        (axis.transpose() * self.variance * axis)[0].max(MIN_TURN_VARIANCE)
+    }
+}
+
+impl Roll {
+    pub(super) fn idle() -> Self {
+        Roll { active: false, rate: 0.0, p: Matrix2::zeros() }
+    }
+}
+
+impl Tracker {
+    /// Step 1, the forearm: measured if its markers are present, rigid as learned and not
+    /// jumped (a calibration's template taken or averaged from it); which of its markers may be
+    /// used otherwise.
+    pub(super) fn measure_forearm(&mut self, step: &mut Step) {
+        let (frame, index, lost) = (&step.frame[..], step.index, step.lost);
+        // Its markers that may be used: present, and (two or three of them) rigid as learned.
+        step.forearm_usable = !step.missing & FOREARM_MARKERS;
+        if step.missing & FOREARM_MARKERS == 0 {
+            let (rejected, relearned) = self.check_rigid(Segment::Forearm, frame, lost);
+            if relearned {
+                step.flags |= status::RESTARTED;
+                self.templated[Segment::Forearm as usize] = false;
+            }
+            if rejected == 0 && self.templating(Segment::Forearm) {
+                self.take_template(Segment::Forearm, frame);
+            }
+            step.forearm_usable &= !rejected;
+            if rejected == 0
+                && let Ok(pose) = reference::fit_segment(&self.body, frame, Segment::Forearm, index)
+            {
+                if self.forearm_plausible(&pose, index, lost) {
+                    self.forearm = Some(pose);
+                    self.forearm_frame = index;
+                    step.forearm_measured = true;
+                    self.follow_placement(Segment::Forearm, &pose, frame);
+                    self.learn_turn(&pose, index);
+                } else {
+                    step.forearm_usable = 0; // the whole forearm jumped: nothing of it is used
+                }
+            }
+            if !step.forearm_measured {
+                step.flags |= status::REJECTED_MARKER;
+            }
+        } else if step.forearm_usable.count_ones() == 2 {
+            let (rejected, _) = self.check_rigid(Segment::Forearm, frame, lost);
+            if rejected != 0 {
+                step.forearm_usable = 0;
+                step.flags |= status::REJECTED_MARKER;
+            }
+        }
+    }
+
+    /// Step 1b, a forearm with one marker missing or rejected: its pose from the two others and
+    /// the wrist centre (see `forearm_from_two`), if that is a pose it could have reached; held
+    /// otherwise.
+    pub(super) fn forearm_through_gap(&mut self, step: &mut Step) {
+        let mut forearm_estimated = false;
+        if !step.forearm_measured
+            && step.forearm_usable.count_ones() == 2
+            && self.templated[Segment::Forearm as usize] | self.calibration.is_none()
+            && let Some((pose, roll)) = self.forearm_from_two(
+                &step.frame,
+                step.forearm_usable,
+                &step.hand,
+                self.centre_memo(&mut step.memo),
+                step.index,
+            )
+            && self.forearm_plausible(&pose, step.index, step.lost)
+        {
+            self.forearm = Some(pose);
+            self.roll = roll;
+            self.forearm_frame = step.index;
+            forearm_estimated = true;
+        }
+        if !step.forearm_measured && !forearm_estimated && self.forearm.is_some() {
+            step.flags |= status::HELD;
+        }
+        step.forearm_seen = step.forearm_measured || forearm_estimated;
+    }
+
+    /// The forearm's pose from two of its markers (`usable`: frame-marker bits 0–2): the last
+    /// pose turned as little as fits them, then rolled about the line through them by its
+    /// [`Roll`] filter, which the wrist centre seen from the hand corrects when the hand's three
+    /// markers are there (`hand`). Returns the pose and the roll filter's new state; `None`
+    /// without a last pose or a centre to use.
+    fn forearm_from_two(
+        &self,
+        frame: &[f64],
+        usable: u8,
+        hand: &[f64; N_HAND],
+        centre: Option<WristCentre>,
+        index: usize,
+    ) -> Option<(Isometry3<f64>, Roll)> {
+        let [a, b] = {
+            let mut two = (0..3).filter(|k| usable & (1 << k) != 0);
+            [two.next()?, two.next()?]
+        };
+        let offset = |k: usize| self.live[k];
+        let point = |k: usize| Vector3::new(frame[3 * k], frame[3 * k + 1], frame[3 * k + 2]);
+        // The fit to the two markers and the wrist centre seen from the hand, with that centre.
+        let mut seen = None;
+        if hand.iter().all(|v| !v.is_nan())
+            && let Some(centre) = centre
+        {
+            let mut whole = [0.0; MARKER_FRAME_LEN];
+            whole[HAND_START..].copy_from_slice(hand);
+            if let Ok(hand_pose) = reference::fit_segment(&self.body, &whole, Segment::Hand, index) {
+                let world = (hand_pose * nalgebra::Point3::from(centre.ch)).coords;
+                // The forearm's point at the wrist depends a little on the posture: taken at the
+                // last estimate's, then at the fit's own.
+                let mut relative = self
+                    .state
+                    .as_ref()
+                    .map_or(Matrix3::identity(), |(x, _)| body::wrist_rotation(&[x[0], x[1], x[2]]).into_inner());
+                for _ in 0..2 {
+                    let fitted = fit_points(
+                        &[offset(a), offset(b), centre.forearm_point(&relative)],
+                        &[point(a), point(b), world],
+                        [1.0, 1.0, CENTRE_WEIGHT],
+                    )?;
+                    relative = (fitted.rotation.inverse() * hand_pose.rotation).to_rotation_matrix().into_inner();
+                    seen = Some((fitted, world, centre));
+                }
+            }
+        }
+        let Some(last) = self.forearm else {
+            return seen.map(|(pose, _, _)| (pose, Roll::idle()));
+        };
+        let (was, now) = (last.rotation * (offset(b) - offset(a)), point(b) - point(a));
+        let turn = UnitQuaternion::rotation_between(&was, &now).unwrap_or_else(UnitQuaternion::identity);
+        let held = turn * last.rotation;
+        let line = nalgebra::Unit::try_new(now, 1e-9)?;
+        // The roll filter: predicted at its rate, its roll noise what the forearm was seen to do.
+        let mut roll = self.roll;
+        if !roll.active {
+            // A gap begins: rolling as the forearm last turned about this line.
+            let v = self.turn.about(&line);
+            roll = Roll { active: true, rate: self.turn.spin.dot(&line), p: Matrix2::new(v, 0.0, 0.0, v) };
+        }
+        let f = Matrix2::new(1.0, 1.0, 0.0, 1.0);
+        let q = ROLL_NOISE_GAIN * self.turn.about(&line) * Matrix2::new(0.25, 0.5, 0.5, 1.0);
+        let (mut angle, mut p) = (roll.rate, f * roll.p * f.transpose() + q);
+        let mut rate = roll.rate;
+        if let Some((fitted, world, centre)) = seen {
+            // The centre's roll: the turn from the held pose to the fitted one about the line ...
+            let measured = (fitted.rotation * held.inverse()).scaled_axis().dot(&line);
+            // ... as uncertain as the centre seen from the hand, over its distance from the line.
+            let arm = world - point(a);
+            let r2 = (arm - line.into_inner() * arm.dot(&line)).norm_squared();
+            let variance = (self.centre_noise_variance(&centre) / r2.max(1e-6)).max(1e-12);
+            let s = p[(0, 0)] + variance;
+            let gain = p.column(0) / s;
+            let innovation = wrap_angle(measured - angle);
+            angle += gain[0] * innovation;
+            rate += gain[1] * innovation;
+            p -= gain * p.row(0);
+            p = (p + p.transpose()) * 0.5;
+        }
+        let rotation = UnitQuaternion::from_axis_angle(&line, angle) * held;
+        let translation = (point(a) + point(b)) / 2.0 - rotation * ((offset(a) + offset(b)) / 2.0);
+        Some((Isometry3::from_parts(Translation3::from(translation), rotation), Roll { active: true, rate, p }))
+    }
+
+    /// Learns how the forearm turns ([`ForearmTurn`]) from its whole pose `pose` at frame `index`;
+    /// its roll filter is idle again.
+    fn learn_turn(&mut self, pose: &Isometry3<f64>, index: usize) {
+        self.roll = Roll::idle();
+        let t = &mut self.turn;
+        let [(i1, r1), (i2, r2)] = t.last;
+        if i1 != usize::MAX && i1 + 1 == index {
+            let spin = (pose.rotation * r1.inverse()).scaled_axis();
+            if i2 != usize::MAX && i2 + 2 == index {
+                let previous = (r1 * r2.inverse()).scaled_axis();
+                let d = spin - previous;
+                // Clipped as a marker's noise sample is (`NOISE_CLIP`): one glitch teaches little.
+                let clip = NOISE_CLIP * t.variance.trace();
+                let d = if d.norm_squared() > clip { d * (clip / d.norm_squared()).sqrt() } else { d };
+                let forget = 1.0 / (self.settings.noise_memory_s * self.settings.rate_hz);
+                let w = (1.0 / (t.samples + PRIOR_FRAMES)).max(forget);
+                t.variance += w * (d * d.transpose() - t.variance);
+                t.samples += 1.0;
+            }
+            t.spin = spin;
+        } else {
+            t.spin = Vector3::zeros();
+        }
+        t.last = [(index, pose.rotation), (i1, r1)];
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::needless_range_loop)] // the checks index truth and estimate side by side
+mod tests {
+    use super::super::testkit::*;
+
+    use super::*;
+    use crate::body::BodyModel;
+
+    #[test]
+    fn the_tracker_runs_at_100_hz_through_a_gap_of_a_forearm_marker() {
+        let body = BodyModel::default();
+        let q = trajectory(1000, 100.0);
+        let mut f = frames(&body, &q, 0.0);
+        for frame in 300..320 {
+            f[frame * MARKER_FRAME_LEN] = f64::NAN; // RSP gone for 200 ms
+        }
+        let (est, status, tracker) = track(&f, 100.0);
+        // The forearm's pose comes from its two other markers and the wrist centre: filled, not held.
+        assert!(status[300..320].iter().all(|s| s & status::HELD == 0 && s & status::FILLED != 0));
+        assert!(worst_deg(&q[300..], &est[300..]) < 0.5, "{}", worst_deg(&q[300..], &est[300..]));
+        assert!(est.iter().flatten().all(|v| v.is_finite()));
+        assert_eq!(tracker.restarts(), 0);
+    }
+}

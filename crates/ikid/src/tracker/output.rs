@@ -1,0 +1,106 @@
+//! What the tracker gives per frame ([`TrackerOutput`]), and the step that makes it: torques
+//! from the state, and the frame's status.
+
+use nalgebra::Isometry3;
+
+use super::{Step, Tracker};
+use crate::body::N_COORDINATES;
+use crate::error::Result;
+use crate::reference::{self, JointState};
+use crate::status;
+
+/// Smallest noise [`TrackerOutput::noise`] reports, m (before any third difference is seen).
+pub const MIN_REPORTED_NOISE: f64 = 1e-9;
+
+/// One frame's estimate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackerOutput {
+    /// Angles, velocities and accelerations (rad, rad/s, rad/s²), coordinate order.
+    pub state: JointState,
+    /// Joint torques, N·m, coordinate order.
+    pub tau: [f64; N_COORDINATES],
+    /// Bit `i` set: marker `i` ([`MARKERS`](crate::body::MARKERS) order) was missing in this frame.
+    pub missing: u8,
+    /// Whether a refiner corrected this estimate (false without one, and while its window fills).
+    pub refined: bool,
+    /// [`status`] bits: markers rejected, poses held, a restart, an implausible angle.
+    pub status: u8,
+    /// Mean of the hand markers' noise (standard deviation) measured so far from the data
+    /// alone, m (at least [`MIN_REPORTED_NOISE`]); what the refiner is told and gated by.
+    pub noise: f64,
+}
+
+/// Values per frame in [`TrackerOutput::values`]: q, q̇, q̈ and τ, three each.
+pub const TRACKER_VALUES: usize = 4 * N_COORDINATES;
+
+impl TrackerOutput {
+    /// What [`Tracker::run`] reports for a frame without an estimate (before the filter
+    /// started): NaN angles, velocities, accelerations, torques and noise, not refined, and the
+    /// frame's own `missing` markers.
+    pub fn waiting(missing: u8) -> Self {
+        let nan = [f64::NAN; N_COORDINATES];
+        TrackerOutput {
+            state: JointState { q: nan, qd: nan, qdd: nan },
+            tau: nan,
+            missing,
+            refined: false,
+            status: 0,
+            noise: f64::NAN,
+        }
+    }
+
+    /// q, q̇, q̈ and τ back to back ([`TRACKER_VALUES`] values; rad, rad/s, rad/s², N·m).
+    pub fn values(&self) -> [f64; TRACKER_VALUES] {
+        let rows = [self.state.q, self.state.qd, self.state.qdd, self.tau];
+        std::array::from_fn(|i| rows[i / N_COORDINATES][i % N_COORDINATES])
+    }
+}
+
+impl Tracker {
+    /// The frame's output: the torques of `state` by Newton–Euler (gravity's direction from the
+    /// forearm's pose `forearm`), and [`status::IMPLAUSIBLE`] for an angle or a torque no wrist
+    /// reaches.
+    pub(super) fn output(
+        &self,
+        step: &mut Step,
+        forearm: &Isometry3<f64>,
+        state: JointState,
+        refined: bool,
+        noise: f64,
+    ) -> Result<TrackerOutput> {
+        if (0..N_COORDINATES).any(|c| status::angle_implausible(c, state.q[c])) {
+            step.flags |= status::IMPLAUSIBLE;
+        }
+        let tau = reference::inverse_dynamics_at(&self.body, &forearm.rotation.to_rotation_matrix(), &state)?;
+        if tau.iter().any(|&t| status::torque_implausible(t, self.torque_limit)) {
+            step.flags |= status::IMPLAUSIBLE;
+        }
+        Ok(TrackerOutput { state, tau, missing: step.missing, refined, status: step.flags, noise })
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::needless_range_loop)] // the checks index truth and estimate side by side
+mod tests {
+
+    use super::*;
+
+    use crate::reference::JointState;
+
+    #[test]
+    fn values_are_q_qd_qdd_tau_in_order() {
+        let out = TrackerOutput {
+            state: JointState { q: [1.0, 2.0, 3.0], qd: [4.0, 5.0, 6.0], qdd: [7.0, 8.0, 9.0] },
+            tau: [10.0, 11.0, 12.0],
+            missing: 0,
+            refined: false,
+            status: 0,
+            noise: 1e-3,
+        };
+        assert_eq!(TRACKER_VALUES, 12);
+        assert_eq!(out.values(), std::array::from_fn(|i| (i + 1) as f64));
+        let w = TrackerOutput::waiting(0b10_0001);
+        assert!(w.values().iter().all(|v| v.is_nan()) && w.noise.is_nan());
+        assert_eq!((w.missing, w.refined), (0b10_0001, false));
+    }
+}

@@ -1,0 +1,72 @@
+//! What the tracker's tests share: trajectories, their markers, and trackers run over them.
+
+use super::{Tracker, TrackerSettings};
+use crate::body::{self, BodyModel};
+use crate::calibration::Calibration;
+
+pub(super) fn trajectory(n: usize, rate: f64) -> Vec<[f64; 3]> {
+    (0..n)
+        .map(|i| {
+            let t = i as f64 / rate;
+            [0.6 * (1.3 * t).sin(), -0.5 * (0.9 * t + 0.4).sin(), 0.2 * (1.7 * t).cos()]
+        })
+        .collect()
+}
+
+pub(super) fn frames(body: &BodyModel, q: &[[f64; 3]], shoulder: f64) -> Vec<f64> {
+    body.marker_frames(&q.concat(), shoulder).unwrap()
+}
+
+/// Runs `f` through a fresh tracker; per frame, the angles (NaN before the start) and status.
+pub(super) fn track(f: &[f64], rate: f64) -> (Vec<[f64; 3]>, Vec<u8>, Tracker) {
+    let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+    let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
+    let (mut q, mut st) = (vec![], vec![]);
+    tracker
+        .run(f, |_, o, _| {
+            q.push(o.state.q);
+            st.push(o.status);
+        })
+        .unwrap();
+    (q, st, tracker)
+}
+
+pub(super) fn worst_deg(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    a.iter().zip(b).flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).abs().to_degrees())).fold(0.0, f64::max)
+}
+
+/// Runs `f` through a fresh tracker at `rate` calibrated to the body model's own placement
+/// (so: the hand measured by its orientation, the wrist centre learned); per frame, the
+/// angles (NaN before the start) and status.
+pub(super) fn track_calibrated(f: &[f64], rate: f64) -> (Vec<[f64; 3]>, Vec<u8>, Tracker) {
+    let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+    let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
+    tracker.set_calibration(Some(Calibration::body_model()));
+    let (mut q, mut st) = (vec![], vec![]);
+    tracker
+        .run(f, |_, o, _| {
+            q.push(o.state.q);
+            st.push(o.status);
+        })
+        .unwrap();
+    (q, st, tracker)
+}
+
+/// Largest geodesic angle between the hand-in-forearm rotations of `a` and `b`, degrees.
+pub(super) fn worst_turn_deg(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| body::wrist_rotation(x).angle_to(&body::wrist_rotation(y)).to_degrees())
+        .fold(0.0, f64::max)
+}
+
+/// A fast wrist (flexion swinging ±60° at 1.5 Hz, deviation and pronation with it), as
+/// wheelchair racing's at a lab's 70 Hz.
+pub(super) fn fast_trajectory(n: usize, rate: f64) -> Vec<[f64; 3]> {
+    (0..n)
+        .map(|i| {
+            let w = std::f64::consts::TAU * 1.5 * i as f64 / rate;
+            [0.5 * (w + 0.3).sin(), -0.2 + 1.0 * w.sin(), 0.25 * (2.0 * w).cos()]
+        })
+        .collect()
+}
