@@ -84,6 +84,15 @@ class Batch:
                     found.append(int(entry.name))
         return found
 
+    def wait_for_workers(self) -> list[int]:
+        """The workers running now, waiting for one if the batch is between two files."""
+        deadline = time.monotonic() + WAIT_S
+        while not (found := self.workers()):
+            assert self.proc.poll() is None, f"the batch ended first: {self.read()}"
+            assert time.monotonic() < deadline, f"no worker within {WAIT_S:.0f} s"
+            time.sleep(0.01)
+        return found
+
     def end(self) -> tuple[int, str, str]:
         try:
             code = self.proc.wait(timeout=WAIT_S)
@@ -158,7 +167,7 @@ def resume(batch: Batch, err: str, done: list[str]) -> None:
 def test_ctrl_c_stops_every_worker_lists_what_was_done_and_resumes(trials, tmp_path):
     batch = Batch(setup(tmp_path, trials))
     batch.wait_for_results(1)
-    assert batch.workers(), "no worker running"
+    batch.wait_for_workers()
     os.killpg(batch.pgid, signal.SIGINT)  # what a terminal's Ctrl-C does
     code, _, err = batch.end()
     done, _ = check_stopped(batch, code, err, signal.SIGINT)
@@ -168,8 +177,7 @@ def test_ctrl_c_stops_every_worker_lists_what_was_done_and_resumes(trials, tmp_p
 def test_kill_of_the_parent_stops_its_workers_too(trials, tmp_path):
     batch = Batch(setup(tmp_path, trials))
     batch.wait_for_results(1)
-    workers = batch.workers()
-    assert workers
+    workers = batch.wait_for_workers()
     batch.proc.send_signal(signal.SIGTERM)  # `kill PID`: the parent alone
     code, _, err = batch.end()
     check_stopped(batch, code, err, signal.SIGTERM)
@@ -179,11 +187,7 @@ def test_kill_of_the_parent_stops_its_workers_too(trials, tmp_path):
 
 def test_a_worker_killed_by_the_kernel_fails_its_file_only(trials, tmp_path):
     batch = Batch(setup(tmp_path, trials))
-    deadline = time.monotonic() + WAIT_S
-    while not (workers := batch.workers()):
-        assert time.monotonic() < deadline and batch.proc.poll() is None, batch.read()
-        time.sleep(0.02)
-    os.kill(workers[0], signal.SIGKILL)  # as the out-of-memory killer does
+    os.kill(batch.wait_for_workers()[0], signal.SIGKILL)  # as the out-of-memory killer does
     code, out, err = batch.end()
     assert code == 2, (code, err)
     assert "Traceback" not in err

@@ -99,19 +99,20 @@ def _die_with_parent() -> None:
 
 
 def _worker(work: Callable[[Any], Any], job: Any, send: multiprocessing.connection.Connection) -> None:
-    """A worker process: one job, its result sent to the parent."""
+    """A worker process: one job, its result sent to the parent. SIGINT and SIGTERM arrive
+    blocked (the parent's mask around the start) and stay so until the handlers are set."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _raise_stopped)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)  # blocked by the parent around the start
     _die_with_parent()
-    if os.getppid() == 1:  # the parent died before the request took effect
-        return
     try:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+        if os.getppid() == 1:  # the parent died before the request took effect
+            return
         result = work(job)
+        send.send(result)
+        send.close()
     except Stopped:
         return  # stopped by the parent: temporary files were removed on the way here
-    send.send(result)
-    send.close()
 
 
 def _signal_name(exitcode: int | None) -> str:

@@ -545,6 +545,7 @@ def cmd_process(args: argparse.Namespace) -> int:
         report(index, {"file": file, "ok": False, "error": error})
 
     started = time.time()
+    before = {path: _file_id(path) for _, opt in jobs for path in _job_outputs(opt)}
     if len(jobs) == 1:
         report(0, _process_one(jobs[0]))  # in this process; SIGINT/SIGTERM end it in main()
         outcome = _batch.Outcome()
@@ -555,6 +556,15 @@ def cmd_process(args: argparse.Namespace) -> int:
         if not rows.get(index, {}).get("ok"):
             for path in _job_outputs(opt):
                 remove_temporaries(path, started)
+    if outcome.stopped_by:
+        # A file whose worker was stopped between writing its outputs and reporting them: its
+        # outputs are new files (renamed into place whole), so it is done all the same.
+        for index in list(outcome.not_done):
+            outputs = _job_outputs(jobs[index][1])
+            if all(_file_id(p) is not None and _file_id(p) != before[p] for p in outputs):
+                file = jobs[index][0]
+                rows[index] = {"file": file, "ok": True, "clean": True, "written": list(map(str, outputs))}
+                outcome.not_done.remove(index)
     ended = [rows[k] for k in sorted(rows)]
     failed = [r for r in ended if not r["ok"]]
     if outcome.stopped_by:

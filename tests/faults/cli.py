@@ -1160,6 +1160,8 @@ def stopped_batches(b: Builder) -> None:
                     os.kill(seen["workers"][0], signal.SIGKILL)
             else:
                 _until(lambda: written() > 0 or proc.poll() is not None)
+                # Between two files the batch may have no worker for a moment: wait for one.
+                _until(lambda: _children(proc.pid) or proc.poll() is not None)
                 seen["workers"] = _children(proc.pid)
                 if case == "SIGINT":
                     os.killpg(proc.pid, signal.SIGINT)  # a terminal's Ctrl-C: the whole group
