@@ -3,9 +3,7 @@ flags frames outside it, the frame status bits are the C header's, wrong units a
 
 from __future__ import annotations
 
-import json
 import re
-import shutil
 import struct
 from pathlib import Path
 
@@ -93,23 +91,6 @@ def test_markers_in_the_wrong_units_are_named(scale, cause):
     with pytest.raises(ikid.InputError) as e:
         stream.push(frames[0])
     assert e.value.code == "implausible_markers"
-
-
-def test_old_model_files_without_a_checksum_still_load(tmp_path):
-    src = Path(ikid.__file__).with_name("models") / "wrist-ik.safetensors"
-    path = tmp_path / "old.safetensors"
-    shutil.copy(src, path)
-    # Strip the checksum the way a file written before it would lack it.
-    from safetensors.numpy import load_file, save_file
-
-    tensors = load_file(str(path))
-    card = dict(ikid.load(path).card)
-    card.pop("tensor_sha256")
-    save_file(tensors, str(path), metadata={"ikid": json.dumps(card)})
-    with pytest.warns(UserWarning, match="checksum"):
-        model = ikid.load(path)
-    assert not model.has_checksum
-    np.testing.assert_array_equal(model.predict(_markers(24)), ikid.load("wrist-ik").predict(_markers(24)))
 
 
 def test_the_c_stream_reports_the_same_status_and_takes_a_left_arm_calibration():

@@ -105,7 +105,14 @@ def available_models() -> list[str]:
     return sorted(p.stem for p in _SHIPPED.glob("*.safetensors"))
 
 
-def load(name_or_path: str | os.PathLike[str], *, rate_hz: float | None = None) -> Model:
+#: How each surface opts in to a model file without a checksum (appended to the loader's
+#: ``missing_checksum`` error by :func:`load`; the CLI swaps in its own flag).
+UNCHECKED_OPT_IN = "or load it unchecked: ikid.load(path, allow_unchecked=True)"
+
+
+def load(
+    name_or_path: str | os.PathLike[str], *, rate_hz: float | None = None, allow_unchecked: bool = False
+) -> Model:
     """Load a shipped model by name (see :func:`available_models`) or a model file.
 
     With ``rate_hz`` (the rate of the frames a stream will be fed), a shipped model's name
@@ -120,6 +127,12 @@ def load(name_or_path: str | os.PathLike[str], *, rate_hz: float | None = None) 
     else (a string with a separator or the suffix, or a ``pathlib.Path``) is a file path:
     ``"./wrist-ik"``, ``"lab-ik.safetensors"``.
 
+    A model file carries a checksum of its weights, verified here. A file written before
+    checksums existed has none, so a corrupted copy cannot be told from a good one: it is
+    refused (:class:`ModelFileError`, ``code == "missing_checksum"``) unless
+    ``allow_unchecked=True``, which loads it with a warning (``python -m
+    ikid_training.export --restamp FILE`` adds the checksum for good).
+
     Raises :class:`NotFoundError` (a ``FileNotFoundError``, listing the shipped names) for a
     name that is not shipped or a path that does not exist, and :class:`ModelFileError` if the
     file is not a valid ikid model.
@@ -127,7 +140,7 @@ def load(name_or_path: str | os.PathLike[str], *, rate_hz: float | None = None) 
     if rate_hz is not None:
         from ikid.pipeline import model_at_rate
 
-        return model_at_rate(name_or_path, rate_hz)
+        return model_at_rate(name_or_path, rate_hz, allow_unchecked=allow_unchecked)
     if is_model_name(name_or_path):
         name = str(name_or_path)
         shipped = _SHIPPED / f"{name}.safetensors"
@@ -145,12 +158,17 @@ def load(name_or_path: str | os.PathLike[str], *, rate_hz: float | None = None) 
     path = Path(name_or_path)
     if not os.path.lexists(path):
         raise NotFoundError(f"no model file {str(name_or_path)!r}: {path} does not exist")
-    model = Model.load(path)
+    try:
+        model = Model.load(path, allow_unchecked=allow_unchecked)
+    except ModelFileError as e:
+        if e.code == "missing_checksum":
+            e.args = (f"{e}, {UNCHECKED_OPT_IN}",)  # the same error (kind, code), its opt-in named
+        raise
     if not model.has_checksum:
         warnings.warn(
-            f"{path}: written before model files carried a checksum of their weights, so a "
-            "corrupted file cannot be told from a good one; re-save it "
-            "(python -m ikid_training.export --restamp FILE, from ikid-training) to add one",
+            f"{path}: loaded without a checksum (allow_unchecked): written before model files carried "
+            "one, so a corrupted file cannot be told from a good one; add one with "
+            "python -m ikid_training.export --restamp FILE (from ikid-training)",
             stacklevel=2,
         )
     return model

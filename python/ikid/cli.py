@@ -30,6 +30,7 @@ import stat
 import sys
 import time
 import traceback
+import warnings
 from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -260,12 +261,18 @@ TASKS = {
 }
 
 
-def _model_for(name: str, use: str, tasks: tuple[str, ...], rate_hz: float | None = None) -> ikid.Model:
-    """``ikid.load(name, rate_hz=rate_hz)`` for ``use`` (e.g. ``"ikid ik --model"``; with a
-    rate, the family's member at it), refused with an :class:`ikid.ArgumentError` naming the
-    model, its task and what ``use`` needs unless its card's task is one of ``tasks`` and its
-    frames and output units are that task's."""
-    model = ikid.load(name, rate_hz=rate_hz)
+def _model_for(
+    name: str,
+    use: str,
+    tasks: tuple[str, ...],
+    rate_hz: float | None = None,
+    allow_unchecked: bool = False,
+) -> ikid.Model:
+    """``ikid.load(name, rate_hz=rate_hz, allow_unchecked=allow_unchecked)`` for ``use`` (e.g.
+    ``"ikid ik --model"``; with a rate, the family's member at it), refused with an
+    :class:`ikid.ArgumentError` naming the model, its task and what ``use`` needs unless its
+    card's task is one of ``tasks`` and its frames and output units are that task's."""
+    model = ikid.load(name, rate_hz=rate_hz, allow_unchecked=allow_unchecked)
     need = " or ".join(f"{t!r} ({TASKS[t][0]})" for t in tasks)
     if model.task not in tasks:
         gives = TASKS.get(model.task, ("an unknown task",))[0]
@@ -382,10 +389,25 @@ def _inputs(paths: list[str]) -> list[Path]:
     return found
 
 
+#: How the command line opts in to a model file without a checksum (see :func:`ikid.load`).
+UNCHECKED_FLAG = "--allow-unchecked-model"
+
+
+def _message(error: BaseException) -> str:
+    """The error's message as the command line says it: a model file without a checksum names
+    this command's opt-in (:data:`UNCHECKED_FLAG`), not the Python API's."""
+    message = str(error)
+    if getattr(error, "code", None) == "missing_checksum":
+        message = message.replace(
+            ikid.UNCHECKED_OPT_IN, f"or give {UNCHECKED_FLAG} to load it anyway (with a warning)"
+        )
+    return message
+
+
 def _naming(path: str, error: BaseException) -> str:
     """The error's message, starting with the input file it concerns (a read or write error
     names its own file already)."""
-    message = str(error)
+    message = _message(error)
     if path in message or isinstance(error, OSError):
         return message
     return f"{path}: {message}"
@@ -438,6 +460,7 @@ def _process_one(job: tuple[str, dict]) -> dict:
                     calibration=calibration,
                     source=path,
                     progress=opt["progress"],
+                    allow_unchecked=opt["allow_unchecked"],
                 )
         for kind, r in runs.items():
             if len(r.time) == 0:
@@ -488,9 +511,10 @@ def cmd_process(args: argparse.Namespace) -> int:
     many = len(inputs) > 1 or any(Path(p).is_dir() for p in args.inputs)
     torque_model = getattr(args, "torque_model", None)
     # The models' cards against what the command writes, once, before any file is read.
-    _model_for(args.model, f"ikid {args.command} --model", ("ik",))
+    unchecked = args.allow_unchecked_model
+    _model_for(args.model, f"ikid {args.command} --model", ("ik",), allow_unchecked=unchecked)
     if torque_model:
-        _model_for(torque_model, f"ikid {args.command} --torque-model", ("chain",))
+        _model_for(torque_model, f"ikid {args.command} --torque-model", ("chain",), allow_unchecked=unchecked)
     stems = [p.stem for p in inputs]
     clash = sorted({s for s in stems if stems.count(s) > 1})
     if many and clash:
@@ -514,6 +538,7 @@ def cmd_process(args: argparse.Namespace) -> int:
             "missing_markers": args.missing_markers,
             "progress": not many,
             "calibration": args.calibration,
+            "allow_unchecked": unchecked,
             "outputs": (mot, _named(stem, ".sto")),
         }
         jobs.append((str(path), opt))
@@ -661,7 +686,9 @@ def cmd_track(args: argparse.Namespace) -> int:
             (m for m in family_members("wrist-track") if same_rate(data.rate_hz, m.frame_rate_hz)), None
         )
     elif args.refiner not in ("", "none"):
-        refiner = _model_for(args.refiner, "ikid track --refiner", ("refine",))
+        refiner = _model_for(
+            args.refiner, "ikid track --refiner", ("refine",), allow_unchecked=args.allow_unchecked_model
+        )
     mapping = MarkerMap.load(args.map) if args.map else None
     frames = data.frames(mapping)
     calibration = _subject_calibration(frames, args.calibration, mapping, args.input)
@@ -933,7 +960,7 @@ def cmd_id(args: argparse.Namespace) -> int:
             f"×{args.mass_scale:g} mass)",
         )
     else:
-        model = _model_for(args.model, "ikid id --model", ("id",))
+        model = _model_for(args.model, "ikid id --model", ("id",), allow_unchecked=args.allow_unchecked_model)
         if check_rate(model, rate, args.input, args.resample):
             time_s, q = resample(time_s, q, model.frame_rate_hz)
         qd = np.gradient(q, time_s, axis=0)
@@ -1085,10 +1112,11 @@ def cmd_stream(args: argparse.Namespace) -> int:
         [_stdout_fd()],
         [stdin, args.calibration, _model_file(args.model), _model_file(args.torque_model)],
     )
-    models = [_model_for(args.model, "ikid stream --model", ("ik", "chain"), rate_hz=args.rate)]
+    unchecked = args.allow_unchecked_model
+    models = [_model_for(args.model, "ikid stream --model", ("ik", "chain"), args.rate, unchecked)]
     if args.torque_model:
         models.append(
-            _model_for(args.torque_model, "ikid stream --torque-model", ("chain",), rate_hz=args.rate)
+            _model_for(args.torque_model, "ikid stream --torque-model", ("chain",), args.rate, unchecked)
         )
     rate = models[0].frame_rate_hz
     for m in models:
@@ -1292,7 +1320,9 @@ def cmd_report(args: argparse.Namespace) -> int:
     from ikid import recordings as D
     from ikid.evaluate import evaluate_recordings, markdown
 
-    model = _model_for(args.model, "ikid report --model", ("ik", "chain", "id"))
+    model = _model_for(
+        args.model, "ikid report --model", ("ik", "chain", "id"), allow_unchecked=args.allow_unchecked_model
+    )
     out = None
     if args.output:
         out = (
@@ -1328,7 +1358,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     """Per-push latency (p50/p99/max) of ``Stream.push`` from Python and ``predict``
     throughput (1 and 2 threads) of a model on a fresh simulated trial, on this machine."""
-    model = ikid.load(args.model)
+    model = ikid.load(args.model, allow_unchecked=args.allow_unchecked_model)
     if args.frames <= model.window:
         raise ikid.ArgumentError(
             f"--frames {args.frames}: model {model.name!r} gives its first output at frame {model.window}; "
@@ -1374,6 +1404,11 @@ def _timed(fn) -> float:
     return time.perf_counter() - t0
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as the command line prints it: one line, no source location."""
+    print(f"ikid: warning: {message}", file=sys.stderr, flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="ikid", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -1416,6 +1451,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration", type=POSITIVE, default=60.0, help="seconds per random trial")
     p.add_argument("--jobs", type=POSITIVE_INT, default=None, help="threads (default: all cores)")
     p.set_defaults(func=cmd_dataset)
+
+    def unchecked_option(p: argparse.ArgumentParser) -> None:
+        p.add_argument(
+            UNCHECKED_FLAG,
+            action="store_true",
+            help="load a model file written before model files carried a checksum of their weights "
+            "(refused otherwise: a corrupted copy cannot be told from a good one; a warning is printed). "
+            "python -m ikid_training.export --restamp FILE adds the checksum for good",
+        )
 
     def processing_options(p: argparse.ArgumentParser, model_help: str) -> None:
         p.add_argument("inputs", nargs="+", metavar="IN", help="marker files (.c3d, .trc) or folders of them")
@@ -1467,6 +1511,7 @@ def main(argv: list[str] | None = None) -> int:
         "the file's, e.g. wrist-ik-100hz; another rate runs on the next faster one, resampled, outputs "
         "at the file's frames)",
     )
+    unchecked_option(p)
     p.set_defaults(func=cmd_process)
 
     p = sub.add_parser(
@@ -1482,6 +1527,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--torque-model", default="wrist-chain", help="markers -> torques model (default wrist-chain)"
     )
+    unchecked_option(p)
     p.set_defaults(func=cmd_process)
 
     p = sub.add_parser(
@@ -1541,6 +1587,7 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="exit 3 if any frame has no estimate or is flagged (the ikid_status column)",
     )
+    unchecked_option(p)
     p.set_defaults(func=cmd_track)
 
     p = sub.add_parser(
@@ -1654,6 +1701,7 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="exit 3 if any frame was refused or any torque flagged (the ikid_status column)",
     )
+    unchecked_option(p)
     p.set_defaults(func=cmd_id)
 
     p = sub.add_parser(
@@ -1712,6 +1760,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--strict", action="store_true", help="stop at the first refused frame (exit 2)")
     p.add_argument("--flush", action="store_true", help="flush stdout after every line (for pipes read live)")
+    unchecked_option(p)
     p.set_defaults(func=cmd_stream)
 
     p = sub.add_parser(
@@ -1775,6 +1824,7 @@ def main(argv: list[str] | None = None) -> int:
         help="Markdown file (+ .json beside it), or a folder (FOLDER/<model name>.md); for the full "
         "report a folder",
     )
+    unchecked_option(p)
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("bench", help="latency and throughput of a model on this machine")
@@ -1785,6 +1835,7 @@ def main(argv: list[str] | None = None) -> int:
         default=20000,
         help="frames to push (more than the window; at most 10 hours at 1 kHz)",
     )
+    unchecked_option(p)
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser(
@@ -1797,7 +1848,8 @@ def main(argv: list[str] | None = None) -> int:
     # SIGINT (Ctrl-C) and SIGTERM (kill) end every command the same way: Stopped raised where
     # the command is, files under way removed on the way out (atomic writes), a line saying so,
     # exit 128 + the signal's number; a batch lists what it did first (ikid._batch).
-    with _batch.stop_on_signals():
+    with _batch.stop_on_signals(), warnings.catch_warnings():
+        warnings.showwarning = _show_warning
         try:
             if argv[:1] == ["demo"]:  # its own options (see `ikid demo --help`)
                 from ikid.demo import main as demo
@@ -1810,7 +1862,7 @@ def main(argv: list[str] | None = None) -> int:
         except (ikid.IkidError, OSError) as e:
             # What a user can act on (a bad file, option or model; a failed write) is a message naming
             # it; anything else is a bug and keeps its traceback.
-            print(f"ikid: error: {e}", file=sys.stderr)
+            print(f"ikid: error: {_message(e)}", file=sys.stderr)
             return 2
         except _batch.Stopped as stop:
             print(

@@ -196,15 +196,21 @@ def family_members(name: str | os.PathLike[str]) -> list[_native.Model]:
     return sorted((ikid.load(n) for n in names), key=lambda m: m.frame_rate_hz)
 
 
-def model_at_rate(model: str | os.PathLike[str], rate_hz: float, source: str = "the stream") -> _native.Model:
+def model_at_rate(
+    model: str | os.PathLike[str],
+    rate_hz: float,
+    source: str = "the stream",
+    *,
+    allow_unchecked: bool = False,
+) -> _native.Model:
     """The model of ``model`` (a family name, a shipped name or a file) trained at ``rate_hz``,
     for frames that cannot be resampled (a live stream); an :class:`ikid.InputError` listing
-    the rates there are otherwise."""
+    the rates there are otherwise. ``allow_unchecked``: as :func:`ikid.load`."""
     import ikid
 
     if not (isinstance(rate_hz, (int, float)) and np.isfinite(rate_hz) and rate_hz > 0):
         raise _native.ArgumentError(f"rate_hz: {rate_hz!r}: expected a rate in Hz greater than 0")
-    members = family_members(model) or [ikid.load(model)]
+    members = family_members(model) or [ikid.load(model, allow_unchecked=allow_unchecked)]
     for m in members:
         if same_rate(rate_hz, m.frame_rate_hz):
             return m
@@ -222,12 +228,14 @@ def pick_model(
     *,
     resample_to_model: bool = False,
     source: str = "frames",
+    allow_unchecked: bool = False,
 ) -> tuple[_native.Model, str]:
     """The model to run on a recording at ``rate_hz`` and how: ``(model, how)``, ``how`` one of
     ``"native"`` (the recording's own frames), ``"at_frames"`` (resampled to the model's rate,
     outputs at the recording's frame times) or ``"resample"`` (resampled, outputs on the model's
     grid: ``resample_to_model``). The rule is the module's docstring; a model that cannot run at
-    ``rate_hz`` is an :class:`ikid.InputError` saying what to do."""
+    ``rate_hz`` is an :class:`ikid.InputError` saying what to do. ``allow_unchecked``: a model
+    file without a checksum is loaded (see :func:`ikid.load`)."""
     if isinstance(model, _native.Model):
         return model, (
             "resample" if rate_hz and check_rate(model, rate_hz, source, resample_to_model) else "native"
@@ -236,7 +244,8 @@ def pick_model(
     if not members:
         import ikid
 
-        return pick_model(ikid.load(model), rate_hz, resample_to_model=resample_to_model, source=source)
+        loaded = ikid.load(model, allow_unchecked=allow_unchecked)
+        return pick_model(loaded, rate_hz, resample_to_model=resample_to_model, source=source)
     if rate_hz is None:  # one frame: no rate to go by, the family's own model
         return next(m for m in members if m.name == str(model) or m is members[-1]), "native"
     for m in members:
@@ -259,6 +268,7 @@ def run_model(
     source: str = "frames",
     progress: bool = False,
     early_outputs: bool | None = None,
+    allow_unchecked: bool = False,
 ) -> Run:
     """Run ``model`` over ``frames`` ``(n, frame_len)`` at ``time`` ``(n,)`` seconds; with a
     ``calibration`` (see :func:`ikid.calibrate`), for this subject's marker placement.
@@ -268,7 +278,8 @@ def run_model(
     which). ``rate_hz`` defaults to the median of the time steps. ``early_outputs`` (default:
     whenever the model corrects its newest frame's features, as the IK models do): while a
     window fills (the first frames, and after a time gap) each frame gets its per-frame
-    solution, flagged ``per_frame``, so every frame has an output."""
+    solution, flagged ``per_frame``, so every frame has an output. ``allow_unchecked``: a model
+    file without a checksum is loaded (with a warning; see :func:`ikid.load`)."""
     frames = np.asarray(frames, np.float64)
     time = np.asarray(time, np.float64)
     if frames.ndim != 2 or time.shape != (len(frames),):
@@ -278,7 +289,9 @@ def run_model(
         )
     if rate_hz is None and len(time) > 1:
         rate_hz = 1.0 / float(np.median(np.diff(time)))
-    model, how = pick_model(model, rate_hz, resample_to_model=resample_to_model, source=source)
+    model, how = pick_model(
+        model, rate_hz, resample_to_model=resample_to_model, source=source, allow_unchecked=allow_unchecked
+    )
     if rate_hz is None:
         rate_hz = model.frame_rate_hz
     if early_outputs is None:

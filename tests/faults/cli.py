@@ -762,6 +762,58 @@ def weights(b: Builder) -> None:
         )
 
 
+def unchecked(b: Builder) -> None:
+    """A model file without a checksum (written before checksums; here with its output scale
+    x30, as the issue's case): refused naming the opt-in, and with the opt-in the clean run's
+    angles (its weights are the shipped ones) with a warning."""
+    import json
+
+    from safetensors.numpy import load_file, save_file
+
+    import ikid
+
+    c, ref = b.c, b.c.ref
+    trc = c.base / "trial.trc"
+    for scale, tag in ((1.0, ""), (30.0, "-scaled-x30")):
+        path = c.probes / f"unchecked{tag}-wrist-ik.safetensors"
+        tensors = load_file(str(c.model("wrist-ik")))
+        tensors["output.scale"] = tensors["output.scale"] * np.float32(scale)
+        card = dict(ikid.load("wrist-ik").card)
+        card.pop("tensor_sha256")
+        save_file(tensors, str(path), metadata={"ikid": json.dumps(card)})
+        for cmd, target, seeded in (
+            ("ik", "out.mot", {"out.mot": ref / "ik.mot"}),
+            ("run", "out", {"out.mot": ref / "run.mot", "out.sto": ref / "run.sto"}),
+        ):
+            d = b.dir(f"{cmd}-model-without-checksum{tag}")
+            b.seed(d, seeded)
+            b.add(
+                f"{cmd}/model-without-checksum{tag}",
+                [cmd, trc, "--model", path, "-o", d / target],
+                d,
+                expect="error",
+                names=["--allow-unchecked-model"],
+            )
+    d = b.dir("ik-model-without-checksum-allowed")
+    b.add(
+        "ik/model-without-checksum-allowed",
+        [
+            "ik",
+            trc,
+            "--model",
+            c.probes / "unchecked-wrist-ik.safetensors",
+            "--allow-unchecked-model",
+            "-o",
+            d / "out.mot",
+        ],
+        d,
+        check=compare([(d / "out.mot", ref / "ik.mot")]),
+        check_any=lambda r, v: (
+            None if "ikid: warning:" in r.stderr else v.silent("no warning for an unchecked model")
+        ),
+    )
+
+
 # --- stream: stdin and UDP -----------------------------------------------------------------------
 
 
@@ -1214,7 +1266,17 @@ def stopped_batches(b: Builder) -> None:
 
 def probes(corpus: Corpus) -> list[Cli]:
     b = Builder(corpus)
-    for part in (processing, options, outputs, weights, stream, batch, over_inputs, stopped_batches):
+    for part in (
+        processing,
+        options,
+        outputs,
+        weights,
+        unchecked,
+        stream,
+        batch,
+        over_inputs,
+        stopped_batches,
+    ):
         part(b)
     return b.out
 

@@ -26,17 +26,29 @@ pub struct Model {
 
 #[pymethods]
 impl Model {
-    /// Loads and validates a `.safetensors` model file.
+    /// Loads and validates a `.safetensors` model file, verifying its checksum; a file
+    /// without one (`has_checksum` false) is refused unless `allow_unchecked`.
     #[staticmethod]
-    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
-        let inner = py.detach(|| ikid::Model::load(&path)).py_err()?;
+    #[pyo3(signature = (path, *, allow_unchecked = false))]
+    fn load(py: Python<'_>, path: PathBuf, allow_unchecked: bool) -> PyResult<Self> {
+        let inner = py
+            .detach(|| {
+                if allow_unchecked { ikid::Model::load_allowing_unchecked(&path) } else { ikid::Model::load(&path) }
+            })
+            .py_err()?;
         Ok(Model { inner })
     }
 
-    /// Validates a model from the bytes of a `.safetensors` file.
+    /// Validates a model from the bytes of a `.safetensors` file (checksum as for `load`).
     #[staticmethod]
-    fn from_bytes(data: &[u8]) -> PyResult<Self> {
-        Ok(Model { inner: ikid::Model::from_bytes(data).py_err()? })
+    #[pyo3(signature = (data, *, allow_unchecked = false))]
+    fn from_bytes(data: &[u8], allow_unchecked: bool) -> PyResult<Self> {
+        let inner = if allow_unchecked {
+            ikid::Model::from_bytes_allowing_unchecked(data)
+        } else {
+            ikid::Model::from_bytes(data)
+        };
+        Ok(Model { inner: inner.py_err()? })
     }
 
     /// The model card as a dict.
@@ -107,7 +119,7 @@ impl Model {
     }
 
     /// True if the file carried a checksum of its tensors (verified on load); False for files
-    /// written before checksums existed (`ikid.load` warns about those).
+    /// written before checksums existed, loaded with `allow_unchecked=True`.
     #[getter]
     fn has_checksum(&self) -> bool {
         self.inner.has_checksum()

@@ -45,6 +45,13 @@ pub enum Error {
         /// The checksum of the tensors read.
         found: String,
     },
+    /// The card carries no `tensor_sha256`: the file was written before model files carried a
+    /// checksum of their weights, so a corrupted copy cannot be told from a good one. Refused
+    /// unless the caller opts in ([`Model::load_allowing_unchecked`](crate::Model::load_allowing_unchecked)).
+    #[error(
+        "the model card has no checksum of the weights (\"tensor_sha256\"): the file was written before model files carried one, so a corrupted copy cannot be told from a good one; add one with `python -m ikid_training.export --restamp FILE` (ikid-training)"
+    )]
+    MissingChecksum,
     /// The model card's format version is not one this build understands.
     #[error("model card format_version {found} is not supported (this build reads version {supported})")]
     UnsupportedVersion {
@@ -227,7 +234,8 @@ impl Error {
             | Error::WrongDtype { .. }
             | Error::ShapeMismatch { .. }
             | Error::NonFiniteWeight { .. }
-            | Error::ChecksumMismatch { .. } => ErrorKind::ModelFile,
+            | Error::ChecksumMismatch { .. }
+            | Error::MissingChecksum => ErrorKind::ModelFile,
             Error::FrameLength { .. }
             | Error::NonFiniteInput { .. }
             | Error::MissingMarkers { .. }
@@ -256,6 +264,7 @@ impl Error {
             Error::ShapeMismatch { .. } => "shape_mismatch",
             Error::NonFiniteWeight { .. } => "non_finite_weight",
             Error::ChecksumMismatch { .. } => "checksum_mismatch",
+            Error::MissingChecksum => "missing_checksum",
             Error::ImplausibleMarkers { .. } => "implausible_markers",
             Error::FrameLength { .. } => "frame_length",
             Error::NonFiniteInput { .. } => "non_finite_input",

@@ -58,10 +58,29 @@ fn a_flipped_bit_in_any_tensor_is_refused_by_the_checksum() {
         assert_eq!(err.kind(), ikid::ErrorKind::ModelFile);
         assert!(err.to_string().contains("corrupt"), "{err}");
     }
-    // A file without a checksum (written before they existed) still loads, and says so.
+    // A file without a checksum (written before they existed) is refused, saying how to add
+    // one; it loads only when the caller opts in, and then says it has none.
     let (t, card) = parts(&m);
-    let old = Model::from_bytes(&build(&t, &card)).unwrap();
+    let unchecked = build(&t, &card);
+    let err = load_err(&unchecked);
+    assert!(matches!(err, Error::MissingChecksum), "{err}");
+    assert_eq!((err.kind(), err.code()), (ikid::ErrorKind::ModelFile, "missing_checksum"));
+    assert!(err.to_string().contains("--restamp"), "{err}");
+    let old = Model::from_bytes_allowing_unchecked(&unchecked).unwrap();
     assert!(!old.has_checksum());
+    assert_eq!(old.mlp(), m.mlp());
+    let dir = std::env::temp_dir().join(format!("ikid-unchecked-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("old.safetensors");
+    std::fs::write(&path, &unchecked).unwrap();
+    let err = Model::load(&path).unwrap_err();
+    assert!(err.to_string().contains(&path.display().to_string()) && err.code() == "missing_checksum", "{err}");
+    assert!(!Model::load_allowing_unchecked(&path).unwrap().has_checksum());
+    // The opt-in is for a missing checksum only: a wrong one is refused all the same.
+    let mut bad = bytes.clone();
+    bad[header + 3] ^= 0x80;
+    assert!(matches!(Model::from_bytes_allowing_unchecked(&bad), Err(Error::ChecksumMismatch { .. })));
+    std::fs::remove_dir_all(&dir).unwrap();
     // A checksum that is not 64 hex digits is a card error, named.
     let mut card = card;
     card["tensor_sha256"] = "xyz".into();

@@ -72,19 +72,48 @@ fn outside(values: &[f32], (lo, hi): &(Vec<f32>, Vec<f32>)) -> bool {
 impl Model {
     /// Loads and validates a `.safetensors` model file. Reads only a regular file of at most
     /// [`MAX_MODEL_FILE_BYTES`](file::MAX_MODEL_FILE_BYTES): a directory, a named pipe or a device (`/dev/zero`) is refused
-    /// before it is opened, so a wrong path never hangs or fills memory.
+    /// before it is opened, so a wrong path never hangs or fills memory. The card's checksum of
+    /// the weights is verified; a file without one is refused ([`Error::MissingChecksum`]; see
+    /// [`load_allowing_unchecked`](Self::load_allowing_unchecked)).
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
+        Self::load_with(path.as_ref(), false)
+    }
+
+    /// [`load`](Self::load), but a file written before model files carried a checksum (its
+    /// card has no `tensor_sha256`) is accepted: the caller's explicit opt-in, since nothing
+    /// then tells a corrupted copy from a good one ([`has_checksum`](Self::has_checksum) is
+    /// false; warn the user). A file that has a checksum is still verified against it.
+    pub fn load_allowing_unchecked(path: impl AsRef<Path>) -> Result<Self> {
+        Self::load_with(path.as_ref(), true)
+    }
+
+    fn load_with(path: &Path, allow_unchecked: bool) -> Result<Self> {
         let name = || path.display().to_string();
         let bytes = file::read_bounded(path, file::MAX_MODEL_FILE_BYTES)
             .map_err(|source| Error::Io { path: name(), source })?;
-        Self::from_bytes(&bytes).map_err(|e| Error::InModelFile { path: name(), source: Box::new(e) })
+        Self::parse_bytes(&bytes, allow_unchecked).map_err(|e| Error::InModelFile { path: name(), source: Box::new(e) })
     }
 
-    /// Validates a model held in memory (the bytes of a `.safetensors` file).
+    /// Validates a model held in memory (the bytes of a `.safetensors` file), checksum
+    /// required as by [`load`](Self::load).
     pub fn from_bytes(bytes: &[u8]) -> Result<Self> {
+        Self::parse_bytes(bytes, false)
+    }
+
+    /// [`from_bytes`](Self::from_bytes) accepting a card without a checksum, as
+    /// [`load_allowing_unchecked`](Self::load_allowing_unchecked) does.
+    pub fn from_bytes_allowing_unchecked(bytes: &[u8]) -> Result<Self> {
+        Self::parse_bytes(bytes, true)
+    }
+
+    fn parse_bytes(bytes: &[u8], allow_unchecked: bool) -> Result<Self> {
         let (card, set, mlp) = file::parse(bytes)?;
-        Self::assemble(card, set, mlp)
+        let model = Self::assemble(card, set, mlp)?;
+        // Last, so a file that is wrong in itself is named for that first.
+        if !allow_unchecked && !model.has_checksum() {
+            return Err(Error::MissingChecksum);
+        }
+        Ok(model)
     }
 
     /// Builds a model from a card and a network (e.g. random weights for benchmarks),
