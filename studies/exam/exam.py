@@ -38,6 +38,7 @@ from studies.exam.truth import Mapping, opensim_hand_rotations
 ROOT = Path(__file__).resolve().parents[2]
 
 RATE = 1000.0
+REFINER_TOLERANCE = 1.01  # the refiner "worse" when its MSE exceeds none's by more than 1 %
 REST_RAD_S = 0.1  # slower than this, the wrist counts as still
 LOW_RATE_DIV = 10  # the one condition at 100 Hz (anatomical layout, 1 % noise)
 POSES_DEG = (0.0, 45.0, -20.0)
@@ -371,6 +372,13 @@ def ratio(a: float, b: float) -> float:
     return a / b if np.isfinite(a) and np.isfinite(b) and b > 0 else math.inf
 
 
+def refiner_worse(methods: dict) -> bool:
+    """The refiner's angles worse than the bare filter's by more than 1 % of its MSE (on clean
+    markers the refiner's gate keeps it off, and the two differ only by rounding), or missing."""
+    a, b = methods["track"]["angle_mse"], methods["track_none"]["angle_mse"]
+    return not a <= REFINER_TOLERANCE * b
+
+
 def summary_line(conds: dict) -> tuple[str, dict]:
     worst = {
         "track_angles": 0.0,
@@ -388,7 +396,7 @@ def summary_line(conds: dict) -> tuple[str, dict]:
             worst["track_torques"], ratio(m["track"].get("torque_rmse", math.nan), m["ekf"]["torque_rmse"])
         )
         worst["ik_angles"] = max(worst["ik_angles"], ratio(m["ik"]["angle_mse"], m["ekf"]["angle_mse"]))
-        if not m["track"]["angle_mse"] <= m["track_none"]["angle_mse"]:
+        if refiner_worse(m):
             worst["refiner_worse"] += 1
         for k in ("track", "track_none", "ik"):
             worst["rows_missing"] = max(worst["rows_missing"], 100.0 - m[k]["rows_pct"])
@@ -508,15 +516,13 @@ def markdown(res: dict) -> str:
         "## Summary",
         "",
         "Worst ratios over the conditions (ikid over the EKF; MSE for angles, "
-        "RMSE for torques), conditions where the refiner's angles are worse than none's, and the "
-        "largest share of scored frames without an ikid output:",
+        "RMSE for torques), conditions where the refiner's angle MSE is more than 1 % above none's, and the "
+        "largest share of scored frames without an ikid output: the page's last line.",
+        *findings(conds),
         "",
-        "```",
         res["line"],
-        "```",
-        "",
     ]
-    return "\n".join(out)
+    return "\n".join(out) + "\n"
 
 
 def findings(conds: dict) -> list[str]:
@@ -539,7 +545,7 @@ def findings(conds: dict) -> list[str]:
             m: med(ratio(c[m].get("torque_rmse", math.nan), c["ekf"]["torque_rmse"]) for c in cs)
             for m in ("track", "track_none", "opensim")
         }
-        worse = sum(not c["track"]["angle_mse"] <= c["track_none"]["angle_mse"] for c in cs)
+        worse = sum(refiner_worse(c) for c in cs)
         out.append(
             f"- {art}: angle MSE over the EKF's — track {fmt(r['track'])}×, no refiner "
             f"{fmt(r['track_none'])}×, ik {fmt(r['ik'])}×, OpenSim IK {fmt(r['opensim'])}×; torque RMSE over "
