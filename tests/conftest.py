@@ -31,6 +31,7 @@ SLOW_MODULES = {
 SLOW_TESTS = {
     "test_train_and_report_on_a_lab_folder_through_the_cli",
     "test_corrupted_c3d_files_are_read_or_refused_never_a_crash",
+    "test_wrist_tracks_card_figures_are_what_its_evaluation_gives",  # ~50 s: 9 trials, 3 noise levels
 }
 
 

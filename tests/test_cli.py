@@ -588,6 +588,29 @@ def test_demo_prints_the_errors_and_latency_of_what_it_streamed(capsys, tmp_path
     assert m, out
     p50, p99 = map(float, m.groups())
     assert np.isfinite([p50, p99]).all() and 0 < p50 <= p99, m.group(0)
+    # The Tracker + wrist-track path on the same frames (issue #31): its printed errors are
+    # those of the tracker run over the frames the demo pushed (float32), on the same rows.
+    est = ikid.Tracker(refiner=ikid.load("wrist-track")).run(np.ascontiguousarray(trial.markers, np.float32))
+    assert est["start"] <= ok
+    trk = np.degrees(est["q"][ok:] - trial.q[ok:])
+    trk_tau = est["tau"][ok:] - trial.tau[ok:]
+    for k, name in enumerate(ikid.coordinate_names()):
+        m = re.search(rf"^   {name} +{NUM} °  +{NUM} N·m  +{NUM} %$", out, re.MULTILINE)
+        assert m, out
+        got = np.array(m.groups(), float)
+        want = [rms(trk)[k], rms(trk_tau)[k], 100 * rms(trk_tau)[k] / span[k]]
+        assert np.all(np.abs(got - want) <= [1e-3, 1e-4, 1e-2]), (name, got, want)
+    m = re.search(rf"Tracker \+ wrist-track: angle MSE {NUM} rad², torque MSE {NUM} N·m²", out)
+    assert m, out
+    np.testing.assert_allclose(
+        np.array(m.groups(), float), [np.mean(np.radians(trk) ** 2), np.mean(trk_tau**2)], rtol=0.01
+    )
+    m = re.search(
+        rf"Tracker \+ wrist-track \(angles, velocities, accelerations, torques\): p50 {NUM} µs, p99 {NUM} µs",
+        out,
+    )
+    assert m, out
+    assert 0 < float(m.group(1)) <= float(m.group(2)), m.group(0)
     assert (tmp_path / "demo.png").stat().st_size > 0
 
 

@@ -190,11 +190,13 @@ def envelope_from_scaling(card: Mapping[str, Any], tensors: Mapping[str, np.ndar
     }
 
 
-def restamp(path: str | Path, envelope: Mapping[str, Any] | None) -> ikid.Model:
+def restamp(
+    path: str | Path, envelope: Mapping[str, Any] | None, metrics: Mapping[str, Any] | None = None
+) -> ikid.Model:
     """Rewrite model file ``path`` through the one writer: same tensors, the card given an
-    ``envelope`` (if not None) and a tensor checksum. A file written before checksums is read
-    unchecked (that is what restamping is for); one with a checksum must match it. Atomic;
-    returns the model read back (checked)."""
+    ``envelope`` and ``metrics`` (each if not None) and a tensor checksum. A file written
+    before checksums is read unchecked (that is what restamping is for); one with a checksum
+    must match it. Atomic; returns the model read back (checked)."""
     from safetensors.numpy import load_file
 
     path = Path(path)
@@ -204,6 +206,8 @@ def restamp(path: str | Path, envelope: Mapping[str, Any] | None) -> ikid.Model:
     card.pop("tensor_sha256", None)
     if envelope is not None:
         card["envelope"] = dict(envelope)
+    if metrics is not None:
+        card["metrics"] = dict(metrics)
     n_layers = len(card["activations"])
     weights: list[npt.ArrayLike] = [tensors[f"layers.{k}.weight"] for k in range(n_layers)]
     biases: list[npt.ArrayLike] = [tensors[f"layers.{k}.bias"] for k in range(n_layers)]

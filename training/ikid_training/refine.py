@@ -174,6 +174,88 @@ def build(recs: list[D.Recording], seed: int, window: int, rate_hz: float = SIM_
     }
 
 
+#: Held-out trials the card's figures are measured on: seeds no refiner trained on (training
+#: takes FIRST_SEED on, RECORDINGS of them), the trained octants, shoulders and sizes.
+EVAL_FIRST_SEED = 2700
+EVAL_RECORDINGS = 9
+
+
+def evaluation_specs(duration: float = DURATION_S, rate_hz: float = SIM_HZ) -> list[dict[str, Any]]:
+    """The held-out recordings of :func:`card_metrics`: :func:`recording_specs`' poses and
+    sizes, seeds from :data:`EVAL_FIRST_SEED`."""
+    specs = recording_specs(EVAL_RECORDINGS, duration, rate_hz)
+    for k, spec in enumerate(specs):
+        seed = EVAL_FIRST_SEED + k
+        spec["seed"] = seed
+        spec["name"] = spec["name"].replace(f"seed{FIRST_SEED + k}", f"seed{seed}")
+    assert EVAL_FIRST_SEED >= FIRST_SEED + RECORDINGS, "evaluation seeds overlap the training seeds"
+    return specs
+
+
+def card_metrics(refiner: ikid.Model, recs: list[D.Recording]) -> dict[str, Any]:
+    """The card's evaluation figures, measured as training measures the other shipped models
+    (``ikid.evaluate``: the thesis' noise levels with the evaluation seeds, the test split —
+    the last 10 % — of each held-out recording, after running the whole recording causally):
+    for each level ``test_<level>``, the angle errors of ``ikid.Tracker`` refined by
+    ``refiner`` (its product: MSE, RMSE per coordinate in rad and degrees, % of range) and,
+    under ``"torque"``, its torques' (N·m); ``"bare_filter_mse"`` is the same without the
+    refiner, for scale."""
+    from ikid.evaluate import EVAL_SEED, NOISE_LEVELS, summary
+
+    rate = float(refiner.frame_rate_hz)
+    lo, hi = D.SPLIT_FRACTIONS["test"]
+    out: dict[str, Any] = {}
+    for label, level in NOISE_LEVELS.items():
+        runs: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = {
+            "refined": [],
+            "bare": [],
+        }
+        for i, rec in enumerate(recs):
+            noisy = D.add_noise(rec, "uniform", level, EVAL_SEED + i) if level > 0 else rec
+            a, b = int(round(lo * len(rec))), int(round(hi * len(rec)))
+            for kind, model in (("refined", refiner), ("bare", None)):
+                est = ikid.Tracker(
+                    length_scale=rec.meta["length_scale"],
+                    mass_scale=rec.meta["mass_scale"],
+                    rate_hz=rate,
+                    refiner=model,
+                ).run(noisy.markers)
+                k = max(a, int(est["start"]))
+                runs[kind].append((est["q"][k:b], rec.q[k:b], est["tau"][k:b], rec.tau[k:b]))
+
+        def stacked(kind: str, j: int, runs: dict = runs) -> np.ndarray:
+            return np.concatenate([r[j] for r in runs[kind]])
+
+        angles = summary(stacked("refined", 0) - stacked("refined", 1), stacked("refined", 1), "rad")
+        angles["torque"] = summary(
+            stacked("refined", 2) - stacked("refined", 3), stacked("refined", 3), "N*m"
+        )
+        angles["bare_filter_mse"] = {
+            "angles": float(((stacked("bare", 0) - stacked("bare", 1)) ** 2).mean()),
+            "torque": float(((stacked("bare", 2) - stacked("bare", 3)) ** 2).mean()),
+        }
+        out[f"test_{label}"] = angles
+    out["evaluated_on"] = {
+        "trials": [r.name for r in recs],
+        "split": "test (last 10 % of each)",
+        "noise": "uniform, seeds from ikid.evaluate.EVAL_SEED",
+        "estimator": "ikid.Tracker(refiner=this model), the recording's own subject size",
+    }
+    return out
+
+
+def stamp_metrics(path: Path, duration: float = DURATION_S) -> dict[str, Any]:
+    """Evaluate the refiner at ``path`` on the held-out trials and write the figures into its
+    card (tensors unchanged, checksum renewed: ``export.restamp``); returns them."""
+    from ikid_training.export import restamp
+
+    refiner = ikid.load(path)
+    recs = D.simulate_all(evaluation_specs(duration, float(refiner.frame_rate_hz)))
+    metrics = {**refiner.card.get("metrics", {}), **card_metrics(refiner, recs)}
+    restamp(path, None, metrics)
+    return metrics
+
+
 def gather(frames: torch.Tensor, newest: torch.Tensor, window: int) -> torch.Tensor:
     """Flattened windows ``(m, window × 7)``, oldest frame first (the core's layout)."""
     idx = newest[:, None] - torch.arange(window - 1, -1, -1)[None, :]
@@ -288,9 +370,21 @@ def main(argv: list[str] | None = None) -> None:
         help=f"simulated recordings, seeds {FIRST_SEED} on, one trajectory each",
     )
     parser.add_argument("--duration", type=float, default=DURATION_S, help="seconds per recording")
+    parser.add_argument(
+        "--metrics-only",
+        action="store_true",
+        help="do not train: evaluate the refiner at --output (default: the shipped one) on the held-out "
+        "trials and write the figures into its card (its tensors unchanged)",
+    )
     args = parser.parse_args(argv)
     name = name_for(args.rate)
     args.output = args.output or Path("python/ikid/models") / f"{name}.safetensors"
+    if args.metrics_only:
+        t0 = time.perf_counter()
+        metrics = stamp_metrics(args.output, args.duration)
+        print(json.dumps({k: v for k, v in metrics.items() if k.startswith("test_")}, indent=1))
+        print(f"wrote the figures into {args.output}'s card ({time.perf_counter() - t0:.0f} s)")
+        return
     args.window = args.window or at_rate(WINDOW, args.rate, least=4)
     torch.set_num_threads(2)
     t0 = time.perf_counter()
@@ -336,6 +430,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     args.output.parent.mkdir(parents=True, exist_ok=True)
     export(trained["net"], args.output, spec, trained["input"], trained["output"])
+    stamp_metrics(args.output, args.duration)  # the card's evaluation figures, as the others carry
     (args.output.with_suffix(".log.json")).write_text(json.dumps(trained["log"], indent=1))
     print(
         f"wrote {args.output} ({trained['epochs']} epochs, best validation loss {trained['best_val']:.4f}, "
