@@ -25,6 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 osim = pytest.importorskip("opensim", reason="the exam needs OpenSim (pip install 'ikid[eval]')")
+osim.Logger.removeFileSink()  # no opensim.log in the working directory
 
 import ikid  # noqa: E402
 from ikid.interop.opensim import marker_positions  # noqa: E402
