@@ -53,7 +53,7 @@ $(TRAINING_STAMP): training/pyproject.toml | $(WHEEL_STAMP)
 wheel: $(WHEEL_STAMP) $(TRAINING_STAMP)
 
 demo: wheel
-	$(PY) -m ikid.demo
+	$(PY) -m ikid demo
 
 # Simulated datasets (gitignored): the thesis-sized set (3 shoulder poses x 42 movements)
 # and 18 random multi-DoF trials of 60 s (3 poses x 3 subject sizes x 2), in parallel.

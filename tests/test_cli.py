@@ -492,7 +492,7 @@ def test_the_runtime_wheel_carries_no_training_code(tmp_path):
         names = z.namelist()
         sources = {n: z.read(n).decode("utf-8") for n in names if n.endswith((".py", ".pyi"))}
         metadata = next(z.read(n).decode("utf-8") for n in names if n.endswith(".dist-info/METADATA"))
-    assert "ikid/cli.py" in sources and "ikid/evaluate.py" in sources  # the right archive
+    assert "ikid/cli/__init__.py" in sources and "ikid/evaluate.py" in sources  # the right archive
     assert not [n for n in names if "training" in n.split("/")[:-1] or n.startswith("ikid_training")]
     assert not [n for n in names if n.endswith(".toml")]  # no training config
     assert not [n for n, text in sources.items() if re.search(r"^\s*(import|from)\s+torch\b", text, re.M)]

@@ -328,41 +328,7 @@ def load_torch(path: str | Path) -> WindowModel:
     ).eval()
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m ikid_training.export --restamp FILE...``: give model files written before
-    envelopes and checksums both, the envelope from their min-max scaling where it allows
-    (:func:`envelope_from_scaling`; otherwise only the checksum)."""
-    import argparse
+if __name__ == "__main__":  # `python -m ikid_training.export --restamp FILE`: see ikid_training.restamp
+    from ikid_training.restamp import main
 
-    p = argparse.ArgumentParser(prog="python -m ikid_training.export")
-    p.add_argument("--restamp", nargs="+", required=True, metavar="FILE")
-    p.add_argument(
-        "--change",
-        action="store_true",
-        help="also give the envelope its window_change, from the model's training data rebuilt from its "
-        "shipped config (ikid_training/configs/<name>.toml, the same seeds and noise as training)",
-    )
-    args = p.parse_args(argv)
-    for f in args.restamp:
-        card = dict(_native.Model.load(Path(f), allow_unchecked=True).card)
-        from safetensors.numpy import load_file
-
-        try:
-            envelope = card.get("envelope") or envelope_from_scaling(card, load_file(f))
-        except ValueError as e:
-            print(f"{f}: no envelope ({e}); checksum only")
-            envelope = None
-        if args.change and envelope is not None:
-            from ikid_training import CONFIG_DIR
-            from ikid_training.train import load_config, training_window_change
-
-            change = training_window_change(load_config(CONFIG_DIR / f"{card['name']}.toml"))
-            envelope = {**envelope, "window_change": change.tolist()}
-            print(f"{f}: window_change {np.round(change, 4).tolist()}")
-        model = restamp(f, envelope)
-        print(f"{f}: envelope {'yes' if model.card.get('envelope') else 'no'}, checksum {model.has_checksum}")
-    return 0
-
-
-if __name__ == "__main__":
     raise SystemExit(main())

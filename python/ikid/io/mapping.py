@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ikid import _native
-from ikid.io.markers import FileFormatError, ikid_marker_names, read_text
+from ikid.io._common import FileFormatError, ikid_marker_names, read_text
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -1,4 +1,4 @@
-"""`make demo` / `ikid demo`: the main job end to end on the shipped models.
+"""`ikid demo` (`make demo`): the main job end to end on the shipped models.
 
 Simulates a fresh trial (a seed and a shoulder pose no shipped model trained on) on the
 rapier wrist model, adds marker noise, streams it frame by frame through the shipped IK
@@ -19,14 +19,16 @@ from pathlib import Path
 import numpy as np
 
 import ikid
+from ikid.cli.options import SEED, SHOULDER_DEG, _number
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog="ikid demo", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "demo",
+        help="stream a fresh simulated trial through the shipped models",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    from ikid.cli import SEED, SHOULDER_DEG, _number  # the CLI's checked option types
-
     parser.add_argument(
         "--seed", type=SEED, default=424242, help="trial seed (the shipped models trained on seeds 1000-9004)"
     )
@@ -41,8 +43,10 @@ def main(argv: list[str] | None = None) -> None:
         help="uniform marker noise, fraction of each coordinate's range",
     )
     parser.add_argument("--plot", type=Path, default=Path("out/demo/demo.png"))
-    args = parser.parse_args(argv)
+    parser.set_defaults(func=run)
 
+
+def run(args: argparse.Namespace) -> int:
     ik, chain = ikid.load("wrist-ik"), ikid.load("wrist-chain")
     print(
         f"1. simulating {args.seconds:.0f} s of random wrist movement (seed {args.seed}, shoulder "
@@ -132,6 +136,7 @@ def main(argv: list[str] | None = None) -> None:
         f"{np.median(lat):.1f} µs, p99 {np.percentile(lat, 99):.1f} µs"
     )
     plot(args.plot, trial, angles, torques, ok, tracked_q, tracked_tau)
+    return 0
 
 
 def rms(x: np.ndarray) -> float:
@@ -174,7 +179,3 @@ def plot(
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=90)
     print(f"6. plot: {path}")
-
-
-if __name__ == "__main__":
-    main()

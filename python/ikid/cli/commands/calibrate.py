@@ -1,0 +1,234 @@
+"""`ikid calibrate`: a subject's marker placement -> calibration JSON."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+import ikid
+from ikid.cli.common import _naming, _refuse_over_inputs
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="measure a subject's marker placement (landmarks, neutral frames, or movements)",
+        description="A subject's marker placement -> calibration JSON (method, side and marker map recorded; "
+        "ikid.calibration.check_calibration_map refuses a trial read with another map).\n\n"
+        "  # landmarks (the map's [landmarks]: epicondyles, styloids) + neutral frames of any trial:\n"
+        "  ikid calibrate --static s01_task.c3d --frames 0-9 --map lab.toml -o s01.json\n"
+        "  # neutral posture only (no landmarks in the map, or --method neutral):\n"
+        "  ikid calibrate --static s01_static.c3d --method neutral --map lab.toml -o s01.json\n"
+        "  # neutral frames + any movement bending the wrist both ways (functional axes):\n"
+        "  ikid calibrate --static s01_task.c3d --frames 0-9 --motion s01_circles.c3d \\\n"
+        "      --map lab.toml -o s01.json\n"
+        "  # static trial + movements of one coordinate each:\n"
+        "  ikid calibrate --static s01_static.c3d --movement ra_wr_e_f=s01_flex.c3d \\\n"
+        "      --movement ra_wr_s_p=s01_pron.c3d --map lab.toml -o s01.json\n"
+        "  ikid ik s01_task.c3d -o s01_task.mot --map lab.toml --calibration s01.json\n\n"
+        "landmarks: the forearm's ISB frame (y from the mid-styloids to the mid-epicondyles, "
+        "x = y x (ulnar -> radial styloid), z = x x y), each landmark averaged in the forearm cluster's "
+        "frame over the frames it is seen in; the hand's frame equals the forearm's at the neutral "
+        "posture, which reads zero, or, when the map names second_metacarpal_head and fifth_metacarpal_head, "
+        "is the hand's own (y from the mid-heads to the mid-styloids, as the forearm's). "
+        "With landmarks, clusters may sit at any orientation. "
+        "neutral: the same, the forearm at the body model's placement: refused (saying what to record) when "
+        "the forearm's markers are not spread as the model's RSP, USP and FAP (clusters, plates). "
+        "functional: the flexion axis (fixed in the forearm) and the deviation axis (fixed in the hand) "
+        "fitted by least squares to a movement mixing both, pronation held; the neutral frames read zero; "
+        "the axes' signs come from the forearm markers' placement (within 60 degrees of the body model's), "
+        "the hand's cluster may sit any way round. "
+        'A left arm (side = "left" in the map, or --side left) is mirrored into a right arm: its angles keep '
+        "their anatomical signs.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--static",
+        required=True,
+        help="marker file of the neutral posture: a static trial, or any trial with --frames",
+    )
+    p.add_argument(
+        "--frames",
+        metavar="LIST",
+        help="frames of --static in the neutral posture, 0-based: 0-9, 41,76,220 (default: all); the "
+        "landmarks are averaged over them too",
+    )
+    p.add_argument(
+        "--method",
+        choices=["auto", "landmarks", "neutral", "functional", "movements"],
+        default="auto",
+        help="auto (default): movements if --movement is given, functional if --motion is, landmarks if "
+        "the map names them, else neutral",
+    )
+    p.add_argument(
+        "--motion",
+        metavar="FILE",
+        help="functional method: a marker file where the wrist bends through flexion-extension and "
+        "deviation together (circles, or a task), the forearm's rotation held",
+    )
+    p.add_argument("--motion-frames", metavar="LIST", help="frames of --motion to fit (default: all)")
+    p.add_argument(
+        "--landmarks",
+        metavar="FILE",
+        help="marker file holding the landmarks with the forearm's markers (default: --static), all its "
+        "frames used",
+    )
+    p.add_argument(
+        "--movement",
+        action="append",
+        default=[],
+        metavar="COORD=FILE",
+        help="a movement of that coordinate alone (movements method: at least two coordinates)",
+    )
+    p.add_argument("--side", choices=["right", "left"], help="the arm (default: the map's side, else right)")
+    p.add_argument("--map", metavar="TOML", help="marker map, optionally with [landmarks] (see map-template)")
+    p.add_argument("-o", "--output", required=True, help="calibration JSON to write")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Landmarks and/or neutral frames, or static + single-coordinate movement files -> a
+    calibration JSON recording the method, the side and the marker map."""
+    from ikid.calibration import calibrate_functional, calibrate_neutral
+    from ikid.io import MarkerMap, read_markers
+
+    def _frame_selection(spec: str, n: int, source: str) -> np.ndarray:
+        """Frame numbers (0-based) from "0-9", "41,76,220" or "0-4,10-14"; each within the file."""
+        chosen: list[int] = []
+        for part in spec.split(","):
+            lo, sep, hi = part.strip().partition("-")
+            try:
+                first, last = int(lo), int(hi) if sep else int(lo)
+            except ValueError:
+                raise SystemExit(
+                    f"ikid: error: --frames {spec!r}: expected frame numbers such as 0-9 or 41,76,220"
+                ) from None
+            if not 0 <= first <= last < n:
+                raise SystemExit(
+                    f"ikid: error: --frames {spec!r}: {part.strip()} is outside frames 0-{n - 1} of {source}"
+                )
+            chosen += range(first, last + 1)
+        return np.array(sorted(set(chosen)), np.int64)
+
+    movement_files = [spec.partition("=")[2] or None for spec in args.movement]
+    _refuse_over_inputs(
+        [args.output],
+        [args.static, args.landmarks, args.motion, args.map, *movement_files],
+        given=args.output,
+    )
+    mapping = MarkerMap.load(args.map) if args.map else MarkerMap.identity()
+    side = args.side or mapping.side
+    static = read_markers(args.static)
+    chosen = _frame_selection(args.frames, len(static), args.static) if args.frames else None
+    neutral = static.frames(mapping)
+    try:
+        ikid.check_marker_units(neutral)
+    except ikid.IkidError as e:
+        raise type(e)(_naming(args.static, e)) from None
+    if chosen is not None:
+        neutral = neutral[chosen]
+    method = args.method
+    if method == "auto":
+        method = (
+            "movements"
+            if args.movement
+            else "functional"
+            if args.motion
+            else ("landmarks" if mapping.landmarks else "neutral")
+        )
+    if method != "movements" and args.movement:
+        raise SystemExit(f"ikid: error: --movement is for --method movements, not {method}")
+    if (method == "functional") != bool(args.motion):
+        raise SystemExit(
+            "ikid: error: --method functional needs --motion FILE (a movement mixing flexion and deviation)"
+            if method == "functional"
+            else f"ikid: error: --motion is for --method functional, not {method}"
+        )
+    if args.motion_frames and not args.motion:
+        raise SystemExit("ikid: error: --motion-frames selects frames of --motion; give --motion FILE")
+    provenance: dict = {"static": args.static, "frames": args.frames}
+    if method == "movements":
+        if side != "right":
+            raise SystemExit(
+                "ikid: error: the movements method measures right arms only; calibrate a left arm from "
+                "landmarks or neutral frames"
+            )
+        movements = {}
+        for spec in args.movement:
+            coord, sep, path = spec.partition("=")
+            if not sep or coord not in ikid.coordinate_names():
+                raise SystemExit(
+                    f"ikid: error: --movement {spec!r}: expected COORDINATE=FILE, COORDINATE one of "
+                    f"{', '.join(ikid.coordinate_names())}"
+                )
+            movements[coord] = read_markers(path).frames(mapping)
+        cal = ikid.calibrate(neutral, movements)
+        provenance["movements"] = dict(s.partition("=")[::2] for s in args.movement)
+    elif method == "landmarks":
+        source = read_markers(args.landmarks) if args.landmarks else static
+        where = chosen if (chosen is not None and not args.landmarks) else slice(None)
+        points = np.concatenate(
+            [source.marker(lab) for lab in mapping.landmark_labels_in_order(source)], axis=1
+        )[where]
+        beside = neutral if source is static else source.frames(mapping)[where]
+        hand_labels = mapping.hand_landmark_labels_in_order(source)
+        hand_points = (
+            None
+            if hand_labels is None
+            else np.concatenate([source.marker(lab) for lab in hand_labels], axis=1)[where]
+        )
+        cal = calibrate_neutral(
+            neutral, points, landmark_frames=beside, side=side, hand_landmarks=hand_points
+        )
+        provenance["landmarks"] = args.landmarks or args.static
+    elif method == "functional":
+        motion = read_markers(args.motion)
+        moving = motion.frames(mapping)
+        if args.motion_frames:
+            moving = moving[_frame_selection(args.motion_frames, len(moving), args.motion)]
+        cal = calibrate_functional(neutral, moving, side=side)
+        provenance["motion"] = args.motion
+        provenance["motion_frames"] = args.motion_frames
+    else:
+        cal = calibrate_neutral(neutral, side=side)
+    ikid.save_calibration(cal, args.output, marker_map=mapping, **provenance)
+    r = cal.report or {}
+    spread = r.get("neutral_spread_deg", 0.0)
+    used = r.get("neutral_frames", len(neutral))
+    noise, uncertainty = r.get("neutral_noise_deg", 0.0), r.get("neutral_uncertainty_deg", 0.0)
+    details = [
+        f"{used} of {len(neutral)} neutral frames used (spread {spread:.1f}°, marker noise "
+        f"{noise:.1f}° a frame, neutral posture ± {uncertainty:.2f}°)"
+    ]
+    if r.get("movements"):
+        details.append(
+            "movements: "
+            + ", ".join(
+                f"{k} {v['range_deg']:.0f}° ({100 * v['single_axis_share']:.1f} % one axis)"
+                for k, v in r["movements"].items()
+            )
+            + f"; axis skew {r.get('axis_skew_deg', 0):.2f}°"
+        )
+    if r.get("functional"):
+        fn = r["functional"]
+        details.append(
+            f"functional fit over {fn['frames']} frames: flexion {fn['flexion_range_deg']:.0f}°, deviation "
+            f"{fn['deviation_range_deg']:.0f}°, pronation held at {-fn['supination_held_deg']:.0f}° "
+            f"(residual {fn['residual_deg']:.1f}° RMS beside {fn['noise_deg']:.1f}° of marker noise)"
+        )
+    if r.get("landmarks"):
+        lm = r["landmarks"]
+        if lm.get("hand"):
+            details.append(
+                f"hand frame from its landmarks ({lm['hand']['frames']} frames; the neutral frames read "
+                f"{lm['hand']['neutral_offset_deg']:.1f}° from zero)"
+            )
+        details.append(
+            f"landmarks: forearm axis {lm['long_axis_mm']:.0f} mm, styloids "
+            f"{lm['styloid_span_mm']:.0f} mm apart at {lm['styloid_axis_deg']:.0f}° to it, seen in "
+            + "/".join(str(n) for n in lm["frames"].values())
+            + " frames"
+        )
+    print(f"{cal!r}; {'; '.join(details)} -> {args.output}")
+    return 0

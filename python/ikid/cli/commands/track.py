@@ -1,0 +1,183 @@
+"""`ikid track`: markers -> angles and torques with ikid.Tracker and its refiner."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import ikid
+from ikid import _native
+from ikid.cli.common import (
+    _model_file,
+    _model_for,
+    _named,
+    _naming,
+    _refuse_over_inputs,
+    _stem,
+    _subject_calibration,
+)
+from ikid.cli.options import SUBJECT_LENGTH, SUBJECT_MASS, _number, unchecked_option
+from ikid.io._atomic import atomic_outputs
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "track",
+        help="markers -> angles (.mot) and torques (.sto) with the Kalman tracker + its refiner",
+        description="Markers -> wrist angles and torques, causally, with ikid.Tracker: an extended Kalman "
+        "filter over the body model that learns each marker coordinate's noise, refined by the shipped "
+        "wrist-track network.\n\n"
+        "  ikid track trial.c3d -o out/trial --length-scale 1.1 --mass-scale 1.3"
+        "   # out/trial.mot, out/trial.sto",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("input", help="marker file (.c3d, .trc, .csv)")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="output stem: writes STEM.mot and STEM.sto (together); a folder (ending with / or existing): "
+        "FOLDER/<input name>.mot, .sto",
+    )
+    p.add_argument("--map", help="marker map (TOML) from the file's labels to ikid's")
+    p.add_argument(
+        "--length-scale",
+        type=SUBJECT_LENGTH,
+        default=None,
+        help="subject's segment lengths / the default subject's (default: the calibration's estimate "
+        "from its landmarks, else 1)",
+    )
+    p.add_argument(
+        "--mass-scale",
+        type=SUBJECT_MASS,
+        default=None,
+        help="subject's segment masses / the default subject's (default: the cube of the length scale)",
+    )
+    p.add_argument(
+        "--refiner",
+        default="auto",
+        help="refinement model, shipped name or file; 'none' for the bare filter; 'auto' (default): "
+        "the shipped wrist-track family's member at the recording's rate (wrist-track: 1000 Hz), else none "
+        "(the summary says which; a refiner at another rate: python -m ikid_training.refine --rate)",
+    )
+    p.add_argument(
+        "--jerk-noise",
+        type=_number(gt=0, le=1e12, unit=" rad²/s⁵"),
+        default=ikid.DEFAULT_JERK_NOISE,
+        help=f"motion model's jerk density, rad²/s⁵ (default {ikid.DEFAULT_JERK_NOISE:g}, "
+        "tuned in docs/ekf.md)",
+    )
+    p.add_argument(
+        "--calibration",
+        metavar="JSON",
+        help="the subject's marker placement (see `ikid calibrate`); without it the body model's placement "
+        "is checked against the markers first, and a recording it cannot read is refused",
+    )
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="exit 3 if any frame has no estimate or is flagged (the ikid_status column)",
+    )
+    unchecked_option(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Markers -> angles (.mot) and torques (.sto) with ``ikid.Tracker``: the causal Kalman
+    tracker over the body model, for one subject (no network), at the recording's own rate.
+    Every row carries its status bits; a row no wrist can give is not written but counted."""
+    from ikid.io import MarkerMap, read_markers, write_mot, write_sto
+
+    stem = _stem(args.output, Path(args.input).stem, create=False)
+    refiner_file = None if args.refiner in ("auto", "", "none") else _model_file(args.refiner)
+    _refuse_over_inputs(
+        [_named(stem, ".mot"), _named(stem, ".sto")],
+        [args.input, args.map, args.calibration, refiner_file],
+        given=args.output,
+    )
+    data = read_markers(args.input)
+    refiner = None
+    if args.refiner == "auto":
+        from ikid.pipeline import family_members, same_rate
+
+        # The shipped refiner family's member at the recording's rate, if there is one.
+        refiner = next(
+            (m for m in family_members("wrist-track") if same_rate(data.rate_hz, m.frame_rate_hz)), None
+        )
+    elif args.refiner not in ("", "none"):
+        refiner = _model_for(
+            args.refiner, "ikid track --refiner", ("refine",), allow_unchecked=args.allow_unchecked_model
+        )
+    mapping = MarkerMap.load(args.map) if args.map else None
+    frames = data.frames(mapping)
+    calibration = _subject_calibration(frames, args.calibration, mapping, args.input)
+    length_scale, mass_scale, size_from = _subject_size(args)
+    try:
+        tracker = ikid.Tracker(
+            length_scale=length_scale,
+            mass_scale=mass_scale,
+            rate_hz=data.rate_hz,
+            jerk_noise=args.jerk_noise,
+            refiner=refiner,
+            calibration=calibration,
+        )
+        out = tracker.run(frames)
+    except ikid.IkidError as e:
+        raise type(e)(_naming(args.input, e)) from None
+    k = out["start"]
+    status = out["status"]
+    bits = ikid.FRAME_STATUS
+    keep = np.arange(len(frames)) >= k
+    implausible = keep & (status & bits["implausible"] != 0)
+    keep &= ~implausible  # nothing no wrist can do is written as a number
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_outputs():  # the pair replaces the old pair, or neither is replaced
+        mot = write_mot(_named(stem, ".mot"), data.time[keep], out["q"][keep], status=status[keep])
+        sto = write_sto(_named(stem, ".sto"), data.time[keep], out["tau"][keep], status=status[keep])
+    counts = {name: int(np.count_nonzero(status[keep] & bit)) for name, bit in bits.items()}
+    noise_mm = ", ".join(f"{v * 1e3:.2f}" for v in tracker.marker_noise)
+    how = f"refined by {refiner.name}" if refiner else "not refined"
+    placed = "uncalibrated"
+    if calibration is not None:
+        from ikid.calibration import calibration_info
+
+        placed = f"calibrated ({calibration_info(args.calibration)['method']}, {calibration.side} arm)"
+    notes = [f"{n} {name.replace('_', ' ')}" for name, n in counts.items() if n]
+    if implausible.any():
+        notes.append(f"{int(implausible.sum())} implausible (not written)")
+    if tracker.restarts:
+        notes.append(f"{tracker.restarts} restarts after losing the hand")
+    print(
+        f"{args.input}: {int(keep.sum())}/{len(frames)} frames tracked from frame {k} "
+        f"at {data.rate_hz:g} Hz, subject ×{length_scale:.3g} length, ×{mass_scale:.3g} mass ({size_from}), "
+        f"{placed}, {how}; flagged: {', '.join(notes) or 'none'}; hand marker noise learned (mm): {noise_mm} "
+        f"-> {mot}, {sto}"
+    )
+    if args.strict and (k > 0 or status[k:].any()):
+        print(f"ikid: --strict: {args.input} has frames without an estimate or flagged", file=sys.stderr)
+        return 3
+    return 0
+
+
+def _subject_size(args: argparse.Namespace) -> tuple[float, float, str]:
+    """The subject's (length, mass) scales for the tracker, and where they came from: the
+    options; else the calibration's size estimate (its landmarks: the forearm's length over
+    the default subject's), mass its cube; else the default subject."""
+    from ikid.calibration import calibration_info
+
+    estimate = None
+    if args.calibration:
+        landmarks = (calibration_info(args.calibration).get("report") or {}).get("landmarks") or {}
+        estimate = landmarks.get("length_scale")
+    if args.length_scale is not None:
+        length, source = args.length_scale, "given"
+    elif estimate is not None:
+        length = min(max(float(estimate), _native.LENGTH_SCALE_RANGE[0]), _native.LENGTH_SCALE_RANGE[1])
+        source = "estimated from the calibration's landmarks"
+    else:
+        length, source = 1.0, "the default subject"
+    mass = args.mass_scale if args.mass_scale is not None else length**3
+    return length, mass, source

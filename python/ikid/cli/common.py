@@ -1,0 +1,220 @@
+"""What every command follows: where -o puts outputs (never over an input), how a model option is
+loaded and checked against the command's task, how errors name their file."""
+
+from __future__ import annotations
+
+import os
+import stat
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import ikid
+from ikid.cli.options import UNCHECKED_FLAG
+
+
+def _is_folder(output: str) -> bool:
+    """``-o`` names a folder when it ends with a path separator or is an existing directory:
+    outputs then go inside it, named after their input."""
+    return output.endswith(("/", os.sep)) or Path(output).is_dir()
+
+
+def _stem(output: str, name: str, suffixes: tuple[str, ...] = (".mot", ".sto"), create: bool = True) -> Path:
+    """The output stem for ``-o OUTPUT``: ``OUTPUT/name`` when it names a folder, else
+    ``OUTPUT`` without one of ``suffixes``; the folder is created if need be (unless not
+    ``create``: a command names its outputs before it has checked anything)."""
+    out = Path(output)
+    if _is_folder(output):
+        stem = out / name
+    else:
+        stem = out.with_suffix("") if out.suffix.lower() in suffixes else out
+    if create:
+        stem.parent.mkdir(parents=True, exist_ok=True)
+    return stem
+
+
+def _named(stem: Path, ext: str) -> Path:
+    """``stem`` + ``ext``, even if the stem holds a dot (``trial.v2``)."""
+    return stem.with_name(stem.name + ext)
+
+
+def _file_id(file) -> tuple[int, int] | None:
+    """(device, inode) of a path (links resolved) or of an open descriptor that is a regular
+    file; None for what does not exist or is not a file (a terminal, a pipe)."""
+    try:
+        st = os.fstat(file) if isinstance(file, int) else os.stat(file)
+    except (OSError, ValueError):
+        return None
+    return (st.st_dev, st.st_ino) if stat.S_ISREG(st.st_mode) else None
+
+
+def _stdout_fd() -> int | None:
+    """Standard output's descriptor, or None when it has none (replaced by a test harness)."""
+    try:
+        return sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def _refuse_over_inputs(outputs: list, inputs: list, given: str | None = None, option: str = "-o") -> None:
+    """The one check every writing command makes before it reads or writes anything: no
+    output may be one of its inputs (the same file after resolving links, hard or symbolic,
+    by device and inode), or ikid would replace what it read with what it computed (``ikid id
+    t.mot -o t.mot``). Raises :class:`ikid.ArgumentError` (exit 2) naming both; nothing is
+    written. ``outputs`` and ``inputs`` are paths (``None`` skipped) or descriptors (standard
+    output); ``option`` and its value ``given`` are what the outputs were named by."""
+    seen: dict[tuple[int, int], str | os.PathLike[str] | int] = {}
+    for inp in inputs:
+        if inp is not None and (key := _file_id(inp)) is not None:
+            seen.setdefault(key, inp)
+    for out in outputs:
+        if out is None or (key := _file_id(out)) is None or key not in seen:
+            continue
+        inp = seen[key]
+        if isinstance(inp, int):
+            what = "standard output is the input, standard input (the same file)"
+            fix = "print to another file (or none)"
+        elif isinstance(out, int):
+            what = f"standard output is the input {inp}"
+            fix = "print to another file (or none)"
+        else:
+            same = "" if str(out) == str(inp) else " (the same file)"
+            named = f"{option} {given}" if given is not None else option
+            what = (
+                f"{named} is the input {inp}{same}"
+                if given is not None and str(out) == str(given)
+                else f"{named}: the output {out} is the input {inp}{same}"
+            )
+            fix = f"give {option} another file"
+        raise ikid.ArgumentError(f"{what}; ikid never writes over an input: {fix}")
+
+
+def _model_file(name: str | None) -> str | None:
+    """A model option's value when it names a file (not a shipped model's name)."""
+    return None if name is None or ikid.is_model_name(name) else name
+
+
+#: What a model of each task gives, the frames it reads and the unit of its outputs.
+TASKS = {
+    "ik": ("markers -> angles", "markers", "rad"),
+    "chain": ("markers -> torques", "markers", "N*m"),
+    "id": ("joint states -> torques", "joint_state", "N*m"),
+    "refine": ("the Kalman tracker's refiner", "tracker_state", None),
+}
+
+
+def _model_for(
+    name: str,
+    use: str,
+    tasks: tuple[str, ...],
+    rate_hz: float | None = None,
+    allow_unchecked: bool = False,
+) -> ikid.Model:
+    """``ikid.load(name, rate_hz=rate_hz, allow_unchecked=allow_unchecked)`` for ``use`` (e.g.
+    ``"ikid ik --model"``; with a rate, the family's member at it), refused with an
+    :class:`ikid.ArgumentError` naming the model, its task and what ``use`` needs unless its
+    card's task is one of ``tasks`` and its frames and output units are that task's."""
+    model = ikid.load(name, rate_hz=rate_hz, allow_unchecked=allow_unchecked)
+    need = " or ".join(f"{t!r} ({TASKS[t][0]})" for t in tasks)
+    if model.task not in tasks:
+        gives = TASKS.get(model.task, ("an unknown task",))[0]
+        raise ikid.ArgumentError(
+            f"{use} {name}: model {model.name!r} has task {model.task!r} ({gives}); "
+            f"{use} needs a model of task {need}"
+        )
+    _, frames, unit = TASKS[model.task]
+    if model.frame_kind != frames:
+        raise ikid.ArgumentError(
+            f"{use} {name}: model {model.name!r} (task {model.task!r}) reads {model.frame_kind} frames; "
+            f"a {model.task!r} model reads {frames} frames"
+        )
+    if unit is not None and (model.n_outputs != 3 or set(model.output_units) != {unit}):
+        raise ikid.ArgumentError(
+            f"{use} {name}: model {model.name!r} gives {model.n_outputs} outputs in "
+            f"{', '.join(sorted(set(model.output_units)))}; {use} writes the 3 wrist coordinates in {unit}"
+        )
+    return model
+
+
+def _inputs(paths: list[str]) -> list[Path]:
+    """Marker files named, or found (by suffix) in named folders. An entry of a folder named
+    like a marker file but not one (a folder ``x.trc/``, a pipe) is kept: it fails as that
+    file, named in the summary, instead of vanishing from the count."""
+    from ikid.io import MARKER_READERS
+
+    found: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found += sorted(f for f in p.iterdir() if f.suffix.lower() in MARKER_READERS)
+        elif os.path.lexists(p):
+            found.append(p)
+        else:
+            raise ikid.NotFoundError(f"{p}: no such file or folder")
+    if not found:
+        raise ikid.ArgumentError(f"no marker files ({', '.join(MARKER_READERS)}) in {', '.join(paths)}")
+    return found
+
+
+def _message(error: BaseException) -> str:
+    """The error's message as the command line says it: a model file without a checksum names
+    this command's opt-in (:data:`UNCHECKED_FLAG`), not the Python API's."""
+    message = str(error)
+    if getattr(error, "code", None) == "missing_checksum":
+        message = message.replace(
+            ikid.UNCHECKED_OPT_IN, f"or give {UNCHECKED_FLAG} to load it anyway (with a warning)"
+        )
+    return message
+
+
+def _naming(path: str, error: BaseException) -> str:
+    """The error's message, starting with the input file it concerns (a read or write error
+    names its own file already)."""
+    message = _message(error)
+    if path in message or isinstance(error, OSError):
+        return message
+    return f"{path}: {message}"
+
+
+def _subject_calibration(frames: np.ndarray, calibration: str | None, mapping, source: str):
+    """The calibration a run of ``frames`` (read with ``mapping``) uses: the file given,
+    checked against the marker map it was measured with; or, without one, the body model's
+    placement, after checking that it can read these markers at all (units, then placement:
+    an uncalibrated real recording reads 50-170° off). Errors name ``source``."""
+    from ikid.calibration import check_calibration_map
+
+    try:
+        ikid.check_marker_units(frames)
+        if calibration:
+            check_calibration_map(calibration, mapping)
+            return ikid.load_calibration(calibration)
+        ikid.check_default_placement(frames)
+    except ikid.IkidError as e:
+        raise type(e)(_naming(source, e)) from None
+    return None
+
+
+def _cause(file: str, error: str) -> str:
+    """An error message without the file name it starts with (the summary names the file)."""
+    if error.startswith(file + ":"):
+        rest = error[len(file) + 1 :].lstrip()
+        head, sep, tail = rest.partition(": ")
+        return f"line {head}: {tail}" if sep and head.isdigit() else rest
+    return error
+
+
+#: How to get the training pipeline, a distribution of its own (``training/`` of a checkout).
+TRAINING_HINT = "pip install ./training (from an ikid source checkout; it brings torch)"
+
+
+def _training_package(what: str):
+    """The ``ikid_training`` package (imported only here, on demand), or an error telling how
+    to install it (exit 2)."""
+    try:
+        import ikid_training
+    except ImportError as e:
+        raise ikid.InputError(
+            f"{what} needs ikid-training, the training pipeline, a distribution of its own beside "
+            f"ikid (not installed: {e}); install it with {TRAINING_HINT}"
+        ) from None
+    return ikid_training
