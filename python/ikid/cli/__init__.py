@@ -63,9 +63,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Warnings printed by this process (a model loaded twice, to check it and to run it, warns once).
+_WARNED: set[str] = set()
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    """A warning as the command line prints it: one line, no source location."""
-    print(f"ikid: warning: {message}", file=sys.stderr, flush=True)
+    """A warning as the command line prints it: one line, no source location, each once."""
+    text = str(message)
+    if text not in _WARNED:
+        _WARNED.add(text)
+        print(f"ikid: warning: {text}", file=sys.stderr, flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
