@@ -153,6 +153,8 @@ def training_use() -> tuple[set[int], set[float]]:
         )
         seeds.update(spec["seed"] for spec in specs)
         sizes.update(float(x) for x in d["length_scales"])
+        # Sessions (ikid_training.data.session_q) draw their own trajectories; their sizes count.
+        sizes.update(float(x) for x in d.get("sessions", {}).get("length_scales") or [])
     trained = ikid.load("wrist-track").card["provenance"]  # the refiner's own trials, as shipped
     seeds.update(int(s) for s in trained["seeds"])
     sizes.update(float(x) for x in trained["length_scales"])

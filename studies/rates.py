@@ -409,7 +409,11 @@ def markdown(res: dict[str, Any]) -> str:
         "at 0 / 1 / 5 % noise, a 10-frame window (100 ms) 1.3e-5 / 1.2e-4 / 1.6e-3: at a low rate a window "
         "of wrist-ik's duration holds too few frames to average noise, so both per-rate models use 100 ms "
         "(configs `training/ikid_training/configs/wrist-ik-100hz.toml`, `wrist-ik-250hz.toml`; trained with "
-        "`python -m ikid_training.train CONFIG`, ~5 min each on one core).",
+        "`python -m ikid_training.train CONFIG`, ~7 min each on one core). Since issue #28 both also "
+        "train on sessions past the random protocol's ranges and speeds (`[data.sessions]`: postures "
+        "to s_p ±125°, e_f ±80°, ad_ab −110…55°, bursts of 40–250 ms, rests and drifts, shoulders "
+        "−30…90°, sizes 0.8–1.25), so real windows lie inside their envelope (docs/realdata.md: "
+        "pyomeca's per-frame fallback 313 → 0 of 580 rows).",
         "",
         "The frames left out at 100 Hz, clean markers: the core's gap filler takes a fast reach for a "
         "jump there (its jump limit is 8x the segment's RMS step *per frame*, learned from the frames "

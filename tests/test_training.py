@@ -48,6 +48,55 @@ def test_recording_sets_never_share_a_trajectory():
     assert all(math.isclose(s["mass_scale"], s["length_scale"] ** 3) for s in specs)
 
 
+def test_sessions_go_past_the_random_protocols_ranges_and_speeds_seeded():
+    spec = D.session_specs({"seeds": [2000], "duration": 20.0}, [0.0], [1.0])[0]
+    rec = D.simulate_session(spec, 1000.0)
+    assert rec.meta["rate_hz"] == 1000.0 and len(rec) >= 20_000
+    np.testing.assert_array_equal(D.simulate_session(spec, 1000.0).q, rec.q)
+    other = D.simulate_session({**spec, "seed": spec["seed"] + 1}, 1000.0)
+    assert not np.array_equal(other.q[:1000], rec.q[:1000])
+    # Targets within the session's ranges, some past the anatomical ones (95 % of the body model's).
+    wide = np.radians(np.array(D.SESSION_DEFAULTS["ranges_deg"]))
+    assert np.all(rec.q >= wide[:, 0] - 1e-9) and np.all(rec.q <= wide[:, 1] + 1e-9)
+    anatomical = np.array([c["range"] for c in ikid.body_model()["coordinates"]])
+    assert np.any((rec.q < anatomical[:, 0]) | (rec.q > anatomical[:, 1]))
+    # Faster than the random protocol's fastest movement, and the motion as analytic as its.
+    random = D.simulate_one({"name": "r", "protocol": "random", "seed": 5, "duration": 20.0})
+    assert np.abs(rec.qd).max() > 2 * np.abs(random.qd).max()
+    slope = np.gradient(rec.q, 1e-3, axis=0)
+    np.testing.assert_allclose(slope[1:-1], rec.qd[1:-1], atol=0.05 * np.abs(rec.qd).max())
+    # What the simulator records for those angles: the body model's markers, read back exactly.
+    np.testing.assert_allclose(ikid.compute_features(rec.markers, "angles"), rec.q, atol=1e-5)
+    at_100 = D.simulate_session(spec, 100.0)
+    np.testing.assert_allclose(at_100.q[:50], rec.q[:500:10], atol=1e-12)
+
+
+def test_session_moves_along_the_hands_rotation_couple_the_angles_and_read_back_exactly():
+    q = np.random.default_rng(0).uniform([-2.0, -1.4, -1.8], [2.0, 1.4, 1.8], size=(500, 3))
+    np.testing.assert_allclose(D.hand_angles(D.hand_rotation(q)), q, atol=1e-12)
+    spec = D.session_specs({"seeds": [2000], "duration": 20.0, "rotation_share": 0.5}, [0.0], [1.0])[0]
+    rec = D.simulate_session(spec, 1000.0)
+    plain = D.simulate_session({**spec, "rotation_share": 0.0}, 1000.0)
+    assert not np.array_equal(rec.q, plain.q)
+    np.testing.assert_allclose(ikid.compute_features(rec.markers, "angles"), rec.q, atol=1e-5)
+    wide = np.radians(np.array(D.SESSION_DEFAULTS["ranges_deg"]))
+    assert np.all(rec.q >= wide[:, 0] - 1e-9) and np.all(rec.q <= wide[:, 1] + 1e-9)
+    assert np.degrees(np.abs(np.diff(rec.q, axis=0)).max()) < 5.0  # continuous: no wrap, no jump
+    v = np.random.default_rng(1).normal(size=(50, 3))
+    v = v[np.linalg.norm(v, axis=1) < 3.0]
+    got = np.array([D.rotation_vector(m) for m in D.rotation_matrix(v)])
+    np.testing.assert_allclose(got, v, atol=1e-9)
+
+
+def test_session_specs_cover_every_body_with_its_own_seed_and_refuse_unknown_keys():
+    specs = D.session_specs({"seeds": [2000, 2001], "length_scales": [0.8, 1.25]}, [0.0, 45.0], [1.0])
+    assert len({s["seed"] for s in specs}) == len(specs) == 8
+    assert {s["length_scale"] for s in specs} == {0.8, 1.25}
+    assert all(math.isclose(s["mass_scale"], s["length_scale"] ** 3) for s in specs)
+    with pytest.raises(ValueError, match="unknown \\[data.sessions\\] keys \\['speed'\\]"):
+        D.session_specs({"speed": 2.0}, [0.0], [1.0])
+
+
 @pytest.mark.parametrize("offset", [False, True], ids=["plain", "output_offset"])
 def test_a_config_trains_and_exports_a_model_with_its_card(tmp_path, offset):
     cfg_path = tmp_path / "tiny.toml"

@@ -315,6 +315,8 @@ def process(rec: Recording, folder: Path, work: Path, log: list[str]) -> dict:
             how = "--resample"
         if done.returncode != 0:
             return None, f"failed: {done.stderr.strip().splitlines()[-1] if done.stderr.strip() else ''}"
+        if tag == "ik":
+            result["ik_per_frame"] = per_frame_rows(done.stdout)
         t, q = read_mot(out)
         step = np.median(np.diff(t)) if len(t) > 1 else 1.0 / rate
         return score(t, q, ref, tol=max(1.5 * step, 1e-6)), how
@@ -345,6 +347,15 @@ def process(rec: Recording, folder: Path, work: Path, log: list[str]) -> dict:
             f"; failed: {done.stderr.strip().splitlines()[-1] if done.stderr.strip() else ''}"
         )
     return result
+
+
+def per_frame_rows(summary: str) -> tuple[int, int]:
+    """From `ikid ik`'s summary: the rows that are the per-frame fallback because the window's
+    posture or speed lay beyond the network's training (the window's filling excepted), and the
+    rows written."""
+    rows = re.search(r"(\d+)/\d+ frames with output", summary)
+    beyond = re.search(r"(\d+) where the window's posture or speed was beyond training", summary)
+    return (int(beyond[1]) if beyond else 0), (int(rows[1]) if rows else 0)
 
 
 def geometry_check(trial: Path, mapping: Path, cal: Path, ref: dict) -> Score:
@@ -919,6 +930,12 @@ def probe_summary(results: list[dict], left: dict) -> list[str]:
     return lines
 
 
+def fallback(r: dict) -> str:
+    """`ik`'s per-frame fallback rows (beyond training, the window's filling aside) of its rows."""
+    beyond, rows = r.get("ik_per_frame", (0, 0))
+    return f"{beyond}/{rows} ({100 * beyond / rows:.1f} %)" if rows else "-"
+
+
 def write_report(results: list[dict], left: dict, log: list[str], path: Path, seconds: float) -> None:
     lines = [
         "# ikid on real recordings",
@@ -933,9 +950,10 @@ def write_report(results: list[dict], left: dict, log: list[str], path: Path, se
         "clusters): pyomeca 1.96°, racing 0.35°.",
         "",
         "| trial | frames scored | ik RMS (valid) | ik RMS (gimbal_ok) | ik p95 / max | ik outputs | "
+        "ik per-frame fallback (window filling aside) | "
         "ik uncalibrated RMS | track RMS (valid) | track RMS (gimbal_ok) | track max | "
         "lag ik / track (ms) | calibration check | how |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results:
         ref, ik, raw, tr = r["ref"], r["ik"], r["ik_raw"], r["track"]
@@ -944,7 +962,7 @@ def write_report(results: list[dict], left: dict, log: list[str], path: Path, se
             f"| {r['rec'].name} | {n} | {fmt(ik.rms_valid if ik else np.nan)} | "
             f"{fmt(ik.rms_gimbal if ik else np.nan)} | "
             f"{fmt(ik.p95_gimbal if ik else np.nan)} / {fmt(ik.max_valid if ik else np.nan)} | "
-            f"{100 * ik.coverage if ik else 0:.1f} % | "
+            f"{100 * ik.coverage if ik else 0:.1f} % | {fallback(r)} | "
             f"{fmt(raw.rms_valid) if raw else 'refused'} | "
             f"{fmt(tr.rms_valid if tr else np.nan)} | {fmt(tr.rms_gimbal if tr else np.nan)} | "
             f"{fmt(tr.max_valid if tr else np.nan)} | "
@@ -1031,7 +1049,8 @@ def main(argv: list[str] | None = None) -> int:
         ik, tr = r["ik"], r["track"]
         print(
             f"{r['rec'].name}: calibrate {'ok' if r['calibrated'] else 'FAILED'}; "
-            f"ik {fmt(headline(r, 'ik'))}° (valid {fmt(ik.rms_valid if ik else np.nan)}, {r['ik_how']}); "
+            f"ik {fmt(headline(r, 'ik'))}° (valid {fmt(ik.rms_valid if ik else np.nan)}, max "
+            f"{fmt(ik.max_valid if ik else np.nan)}, per-frame fallback {fallback(r)}, {r['ik_how']}); "
             f"track {fmt(headline(r, 'track'))}° "
             f"(valid {fmt(tr.rms_valid if tr else np.nan)}; {r['track_how']})"
         )

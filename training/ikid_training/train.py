@@ -63,7 +63,17 @@ TRAIN_DEFAULTS: dict[str, Any] = {
     "occlusion_bursts_per_s": 0.0,
     "occlusion_s": [0.02, 0.5],
     "threads": 2,
+    # Output scaling from the targets' [q, 1 - q] quantiles instead of their extremes (0: extremes),
+    # and windows whose scaled target lies beyond OUTLIER_SCALED left out of training and
+    # validation. For corrections whose extremes are noise wrapped past ±180° or amplified near
+    # the Y-Z-X singularity (e_f near ±90°): fitted to them, the scaling spends the network's
+    # precision on targets no window can predict.
+    "output_quantile": 0.0,
 }
+
+#: With ``output_quantile``: scaled targets beyond this (the quantile range maps to [-1, 1]) are
+#: outliers, left out.
+OUTLIER_SCALED = 4.0
 
 
 #: The simulator's step rate; ``[data] rate_hz`` (simulated data) keeps every k-th of its frames.
@@ -129,7 +139,12 @@ def build_recordings(data_cfg: dict[str, Any]) -> list[D.Recording]:
                 f"[data] rate_hz {data_cfg['rate_hz']} must divide {SIM_RATE_HZ:g} Hz (the simulator's rate)"
             )
         specs = [{**s, "output_every": int(round(every))} for s in specs]
-    return D.simulate_all(specs)
+    recs = D.simulate_all(specs)
+    if "sessions" in data_cfg:
+        # Sessions past the random protocol's ranges and speeds (ikid_training.data.session_q).
+        rate = float(data_cfg.get("rate_hz", SIM_RATE_HZ))
+        recs += [D.simulate_session(s, rate) for s in D.session_specs(data_cfg["sessions"], **common)]
+    return recs
 
 
 def check_targets(recs: list[D.Recording], task: str) -> None:
@@ -238,15 +253,25 @@ def train(
     envelope = envelope_of(clean[0], D.feature_len(fs), clean[1], seen=(x0,) if offset else ())
     del clean
     r0 = targets(x0, y0)
-    out_fwd = Affine.minmax(r0.min(0), r0.max(0))
+    oq = float(t["output_quantile"])
+    out_fwd = (
+        Affine.minmax(np.quantile(r0, oq, axis=0), np.quantile(r0, 1 - oq, axis=0))
+        if oq > 0
+        else Affine.minmax(r0.min(0), r0.max(0))
+    )
+
+    def inliers(ys: np.ndarray) -> np.ndarray:
+        return (np.abs(ys) <= OUTLIER_SCALED).all(axis=1) if oq > 0 else np.ones(len(ys), bool)
+
     del x0, y0, r0
     # A fixed validation set with the same noise mixture (seeded), so early stopping compares like with like.
     xv, yv = D.stack_windows(
         _noisy(val_parts, t, np.random.default_rng(t["seed"] + 1)), task, fs, window, stride=5
     )
-    yv = targets(xv, yv)
-    xv_t = torch.as_tensor(xv * inp.scale + inp.shift)
-    yv_t = torch.as_tensor(yv * out_fwd.scale + out_fwd.shift)
+    yv = targets(xv, yv) * out_fwd.scale + out_fwd.shift
+    keep = inliers(yv)
+    xv_t = torch.as_tensor((xv * inp.scale + inp.shift)[keep])
+    yv_t = torch.as_tensor(yv[keep])
 
     net = mlp(xv.shape[1], list(m["hidden"]), yv.shape[1])
     opt = torch.optim.Adam(net.parameters(), lr=t["lr"])
@@ -269,9 +294,10 @@ def train(
         x, y = D.stack_windows(
             _noisy(train_parts, t, rng), task, fs, window, stride=stride, offset=int(rng.integers(stride))
         )
-        y = targets(x, y)
-        xs = torch.as_tensor(x * inp.scale + inp.shift)
-        ys = torch.as_tensor(y * out_fwd.scale + out_fwd.shift)
+        y = targets(x, y) * out_fwd.scale + out_fwd.shift
+        keep = inliers(y)
+        xs = torch.as_tensor((x * inp.scale + inp.shift)[keep])
+        ys = torch.as_tensor(y[keep])
         net.train()
         perm = torch.randperm(len(xs))
         total = 0.0
@@ -327,7 +353,12 @@ def spec_for(
         envelope=trained.envelope,
         scaling={
             "input": "minmax(-1,1) on clean training windows",
-            "output": "minmax(-1,1) on training targets",
+            "output": (
+                f"quantiles {cfg['train']['output_quantile']:g}-{1 - cfg['train']['output_quantile']:g} "
+                "of training targets to (-1,1)"
+                if cfg["train"]["output_quantile"] > 0
+                else "minmax(-1,1) on training targets"
+            ),
         },
         provenance={
             "simulator": None if "lab" in cfg["data"] else ikid.SIMULATOR,
