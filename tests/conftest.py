@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import locale
 import sys
 from pathlib import Path
 
@@ -88,6 +89,17 @@ def marker_frames(n: int, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     q = 0.4 * np.sin(np.linspace(0, 3, n)[:, None] * rng.uniform(1, 3, 3) + rng.uniform(0, 6, 3))
     return ikid.forward_markers(q, 0.3).astype(np.float32)
+
+
+@pytest.fixture(autouse=True)
+def _locale_kept():
+    """Puts the process's locale back after each test: biorbd sets LC_ALL to "C" when it loads a
+    model, and every later ``open()`` without an encoding then read ASCII (about 20 tests of
+    other files failed reading UTF-8 after tests/test_exam.py)."""
+    before = locale.setlocale(locale.LC_ALL)
+    yield
+    if locale.setlocale(locale.LC_ALL) != before:
+        locale.setlocale(locale.LC_ALL, before)
 
 
 @pytest.fixture
