@@ -1755,6 +1755,28 @@ mod tests {
     }
 
     #[test]
+    fn sides_and_methods_are_named_as_files_and_the_command_line_write_them() {
+        // Calibration files and maps record these names; a reader takes them back by name.
+        assert_eq!((Side::Right.name(), Side::Left.name()), ("right", "left"));
+        for side in [Side::Right, Side::Left] {
+            assert_eq!(Side::from_name(side.name()).unwrap(), side);
+        }
+        let err = Side::from_name("up").unwrap_err().to_string();
+        assert!(err.contains(r#"is "up", expected "right" or "left""#), "{err}");
+        let names = [
+            (Method::BodyModel, "body_model"),
+            (Method::Matrices, "matrices"),
+            (Method::Movements, "movements"),
+            (Method::Landmarks, "landmarks"),
+            (Method::Neutral, "neutral"),
+            (Method::Functional, "functional"),
+        ];
+        for (method, name) in names {
+            assert_eq!(method.name(), name);
+        }
+    }
+
+    #[test]
     fn a_refused_left_frame_is_left_as_it_came() {
         let cal = Calibration { side: Side::Left, ..Calibration::body_model() };
         let mut frame = vec![0.0f32; MARKER_FRAME_LEN];
