@@ -153,6 +153,11 @@ pub struct Tracker {
     /// The same estimate from the data alone (no initial guess): what the refiner is told.
     data_variance: [f64; N_HAND],
     noise_samples: [f64; N_HAND],
+    /// Mean square of the hand markers' residual to the rigid fit of the hand's template, over
+    /// about [`MISFIT_MEMORY_S`](variance::MISFIT_MEMORY_S) (calibrated hand only): white noise
+    /// and the template's misfit (skin sliding with the posture) together.
+    fit_residual_ms: f64,
+    fit_residual_samples: f64,
     frames: usize,
     refiner: Option<Stream>,
     /// Per segment: its rigid shape, as learned.
@@ -234,6 +239,8 @@ impl Tracker {
             noise_variance: [0.0; N_HAND],
             data_variance: [0.0; N_HAND],
             noise_samples: [0.0; N_HAND],
+            fit_residual_ms: 0.0,
+            fit_residual_samples: 0.0,
             frames: 0,
             refiner: None,
             shapes: [RigidShape::new(); 2],
@@ -268,6 +275,8 @@ impl Tracker {
         self.noise_variance = [self.settings.initial_marker_noise.powi(2); N_HAND];
         self.data_variance = [0.0; N_HAND];
         self.noise_samples = [0.0; N_HAND];
+        self.fit_residual_ms = 0.0;
+        self.fit_residual_samples = 0.0;
         self.frames = 0;
         self.shapes = [RigidShape::new(); 2];
         self.forearm_frame = 0;

@@ -21,6 +21,9 @@ pub(super) const PRIOR_FRAMES: f64 = 10.0;
 /// inflate the noise estimate (a frame 1 km off made it 18 m), while a real rise in noise is
 /// still learned, at most ×25 per memory length.
 pub(super) const NOISE_CLIP: f64 = 25.0;
+/// Memory of the hand template's misfit estimate, s: skin slides with the posture, so the misfit
+/// changes as fast as the posture does, and a second holds enough frames at any lab's rate.
+pub const MISFIT_MEMORY_S: f64 = 1.0;
 
 impl Tracker {
     /// Each hand marker coordinate's current noise estimate (standard deviation, m), in frame
@@ -50,6 +53,12 @@ impl Tracker {
     pub(super) fn learn_noise(&mut self, hand: &[f64; N_HAND], index: usize) {
         let relative = self.relative_hand();
         let now = if relative { self.fit_residual(hand, index).unwrap_or([f64::NAN; N_HAND]) } else { *hand };
+        if relative && now.iter().all(|r| r.is_finite()) {
+            let sample = now.iter().map(|r| r * r).sum::<f64>() / N_HAND as f64;
+            let w = (1.0 / (self.fit_residual_samples + 1.0)).max(1.0 / (MISFIT_MEMORY_S * self.settings.rate_hz));
+            self.fit_residual_ms += w * (sample - self.fit_residual_ms);
+            self.fit_residual_samples += 1.0;
+        }
         if self.history_len == 3 {
             let d3: [f64; N_HAND] = std::array::from_fn(|i| {
                 let [a, b, c] = [self.history[0][i], self.history[1][i], self.history[2][i]];
@@ -72,6 +81,18 @@ impl Tracker {
         }
         self.history = [now, self.history[0], self.history[1]];
         self.history_len = (self.history_len + 1).min(3);
+    }
+
+    /// The variance per hand marker coordinate by which the hand's template misses the markers
+    /// beyond their white noise `noise_variance` (0 for a template that fits): skin markers whose
+    /// shape changes with the posture. The fit's residual keeps [`FIT_RESIDUAL_DOF`] of the nine
+    /// coordinates' degrees of freedom, so a coordinate's misfit is its mean square times
+    /// 9 / [`FIT_RESIDUAL_DOF`].
+    pub(super) fn template_misfit_variance(&self, noise_variance: f64) -> f64 {
+        if self.fit_residual_samples < 1.0 {
+            return 0.0;
+        }
+        (self.fit_residual_ms * N_HAND as f64 / FIT_RESIDUAL_DOF - noise_variance).max(0.0)
     }
 
     fn add_noise_sample(&mut self, i: usize, sample: f64) {
