@@ -32,6 +32,7 @@ from ikid.interop.opensim import marker_positions  # noqa: E402
 from studies.exam import exam  # noqa: E402
 from studies.exam import markers as MK  # noqa: E402
 from studies.exam.biomod import write_biomod  # noqa: E402
+from studies.exam.lab_biomod import isb_forearm, to_ikid, write_lab_biomod  # noqa: E402
 from studies.exam.models import MODELS, build_osim  # noqa: E402
 from studies.exam.truth import Mapping  # noqa: E402
 
@@ -133,3 +134,64 @@ def test_torque_mapping_is_virtual_work():
     dq = np.array([[1e-5, -2e-5, 1.5e-5]])
     d_ikid = mapping.angles(q + dq) - mapping.angles(q)
     assert float(np.sum(tau * d_ikid)) == pytest.approx(float(np.sum(tau_model * dq)), rel=1e-4)
+
+
+def _rot(axis, angle: float) -> np.ndarray:
+    """Rodrigues: the rotation by ``angle`` about the unit ``axis`` (independent of every module)."""
+    a = np.asarray(axis, float)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def test_lab_biomod_turns_the_hand_by_ikids_convention_and_weighs_it(tmp_path):
+    """The lab-model peer: a static trial's markers, turned by ikid's ``Rot(−y, s_p) Rot(z, e_f)
+    Rot(x, ad_ab)`` about the mid-styloids in the landmarks' ISB frame, are where biorbd puts them
+    at the coordinates ``to_ikid`` maps back to those angles; at rest its inverse dynamics is the
+    hand's weight's moment about each axis."""
+    biorbd = pytest.importorskip(
+        "biorbd", reason="the exam's EKF peer needs biorbd (pip install 'ikid[eval]')"
+    )
+    rng = np.random.default_rng(5)
+    axis = rng.normal(size=3)
+    turn = _rot(axis / np.linalg.norm(axis), 1.1)
+    origin = np.array([0.2, 1.0, -0.3])
+    local_lms = {  # a right forearm in its ISB frame: y proximal, z radial
+        "lateral_epicondyle": [0.0, 0.26, 0.03],
+        "medial_epicondyle": [0.0, 0.26, -0.03],
+        "radial_styloid": [0.0, 0.0, 0.03],
+        "ulnar_styloid": [0.0, 0.0, -0.03],
+    }
+    local_mk = np.array(
+        [
+            [0.01, 0.02, 0.03],
+            [0.01, 0.02, -0.03],
+            [-0.02, 0.15, 0.0],
+            [0.01, -0.07, 0.03],
+            [0.01, -0.07, -0.03],
+            [-0.02, -0.03, 0.0],
+        ]
+    )
+    labels = ["A", "B", "C", "D", "E", "F"]
+    lab = lambda p: origin + turn @ np.asarray(p, float)  # noqa: E731
+    frame = np.concatenate([lab(p) for p in local_mk] + [lab(local_lms[k]) for k in MK.LANDMARKS])
+    static = np.tile(frame, (5, 1))
+    mass = 0.45
+    bio = biorbd.Model(
+        str(write_lab_biomod(static, labels, {"D", "E", "F"}, MK.LANDMARKS, mass, tmp_path / "l.bioMod"))
+    )
+    f, centre, _ = isb_forearm({k: lab(v) for k, v in local_lms.items()})
+    np.testing.assert_allclose(f, turn, atol=1e-12)
+    for s_p, e_f, ad in rng.uniform(-0.8, 0.8, (5, 3)):
+        r = _rot([0, -1, 0], s_p) @ _rot([0, 0, 1], e_f) @ _rot([1, 0, 0], ad)
+        want = [lab(p) for p in local_mk[:3]] + [lab(r @ p) for p in local_mk[3:]]
+        q, _ = to_ikid(np.array([s_p, e_f, ad]), np.zeros(3))  # the map is its own inverse
+        got = [m.to_array() for m in bio.markers(q)]
+        np.testing.assert_allclose(got, want, atol=1e-9)
+    # At rest in neutral: τ_j = (r_com × m g) · axis_j (the hand's weight held by the joint).
+    q0 = np.zeros(3)
+    tau = bio.InverseDynamics(q0, q0, q0).to_array()
+    g = np.array([0.0, -9.80665, 0.0])
+    r_com = turn @ np.array([0.0, -0.79 * 86.2 / 268.9 * 0.26, 0.0])
+    moment = np.cross(r_com, mass * g)  # about the mid-styloids, where all three axes cross
+    want_tau = -np.array([moment @ turn[:, 1], moment @ turn[:, 2], moment @ turn[:, 0]])
+    np.testing.assert_allclose(tau, want_tau, atol=1e-9)
