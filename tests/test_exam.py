@@ -184,12 +184,14 @@ def test_lab_biomod_turns_the_hand_by_ikids_convention_and_weighs_it(tmp_path):
     for s_p, e_f, ad in rng.uniform(-0.8, 0.8, (5, 3)):
         r = _rot([0, -1, 0], s_p) @ _rot([0, 0, 1], e_f) @ _rot([1, 0, 0], ad)
         want = [lab(p) for p in local_mk[:3]] + [lab(r @ p) for p in local_mk[3:]]
-        q, _ = to_ikid(np.array([s_p, e_f, ad]), np.zeros(3))  # the map is its own inverse
+        wrist, _ = to_ikid(np.array([s_p, e_f, ad]), np.zeros(3))  # the map is its own inverse
+        q = np.concatenate([np.zeros(6), wrist])  # the forearm where the static trial had it
         got = [m.to_array() for m in bio.markers(q)]
         np.testing.assert_allclose(got, want, atol=1e-9)
     # At rest in neutral: τ_j = (r_com × m g) · axis_j (the hand's weight held by the joint).
-    q0 = np.zeros(3)
-    tau = bio.InverseDynamics(q0, q0, q0).to_array()
+    q0 = np.zeros(9)
+    _, tau = to_ikid(q0, bio.InverseDynamics(q0, q0, q0).to_array())
+    tau = tau * np.array([-1.0, 1.0, 1.0])  # back to the model's own coordinates
     g = np.array([0.0, -9.80665, 0.0])
     r_com = turn @ np.array([0.0, -0.79 * 86.2 / 268.9 * 0.26, 0.0])
     moment = np.cross(r_com, mass * g)  # about the mid-styloids, where all three axes cross

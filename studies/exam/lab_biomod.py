@@ -7,7 +7,9 @@ would"):
 
 * the forearm's frame from the static trial's four probed landmarks, ISB style (y from the
   mid-styloids to the mid-epicondyles, x = y × (ulnar → radial styloid), z = x × y; origin at the
-  mid-styloids, taken as the wrist's centre), fixed in the lab (the exam's forearm does not move);
+  mid-styloids, taken as the wrist's centre), free in the lab (six degrees of freedom, as ikid
+  tracks it: a lab's forearm moves, and that the exam's stands still is not something the peer
+  is told);
 * the hand turning about that centre by the ISB joint coordinate system's three rotations,
   ``rotations yzx`` (R = Ry(q0) Rz(q1) Rx(q2)): with ikid's convention ``R = Rot(−y, s_p)
   Rot(z, e_f) Rot(x, ad_ab)`` that is ``s_p = −q0, e_f = q1, ad_ab = q2``, the truth's own
@@ -76,11 +78,8 @@ def write_lab_biomod(
     inertia = np.diag([hand_mass * (DE_LEVA_HAND_GYRATION[a] * hand_len) ** 2 for a in "xyz"])
     lines = ["version 4", "", "// an exam subject as a biorbd user builds it (studies/exam/lab_biomod.py)"]
     lines += [f"gravity {_v(GRAVITY)}", "", "segment forearm", "    rtinmatrix 1", "    rt"]
-    lines += [f"        {_v(list(f[i]) + [centre[i]])}" for i in range(3)] + [
-        "        0 0 0 1",
-        "endsegment",
-        "",
-    ]
+    lines += [f"        {_v(list(f[i]) + [centre[i]])}" for i in range(3)] + ["        0 0 0 1"]
+    lines += ["    translations xyz", "    rotations xyz", "endsegment", ""]
     lines += ["segment hand", "    parent forearm", "    rotations yzx"]
     lines += ["    rangesQ", "        -3.14159 3.14159", "        -1.5 1.5", "        -3.14159 3.14159"]
     lines += [f"    mass {hand_mass:.12g}", f"    com {_v(com)}", "    inertia"]
@@ -101,7 +100,8 @@ def write_lab_biomod(
 
 
 def to_ikid(q: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The lab model's coordinates (q0, q1, q2 about y, z, x) and generalized forces in ikid's
-    convention: s_p = −q0 (its torque −τ0), e_f = q1, ad_ab = q2."""
+    """The lab model's wrist coordinates (its last three, after the forearm's six: q0, q1, q2
+    about y, z, x) and their generalized forces in ikid's convention: s_p = −q0 (its torque
+    −τ0), e_f = q1, ad_ab = q2."""
     sign = np.array([-1.0, 1.0, 1.0])
-    return q * sign, tau * sign
+    return q[..., -3:] * sign, tau[..., -3:] * sign

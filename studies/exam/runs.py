@@ -148,7 +148,8 @@ def run_ikid(
 
 def run_ekf(biomod: Path, markers: np.ndarray, rate: float, id_from: int = 0) -> dict:
     """biorbd's EKF, frame by frame, and its inverse dynamics on the frames from ``id_from`` (the
-    scored ones: the rest would only cost time); NaN markers are occluded."""
+    scored ones: the rest would only cost time); NaN markers are occluded. Every coordinate of
+    the model, in its order."""
     import biorbd
 
     model = biorbd.Model(str(biomod))
@@ -158,8 +159,8 @@ def run_ekf(biomod: Path, markers: np.ndarray, rate: float, id_from: int = 0) ->
         biorbd.GeneralizedVelocity(model),
         biorbd.GeneralizedAcceleration(model),
     )
-    n = len(markers)
-    out = {k: np.empty((n, 3)) for k in ("q", "tau")}
+    n, dof = len(markers), model.nbQ()
+    out = {k: np.empty((n, dof)) for k in ("q", "tau")}
     start = time.perf_counter()
     for i in range(n):
         kalman.reconstructFrame(model, markers[i], q, qd, qdd)
