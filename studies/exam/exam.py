@@ -632,6 +632,11 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="one model, one pose, short trials")
     parser.add_argument("--keep", metavar="DIR", help="keep every generated file in DIR")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    parser.add_argument(
+        "--layouts",
+        default=",".join(MK.LAYOUTS),
+        help=f"marker layouts to run (default {','.join(MK.LAYOUTS)})",
+    )
     parser.add_argument("--doc", default=str(ROOT / "docs" / "exam.md"), help="page to write")
     parser.add_argument("--json", default=str(ROOT / "target" / "exam.json"), help="numbers to write")
     parser.add_argument("--render", metavar="JSON", help="only rewrite the page from a run's numbers")
@@ -658,7 +663,7 @@ def main() -> None:
         }
         for m in models
         for p in poses
-        for lay in MK.LAYOUTS
+        for lay in args.layouts.split(",")
     ]
     rows: list[dict] = []
     # spawn: the parent may hold the core's threads, which fork does not copy safely.
