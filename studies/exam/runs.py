@@ -230,3 +230,33 @@ def run_opensim(osim: Path, trc: Path, n: int, rate: float, first: int) -> dict:
         tau[first:] = inverse_dynamics(osim, qf, spline(t, 1), spline(t, 2))
         id_seconds = time.perf_counter() - start
     return {"q": q, "tau": tau, "seconds": res.seconds, "id_seconds": id_seconds, "frames": len(res.q)}
+
+
+def track_bare(
+    folder: Path, task: Path, calibration: Path, rate: float, scales: tuple[float, float], n: int
+) -> np.ndarray | None:
+    """``ikid track --refiner none`` on ``task`` with ``calibration``: its angles on every frame
+    (NaN where none), or None when the command wrote nothing."""
+    stem = folder / f"bare_{calibration.stem}_{task.stem}"
+    done, _ = ikid_cmd(
+        [
+            "track",
+            str(task),
+            "-o",
+            str(stem),
+            "--calibration",
+            str(calibration),
+            "--refiner",
+            "none",
+            "--length-scale",
+            f"{scales[0]:.6f}",
+            "--mass-scale",
+            f"{scales[1]:.6f}",
+            "--map",
+            str(folder / "map.toml"),
+        ]
+    )
+    mot = Path(str(stem) + ".mot")
+    if done.returncode not in (0, 3) or not mot.exists():
+        return None
+    return read_rows(mot, coordinate_names(), n, rate)["values"]
