@@ -651,6 +651,10 @@ def main() -> None:
     parser.add_argument("--keep", metavar="DIR", help="keep every generated file in DIR")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     parser.add_argument(
+        "--poses",
+        help="shoulder poses to run, degrees (default: all; --quick: the first)",
+    )
+    parser.add_argument(
         "--layouts",
         default=",".join(MK.LAYOUTS),
         help=f"marker layouts to run (default {','.join(MK.LAYOUTS)})",
@@ -667,6 +671,10 @@ def main() -> None:
     start = time.perf_counter()
     models = list(MODELS)[:1] if args.quick else list(MODELS)
     poses = POSES_DEG[:1] if args.quick else POSES_DEG
+    if args.poses:
+        poses = tuple(float(p) for p in args.poses.split(","))
+        if unknown := [p for p in poses if p not in POSES_DEG]:
+            parser.error(f"--poses: {unknown} not among the exam's poses {POSES_DEG}")
     durations = QUICK if args.quick else {"task": TASK_S, "static": STATIC_S, "functional": FUNCTIONAL_S}
     work = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="ikid-exam-"))
     jobs = [
