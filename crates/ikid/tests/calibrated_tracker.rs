@@ -356,11 +356,13 @@ fn a_calibrated_tracker_filters_noise_through_rests_drifts_and_bursts() {
             assert_eq!(cal.implausible, 0, "{what}: frames flagged implausible");
             for (rest, learned) in cal.learned.iter().enumerate() {
                 for k in 0..9 {
-                    // No coordinate under-read (that is what inflated the filter), and the hand's
-                    // noise read as its RMS over the coordinates (one variance for the hand).
+                    // No coordinate under-read (that is what inflated the filter), nor read over
+                    // 1.5× the larger of its own noise and the hand's RMS: the fit residual's one
+                    // variance for the hand, raised per coordinate by its own third differences
+                    // where they show more (variance::RAW_NOISE_CAP).
                     let (own, rms) = (learned[k] / true_std[k], learned[k] / rms_true);
                     assert!(
-                        own > 0.5 && rms > 1.0 / 1.5 && rms < 1.5,
+                        own > 0.5 && rms > 1.0 / 1.5 && learned[k] < 1.5 * true_std[k].max(rms_true),
                         "{what}, rest {rest}, hand coordinate {k}: learned {:.3} mm, true {:.3} mm, the hand's RMS {:.3} mm",
                         learned[k] * 1e3,
                         true_std[k] * 1e3,

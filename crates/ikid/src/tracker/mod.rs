@@ -149,6 +149,15 @@ pub struct Tracker {
     /// The last three frames' hand marker coordinates, newest first (NaN where missing).
     history: [[f64; N_HAND]; 3],
     history_len: usize,
+    /// The last three frames' hand marker coordinates as measured (the calibrated hand's
+    /// `history` holds its fit residual instead), newest first.
+    raw_history: [[f64; N_HAND]; 3],
+    /// Running means of each coordinate's own third-difference noise sample and of the fit
+    /// residual's (calibrated hand), and how many went in: their ratio corrects the residual's
+    /// blindness normal to the markers' plane (see [`variance::RAW_NOISE_CAP`]).
+    own_noise: [f64; N_HAND],
+    fit_noise: f64,
+    own_noise_samples: f64,
     noise_variance: [f64; N_HAND],
     /// The same estimate from the data alone (no initial guess): what the refiner is told.
     data_variance: [f64; N_HAND],
@@ -236,6 +245,10 @@ impl Tracker {
             forearm: None,
             history: [[f64::NAN; N_HAND]; 3],
             history_len: 0,
+            raw_history: [[f64::NAN; N_HAND]; 3],
+            own_noise: [0.0; N_HAND],
+            fit_noise: 0.0,
+            own_noise_samples: 0.0,
             noise_variance: [0.0; N_HAND],
             data_variance: [0.0; N_HAND],
             noise_samples: [0.0; N_HAND],
@@ -277,6 +290,9 @@ impl Tracker {
         self.noise_samples = [0.0; N_HAND];
         self.fit_residual_ms = 0.0;
         self.fit_residual_samples = 0.0;
+        self.own_noise = [0.0; N_HAND];
+        self.fit_noise = 0.0;
+        self.own_noise_samples = 0.0;
         self.frames = 0;
         self.shapes = [RigidShape::new(); 2];
         self.forearm_frame = 0;
