@@ -699,6 +699,151 @@ def left_arm(folder: Path, work: Path, right: dict, log: list[str]) -> dict:
     return out
 
 
+# --- Plug-in Gait: one hand marker, against Vicon's own wrist angles ---------------------------
+
+PIG_TRIAL, PIG_STATIC = "pycgm_movement.c3d", "pycgm_static.c3d"
+
+
+def pig_map(side: str) -> str:
+    """Plug-in Gait's arm as ikid's one-marker-hand set: the wrist bar on the styloids (markers
+    and landmarks), ELB (lateral epicondyle) the forearm's third marker and its one elbow
+    landmark (named for both epicondyles: the long axis ends there), FIN the hand's one marker."""
+    p = side[0].upper()
+    return "\n".join(
+        [
+            f'side = "{side}"',
+            "[markers]",
+            f'RSP = "{p}WRA"',
+            f'USP = "{p}WRB"',
+            f'FAP = "{p}ELB"',
+            f'HND = "{p}FIN"',
+            "[landmarks]",
+            f'radial_styloid = "{p}WRA"',
+            f'ulnar_styloid = "{p}WRB"',
+            f'lateral_epicondyle = "{p}ELB"',
+            f'medial_epicondyle = "{p}ELB"',
+            "",
+        ]
+    )
+
+
+def vicon_wrist(folder: Path, trial: str, side: str) -> np.ndarray:
+    """Vicon's wrist angles of ``trial`` (pycgm_movement or pycgm_static) converted as the data's
+    README says: R = Ry(X)·Rx(Y)·Rz(Z) (left: Y and Z negated) decomposed Z-Y'-X'' gives
+    (pronation, flexion, -ulnar deviation) (left: -pronation, flexion, ulnar deviation).
+    Returns (pronation, flexion, ulnar deviation) in degrees: the reference's s_p/e_f/ad_ab."""
+    t = np.genfromtxt(folder / "reference" / f"{trial}_vicon_wrist.csv", delimiter=",", names=True)
+    p = side[0].upper()
+    x, y, z = (np.radians(t[f"{p}_{k}"]) for k in ("flex", "dev", "rot"))
+    sign = 1.0 if p == "R" else -1.0
+    r = _rot(1, x) @ _rot(0, sign * y) @ _rot(2, sign * z)
+    a1 = np.arctan2(r[:, 1, 0], r[:, 0, 0])
+    a2 = -np.arcsin(np.clip(r[:, 2, 0], -1.0, 1.0))
+    a3 = np.arctan2(r[:, 2, 1], r[:, 2, 2])
+    return np.degrees(np.stack([sign * a1, a2, -sign * a3], axis=1))
+
+
+def pig(folder: Path, work: Path, log: list[str]) -> dict:
+    """Both arms of the Plug-in Gait trial: calibrated from the static trial, `ik` and `track`,
+    e_f and ad_ab (the coordinates one hand marker determines) against Vicon's converted wrist
+    angles, each trial's mean removed (the two models place their axes differently)."""
+    from ikid.io.storage import not_determined, read_storage
+
+    trial = folder / PIG_TRIAL
+    out: dict = {"arms": {}}
+    for side in ("right", "left"):
+        mapping = work / f"pig_{side}.toml"
+        mapping.write_text(pig_map(side))
+        cal = work / f"pig_{side}.json"
+        done = run(
+            ["calibrate", "--static", str(folder / PIG_STATIC), "--map", str(mapping), "-o", str(cal)], log
+        )
+        arm: dict = {"calibrate_out": (done.stdout + done.stderr).strip(), "calibrated": done.returncode == 0}
+        vicon = vicon_wrist(folder, "pycgm_movement", side)
+        for path in ("ik", "track"):
+            stem = work / f"pig_{side}_{path}"
+            args = [path, str(trial), "-o", str(stem.with_suffix(".mot") if path == "ik" else stem)]
+            done = run(args + ["--map", str(mapping), "--calibration", str(cal)], log)
+            arm[f"{path}_out"] = (done.stdout + done.stderr).strip()
+            if done.returncode != 0 or not arm["calibrated"]:
+                arm[path] = None
+                continue
+            table = read_storage(stem.with_suffix(".mot"))
+            rows = np.rint(table.time * 120.0).astype(int)
+            q = np.full((len(vicon), 3), np.nan)
+            q[rows, 1] = table.column("ra_wr_e_f")
+            q[rows, 2] = table.column("ra_wr_ad_ab")
+            has = np.isfinite(q[:, 1:]).all(axis=1)
+            rms_by = []
+            for k in (1, 2):
+                a, b = q[has, k] - q[has, k].mean(), vicon[has, k] - vicon[has, k].mean()
+                rms_by.append(float(np.sqrt(np.mean((a - b) ** 2))))
+            arm[path] = {
+                "rms": rms_by,
+                "r": [float(np.corrcoef(q[has, k], vicon[has, k])[0, 1]) for k in (1, 2)],
+                "rows": int(has.sum()),
+                "frames": len(vicon),
+                "columns": list(table.columns),
+                "not_determined": not_determined(table),
+            }
+        out["arms"][side] = arm
+    for path in ("ik", "track"):
+        scores = [a[path] for a in out["arms"].values()]
+        out[path] = float("nan") if any(s is None for s in scores) else max(max(s["rms"]) for s in scores)
+    return out
+
+
+def pig_summary(p: dict) -> list[str]:
+    lines = []
+    for side, arm in p["arms"].items():
+        for path in ("ik", "track"):
+            s = arm[path]
+            if s is None:
+                why = arm[f"{path}_out"].splitlines()[-1] if arm[f"{path}_out"] else ""
+                lines.append(f"pig {side} {path}: FAILED: {why or arm['calibrate_out']}")
+                continue
+            lines.append(
+                f"pig {side} {path}: e_f {s['rms'][0]:.2f}° ad_ab {s['rms'][1]:.2f}° RMS against Vicon, means "
+                f"removed (r {s['r'][0]:.3f}, {s['r'][1]:.3f}); {s['rows']}/{s['frames']} rows; not written: "
+                f"{', '.join(s['not_determined']) or 'none'}"
+            )
+    return lines
+
+
+# --- styloid markers that are also landmarks -----------------------------------------------------
+
+PYOMECA_STYLOIDS = {
+    "RSP": "Daphnee:STYLr",
+    "USP": "Daphnee:STYLu",
+    "FAP": "Daphnee:LARM_ant",
+    "MC2": "Daphnee:INDEX",
+    "MC5": "Daphnee:MEDH",
+    "MCB": "Daphnee:LATH",
+}
+
+
+def pyomeca_styloids(folder: Path, work: Path, log: list[str]) -> dict:
+    """pyomeca with the styloid markers STYLr/STYLu as RSP/USP and as the styloid landmarks
+    (one label each for a marker and a landmark), calibrated and scored as `process` does."""
+    base = next(r for r in RECORDINGS if r.name == "pyomeca")
+    rec = Recording(
+        "pyomeca_styloids",
+        base.trial,
+        base.reference,
+        PYOMECA_STYLOIDS,
+        base.landmarks,
+        base.calibration_file,
+    )
+    r = process(rec, folder, work, log)
+    return {
+        "calibrated": r["calibrated"],
+        "calibrate_out": r["calibrate_out"],
+        "ik": r["ik"],
+        "track": r["track"],
+        "geometry": r["geometry"],
+    }
+
+
 # --- report ------------------------------------------------------------------------------------
 
 
