@@ -11,9 +11,11 @@ allows). Scores: geodesic RMS between the hand-in-forearm rotations on the refer
 ``valid`` frames (racing also on ``gimbal_ok``), per-angle RMS, outputs per valid frame.
 Writes ``docs/realdata.md`` and ``docs/realdata/*.png``; the last line printed is
 
-    realdata: pyomeca_ik=<deg> pyomeca_track=<deg> racing_ik=<deg> racing_track=<deg> diverged=<count>
+    realdata: pyomeca_ik=<deg> pyomeca_track=<deg> racing_ik=<deg> racing_track=<deg> pig_ik=<deg>
+              pig_track=<deg> diverged=<count>
 
-(racing on its gimbal_ok frames; diverged = trials and probes whose track output is non-finite or
+(racing on its gimbal_ok frames; pig: the Plug-in Gait trial, both arms, e_f and ad_ab — what its one
+hand marker determines — against Vicon's converted wrist angles, means removed, worst; diverged = trials and probes whose track output is non-finite or
 more than 100° off the reference anywhere, garbage frames included; the left arm if non-finite).
 It also probes the tracker's promises (issue #19 item 3) through `ikid track`: 200 ms gaps of each
 marker, no 360° jumps, garbage bursts flagged and recovered from within 100 ms, refusal when
@@ -705,26 +707,11 @@ PIG_TRIAL, PIG_STATIC = "pycgm_movement.c3d", "pycgm_static.c3d"
 
 
 def pig_map(side: str) -> str:
-    """Plug-in Gait's arm as ikid's one-marker-hand set: the wrist bar on the styloids (markers
-    and landmarks), ELB (lateral epicondyle) the forearm's third marker and its one elbow
-    landmark (named for both epicondyles: the long axis ends there), FIN the hand's one marker."""
-    p = side[0].upper()
-    return "\n".join(
-        [
-            f'side = "{side}"',
-            "[markers]",
-            f'RSP = "{p}WRA"',
-            f'USP = "{p}WRB"',
-            f'FAP = "{p}ELB"',
-            f'HND = "{p}FIN"',
-            "[landmarks]",
-            f'radial_styloid = "{p}WRA"',
-            f'ulnar_styloid = "{p}WRB"',
-            f'lateral_epicondyle = "{p}ELB"',
-            f'medial_epicondyle = "{p}ELB"',
-            "",
-        ]
-    )
+    """Plug-in Gait's arm as ikid ships it (``MarkerMap.plug_in_gait``, what ``ikid map-template``
+    writes for these labels): the wrist bar on the styloids, ELB, FIN the hand's one marker."""
+    from ikid.io import MarkerMap
+
+    return MarkerMap.plug_in_gait(side).to_toml()
 
 
 def vicon_wrist(folder: Path, trial: str, side: str) -> np.ndarray:
@@ -812,36 +799,57 @@ def pig_summary(p: dict) -> list[str]:
 
 # --- styloid markers that are also landmarks -----------------------------------------------------
 
+# Two of pyomeca's maps whose markers are also landmarks: the styloid markers both in the forearm's
+# cluster (STYLr/STYLu as RSP/USP), and STYLr alone there with two markers on the radius. The styloids
+# sit on two bones that turn about each other in pronation, and ikid's technical frame (Gram-Schmidt
+# from RSP towards USP) takes the three as one rigid body: the first reads 12.8° off (an ISB frame
+# built anew each frame from the four landmarks, 8.4°), the second 1.55° (the reference's own cluster
+# 1.96°).
 PYOMECA_STYLOIDS = {
-    "RSP": "Daphnee:STYLr",
-    "USP": "Daphnee:STYLu",
-    "FAP": "Daphnee:LARM_ant",
-    "MC2": "Daphnee:INDEX",
-    "MC5": "Daphnee:MEDH",
-    "MCB": "Daphnee:LATH",
+    "both styloids as RSP/USP": {
+        "RSP": "Daphnee:STYLr",
+        "USP": "Daphnee:STYLu",
+        "FAP": "Daphnee:LARM_ant",
+    },
+    "radial styloid as RSP": {
+        "RSP": "Daphnee:STYLr",
+        "USP": "Daphnee:LARM_ant",
+        "FAP": "Daphnee:WRIST",
+    },
 }
 
 
 def pyomeca_styloids(folder: Path, work: Path, log: list[str]) -> dict:
-    """pyomeca with the styloid markers STYLr/STYLu as RSP/USP and as the styloid landmarks
-    (one label each for a marker and a landmark), calibrated and scored as `process` does."""
+    """pyomeca with styloid markers in the forearm's cluster that are also its styloid landmarks
+    (one label for a marker and a landmark), calibrated and scored as `process` does, per map."""
     base = next(r for r in RECORDINGS if r.name == "pyomeca")
-    rec = Recording(
-        "pyomeca_styloids",
-        base.trial,
-        base.reference,
-        PYOMECA_STYLOIDS,
-        base.landmarks,
-        base.calibration_file,
+    out = {}
+    for k, (name, forearm) in enumerate(PYOMECA_STYLOIDS.items()):
+        markers = {**base.markers, **forearm}
+        rec = Recording(
+            f"pyomeca_styloids{k}", base.trial, base.reference, markers, base.landmarks, base.trial
+        )
+        r = process(rec, folder, work, log)
+        out[name] = {key: r[key] for key in ("calibrated", "calibrate_out", "ik", "track", "geometry")}
+        out[name]["markers"] = forearm
+    return out
+
+
+def styloid_line(styloids: dict) -> str:
+    parts = []
+    for name, st in styloids.items():
+        used = ", ".join(f"{m}={lab.split(':')[-1]}" for m, lab in st["markers"].items())
+        if not st["calibrated"]:
+            parts.append(f"{name} ({used}): calibration FAILED: {st['calibrate_out'].splitlines()[-1]}")
+            continue
+        ik, tr, ge = st["ik"], st["track"], st["geometry"]
+        parts.append(
+            f"{name} ({used}): ik {fmt(ik.rms_valid if ik else np.nan)}°, track "
+            f"{fmt(tr.rms_valid if tr else np.nan)}°, calibration check {fmt(ge.rms_valid if ge else np.nan)}°"
+        )
+    return "pyomeca, styloid markers that are also landmarks (geodesic RMS, valid frames): " + "; ".join(
+        parts
     )
-    r = process(rec, folder, work, log)
-    return {
-        "calibrated": r["calibrated"],
-        "calibrate_out": r["calibrate_out"],
-        "ik": r["ik"],
-        "track": r["track"],
-        "geometry": r["geometry"],
-    }
 
 
 # --- report ------------------------------------------------------------------------------------
@@ -1081,7 +1089,15 @@ def fallback(r: dict) -> str:
     return f"{beyond}/{rows} ({100 * beyond / rows:.1f} %)" if rows else "-"
 
 
-def write_report(results: list[dict], left: dict, log: list[str], path: Path, seconds: float) -> None:
+def write_report(
+    results: list[dict],
+    left: dict,
+    log: list[str],
+    path: Path,
+    seconds: float,
+    plug_in_gait: dict,
+    styloids: dict,
+) -> None:
     lines = [
         "# ikid on real recordings",
         "",
@@ -1127,6 +1143,29 @@ def write_report(results: list[dict], left: dict, log: list[str], path: Path, se
     for r in results:
         lines += [f"![{r['rec'].name}](realdata/{r['rec'].name}.png)", ""]
     lines += probe_report(results, left)
+    lines += [
+        "## Plug-in Gait: one hand marker, against Vicon's wrist angles",
+        "",
+        "`pycgm_movement.c3d`, both arms, as ikid's one-hand-marker set (`docs/markersets.md`): `WRA`/`WRB` "
+        "as RSP/USP and the styloid landmarks, `ELB` as FAP and the elbow landmark, `FIN` as HND; calibrated "
+        "from `pycgm_static.c3d`. ikid writes e_f and ad_ab and not s_p (the hand's roll is not observed); "
+        "Vicon's angles converted as the data's README says, each trial's mean removed (the two models place "
+        "their axes differently). `pig_ik`/`pig_track` on the last line: the worst of these.",
+        "",
+        "| arm | path | e_f RMS, ° | ad_ab RMS, ° | r e_f / ad_ab | rows | columns not written |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for side, arm in plug_in_gait["arms"].items():
+        for key in ("ik", "track"):
+            sc = arm[key]
+            if sc is None:
+                lines.append(f"| {side} | {key} | failed | | | | |")
+                continue
+            lines.append(
+                f"| {side} | {key} | {sc['rms'][0]:.2f} | {sc['rms'][1]:.2f} | {sc['r'][0]:.3f} / "
+                f"{sc['r'][1]:.3f} | {sc['rows']}/{sc['frames']} | {', '.join(sc['not_determined'])} |"
+            )
+    lines += ["", f"- {styloid_line(styloids)}", ""]
     lines += [
         "## Notes",
         "",
@@ -1182,6 +1221,8 @@ def main(argv: list[str] | None = None) -> int:
         for r in results:
             r["probes"] = probes(r, folder, work, log)
         left = left_arm(folder, work, next(r for r in results if r["rec"].name == "racing"), log)
+        plug_in_gait = pig(folder, work, log)
+        styloids = pyomeca_styloids(folder, work, log)
         log = [entry.replace(str(work), "$WORK").replace(str(folder), "$REALDATA") for entry in log]
         for r in results:
             u = r["probes"]["uncalibrated"]
@@ -1201,6 +1242,9 @@ def main(argv: list[str] | None = None) -> int:
         )
     for line in probe_summary(results, left):
         print(line)
+    for line in pig_summary(plug_in_gait):
+        print(line)
+    print(styloid_line(styloids))
     if args.doc:
         doc = Path(args.doc)
         for r in results:
@@ -1211,7 +1255,7 @@ def main(argv: list[str] | None = None) -> int:
                 next(r for r in results if r["rec"].name == "racing"),
                 doc.parent / "realdata" / "racing_left.png",
             )
-        write_report(results, left, log, doc, time.perf_counter() - t0)
+        write_report(results, left, log, doc, time.perf_counter() - t0, plug_in_gait, styloids)
     by = {r["rec"].name: r for r in results}
     n_div = count_diverged(results, left)
     last = " ".join(
@@ -1219,7 +1263,8 @@ def main(argv: list[str] | None = None) -> int:
         for name in ("pyomeca", "racing")
         for key in ("ik", "track")
     )
-    print(f"realdata: {last} diverged={n_div}")
+    pig_last = f"pig_ik={plug_in_gait['ik']:.2f} pig_track={plug_in_gait['track']:.2f}"
+    print(f"realdata: {last} {pig_last} diverged={n_div}")
     return 0
 
 

@@ -154,6 +154,46 @@ class MarkerMap:
         )
 
     @staticmethod
+    def plug_in_gait(side: str = "right", prefix: str = "") -> MarkerMap:
+        """Plug-in Gait's upper limb (per arm SHO, UPA, ELB, FRM, WRA, WRB, FIN) as ikid's
+        one-hand-marker set: the wrist bar (WRA thumb side, WRB little-finger side) on the
+        styloids as RSP/USP and the styloid landmarks, ELB (lateral epicondyle) as FAP and the
+        elbow's landmark (named for both epicondyles: Plug-in Gait has no medial one), FIN as
+        HND. SHO, UPA and FRM are not used. ``prefix``: the labels' (e.g. ``"Subject:"``)."""
+        p = prefix + {"right": "R", "left": "L"}[side]
+        table = {
+            "side": side,
+            "markers": {
+                "RSP": f"{p}WRA",
+                "USP": f"{p}WRB",
+                "FAP": f"{p}ELB",
+                _native.HAND_POINT[0]: f"{p}FIN",
+            },
+            "landmarks": {
+                "lateral_epicondyle": f"{p}ELB",
+                "medial_epicondyle": f"{p}ELB",
+                "radial_styloid": f"{p}WRA",
+                "ulnar_styloid": f"{p}WRB",
+            },
+        }
+        return MarkerMap.from_dict(table, f"Plug-in Gait, {side} arm")
+
+    @staticmethod
+    def recognise(labels: list[str] | tuple[str, ...], side: str | None = None) -> MarkerMap | None:
+        """The shipped set a file's labels are (Plug-in Gait: WRA, WRB, ELB and FIN of one arm,
+        with or without a ``Subject:`` prefix), as a map of ``side`` (default: the right arm if
+        it is there, else the left); None when no shipped set fits."""
+        for s in [side] if side else ["right", "left"]:
+            letter = {"right": "R", "left": "L"}[s]
+            for label in labels:
+                if label.endswith(f"{letter}WRA"):
+                    prefix = label[: -len(f"{letter}WRA")]
+                    wanted = [f"{prefix}{letter}{m}" for m in ("WRB", "ELB", "FIN")]
+                    if all(w in labels for w in wanted):
+                        return MarkerMap.plug_in_gait(s, prefix)
+        return None
+
+    @staticmethod
     def load(path: str | os.PathLike[str]) -> MarkerMap:
         path = Path(path)
         try:
@@ -257,10 +297,15 @@ class MarkerMap:
         descr = {m[0]: m[2] for m in _native.MARKERS} | {_native.HAND_POINT[0]: _native.HAND_POINT[2]}
         lines = [
             "# ikid marker = the label in your C3D/TRC files",
-            f'side = "{self.side}"  # or "left": the arm these markers are on',
+            f'side = "{self.side}"  # "right" or "left": the arm these markers are on',
             "[markers]",
         ]
         lines += [f'{m} = "{lab}"  # {descr[m]}' for m, lab in self.labels.items()]
+        if self.one_hand_marker:
+            lines.append(
+                f"# one hand marker: {', '.join(self.undetermined)} is not written (the hand's roll is not observed); "
+                "RSP/USP must be on the styloids and FAP on the elbow (docs/markersets.md)"
+            )
         lm_descr = dict(_native.Calibration.LANDMARKS) | dict(_native.Calibration.HAND_LANDMARKS)
         lines += [
             "",
