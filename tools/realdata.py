@@ -15,7 +15,8 @@ Writes ``docs/realdata.md`` and ``docs/realdata/*.png``; the last line printed i
               pig_track=<deg> diverged=<count>
 
 (racing on its gimbal_ok frames; pig: the Plug-in Gait trial, both arms, e_f and ad_ab — what its one
-hand marker determines — against Vicon's converted wrist angles, means removed, worst; diverged = trials and probes whose track output is non-finite or
+hand marker determines — against Vicon's converted wrist angles, means removed, worst;
+diverged = trials and probes whose track output is non-finite or
 more than 100° off the reference anywhere, garbage frames included; the left arm if non-finite).
 It also probes the tracker's promises (issue #19 item 3) through `ikid track`: 200 ms gaps of each
 marker, no 360° jumps, garbage bursts flagged and recovered from within 100 ms, refusal when
@@ -790,7 +791,8 @@ def pig_summary(p: dict) -> list[str]:
                 lines.append(f"pig {side} {path}: FAILED: {why or arm['calibrate_out']}")
                 continue
             lines.append(
-                f"pig {side} {path}: e_f {s['rms'][0]:.2f}° ad_ab {s['rms'][1]:.2f}° RMS against Vicon, means "
+                f"pig {side} {path}: e_f {s['rms'][0]:.2f}° ad_ab {s['rms'][1]:.2f}° RMS against Vicon, "
+                "means "
                 f"removed (r {s['r'][0]:.3f}, {s['r'][1]:.3f}); {s['rows']}/{s['frames']} rows; not written: "
                 f"{', '.join(s['not_determined']) or 'none'}"
             )
@@ -845,7 +847,8 @@ def styloid_line(styloids: dict) -> str:
         ik, tr, ge = st["ik"], st["track"], st["geometry"]
         parts.append(
             f"{name} ({used}): ik {fmt(ik.rms_valid if ik else np.nan)}°, track "
-            f"{fmt(tr.rms_valid if tr else np.nan)}°, calibration check {fmt(ge.rms_valid if ge else np.nan)}°"
+            f"{fmt(tr.rms_valid if tr else np.nan)}°, calibration check "
+            f"{fmt(ge.rms_valid if ge else np.nan)}°"
         )
     return "pyomeca, styloid markers that are also landmarks (geodesic RMS, valid frames): " + "; ".join(
         parts

@@ -143,7 +143,8 @@ class MarkerMap:
             if segment_of[marker] != landmark_segment:
                 raise FileFormatError(
                     f"{source}: label {v!r} is given to marker {marker} (on the {segment_of[marker]}) and to "
-                    f"landmark {k} (on the {landmark_segment}); a marker can be a landmark of its own segment "
+                    f"landmark {k} (on the {landmark_segment}); a marker can be a landmark of its own "
+                    "segment "
                     "only: give the landmark its own label"
                 )
         return MarkerMap(
@@ -219,8 +220,9 @@ class MarkerMap:
             return {}
         label = self.labels[_native.HAND_POINT[0]]
         return {
-            _undetermined_name(): f"the hand is one marker ({_native.HAND_POINT[0]} = {label!r}): its roll about "
-            "its own long axis is not observed, so the rotation about the forearm's axis that the Y-Z-X order "
+            _undetermined_name(): f"the hand is one marker ({_native.HAND_POINT[0]} = {label!r}): its roll "
+            "about its own long axis is not observed, so the rotation about the forearm's axis that the "
+            "Y-Z-X order "
             "gives first is not known; flexion and deviation are the hand's direction in the forearm"
         }
 
@@ -303,7 +305,8 @@ class MarkerMap:
         lines += [f'{m} = "{lab}"  # {descr[m]}' for m, lab in self.labels.items()]
         if self.one_hand_marker:
             lines.append(
-                f"# one hand marker: {', '.join(self.undetermined)} is not written (the hand's roll is not observed); "
+                f"# one hand marker: {', '.join(self.undetermined)} is not written (the hand's roll is not "
+                "observed); "
                 "RSP/USP must be on the styloids and FAP on the elbow (docs/markersets.md)"
             )
         lm_descr = dict(_native.Calibration.LANDMARKS) | dict(_native.Calibration.HAND_LANDMARKS)

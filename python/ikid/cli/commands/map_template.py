@@ -12,7 +12,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "map-template",
         help="print a marker map (TOML) to fill in, listing a file's labels (Plug-in Gait's recognised)",
-        description="Print a marker map to fill in. With a file whose labels are Plug-in Gait's (WRA, WRB, ELB, "
+        description="Print a marker map to fill in. With a file whose labels are Plug-in Gait's "
+        "(WRA, WRB, ELB, "
         "FIN of an arm), the map of that set is printed filled in (docs/markersets.md).",
     )
     p.add_argument("input", nargs="?", help="a .c3d/.trc whose labels to list")
@@ -36,7 +37,8 @@ def run(args: argparse.Namespace) -> int:
         if known is not None:
             other = "left" if known.side == "right" else "right"
             head += (
-                f"# Plug-in Gait labels: the {known.side} arm as ikid's one-hand-marker set (docs/markersets.md); "
+                f"# Plug-in Gait labels: the {known.side} arm as ikid's one-hand-marker set "
+                "(docs/markersets.md); "
                 f"the {other} arm: --side {other}\n"
             )
             text = known.to_toml()
