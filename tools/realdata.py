@@ -11,8 +11,8 @@ allows). Scores: geodesic RMS between the hand-in-forearm rotations on the refer
 ``valid`` frames (racing also on ``gimbal_ok``), per-angle RMS, outputs per valid frame.
 Writes ``docs/realdata.md`` and ``docs/realdata/*.png``; the last line printed is
 
-    realdata: pyomeca_ik=<deg> pyomeca_track=<deg> racing_ik=<deg> racing_track=<deg> pig_ik=<deg>
-              pig_track=<deg> diverged=<count>
+    realdata: pyomeca_ik=<deg> pyomeca_track=<deg> racing_ik=<deg> racing_track=<deg>
+              left_in_range=<%|refused> left_r=<r|refused> pig_ik=<deg> pig_track=<deg> diverged=<count>
 
 (racing on its gimbal_ok frames; pig: the Plug-in Gait trial, both arms, e_f and ad_ab — what its one
 hand marker determines — against Vicon's converted wrist angles, means removed, worst;
@@ -1266,8 +1266,14 @@ def main(argv: list[str] | None = None) -> int:
         for name in ("pyomeca", "racing")
         for key in ("ik", "track")
     )
+    # The racing left arm: refused (nothing written) unless a method gives its forearm's axes.
+    left_last = (
+        "left_in_range=refused left_r=refused"
+        if left["run"] is None
+        else f"left_in_range={100 * left['in_range']:.1f} left_r={left['ef_correlation']:.2f}"
+    )
     pig_last = f"pig_ik={plug_in_gait['ik']:.2f} pig_track={plug_in_gait['track']:.2f}"
-    print(f"realdata: {last} {pig_last} diverged={n_div}")
+    print(f"realdata: {last} {left_last} {pig_last} diverged={n_div}")
     return 0
 
 

@@ -174,7 +174,7 @@ pub const MIN_HAND_POINT_ANGLE_DEG: f64 = 20.0;
 /// either direction within [`MIN_HAND_POINT_ANGLE_DEG`] of the styloid line (the hand's
 /// markers need the forearm's).
 pub fn hand_from_one_marker(frames: &[f64], left: bool) -> crate::Result<Vec<f64>> {
-    if frames.len() % ONE_HAND_MARKER_FRAME_LEN != 0 {
+    if !frames.len().is_multiple_of(ONE_HAND_MARKER_FRAME_LEN) {
         return Err(crate::Error::BadArgument {
             what: "frames",
             detail: format!(
@@ -237,7 +237,7 @@ fn one_marker_frames(f: &[f64]) -> OneMarkerFrames {
 /// direction in the forearm rather than the static posture as zero. NaN where the hand's
 /// frame is not determined.
 pub fn one_marker_hand_landmarks(frames: &[f64]) -> crate::Result<Vec<f64>> {
-    if frames.len() % ONE_HAND_MARKER_FRAME_LEN != 0 {
+    if !frames.len().is_multiple_of(ONE_HAND_MARKER_FRAME_LEN) {
         return Err(crate::Error::BadArgument {
             what: "frames",
             detail: format!(
