@@ -175,3 +175,12 @@ def test_one_hand_marker_frames_are_the_cores_virtual_markers(tmp_path):
     path = write_arm(tmp_path / "s.trc", still, 100.0)
     with pytest.raises(ikid.InputError, match="no frame gives the hand's direction from its one marker"):
         io.read_markers(path).frames(MarkerMap.plug_in_gait("right"))
+
+
+def test_a_maps_labels_come_in_frame_order_whatever_order_it_was_given(tmp_path):
+    positions, _, _ = one_marker_arm(20, 100.0, 4)
+    path = write_arm(tmp_path / "t.trc", positions, 100.0)
+    data = io.read_markers(path)
+    given = MarkerMap({"HND": "RFIN", "FAP": "RELB", "USP": "RWRB", "RSP": "RWRA"}, "reversed")
+    assert given.labels_in_ikid_order(data) == ["RWRA", "RWRB", "RELB", "RFIN"]
+    assert np.allclose(data.frames(given), data.frames(MarkerMap.plug_in_gait("right")), equal_nan=True)

@@ -208,6 +208,12 @@ class MarkerMap:
             return f"virtual, from {_native.HAND_POINT[0]} {self.labels[_native.HAND_POINT[0]]!r}"
         return self.labels[name]
 
+    def marker_names(self) -> list[str]:
+        """The ikid markers this map names, in frame order: the forearm's three, then the
+        hand's three, or its one (``HND``)."""
+        six = ikid_marker_names()
+        return six[:3] + ([_native.HAND_POINT[0]] if self.one_hand_marker else six[3:])
+
     @property
     def one_hand_marker(self) -> bool:
         """The hand is one marker (``HND``): its three are virtual (``ikid.hand_from_one_marker``)."""
@@ -236,7 +242,7 @@ class MarkerMap:
     def labels_in_ikid_order(self, data: MarkerData) -> list[str]:
         """The file's labels for ikid's markers, in ikid's order; an error lists what the file
         has if any is absent."""
-        wanted = list(self.labels.values())  # forearm's three, then the hand's (three, or one)
+        wanted = [self.labels[m] for m in self.marker_names()]
         absent = [f"{lab} ({m})" for m, lab in self.labels.items() if lab not in data.labels]
         if absent:
             hint = (

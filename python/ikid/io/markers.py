@@ -92,7 +92,7 @@ class MarkerData:
         mapping = mapping or MarkerMap.identity()
         columns = np.concatenate([self.marker(label) for label in mapping.labels_in_ikid_order(self)], axis=1)
         source = self.source or "markers"
-        for j, name in enumerate(mapping.labels):
+        for j, name in enumerate(mapping.marker_names()):
             seen = np.isfinite(columns[:, 3 * j : 3 * j + 3]).all(axis=1)
             if not seen.any():
                 raise _native.InputError(
