@@ -11,9 +11,12 @@ allows). Scores: geodesic RMS between the hand-in-forearm rotations on the refer
 ``valid`` frames (racing also on ``gimbal_ok``), per-angle RMS, outputs per valid frame.
 Writes ``docs/realdata.md`` and ``docs/realdata/*.png``; the last line printed is
 
-    realdata: pyomeca_ik=<deg> pyomeca_track=<deg> racing_ik=<deg> racing_track=<deg> diverged=<count>
+    realdata: pyomeca_ik=<deg> pyomeca_track=<deg> racing_ik=<deg> racing_track=<deg>
+              left_in_range=<%|refused> left_r=<r|refused> pig_ik=<deg> pig_track=<deg> diverged=<count>
 
-(racing on its gimbal_ok frames; diverged = trials and probes whose track output is non-finite or
+(racing on its gimbal_ok frames; pig: the Plug-in Gait trial, both arms, e_f and ad_ab — what its one
+hand marker determines — against Vicon's converted wrist angles, means removed, worst;
+diverged = trials and probes whose track output is non-finite or
 more than 100° off the reference anywhere, garbage frames included; the left arm if non-finite).
 It also probes the tracker's promises (issue #19 item 3) through `ikid track`: 200 ms gaps of each
 marker, no 360° jumps, garbage bursts flagged and recovered from within 100 ms, refusal when
@@ -699,6 +702,159 @@ def left_arm(folder: Path, work: Path, right: dict, log: list[str]) -> dict:
     return out
 
 
+# --- Plug-in Gait: one hand marker, against Vicon's own wrist angles ---------------------------
+
+PIG_TRIAL, PIG_STATIC = "pycgm_movement.c3d", "pycgm_static.c3d"
+
+
+def pig_map(side: str) -> str:
+    """Plug-in Gait's arm as ikid ships it (``MarkerMap.plug_in_gait``, what ``ikid map-template``
+    writes for these labels): the wrist bar on the styloids, ELB, FIN the hand's one marker."""
+    from ikid.io import MarkerMap
+
+    return MarkerMap.plug_in_gait(side).to_toml()
+
+
+def vicon_wrist(folder: Path, trial: str, side: str) -> np.ndarray:
+    """Vicon's wrist angles of ``trial`` (pycgm_movement or pycgm_static) converted as the data's
+    README says: R = Ry(X)·Rx(Y)·Rz(Z) (left: Y and Z negated) decomposed Z-Y'-X'' gives
+    (pronation, flexion, -ulnar deviation) (left: -pronation, flexion, ulnar deviation).
+    Returns (pronation, flexion, ulnar deviation) in degrees: the reference's s_p/e_f/ad_ab."""
+    t = np.genfromtxt(folder / "reference" / f"{trial}_vicon_wrist.csv", delimiter=",", names=True)
+    p = side[0].upper()
+    x, y, z = (np.radians(t[f"{p}_{k}"]) for k in ("flex", "dev", "rot"))
+    sign = 1.0 if p == "R" else -1.0
+    r = _rot(1, x) @ _rot(0, sign * y) @ _rot(2, sign * z)
+    a1 = np.arctan2(r[:, 1, 0], r[:, 0, 0])
+    a2 = -np.arcsin(np.clip(r[:, 2, 0], -1.0, 1.0))
+    a3 = np.arctan2(r[:, 2, 1], r[:, 2, 2])
+    return np.degrees(np.stack([sign * a1, a2, -sign * a3], axis=1))
+
+
+def pig(folder: Path, work: Path, log: list[str]) -> dict:
+    """Both arms of the Plug-in Gait trial: calibrated from the static trial, `ik` and `track`,
+    e_f and ad_ab (the coordinates one hand marker determines) against Vicon's converted wrist
+    angles, each trial's mean removed (the two models place their axes differently)."""
+    from ikid.io.storage import not_determined, read_storage
+
+    trial = folder / PIG_TRIAL
+    out: dict = {"arms": {}}
+    for side in ("right", "left"):
+        mapping = work / f"pig_{side}.toml"
+        mapping.write_text(pig_map(side))
+        cal = work / f"pig_{side}.json"
+        done = run(
+            ["calibrate", "--static", str(folder / PIG_STATIC), "--map", str(mapping), "-o", str(cal)], log
+        )
+        arm: dict = {"calibrate_out": (done.stdout + done.stderr).strip(), "calibrated": done.returncode == 0}
+        vicon = vicon_wrist(folder, "pycgm_movement", side)
+        for path in ("ik", "track"):
+            stem = work / f"pig_{side}_{path}"
+            args = [path, str(trial), "-o", str(stem.with_suffix(".mot") if path == "ik" else stem)]
+            done = run(args + ["--map", str(mapping), "--calibration", str(cal)], log)
+            arm[f"{path}_out"] = (done.stdout + done.stderr).strip()
+            if done.returncode != 0 or not arm["calibrated"]:
+                arm[path] = None
+                continue
+            table = read_storage(stem.with_suffix(".mot"))
+            rows = np.rint(table.time * 120.0).astype(int)
+            q = np.full((len(vicon), 3), np.nan)
+            q[rows, 1] = table.column("ra_wr_e_f")
+            q[rows, 2] = table.column("ra_wr_ad_ab")
+            has = np.isfinite(q[:, 1:]).all(axis=1)
+            rms_by = []
+            for k in (1, 2):
+                a, b = q[has, k] - q[has, k].mean(), vicon[has, k] - vicon[has, k].mean()
+                rms_by.append(float(np.sqrt(np.mean((a - b) ** 2))))
+            arm[path] = {
+                "rms": rms_by,
+                "r": [float(np.corrcoef(q[has, k], vicon[has, k])[0, 1]) for k in (1, 2)],
+                "rows": int(has.sum()),
+                "frames": len(vicon),
+                "columns": list(table.columns),
+                "not_determined": not_determined(table),
+            }
+        out["arms"][side] = arm
+    for path in ("ik", "track"):
+        scores = [a[path] for a in out["arms"].values()]
+        out[path] = float("nan") if any(s is None for s in scores) else max(max(s["rms"]) for s in scores)
+    return out
+
+
+def pig_summary(p: dict) -> list[str]:
+    lines = []
+    for side, arm in p["arms"].items():
+        for path in ("ik", "track"):
+            s = arm[path]
+            if s is None:
+                why = arm[f"{path}_out"].splitlines()[-1] if arm[f"{path}_out"] else ""
+                lines.append(f"pig {side} {path}: FAILED: {why or arm['calibrate_out']}")
+                continue
+            lines.append(
+                f"pig {side} {path}: e_f {s['rms'][0]:.2f}° ad_ab {s['rms'][1]:.2f}° RMS against Vicon, "
+                "means "
+                f"removed (r {s['r'][0]:.3f}, {s['r'][1]:.3f}); {s['rows']}/{s['frames']} rows; not written: "
+                f"{', '.join(s['not_determined']) or 'none'}"
+            )
+    return lines
+
+
+# --- styloid markers that are also landmarks -----------------------------------------------------
+
+# Two of pyomeca's maps whose markers are also landmarks: the styloid markers both in the forearm's
+# cluster (STYLr/STYLu as RSP/USP), and STYLr alone there with two markers on the radius. The styloids
+# sit on two bones that turn about each other in pronation, and ikid's technical frame (Gram-Schmidt
+# from RSP towards USP) takes the three as one rigid body: the first reads 12.8° off (an ISB frame
+# built anew each frame from the four landmarks, 8.4°), the second 1.55° (the reference's own cluster
+# 1.96°).
+PYOMECA_STYLOIDS = {
+    "both styloids as RSP/USP": {
+        "RSP": "Daphnee:STYLr",
+        "USP": "Daphnee:STYLu",
+        "FAP": "Daphnee:LARM_ant",
+    },
+    "radial styloid as RSP": {
+        "RSP": "Daphnee:STYLr",
+        "USP": "Daphnee:LARM_ant",
+        "FAP": "Daphnee:WRIST",
+    },
+}
+
+
+def pyomeca_styloids(folder: Path, work: Path, log: list[str]) -> dict:
+    """pyomeca with styloid markers in the forearm's cluster that are also its styloid landmarks
+    (one label for a marker and a landmark), calibrated and scored as `process` does, per map."""
+    base = next(r for r in RECORDINGS if r.name == "pyomeca")
+    out = {}
+    for k, (name, forearm) in enumerate(PYOMECA_STYLOIDS.items()):
+        markers = {**base.markers, **forearm}
+        rec = Recording(
+            f"pyomeca_styloids{k}", base.trial, base.reference, markers, base.landmarks, base.trial
+        )
+        r = process(rec, folder, work, log)
+        out[name] = {key: r[key] for key in ("calibrated", "calibrate_out", "ik", "track", "geometry")}
+        out[name]["markers"] = forearm
+    return out
+
+
+def styloid_line(styloids: dict) -> str:
+    parts = []
+    for name, st in styloids.items():
+        used = ", ".join(f"{m}={lab.split(':')[-1]}" for m, lab in st["markers"].items())
+        if not st["calibrated"]:
+            parts.append(f"{name} ({used}): calibration FAILED: {st['calibrate_out'].splitlines()[-1]}")
+            continue
+        ik, tr, ge = st["ik"], st["track"], st["geometry"]
+        parts.append(
+            f"{name} ({used}): ik {fmt(ik.rms_valid if ik else np.nan)}°, track "
+            f"{fmt(tr.rms_valid if tr else np.nan)}°, calibration check "
+            f"{fmt(ge.rms_valid if ge else np.nan)}°"
+        )
+    return "pyomeca, styloid markers that are also landmarks (geodesic RMS, valid frames): " + "; ".join(
+        parts
+    )
+
+
 # --- report ------------------------------------------------------------------------------------
 
 
@@ -936,7 +1092,15 @@ def fallback(r: dict) -> str:
     return f"{beyond}/{rows} ({100 * beyond / rows:.1f} %)" if rows else "-"
 
 
-def write_report(results: list[dict], left: dict, log: list[str], path: Path, seconds: float) -> None:
+def write_report(
+    results: list[dict],
+    left: dict,
+    log: list[str],
+    path: Path,
+    seconds: float,
+    plug_in_gait: dict,
+    styloids: dict,
+) -> None:
     lines = [
         "# ikid on real recordings",
         "",
@@ -982,6 +1146,29 @@ def write_report(results: list[dict], left: dict, log: list[str], path: Path, se
     for r in results:
         lines += [f"![{r['rec'].name}](realdata/{r['rec'].name}.png)", ""]
     lines += probe_report(results, left)
+    lines += [
+        "## Plug-in Gait: one hand marker, against Vicon's wrist angles",
+        "",
+        "`pycgm_movement.c3d`, both arms, as ikid's one-hand-marker set (`docs/markersets.md`): `WRA`/`WRB` "
+        "as RSP/USP and the styloid landmarks, `ELB` as FAP and the elbow landmark, `FIN` as HND; calibrated "
+        "from `pycgm_static.c3d`. ikid writes e_f and ad_ab and not s_p (the hand's roll is not observed); "
+        "Vicon's angles converted as the data's README says, each trial's mean removed (the two models place "
+        "their axes differently). `pig_ik`/`pig_track` on the last line: the worst of these.",
+        "",
+        "| arm | path | e_f RMS, ° | ad_ab RMS, ° | r e_f / ad_ab | rows | columns not written |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for side, arm in plug_in_gait["arms"].items():
+        for key in ("ik", "track"):
+            sc = arm[key]
+            if sc is None:
+                lines.append(f"| {side} | {key} | failed | | | | |")
+                continue
+            lines.append(
+                f"| {side} | {key} | {sc['rms'][0]:.2f} | {sc['rms'][1]:.2f} | {sc['r'][0]:.3f} / "
+                f"{sc['r'][1]:.3f} | {sc['rows']}/{sc['frames']} | {', '.join(sc['not_determined'])} |"
+            )
+    lines += ["", f"- {styloid_line(styloids)}", ""]
     lines += [
         "## Notes",
         "",
@@ -1037,6 +1224,8 @@ def main(argv: list[str] | None = None) -> int:
         for r in results:
             r["probes"] = probes(r, folder, work, log)
         left = left_arm(folder, work, next(r for r in results if r["rec"].name == "racing"), log)
+        plug_in_gait = pig(folder, work, log)
+        styloids = pyomeca_styloids(folder, work, log)
         log = [entry.replace(str(work), "$WORK").replace(str(folder), "$REALDATA") for entry in log]
         for r in results:
             u = r["probes"]["uncalibrated"]
@@ -1056,6 +1245,9 @@ def main(argv: list[str] | None = None) -> int:
         )
     for line in probe_summary(results, left):
         print(line)
+    for line in pig_summary(plug_in_gait):
+        print(line)
+    print(styloid_line(styloids))
     if args.doc:
         doc = Path(args.doc)
         for r in results:
@@ -1066,7 +1258,7 @@ def main(argv: list[str] | None = None) -> int:
                 next(r for r in results if r["rec"].name == "racing"),
                 doc.parent / "realdata" / "racing_left.png",
             )
-        write_report(results, left, log, doc, time.perf_counter() - t0)
+        write_report(results, left, log, doc, time.perf_counter() - t0, plug_in_gait, styloids)
     by = {r["rec"].name: r for r in results}
     n_div = count_diverged(results, left)
     last = " ".join(
@@ -1074,7 +1266,14 @@ def main(argv: list[str] | None = None) -> int:
         for name in ("pyomeca", "racing")
         for key in ("ik", "track")
     )
-    print(f"realdata: {last} diverged={n_div}")
+    # The racing left arm: refused (nothing written) unless a method gives its forearm's axes.
+    left_last = (
+        "left_in_range=refused left_r=refused"
+        if left["run"] is None
+        else f"left_in_range={100 * left['in_range']:.1f} left_r={left['ef_correlation']:.2f}"
+    )
+    pig_last = f"pig_ik={plug_in_gait['ik']:.2f} pig_track={plug_in_gait['track']:.2f}"
+    print(f"realdata: {last} {left_last} {pig_last} diverged={n_div}")
     return 0
 
 

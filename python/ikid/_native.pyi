@@ -44,6 +44,10 @@ __all__ = [
     "MASS_SCALE_RANGE",
     "check_marker_units",
     "check_default_placement",
+    "hand_from_one_marker",
+    "one_marker_hand_landmarks",
+    "HAND_POINT",
+    "ONE_HAND_MARKER_UNDETERMINED",
 ]
 
 __version__: str
@@ -219,6 +223,11 @@ class Tracker:
 
 def check_marker_units(frames: _Floats) -> None: ...
 def check_default_placement(frames: _Floats, length_scale: float = 1.0) -> None: ...
+def hand_from_one_marker(frames: _Floats, left: bool = False) -> npt.NDArray[np.float64]: ...
+def one_marker_hand_landmarks(frames: _Floats) -> npt.NDArray[np.float64]: ...
+
+HAND_POINT: tuple[str, str, str]
+ONE_HAND_MARKER_UNDETERMINED: str
 
 MARKER_SPAN_M: tuple[float, float]
 LENGTH_SCALE_RANGE: tuple[float, float]

@@ -16,6 +16,11 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(forward_markers, m)?)?;
     m.add_function(wrap_pyfunction!(body_model, m)?)?;
     m.add_function(wrap_pyfunction!(check_marker_units, m)?)?;
+    m.add_function(wrap_pyfunction!(hand_from_one_marker, m)?)?;
+    m.add_function(wrap_pyfunction!(one_marker_hand_landmarks, m)?)?;
+    let hp = ikid::body::HAND_POINT;
+    m.add("HAND_POINT", (hp.name, hp.segment.name(), hp.description))?;
+    m.add("ONE_HAND_MARKER_UNDETERMINED", COORDINATES[ikid::body::ONE_HAND_MARKER_UNDETERMINED].name)?;
     m.add("MARKER_SPAN_M", ikid::body::MARKER_SPAN_M)?;
     m.add("LENGTH_SCALE_RANGE", ikid::body::LENGTH_SCALE_RANGE)?;
     m.add("MASS_SCALE_RANGE", ikid::body::MASS_SCALE_RANGE)?;
@@ -28,6 +33,33 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 #[pyfunction]
 fn check_marker_units(frames: &Bound<'_, PyAny>) -> PyResult<()> {
     with_f64_rows(frames, "frames", ikid::body::MARKER_FRAME_LEN, |v, _| ikid::body::check_recording_span(v).py_err())
+}
+
+/// Six-marker frames `(n, 18)` from the forearm's three markers and one hand marker `(n, 12)`
+/// (RSP, USP, FAP, HND; metres): the hand's three markers virtual, without a roll of their own
+/// (the core's `body::hand_from_one_marker`; `left` for a left arm).
+#[pyfunction]
+#[pyo3(signature = (frames, left=false))]
+fn hand_from_one_marker<'py>(
+    py: Python<'py>,
+    frames: &Bound<'py, PyAny>,
+    left: bool,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    with_f64_rows(frames, "frames", ikid::body::ONE_HAND_MARKER_FRAME_LEN, |v, n| {
+        let six = ikid::body::hand_from_one_marker(v, left).py_err()?;
+        six.into_pyarray(py).reshape([n, ikid::body::MARKER_FRAME_LEN])
+    })
+}
+
+/// The hand landmarks `(n, 6)` (second, fifth metacarpal head) a one-marker hand stands for,
+/// from `(n, 12)` frames as `hand_from_one_marker` takes them (the core's
+/// `body::one_marker_hand_landmarks`).
+#[pyfunction]
+fn one_marker_hand_landmarks<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    with_f64_rows(frames, "frames", ikid::body::ONE_HAND_MARKER_FRAME_LEN, |v, n| {
+        let points = ikid::body::one_marker_hand_landmarks(v).py_err()?;
+        points.into_pyarray(py).reshape([n, 6])
+    })
 }
 
 /// A subject scaled from the default, each marker moved by `marker_shift` `(6, 3)` (metres,

@@ -129,6 +129,134 @@ pub const MARKERS: [Marker; 6] = [
     },
 ];
 
+/// A hand seen through one marker instead of [`MARKERS`]' three (Plug-in Gait's `FIN`, a
+/// wheelchair glove's single marker): it gives the hand's direction from the wrist, not its
+/// roll about that direction. See [`hand_from_one_marker`].
+pub const HAND_POINT: Marker = Marker {
+    name: "HND",
+    segment: Segment::Hand,
+    description: "one marker on the back of the hand, distally (Plug-in Gait's FIN): the hand's direction, \
+                  not its roll",
+    offset: [-0.010, -0.080, 0.000],
+};
+/// The markers of a one-marker hand's frame: the forearm's three ([`MARKERS`] 0-2), then
+/// [`HAND_POINT`] (12 values).
+pub const ONE_HAND_MARKER_FRAME_LEN: usize = 12;
+/// The coordinate a one-marker hand does not determine: its roll about its own long axis,
+/// which in the Y-Z'-X'' order is the first rotation (`ra_wr_s_p`).
+pub const ONE_HAND_MARKER_UNDETERMINED: usize = 0;
+/// Closest the hand's one marker may be to the mid-styloids, m: nearer, its direction from
+/// the wrist is the markers' noise.
+pub const MIN_HAND_POINT_DISTANCE_M: f64 = 0.03;
+/// Smallest angle between the styloid line (RSP-USP) and the hand's direction, degrees: below
+/// it the two do not span a plane and the virtual hand has no defined orientation.
+pub const MIN_HAND_POINT_ANGLE_DEG: f64 = 20.0;
+
+/// The six-marker frames (`(n, 18)`, [`MARKERS`] order) of frames with three forearm markers
+/// on its landmarks and one hand marker (`(n, 12)`: RSP and USP on the radial and ulnar
+/// styloids — a wrist bar —, FAP on the lateral epicondyle, [`HAND_POINT`]; metres, NaN =
+/// missing), as Plug-in Gait marks an arm. All six are virtual, at the body model's offsets in
+/// each segment's anatomical frame of that instant:
+/// - the forearm's (ISB, as [`crate::calibration`]'s landmark method builds it): origin the
+///   mid-styloids, `y` to FAP (proximal), `x = y × (USP → RSP)` (volar), `z = x × y` (radial).
+///   Built anew each frame, not as a rigid cluster: FAP sits on the humerus and the styloids
+///   turn about the forearm's axis with pronation, so the three are no rigid body;
+/// - the hand's: `y` from the hand marker to the mid-styloids, `z` the forearm's `z` made
+///   perpendicular to `y`, `x = y × z`. It has no roll of its own: a hand flexed by `e` and
+///   deviated by `a` reads `Rot(z, e)·Rot(x, a)` in the forearm, exactly, and the first angle of
+///   the Y-Z'-X'' order ([`ONE_HAND_MARKER_UNDETERMINED`], `ra_wr_s_p`) is not observed: it must
+///   not be reported.
+///
+/// For a left arm (`left`) each `x` is negated, so that the arm mirrored into a right one (lab
+/// `z` negated, as calibration does) has its markers where a right arm's would be. A segment's
+/// virtual markers are NaN in a frame where one of its points is missing or degenerate: FAP
+/// within [`MIN_HAND_POINT_DISTANCE_M`] of the mid-styloids, the hand marker as close, or
+/// either direction within [`MIN_HAND_POINT_ANGLE_DEG`] of the styloid line (the hand's
+/// markers need the forearm's).
+pub fn hand_from_one_marker(frames: &[f64], left: bool) -> crate::Result<Vec<f64>> {
+    if !frames.len().is_multiple_of(ONE_HAND_MARKER_FRAME_LEN) {
+        return Err(crate::Error::BadArgument {
+            what: "frames",
+            detail: format!(
+                "{} values is not whole frames of {ONE_HAND_MARKER_FRAME_LEN} (RSP, USP, FAP and the hand marker)",
+                frames.len()
+            ),
+        });
+    }
+    let mirror = if left { -1.0 } else { 1.0 };
+    let place = |out: &mut Vec<f64>, origin: Vector3<f64>, axes: Option<[Vector3<f64>; 3]>, markers: &[Marker]| {
+        for m in markers {
+            match axes {
+                Some([x, y, z]) => {
+                    let p = origin + x * (mirror * m.offset[0]) + y * m.offset[1] + z * m.offset[2];
+                    out.extend_from_slice(&[p.x, p.y, p.z]);
+                }
+                None => out.extend_from_slice(&[f64::NAN; 3]),
+            }
+        }
+    };
+    let mut out = Vec::with_capacity(frames.len() / ONE_HAND_MARKER_FRAME_LEN * MARKER_FRAME_LEN);
+    for f in frames.chunks_exact(ONE_HAND_MARKER_FRAME_LEN) {
+        let (wrist, forearm, hand, _) = one_marker_frames(f);
+        place(&mut out, wrist, forearm, &MARKERS[..first_marker(Segment::Hand)]);
+        place(&mut out, wrist, hand, &MARKERS[first_marker(Segment::Hand)..]);
+    }
+    Ok(out)
+}
+
+/// One frame of [`hand_from_one_marker`]'s input: the mid-styloids, the forearm's and the
+/// hand's anatomical axes (right-arm construction; None where not determined), the hand marker.
+type OneMarkerFrames = (Vector3<f64>, Option<[Vector3<f64>; 3]>, Option<[Vector3<f64>; 3]>, Vector3<f64>);
+
+fn one_marker_frames(f: &[f64]) -> OneMarkerFrames {
+    // `towards` made perpendicular to the unit `y`, unit; None when within the smallest angle.
+    let across = |towards: Vector3<f64>, y: Vector3<f64>| {
+        let angle = towards.angle(&y).to_degrees();
+        (angle.min(180.0 - angle) >= MIN_HAND_POINT_ANGLE_DEG).then(|| (towards - y * towards.dot(&y)).normalize())
+    };
+    let point = |m: usize| Vector3::new(f[3 * m], f[3 * m + 1], f[3 * m + 2]);
+    let seen = |m: usize| f[3 * m..3 * m + 3].iter().all(|v| v.is_finite());
+    let (rsp, usp, fap, hnd) = (point(0), point(1), point(2), point(3));
+    let wrist = (rsp + usp) / 2.0;
+    let forearm = (seen(0) && seen(1) && seen(2) && (fap - wrist).norm() >= MIN_HAND_POINT_DISTANCE_M)
+        .then(|| (fap - wrist).normalize())
+        .and_then(|y| across(rsp - usp, y).map(|z| [y.cross(&z), y, z]));
+    let hand =
+        forearm.filter(|_| seen(3) && (wrist - hnd).norm() >= MIN_HAND_POINT_DISTANCE_M).and_then(|[_, _, z_f]| {
+            let y = (wrist - hnd).normalize();
+            across(z_f, y).map(|z| [y.cross(&z), y, z])
+        });
+    (wrist, forearm, hand, hnd)
+}
+
+/// The hand's two landmarks (second and fifth metacarpal heads, [`crate::calibration::HAND_LANDMARKS`]
+/// order, `(n, 6)`) a one-marker hand stands for: the hand marker ± 25 mm along the virtual
+/// hand's `z` ([`hand_from_one_marker`]), from frames as that takes them. With the styloids and
+/// FAP as the forearm's landmarks, a calibration then finds both segments at the body model's
+/// placement: the virtual markers are their anatomical frames, and the angles read the hand's
+/// direction in the forearm rather than the static posture as zero. NaN where the hand's
+/// frame is not determined.
+pub fn one_marker_hand_landmarks(frames: &[f64]) -> crate::Result<Vec<f64>> {
+    if !frames.len().is_multiple_of(ONE_HAND_MARKER_FRAME_LEN) {
+        return Err(crate::Error::BadArgument {
+            what: "frames",
+            detail: format!(
+                "{} values is not whole frames of {ONE_HAND_MARKER_FRAME_LEN} (RSP, USP, FAP and the hand marker)",
+                frames.len()
+            ),
+        });
+    }
+    let mut out = Vec::with_capacity(frames.len() / 2);
+    for f in frames.chunks_exact(ONE_HAND_MARKER_FRAME_LEN) {
+        let (_, _, hand, hnd) = one_marker_frames(f);
+        for sign in [1.0, -1.0] {
+            let p = hand.map_or(Vector3::repeat(f64::NAN), |[_, _, z]| hnd + z * (sign * 0.025));
+            out.extend_from_slice(&[p.x, p.y, p.z]);
+        }
+    }
+    Ok(out)
+}
+
 /// Number of markers in a frame.
 pub const N_MARKERS: usize = MARKERS.len();
 /// Values in one marker frame (`x, y, z` per marker).
@@ -499,6 +627,62 @@ pub fn wrist_angles(r: &Rotation3<f64>) -> [f64; 3] {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_one_marker_hand_reads_flexion_and_deviation_exactly_and_no_roll() {
+        // Oracle: an arm whose forearm's anatomical frame is `arm` (lab) with the origin at
+        // `at`, its hand posed by Rot(z, e)·Rot(x, a) in it: the forearm's markers sit at
+        // arm·offset, the hand's at arm·pose·offset; the function sees the styloids, a point on
+        // the long axis and one hand marker straight distal, nothing of the rest.
+        let arm = Rotation3::from_euler_angles(0.3, -0.5, 1.1);
+        let at = Vector3::new(0.2, 1.0, -0.4);
+        for &(e, a) in &[(0.4, 0.2), (-0.6, -0.3), (0.1, 0.35), (0.0, 0.0)] {
+            let lab = |p: Vector3<f64>| at + arm * p;
+            // Styloids off the perpendicular (a real wrist bar), their midpoint the origin.
+            let (rsp, usp) = (lab(Vector3::new(0.0, 0.004, 0.03)), lab(Vector3::new(0.0, -0.004, -0.03)));
+            let fap = lab(Vector3::new(0.0, 0.25, 0.0));
+            let pose =
+                Rotation3::from_axis_angle(&Vector3::z_axis(), e) * Rotation3::from_axis_angle(&Vector3::x_axis(), a);
+            let hnd = lab(pose * Vector3::new(0.0, -0.08, 0.0));
+            let frame: Vec<f64> = [rsp, usp, fap, hnd].iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+            let six = hand_from_one_marker(&frame, false).unwrap();
+            for (k, m) in MARKERS.iter().enumerate() {
+                let local = Vector3::from(m.offset);
+                let want = if k < 3 { lab(local) } else { lab(pose * local) };
+                for c in 0..3 {
+                    assert!((six[3 * k + c] - want[c]).abs() < 1e-12, "{e} {a} marker {k}");
+                }
+            }
+            // The hand's landmarks it stands for give, by the calibration's rule for a hand's own
+            // frame (y from the mid-heads to the mid-styloids, x = y × (fifth → second head)), the
+            // hand's axes.
+            let lm = one_marker_hand_landmarks(&frame).unwrap();
+            let (second, fifth) = (Vector3::new(lm[0], lm[1], lm[2]), Vector3::new(lm[3], lm[4], lm[5]));
+            let y = ((rsp + usp) / 2.0 - (second + fifth) / 2.0).normalize();
+            let x = y.cross(&(second - fifth)).normalize();
+            assert!((y - arm * pose * Vector3::y()).norm() < 1e-12);
+            assert!((x - arm * pose * Vector3::x()).norm() < 1e-12);
+            // A left arm: mirrored (z negated) and built with `left`, then mirrored back, the same.
+            let mirrored: Vec<f64> = frame.iter().enumerate().map(|(i, v)| if i % 3 == 2 { -v } else { *v }).collect();
+            let left = hand_from_one_marker(&mirrored, true).unwrap();
+            for (i, (l, r)) in left.iter().zip(&six).enumerate() {
+                assert!((if i % 3 == 2 { -l } else { *l } - r).abs() < 1e-12);
+            }
+        }
+        // No direction: the hand marker on the wrist, missing, or along the styloid line: the
+        // hand's markers NaN, the forearm's kept; FAP missing: neither.
+        let base = [0.0, 0.0, 0.03, 0.0, 0.0, -0.03, 0.0, 0.2, 0.0];
+        for hnd in [[0.0, -0.01, 0.0], [f64::NAN, 0.0, 0.0], [0.0, 0.0, 0.09]] {
+            let frame: Vec<f64> = base.iter().chain(&hnd).copied().collect();
+            let six = hand_from_one_marker(&frame, false).unwrap();
+            assert!(six[9..].iter().all(|v| v.is_nan()) && six[..9].iter().all(|v| v.is_finite()));
+        }
+        let mut no_fap: Vec<f64> = base.iter().chain(&[0.0, -0.08, 0.0]).copied().collect();
+        no_fap[6] = f64::NAN;
+        assert!(hand_from_one_marker(&no_fap, false).unwrap().iter().all(|v| v.is_nan()));
+        assert!(hand_from_one_marker(&[0.0; 13], false).is_err());
+        assert!(one_marker_hand_landmarks(&[0.0; 13]).is_err());
+    }
+
     use super::*;
     use proptest::prelude::*;
 

@@ -60,16 +60,18 @@ def _process_one(job: tuple[str, dict]) -> dict:
                     progress=opt["progress"],
                     allow_unchecked=opt["allow_unchecked"],
                 )
+        # Coordinates the markers do not determine (a one-marker hand's s_p): not written.
+        undetermined = mapping.undetermined if mapping else {}
         for kind, r in runs.items():
             if len(r.time) == 0:
                 raise ikid.InputError(f"{path}: no frame gave {kind}: {r.summary()}")
         with atomic_outputs() as written:
             if "angles" in runs:
                 r = runs["angles"]
-                write_mot(opt["outputs"][0], r.time, r.values, status=r.status)
+                write_mot(opt["outputs"][0], r.time, r.values, status=r.status, undetermined=undetermined)
             if "torques" in runs:
                 r = runs["torques"]
-                write_sto(opt["outputs"][1], r.time, r.values, status=r.status)
+                write_sto(opt["outputs"][1], r.time, r.values, status=r.status, undetermined=undetermined)
         first = next(iter(runs.values()))
         row.update(
             clean=all(r.clean for r in runs.values()),
@@ -77,7 +79,9 @@ def _process_one(job: tuple[str, dict]) -> dict:
             frames=len(data),
             rate_hz=data.rate_hz,
             summary="; ".join(
-                [first.summary()] + [f"{kind}: {r.model_note()}" for kind, r in list(runs.items())[1:]]
+                [first.summary()]
+                + [f"{kind}: {r.model_note()}" for kind, r in list(runs.items())[1:]]
+                + [f"{name} not written: {why}" for name, why in undetermined.items()]
             ),
             written=list(map(str, written)),
         )

@@ -12,7 +12,8 @@ Example (``ikid map-template`` prints one)::
     MCB = "R_MCB3"
 
 Every ikid marker must be named, each by a different label; the file may have more labels
-than these (they are ignored).
+than these (they are ignored). A marker may also be a landmark of its own segment (RSP on the
+radial styloid given as ``radial_styloid`` too).
 
 Optionally, for ``ikid calibrate`` (see ``ikid.calibration``): the arm, and the labels of
 the forearm's anatomical landmarks (markers, or virtual points from a probing file), any of
@@ -37,6 +38,8 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+import numpy as np
 
 from ikid import _native
 from ikid.io._common import FileFormatError, ikid_marker_names, read_text
@@ -66,23 +69,40 @@ class MarkerMap:
 
     @staticmethod
     def from_dict(table: dict, source: str = "marker map") -> MarkerMap:
-        names = ikid_marker_names()
+        six = ikid_marker_names()
+        hand_point = _native.HAND_POINT[0]
         markers = table.get("markers")
         if not isinstance(markers, dict):
             raise FileFormatError(
-                f"{source}: expected a [markers] table mapping each of {', '.join(names)} to a label"
+                f"{source}: expected a [markers] table mapping each of {', '.join(six)} to a label"
             )
-        unknown = sorted(set(markers) - set(names))
+        unknown = sorted(set(markers) - set(six) - {hand_point})
         if unknown:
             raise FileFormatError(
                 f"{source}: unknown ikid marker(s) {', '.join(unknown)}; ikid's "
-                f"markers are {', '.join(names)}"
+                f"markers are {', '.join(six)} (or {hand_point} for a hand with one marker)"
             )
+        forearm = [m for m in six if _segment(m) == "forearm"]
+        hand = [m for m in six if _segment(m) == "hand"]
+        if hand_point in markers and any(m in markers for m in hand):
+            raise FileFormatError(
+                f"{source}: [markers] names {hand_point} and {', '.join(m for m in hand if m in markers)}; "
+                f"a hand is three markers ({', '.join(hand)}) or one ({hand_point}), not both"
+            )
+        names = forearm + ([hand_point] if hand_point in markers else hand)
         missing = [m for m in names if m not in markers]
         if missing:
+            named_hand = [m for m in hand if m in markers]
+            hint = (
+                f" (a hand needs three markers, {', '.join(hand)}, for all three angles; with one marker on "
+                f"it, name it {hand_point}: flexion and deviation are written, not {_undetermined_name()}, "
+                "the hand's roll about its own axis which one marker does not show)"
+                if any(m in hand for m in missing) and len(named_hand) < len(hand)
+                else ""
+            )
             raise FileFormatError(
                 f"{source}: [markers] does not name {', '.join(missing)} (every one of "
-                f"{', '.join(names)} is needed)"
+                f"{', '.join(names)} is needed){hint}"
             )
         bad = [m for m in names if not isinstance(markers[m], str) or not markers[m].strip()]
         if bad:
@@ -111,10 +131,21 @@ class MarkerMap:
             raise FileFormatError(
                 f"{source}: the label for landmark {', '.join(bad)} must be a non-empty string"
             )
+        # A marker may also be a landmark (RSP on the radial styloid named radial_styloid too), on
+        # its own segment only: a forearm landmark on a hand marker moves with the hand.
+        segment_of = {m: _segment(m) for m in names}
+        forearm_landmarks = set(landmark_names())
         for k, v in landmarks.items():
-            if v.strip() in seen:
+            marker = seen.get(v.strip())
+            if marker is None:
+                continue
+            landmark_segment = "forearm" if k in forearm_landmarks else "hand"
+            if segment_of[marker] != landmark_segment:
                 raise FileFormatError(
-                    f"{source}: label {v!r} is given to both marker {seen[v.strip()]} and landmark {k}"
+                    f"{source}: label {v!r} is given to marker {marker} (on the {segment_of[marker]}) and to "
+                    f"landmark {k} (on the {landmark_segment}); a marker can be a landmark of its own "
+                    "segment "
+                    "only: give the landmark its own label"
                 )
         return MarkerMap(
             {m: markers[m].strip() for m in names},
@@ -122,6 +153,46 @@ class MarkerMap:
             {k: landmarks[k].strip() for k in known if k in landmarks},
             side,
         )
+
+    @staticmethod
+    def plug_in_gait(side: str = "right", prefix: str = "") -> MarkerMap:
+        """Plug-in Gait's upper limb (per arm SHO, UPA, ELB, FRM, WRA, WRB, FIN) as ikid's
+        one-hand-marker set: the wrist bar (WRA thumb side, WRB little-finger side) on the
+        styloids as RSP/USP and the styloid landmarks, ELB (lateral epicondyle) as FAP and the
+        elbow's landmark (named for both epicondyles: Plug-in Gait has no medial one), FIN as
+        HND. SHO, UPA and FRM are not used. ``prefix``: the labels' (e.g. ``"Subject:"``)."""
+        p = prefix + {"right": "R", "left": "L"}[side]
+        table = {
+            "side": side,
+            "markers": {
+                "RSP": f"{p}WRA",
+                "USP": f"{p}WRB",
+                "FAP": f"{p}ELB",
+                _native.HAND_POINT[0]: f"{p}FIN",
+            },
+            "landmarks": {
+                "lateral_epicondyle": f"{p}ELB",
+                "medial_epicondyle": f"{p}ELB",
+                "radial_styloid": f"{p}WRA",
+                "ulnar_styloid": f"{p}WRB",
+            },
+        }
+        return MarkerMap.from_dict(table, f"Plug-in Gait, {side} arm")
+
+    @staticmethod
+    def recognise(labels: list[str] | tuple[str, ...], side: str | None = None) -> MarkerMap | None:
+        """The shipped set a file's labels are (Plug-in Gait: WRA, WRB, ELB and FIN of one arm,
+        with or without a ``Subject:`` prefix), as a map of ``side`` (default: the right arm if
+        it is there, else the left); None when no shipped set fits."""
+        for s in [side] if side else ["right", "left"]:
+            letter = {"right": "R", "left": "L"}[s]
+            for label in labels:
+                if label.endswith(f"{letter}WRA"):
+                    prefix = label[: -len(f"{letter}WRA")]
+                    wanted = [f"{prefix}{letter}{m}" for m in ("WRB", "ELB", "FIN")]
+                    if all(w in labels for w in wanted):
+                        return MarkerMap.plug_in_gait(s, prefix)
+        return None
 
     @staticmethod
     def load(path: str | os.PathLike[str]) -> MarkerMap:
@@ -133,12 +204,45 @@ class MarkerMap:
         return MarkerMap.from_dict(table, str(path))
 
     def label_of(self, name: str) -> str:
+        if name not in self.labels and self.one_hand_marker:
+            return f"virtual, from {_native.HAND_POINT[0]} {self.labels[_native.HAND_POINT[0]]!r}"
         return self.labels[name]
+
+    def marker_names(self) -> list[str]:
+        """The ikid markers this map names, in frame order: the forearm's three, then the
+        hand's three, or its one (``HND``)."""
+        six = ikid_marker_names()
+        return six[:3] + ([_native.HAND_POINT[0]] if self.one_hand_marker else six[3:])
+
+    @property
+    def one_hand_marker(self) -> bool:
+        """The hand is one marker (``HND``): its three are virtual (``ikid.hand_from_one_marker``)."""
+        return _native.HAND_POINT[0] in self.labels
+
+    @property
+    def undetermined(self) -> dict[str, str]:
+        """Coordinates these markers do not determine -> why: they are not written (no column)."""
+        if not self.one_hand_marker:
+            return {}
+        label = self.labels[_native.HAND_POINT[0]]
+        return {
+            _undetermined_name(): f"the hand is one marker ({_native.HAND_POINT[0]} = {label!r}): its roll "
+            "about its own long axis is not observed, so the rotation about the forearm's axis that the "
+            "Y-Z-X order "
+            "gives first is not known; flexion and deviation are the hand's direction in the forearm"
+        }
+
+    def ikid_frames(self, columns: np.ndarray) -> np.ndarray:
+        """ikid's ``(n, 18)`` frames from the mapped labels' columns (``labels_in_ikid_order``):
+        as they are, or, for a one-marker hand, with its three markers made virtual."""
+        if not self.one_hand_marker:
+            return columns
+        return _native.hand_from_one_marker(columns, left=self.side == "left")
 
     def labels_in_ikid_order(self, data: MarkerData) -> list[str]:
         """The file's labels for ikid's markers, in ikid's order; an error lists what the file
         has if any is absent."""
-        wanted = [self.labels[m] for m in ikid_marker_names()]
+        wanted = [self.labels[m] for m in self.marker_names()]
         absent = [f"{lab} ({m})" for m, lab in self.labels.items() if lab not in data.labels]
         if absent:
             hint = (
@@ -198,13 +302,19 @@ class MarkerMap:
         return labels
 
     def to_toml(self) -> str:
-        descr = {m[0]: m[2] for m in _native.MARKERS}
+        descr = {m[0]: m[2] for m in _native.MARKERS} | {_native.HAND_POINT[0]: _native.HAND_POINT[2]}
         lines = [
             "# ikid marker = the label in your C3D/TRC files",
-            f'side = "{self.side}"  # or "left": the arm these markers are on',
+            f'side = "{self.side}"  # "right" or "left": the arm these markers are on',
             "[markers]",
         ]
         lines += [f'{m} = "{lab}"  # {descr[m]}' for m, lab in self.labels.items()]
+        if self.one_hand_marker:
+            lines.append(
+                f"# one hand marker: {', '.join(self.undetermined)} is not written (the hand's roll is not "
+                "observed); "
+                "RSP/USP must be on the styloids and FAP on the elbow (docs/markersets.md)"
+            )
         lm_descr = dict(_native.Calibration.LANDMARKS) | dict(_native.Calibration.HAND_LANDMARKS)
         lines += [
             "",
@@ -217,6 +327,17 @@ class MarkerMap:
             else:
                 lines.append(f'# {k} = "LABEL"  # {lm_descr[k]}')
         return "\n".join(lines) + "\n"
+
+
+def _segment(marker: str) -> str:
+    """The segment an ikid marker name (one of the six, or HND) sits on."""
+    if marker == _native.HAND_POINT[0]:
+        return _native.HAND_POINT[1]
+    return {m[0]: m[1] for m in _native.MARKERS}[marker]
+
+
+def _undetermined_name() -> str:
+    return _native.ONE_HAND_MARKER_UNDETERMINED
 
 
 def landmark_names() -> list[str]:

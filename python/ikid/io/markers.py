@@ -90,15 +90,22 @@ class MarkerData:
         """ikid's ``(n, 18)`` frames (metres, float64, NaN = missing). ``mapping`` says which
         label is which ikid marker (default: the labels are ikid's own names)."""
         mapping = mapping or MarkerMap.identity()
-        frames = np.concatenate([self.marker(label) for label in mapping.labels_in_ikid_order(self)], axis=1)
+        columns = np.concatenate([self.marker(label) for label in mapping.labels_in_ikid_order(self)], axis=1)
         source = self.source or "markers"
-        for j, name in enumerate(ikid_marker_names()):
-            seen = np.isfinite(frames[:, 3 * j : 3 * j + 3]).all(axis=1)
+        for j, name in enumerate(mapping.marker_names()):
+            seen = np.isfinite(columns[:, 3 * j : 3 * j + 3]).all(axis=1)
             if not seen.any():
                 raise _native.InputError(
                     f"{source}: marker {name} (label {mapping.label_of(name)!r}) is missing in every frame; "
                     "ikid needs each marker in at least some frames"
                 )
+        frames = mapping.ikid_frames(columns)
+        if mapping.one_hand_marker and not np.isfinite(frames[:, 9:]).all(axis=1).any():
+            raise _native.InputError(
+                f"{source}: no frame gives the hand's direction from its one marker "
+                f"({mapping.label_of(_native.HAND_POINT[0])}): it is never 3 cm or more from the wrist "
+                "markers' midpoint and off their line"
+            )
         # Units: the core's one check (the markers' spread against what an arm spans), named
         # with the file and what its header claims.
         try:

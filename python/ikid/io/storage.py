@@ -112,17 +112,37 @@ def read_storage(path: str | os.PathLike[str]) -> Storage:
     return Storage(time, columns[1:], rows[:, 1:], in_degrees, src, header)
 
 
+#: The header key naming the columns a file does not have because the markers did not
+#: determine them (a one-marker hand's s_p): ``ikid_not_determined=ra_wr_s_p``.
+NOT_DETERMINED_KEY = "ikid_not_determined"
+
+
+def not_determined(table: Storage) -> list[str]:
+    """The coordinates (or moments) ``table``'s header declares not determined (not written)."""
+    value = table.header.get(NOT_DETERMINED_KEY, "")
+    return [n.strip() for n in value.split(",") if n.strip()]
+
+
 def read_mot(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """``(time, q)``: the wrist angles ``(n, 3)`` in radians, columns found by name."""
+    """``(time, q)``: the wrist angles ``(n, 3)`` in radians, columns found by name; NaN in a
+    column the header declares not determined (``ikid_not_determined``), and only there."""
     table = read_storage(path)
-    q = table.select(coordinate_names())
+    absent = set(not_determined(table)) - set(table.columns)
+    present = [c for c in coordinate_names() if c not in absent]
+    q = np.full((len(table.time), len(coordinate_names())), np.nan)
+    q[:, [coordinate_names().index(c) for c in present]] = table.select(present)
     return table.time, np.radians(q) if table.in_degrees else q
 
 
 def read_sto(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """``(time, tau)``: the wrist torques ``(n, 3)`` in N·m (``<coordinate>_moment`` columns)."""
+    """``(time, tau)``: the wrist torques ``(n, 3)`` in N·m (``<coordinate>_moment`` columns; NaN
+    in one the header declares not determined, as :func:`read_mot`)."""
     table = read_storage(path)
-    return table.time, table.select(moment_names())
+    absent = set(not_determined(table)) - set(table.columns)
+    present = [c for c in moment_names() if c not in absent]
+    tau = np.full((len(table.time), len(moment_names())), np.nan)
+    tau[:, [moment_names().index(c) for c in present]] = table.select(present)
+    return table.time, tau
 
 
 def _check_rows(name: str, time, values, cols: int) -> tuple[np.ndarray, np.ndarray]:
@@ -137,8 +157,11 @@ def _check_rows(name: str, time, values, cols: int) -> tuple[np.ndarray, np.ndar
     return time, values
 
 
-def write_storage(path: str | os.PathLike[str], time, values, columns: list[str], in_degrees: bool) -> Path:
-    """Any table -> OpenSim storage text (atomically). Refuses non-finite values."""
+def write_storage(
+    path: str | os.PathLike[str], time, values, columns: list[str], in_degrees: bool, notes=()
+) -> Path:
+    """Any table -> OpenSim storage text (atomically). Refuses non-finite values. ``notes``:
+    more ``key=value`` header lines."""
     time, values = _check_rows(Path(path).name, time, values, len(columns))
     if not np.all(np.isfinite(values)):
         row, col = np.argwhere(~np.isfinite(values))[0]
@@ -151,6 +174,7 @@ def write_storage(path: str | os.PathLike[str], time, values, columns: list[str]
         f"nRows={len(time)}",
         f"nColumns={len(columns) + 1}",
         f"inDegrees={'yes' if in_degrees else 'no'}",
+        *notes,
         "endheader",
         "time\t" + "\t".join(columns),
     ]
@@ -175,16 +199,34 @@ def _with_status(values: np.ndarray, columns: list[str], status) -> tuple[np.nda
     return np.column_stack([values, status.astype(np.float64)]), [*columns, STATUS_COLUMN]
 
 
-def write_mot(path: str | os.PathLike[str], time, q, status=None) -> Path:
+def _determined(
+    values: np.ndarray, names: list[str], undetermined
+) -> tuple[np.ndarray, list[str], list[str]]:
+    """The columns the markers determine, and the header line naming the others (not written)."""
+    values = np.asarray(values, np.float64)
+    skip = [k for k, c in enumerate(coordinate_names()) if c in (undetermined or ())]
+    keep = [k for k in range(len(names)) if k not in skip]
+    notes = [f"{NOT_DETERMINED_KEY}={','.join(names[k] for k in skip)}"] if skip else []
+    if values.ndim != 2 or values.shape[1] != len(names):
+        return values, names, notes  # write_storage names the wrong shape
+    return values[:, keep], [names[k] for k in keep], notes
+
+
+def write_mot(path: str | os.PathLike[str], time, q, status=None, undetermined=None) -> Path:
     """Wrist angles ``(n, 3)`` in radians -> ``.mot`` in degrees (``inDegrees=yes``); with
     ``status`` ``(n,)``, each row's ``ikid.FRAME_STATUS`` bits in a last column
-    (:data:`STATUS_COLUMN`)."""
-    values, columns = _with_status(np.degrees(np.asarray(q, np.float64)), coordinate_names(), status)
-    return write_storage(path, time, values, columns, in_degrees=True)
+    (:data:`STATUS_COLUMN`). Coordinates in ``undetermined`` (names) are not written: the
+    header names them (:data:`NOT_DETERMINED_KEY`)."""
+    values, names, notes = _determined(
+        np.degrees(np.asarray(q, np.float64)), coordinate_names(), undetermined
+    )
+    values, columns = _with_status(values, names, status)
+    return write_storage(path, time, values, columns, in_degrees=True, notes=notes)
 
 
-def write_sto(path: str | os.PathLike[str], time, tau, status=None) -> Path:
+def write_sto(path: str | os.PathLike[str], time, tau, status=None, undetermined=None) -> Path:
     """Joint torques ``(n, 3)`` in N·m -> ``.sto`` with OpenSim's ``<coordinate>_moment`` columns
-    (and ``status``, as :func:`write_mot`)."""
-    values, columns = _with_status(np.asarray(tau, np.float64), moment_names(), status)
-    return write_storage(path, time, values, columns, in_degrees=False)
+    (and ``status`` and ``undetermined``, as :func:`write_mot`)."""
+    values, names, notes = _determined(np.asarray(tau, np.float64), moment_names(), undetermined)
+    values, columns = _with_status(values, names, status)
+    return write_storage(path, time, values, columns, in_degrees=False, notes=notes)

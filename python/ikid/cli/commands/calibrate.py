@@ -178,6 +178,11 @@ def run(args: argparse.Namespace) -> int:
             if hand_labels is None
             else np.concatenate([source.marker(lab) for lab in hand_labels], axis=1)[where]
         )
+        if hand_points is None and mapping.one_hand_marker:
+            # A one-marker hand's frame is its marker and the styloid line (as Plug-in Gait's):
+            # the landmarks it stands for make the calibration read its direction, not zero.
+            columns = [source.marker(lab) for lab in mapping.labels_in_ikid_order(source)]
+            hand_points = ikid._native.one_marker_hand_landmarks(np.concatenate(columns, axis=1))[where]
         cal = calibrate_neutral(
             neutral, points, landmark_frames=beside, side=side, hand_landmarks=hand_points
         )

@@ -135,8 +135,22 @@ def run(args: argparse.Namespace) -> int:
     keep &= ~implausible  # nothing no wrist can do is written as a number
     stem.parent.mkdir(parents=True, exist_ok=True)
     with atomic_outputs():  # the pair replaces the old pair, or neither is replaced
-        mot = write_mot(_named(stem, ".mot"), data.time[keep], out["q"][keep], status=status[keep])
-        sto = write_sto(_named(stem, ".sto"), data.time[keep], out["tau"][keep], status=status[keep])
+        # Coordinates the markers do not determine (a one-marker hand's s_p) are not written.
+        undetermined = mapping.undetermined if mapping else {}
+        mot = write_mot(
+            _named(stem, ".mot"),
+            data.time[keep],
+            out["q"][keep],
+            status=status[keep],
+            undetermined=undetermined,
+        )
+        sto = write_sto(
+            _named(stem, ".sto"),
+            data.time[keep],
+            out["tau"][keep],
+            status=status[keep],
+            undetermined=undetermined,
+        )
     counts = {name: int(np.count_nonzero(status[keep] & bit)) for name, bit in bits.items()}
     noise_mm = ", ".join(f"{v * 1e3:.2f}" for v in tracker.marker_noise)
     how = f"refined by {refiner.name}" if refiner else "not refined"
@@ -153,8 +167,9 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"{args.input}: {int(keep.sum())}/{len(frames)} frames tracked from frame {k} "
         f"at {data.rate_hz:g} Hz, subject ×{length_scale:.3g} length, ×{mass_scale:.3g} mass ({size_from}), "
-        f"{placed}, {how}; flagged: {', '.join(notes) or 'none'}; hand marker noise learned (mm): {noise_mm} "
-        f"-> {mot}, {sto}"
+        f"{placed}, {how}; flagged: {', '.join(notes) or 'none'}; hand marker noise learned (mm): {noise_mm}"
+        + "".join(f"; {name} not written: {why}" for name, why in undetermined.items())
+        + f" -> {mot}, {sto}"
     )
     if args.strict and (k > 0 or status[k:].any()):
         print(f"ikid: --strict: {args.input} has frames without an estimate or flagged", file=sys.stderr)

@@ -1,0 +1,186 @@
+"""Marker sets (docs/markersets.md): a marker that is also a landmark, and a hand seen through one
+marker (Plug-in Gait's FIN) whose roll is not observed: s_p is not written, the header and the
+summary say so, flexion and deviation are the hand's direction in the forearm."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import ikid
+from ikid import io
+from ikid.cli import main as cli
+from ikid.io import MarkerMap, read_storage
+from ikid.io.markers import FileFormatError
+from ikid.io.storage import not_determined
+
+
+def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    r = np.zeros(np.shape(angle) + (3, 3))
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    r[..., axis, axis] = 1.0
+    r[..., i, i] = c
+    r[..., j, j] = c
+    r[..., i, j] = -s
+    r[..., j, i] = s
+    return r
+
+
+def one_marker_arm(
+    n: int, rate: float, seed: int, moving: bool = True
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A right arm marked as Plug-in Gait marks one: lab positions (n, 12) of the wrist bar on
+    the styloids, the lateral epicondyle and one hand marker, and the hand's true flexion and
+    deviation (radians). The forearm swings and turns in the lab; its anatomical frame (x volar,
+    y proximal, z radial, origin mid-styloids) is where the styloids and the elbow put it; the
+    hand is posed by Rot(z, e)·Rot(x, a) in it (no roll: one marker could not show one). Not
+    ``moving``: a static trial, everything held where it is at time 0, 0.3 mm of noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / rate if moving else np.zeros(n)
+    e = 0.5 * np.sin(2 * np.pi * 0.7 * t + rng.uniform(0, 6))  # ±29°
+    a = 0.25 * np.sin(2 * np.pi * 0.45 * t + rng.uniform(0, 6))  # ±14°
+    arm = _rot(1, 0.8 * np.sin(2 * np.pi * 0.2 * t)) @ _rot(0, 0.3 + 0.2 * np.sin(2 * np.pi * 0.3 * t))
+    origin = np.stack([0.3 + 0.05 * t, np.full(n, 1.1), np.full(n, 0.2)], axis=1)
+
+    def lab(local: np.ndarray) -> np.ndarray:  # (n, 3) in the forearm's frame -> lab
+        return origin + np.einsum("nij,nj->ni", arm, local)
+
+    # The wrist bar a little off the perpendicular to the forearm's axis, as real ones are.
+    wra = lab(np.tile([0.0, 0.003, 0.032], (n, 1)))
+    wrb = lab(np.tile([0.0, -0.003, -0.032], (n, 1)))
+    elb = lab(np.tile([0.0, 0.26, 0.0], (n, 1)))
+    hand = _rot(2, e) @ _rot(0, a)
+    fin = lab(np.einsum("nij,j->ni", hand, [0.0, -0.085, 0.0]))
+    positions = np.concatenate([wra, wrb, elb, fin], axis=1)
+    if not moving:
+        positions += rng.normal(0.0, 0.0003, positions.shape)
+    return positions, e, a
+
+
+def write_arm(path, positions: np.ndarray, rate: float, prefix: str = "R"):
+    labels = [f"{prefix}{m}" for m in ("WRA", "WRB", "ELB", "FIN")]
+    return io.write_trc(path, np.arange(len(positions)) / rate, positions, rate, labels)
+
+
+def test_a_marker_may_be_a_landmark_of_its_own_segment_only():
+    six = {"RSP": "A", "USP": "B", "FAP": "C", "MC2": "D", "MC5": "E", "MCB": "F"}
+    both = MarkerMap.from_dict({"markers": six, "landmarks": {"radial_styloid": "A", "ulnar_styloid": "B"}})
+    assert both.landmarks == {"radial_styloid": "A", "ulnar_styloid": "B"}
+    with pytest.raises(
+        FileFormatError,
+        match=r"label 'D' is given to marker MC2 \(on the hand\) and to landmark radial_styloid \(on the "
+        r"forearm\); a marker can be a landmark of its own segment only",
+    ):
+        MarkerMap.from_dict({"markers": six, "landmarks": {"radial_styloid": "D"}})
+    with pytest.raises(FileFormatError, match="label 'A' is given to both RSP and USP"):
+        MarkerMap.from_dict({"markers": {**six, "USP": "A"}})
+
+
+def test_a_map_says_a_hand_is_three_markers_or_one():
+    forearm = {"RSP": "RWRA", "USP": "RWRB", "FAP": "RELB"}
+    with pytest.raises(
+        FileFormatError,
+        match=r"does not name MC5, MCB .*\(a hand needs three markers, MC2, MC5, MCB, for all three angles; "
+        r"with one marker on it, name it HND: flexion and deviation are written, not ra_wr_s_p",
+    ):
+        MarkerMap.from_dict({"markers": {**forearm, "MC2": "RFIN"}})
+    with pytest.raises(
+        FileFormatError, match=r"names HND and MC2; a hand is three markers \(MC2, MC5, MCB\) or one"
+    ):
+        MarkerMap.from_dict({"markers": {**forearm, "MC2": "RFIN", "HND": "RFIN2"}})
+    one = MarkerMap.from_dict({"markers": {**forearm, "HND": "RFIN"}})
+    assert one.one_hand_marker and list(one.undetermined) == ["ra_wr_s_p"]
+    assert "its roll about its own long axis is not observed" in one.undetermined["ra_wr_s_p"]
+    assert not MarkerMap.identity().one_hand_marker and MarkerMap.identity().undetermined == {}
+
+
+def test_map_template_writes_plug_in_gaits_set_for_either_arm(tmp_path, capsys):
+    positions, _, _ = one_marker_arm(50, 100.0, 0)
+    both = np.concatenate([positions, positions + 0.5], axis=1)
+    labels = [f"{p}{m}" for p in ("S1:R", "S1:L") for m in ("WRA", "WRB", "ELB", "FIN")]
+    path = io.write_trc(tmp_path / "pig.trc", np.arange(50) / 100.0, both, 100.0, labels)
+    for side in ("right", "left"):
+        assert cli(["map-template", str(path), "--side", side]) == 0
+        text = capsys.readouterr().out
+        (tmp_path / "m.toml").write_text(text)
+        m = MarkerMap.load(tmp_path / "m.toml")
+        p = "S1:" + side[0].upper()
+        assert m.side == side and m.labels == {
+            "RSP": f"{p}WRA",
+            "USP": f"{p}WRB",
+            "FAP": f"{p}ELB",
+            "HND": f"{p}FIN",
+        }
+        assert m.landmarks["radial_styloid"] == f"{p}WRA" and m.landmarks["lateral_epicondyle"] == f"{p}ELB"
+        assert "Plug-in Gait labels" in text
+    # Without Plug-in Gait's labels: ikid's own template, and --side says what is missing.
+    plain = io.write_trc(
+        tmp_path / "plain.trc", np.arange(50) / 100.0, positions, 100.0, ["a", "b", "c", "d"]
+    )
+    assert cli(["map-template", str(plain)]) == 0
+    assert 'MC2 = "MC2"' in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="no Plug-in Gait labels of the left arm"):
+        cli(["map-template", str(plain), "--side", "left"])
+
+
+@pytest.mark.parametrize("command", ["ik", "track"])
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_one_hand_marker_gives_flexion_and_deviation_and_says_why_not_s_p(command, side, tmp_path, capsys):
+    rate = 100.0
+    static, _, _ = one_marker_arm(100, rate, 1, moving=False)
+    trial, e, a = one_marker_arm(600, rate, 2)
+    if side == "left":  # the mirror image of the right arm: the same anatomical angles
+        static, trial = static * np.tile([1.0, 1.0, -1.0], 4), trial * np.tile([1.0, 1.0, -1.0], 4)
+    p = side[0].upper()
+    write_arm(tmp_path / "static.trc", static, rate, p)
+    write_arm(tmp_path / "trial.trc", trial, rate, p)
+    (tmp_path / "pig.toml").write_text(MarkerMap.plug_in_gait(side).to_toml())
+    cal = tmp_path / "cal.json"
+    common = ["--map", str(tmp_path / "pig.toml")]
+    assert cli(["calibrate", "--static", str(tmp_path / "static.trc"), "-o", str(cal), *common]) == 0
+    said = capsys.readouterr().out
+    # Both segments' frames are their markers' anatomical frames: found at the model's placement.
+    assert "forearm 0.0°, hand 0.0° from the body model's placement" in said, said
+    out = tmp_path / "out.mot"
+    target = str(out) if command == "ik" else str(tmp_path / "out")
+    assert cli([command, str(tmp_path / "trial.trc"), "-o", target, "--calibration", str(cal), *common]) == 0
+    said = capsys.readouterr().out
+    assert "ra_wr_s_p not written: the hand is one marker (HND = " in said, said
+    table = read_storage(out)
+    assert "ra_wr_s_p" not in table.columns and not_determined(table) == ["ra_wr_s_p"]
+    assert np.isfinite(table.values).all()
+    rows = np.rint(table.time * rate).astype(int)
+    got = np.radians(table.select(["ra_wr_e_f", "ra_wr_ad_ab"]))
+    settled = rows >= 50  # after the window filled / the tracker settled
+    err = np.degrees(got[settled] - np.stack([e, a], axis=1)[rows[settled]])
+    rms = np.sqrt(np.mean(err**2, axis=0))
+    assert (rms < 1.5).all(), rms
+    t, q = io.read_mot(out)
+    assert np.isnan(q[:, 0]).all() and np.isfinite(q[:, 1:]).all()
+    if command == "track":
+        sto = read_storage(tmp_path / "out.sto")
+        assert "ra_wr_s_p_moment" not in sto.columns and not_determined(sto) == ["ra_wr_s_p_moment"]
+
+
+def test_one_hand_marker_frames_are_the_cores_virtual_markers(tmp_path):
+    positions, _, _ = one_marker_arm(20, 100.0, 3)
+    path = write_arm(tmp_path / "t.trc", positions, 100.0)
+    frames = io.read_markers(path).frames(MarkerMap.plug_in_gait("right"))
+    assert frames.shape == (20, 18)
+    assert np.allclose(frames, ikid._native.hand_from_one_marker(positions), atol=1e-9)
+    # The hand marker on the wrist in every frame: no direction, so no frame to give.
+    still = positions.copy()
+    still[:, 9:12] = (positions[:, 0:3] + positions[:, 3:6]) / 2
+    path = write_arm(tmp_path / "s.trc", still, 100.0)
+    with pytest.raises(ikid.InputError, match="no frame gives the hand's direction from its one marker"):
+        io.read_markers(path).frames(MarkerMap.plug_in_gait("right"))
+
+
+def test_a_maps_labels_come_in_frame_order_whatever_order_it_was_given(tmp_path):
+    positions, _, _ = one_marker_arm(20, 100.0, 4)
+    path = write_arm(tmp_path / "t.trc", positions, 100.0)
+    data = io.read_markers(path)
+    given = MarkerMap({"HND": "RFIN", "FAP": "RELB", "USP": "RWRB", "RSP": "RWRA"}, "reversed")
+    assert given.labels_in_ikid_order(data) == ["RWRA", "RWRB", "RELB", "RFIN"]
+    assert np.allclose(data.frames(given), data.frames(MarkerMap.plug_in_gait("right")), equal_nan=True)
