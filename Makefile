@@ -135,8 +135,12 @@ test-c: c wheel
 $(CBINDGEN):
 	$(CARGO) install cbindgen --version 0.29.4 --locked --root .tools
 
+# libikid.so carries the SONAME libikid.so.$(SOMAJOR) (crates/ikid-capi/build.rs): a host records
+# that name, so the link sits beside the library here too (the C tests run from target/release).
+SOMAJOR := $(firstword $(subst ., ,$(VERSION)))
 capi:
 	$(CARGO) build --release -p ikid-capi
+	ln -sf libikid.so $(LIBDIR)/libikid.so.$(SOMAJOR)
 
 # Regenerate include/ikid.h after changing the ABI; check-header fails on any difference.
 header: $(CBINDGEN)
@@ -150,14 +154,20 @@ c: capi
 	mkdir -p target/c
 	$(CC) $(CFLAGS_C) tests/c/test_capi.c -o target/c/test_capi $(LDLIBS_C)
 	$(CC) $(CFLAGS_C) tests/c/test_tracker.c -o target/c/test_tracker $(LDLIBS_C)
+	$(CC) $(CFLAGS_C) tests/c/every_call.c -o target/c/every_call $(LDLIBS_C)
 	$(CC) $(CFLAGS_C) examples/c/stream_csv.c -o target/c/stream_csv $(LDLIBS_C)
 	$(CC) $(CFLAGS_C) examples/c/track_csv.c -o target/c/track_csv $(LDLIBS_C)
 	$(CC) $(CFLAGS_C) benches/c/abi_overhead.c -o target/c/abi_overhead $(LDLIBS_C)
 
-# Installs libikid (shared and static), ikid.h and a pkg-config file under PREFIX.
+# Installs libikid (shared and static), ikid.h and a pkg-config file under PREFIX, as a system
+# library: libikid.so.$(VERSION) (the file), libikid.so.$(SOMAJOR) (its SONAME, what hosts load),
+# libikid.so (the link -likid finds). ikid.pc's Libs carry an rpath to PREFIX/lib, so a host
+# linked through pkg-config starts without LD_LIBRARY_PATH wherever PREFIX is.
 install: capi
 	install -d $(PREFIX)/lib/pkgconfig $(PREFIX)/include
-	install -m 755 $(LIBDIR)/libikid.so $(PREFIX)/lib/
+	install -m 755 $(LIBDIR)/libikid.so $(PREFIX)/lib/libikid.so.$(VERSION)
+	ln -sf libikid.so.$(VERSION) $(PREFIX)/lib/libikid.so.$(SOMAJOR)
+	ln -sf libikid.so.$(SOMAJOR) $(PREFIX)/lib/libikid.so
 	install -m 644 $(LIBDIR)/libikid.a $(PREFIX)/lib/
 	install -m 644 include/ikid.h $(PREFIX)/include/
 	sed -e 's|@PREFIX@|$(abspath $(PREFIX))|' -e 's|@VERSION@|$(VERSION)|' crates/ikid-capi/ikid.pc.in > $(PREFIX)/lib/pkgconfig/ikid.pc
