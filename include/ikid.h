@@ -6,6 +6,9 @@
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+
+/* IKID_DEPRECATED(note) marks the old names: in the spelling the compiler knows, or nothing.
+ * Define it before including this header to override it (empty silences the warnings). */
 #ifndef IKID_DEPRECATED
 #if (defined(__cplusplus) && __cplusplus >= 201402L) || (defined(__STDC_VERSION__) && __STDC_VERSION__ >= 202311L)
 #define IKID_DEPRECATED(note) [[deprecated(note)]]
