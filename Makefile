@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf compare-rates realdata exam
+.PHONY: all venv wheel wheel-portable sdist demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf compare-rates realdata exam
 
 all: wheel
 
@@ -52,6 +52,37 @@ $(TRAINING_STAMP): training/pyproject.toml | $(WHEEL_STAMP)
 
 wheel: $(WHEEL_STAMP) $(TRAINING_STAMP)
 
+# The portable wheel (what is published): manylinux2014, i.e. glibc >= 2.17 (CentOS 7, RHEL 8,
+# Ubuntu 18.04+, Debian 9+), linked by zig against that old glibc, checked by auditwheel (its tag
+# and no library outside the manylinux policy), then installed in a fresh venv and run. In its
+# own target folder so development rebuilds (`make wheel`, native, faster) are not undone; part
+# of `make test`. The sdist (target/sdist) builds wherever cargo is: tests/test_packaging.py.
+ZIGLANG_VERSION    := 0.17.0
+AUDITWHEEL_VERSION := 6.8.2
+PORTABLE_WHEELS    := target/wheels-portable
+PORTABLE_TOOLS     := $(VENV)/.portable-tools
+PORTABLE_TAG       := manylinux2014_x86_64.manylinux_2_17_x86_64
+$(PORTABLE_TOOLS): $(VENV)/.created
+	$(PIP) install --quiet "ziglang==$(ZIGLANG_VERSION)" "auditwheel==$(AUDITWHEEL_VERSION)"
+	touch $@
+
+wheel-portable: $(PORTABLE_TOOLS)
+	rm -rf $(PORTABLE_WHEELS) target/portable-venv
+	PATH="$(abspath $(VENV)/bin):$$PATH" CARGO_TARGET_DIR=target/portable \
+		$(VENV)/bin/maturin build --release --quiet --zig --compatibility manylinux2014 -o $(PORTABLE_WHEELS)
+	ls $(PORTABLE_WHEELS)/ikid-*-cp310-abi3-$(PORTABLE_TAG).whl
+	$(VENV)/bin/auditwheel show $(PORTABLE_WHEELS)/ikid-*.whl | tee target/auditwheel-show.txt
+	tr -s '\n ' '  ' < target/auditwheel-show.txt | grep -q 'is consistent with the following platform tag: "manylinux_2_17_x86_64"'
+	! grep -qi "external shared libraries\|not consistent\|cannot repair" target/auditwheel-show.txt
+	$(PYTHON) -m venv target/portable-venv
+	target/portable-venv/bin/python -m pip install --quiet $(PORTABLE_WHEELS)/ikid-*.whl
+	cd target && portable-venv/bin/python -c "import ikid, numpy as np; m = ikid.load('wrist-ik'); \
+		f = ikid.forward_markers(np.zeros((80, 3)), 0.3); print('portable wheel runs:', ikid.__file__, m.predict(f).shape)"
+
+sdist: $(VENV)/.created
+	rm -rf target/sdist
+	$(VENV)/bin/maturin sdist --out target/sdist
+
 demo: wheel
 	$(PY) -m ikid demo
 
@@ -84,7 +115,7 @@ report: wheel
 check: lint test-rust test-python stubtest
 	@echo "make check: all passed"
 
-test: check test-python-slow fuzz faults
+test: check test-python-slow fuzz faults wheel-portable
 	@echo "make test: all suites passed"
 
 lint: fmt-check clippy ruff mypy check-header
@@ -104,8 +135,11 @@ ruff: wheel
 mypy: wheel
 	$(VENV)/bin/mypy python/ikid training/ikid_training
 
+# The doc tests run here too (the crate docs' examples); the shipped models compiled in
+# (feature embedded-models) are checked against the files.
 test-rust:
 	$(CARGO) test --workspace --exclude ikid-py --profile quick
+	$(CARGO) test -p ikid --profile quick --features embedded-models --lib shipped
 
 # Python tests against the installed wheel; those marked `slow` (tests/conftest.py) run in
 # `make test` only. The C ABI tests need the C programs (`make c`).
