@@ -121,6 +121,10 @@ impl Model {
     }
 }
 
+/// What one thread of [`for_each_claimed`] did: its items' results, and the item it stopped
+/// at with its error, if one failed.
+type Claimed<R> = (Vec<(usize, R)>, Option<(usize, Error)>);
+
 /// Runs `work` on items `0..n_items` on up to `threads` threads (the calling one included),
 /// each thread claiming the next item in order and keeping its own `state`; returns the
 /// items' results in item order, or the error of the earliest failing item (every item before
@@ -140,7 +144,7 @@ fn for_each_claimed<S, R: Send + 'static>(
     let shared = Arc::new((state, work));
     let worker = {
         let (next, shared) = (Arc::clone(&next), Arc::clone(&shared));
-        move || -> (Vec<(usize, R)>, Option<(usize, Error)>) {
+        move || -> Claimed<R> {
             let (state, work) = &*shared;
             let mut state = state();
             let mut done = Vec::new();
