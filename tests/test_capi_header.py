@@ -76,7 +76,10 @@ def test_header_compiles_without_gnu_attributes(tmp_path, standard):
     # What the declaration reads after preprocessing: no attribute of any spelling.
     src = tmp_path / f"host{suffix}"
     pre = subprocess.run(
-        [compiler, *flags, *no_gnu, f"-I{INCLUDE}", "-E", str(src)], capture_output=True, text=True, timeout=60
+        [compiler, *flags, *no_gnu, f"-I{INCLUDE}", "-E", str(src)],
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert pre.returncode == 0, pre.stderr
     for name in ("ikid_model_describe", "ikid_predict_rows", "ikid_predict"):
