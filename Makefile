@@ -111,7 +111,8 @@ report: wheel
 # the C header), then the Rust tests, the fast Python tests and the stub check. `make test`
 # (what CI runs): check, then the slow tier: shipped-model accuracy, training end to end,
 # torch/OpenSim/biorbd peers, the C programs under valgrind (a failure, not a skip, in CI when
-# valgrind is missing), and 60 s of fuzzing.
+# valgrind is missing), the embedding programs and the sdist built from outside the repository,
+# 60 s of fuzzing, the fault suite and the portable wheel (built, audited, installed, run).
 check: lint test-rust test-python stubtest
 	@echo "make check: all passed"
 
