@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf compare-rates realdata exam
+.PHONY: all venv wheel wheel-portable sdist demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf compare-rates realdata exam
 
 all: wheel
 
@@ -52,6 +52,37 @@ $(TRAINING_STAMP): training/pyproject.toml | $(WHEEL_STAMP)
 
 wheel: $(WHEEL_STAMP) $(TRAINING_STAMP)
 
+# The portable wheel (what is published): manylinux2014, i.e. glibc >= 2.17 (CentOS 7, RHEL 8,
+# Ubuntu 18.04+, Debian 9+), linked by zig against that old glibc, checked by auditwheel (its tag
+# and no library outside the manylinux policy), then installed in a fresh venv and run. In its
+# own target folder so development rebuilds (`make wheel`, native, faster) are not undone; part
+# of `make test`. The sdist (target/sdist) builds wherever cargo is: tests/test_packaging.py.
+ZIGLANG_VERSION    := 0.17.0
+AUDITWHEEL_VERSION := 6.8.2
+PORTABLE_WHEELS    := target/wheels-portable
+PORTABLE_TOOLS     := $(VENV)/.portable-tools
+PORTABLE_TAG       := manylinux2014_x86_64.manylinux_2_17_x86_64
+$(PORTABLE_TOOLS): $(VENV)/.created
+	$(PIP) install --quiet "ziglang==$(ZIGLANG_VERSION)" "auditwheel==$(AUDITWHEEL_VERSION)"
+	touch $@
+
+wheel-portable: $(PORTABLE_TOOLS)
+	rm -rf $(PORTABLE_WHEELS) target/portable-venv
+	PATH="$(abspath $(VENV)/bin):$$PATH" CARGO_TARGET_DIR=target/portable \
+		$(VENV)/bin/maturin build --release --quiet --zig --compatibility manylinux2014 -o $(PORTABLE_WHEELS)
+	ls $(PORTABLE_WHEELS)/ikid-*-cp310-abi3-$(PORTABLE_TAG).whl
+	$(VENV)/bin/auditwheel show $(PORTABLE_WHEELS)/ikid-*.whl | tee target/auditwheel-show.txt
+	tr -s '\n ' '  ' < target/auditwheel-show.txt | grep -q 'is consistent with the following platform tag: "manylinux_2_17_x86_64"'
+	! grep -qi "external shared libraries\|not consistent\|cannot repair" target/auditwheel-show.txt
+	$(PYTHON) -m venv target/portable-venv
+	target/portable-venv/bin/python -m pip install --quiet $(PORTABLE_WHEELS)/ikid-*.whl
+	cd target && portable-venv/bin/python -c "import ikid, numpy as np; m = ikid.load('wrist-ik'); \
+		f = ikid.forward_markers(np.zeros((80, 3)), 0.3); print('portable wheel runs:', ikid.__file__, m.predict(f).shape)"
+
+sdist: $(VENV)/.created
+	rm -rf target/sdist
+	$(VENV)/bin/maturin sdist --out target/sdist
+
 demo: wheel
 	$(PY) -m ikid demo
 
@@ -80,11 +111,12 @@ report: wheel
 # the C header), then the Rust tests, the fast Python tests and the stub check. `make test`
 # (what CI runs): check, then the slow tier: shipped-model accuracy, training end to end,
 # torch/OpenSim/biorbd peers, the C programs under valgrind (a failure, not a skip, in CI when
-# valgrind is missing), and 60 s of fuzzing.
+# valgrind is missing), the embedding programs and the sdist built from outside the repository,
+# 60 s of fuzzing, the fault suite and the portable wheel (built, audited, installed, run).
 check: lint test-rust test-python stubtest
 	@echo "make check: all passed"
 
-test: check test-python-slow fuzz faults
+test: check test-python-slow fuzz faults wheel-portable
 	@echo "make test: all suites passed"
 
 lint: fmt-check clippy ruff mypy check-header
@@ -104,8 +136,11 @@ ruff: wheel
 mypy: wheel
 	$(VENV)/bin/mypy python/ikid training/ikid_training
 
+# The doc tests run here too (the crate docs' examples); the shipped models compiled in
+# (feature embedded-models) are checked against the files.
 test-rust:
 	$(CARGO) test --workspace --exclude ikid-py --profile quick
+	$(CARGO) test -p ikid --profile quick --features embedded-models --lib shipped
 
 # Python tests against the installed wheel; those marked `slow` (tests/conftest.py) run in
 # `make test` only. The C ABI tests need the C programs (`make c`).
@@ -135,8 +170,12 @@ test-c: c wheel
 $(CBINDGEN):
 	$(CARGO) install cbindgen --version 0.29.4 --locked --root .tools
 
+# libikid.so carries the SONAME libikid.so.$(SOMAJOR) (crates/ikid-capi/build.rs): a host records
+# that name, so the link sits beside the library here too (the C tests run from target/release).
+SOMAJOR := $(firstword $(subst ., ,$(VERSION)))
 capi:
 	$(CARGO) build --release -p ikid-capi
+	ln -sf libikid.so $(LIBDIR)/libikid.so.$(SOMAJOR)
 
 # Regenerate include/ikid.h after changing the ABI; check-header fails on any difference.
 header: $(CBINDGEN)
@@ -150,14 +189,20 @@ c: capi
 	mkdir -p target/c
 	$(CC) $(CFLAGS_C) tests/c/test_capi.c -o target/c/test_capi $(LDLIBS_C)
 	$(CC) $(CFLAGS_C) tests/c/test_tracker.c -o target/c/test_tracker $(LDLIBS_C)
+	$(CC) $(CFLAGS_C) tests/c/every_call.c -o target/c/every_call $(LDLIBS_C)
 	$(CC) $(CFLAGS_C) examples/c/stream_csv.c -o target/c/stream_csv $(LDLIBS_C)
 	$(CC) $(CFLAGS_C) examples/c/track_csv.c -o target/c/track_csv $(LDLIBS_C)
 	$(CC) $(CFLAGS_C) benches/c/abi_overhead.c -o target/c/abi_overhead $(LDLIBS_C)
 
-# Installs libikid (shared and static), ikid.h and a pkg-config file under PREFIX.
+# Installs libikid (shared and static), ikid.h and a pkg-config file under PREFIX, as a system
+# library: libikid.so.$(VERSION) (the file), libikid.so.$(SOMAJOR) (its SONAME, what hosts load),
+# libikid.so (the link -likid finds). ikid.pc's Libs carry an rpath to PREFIX/lib, so a host
+# linked through pkg-config starts without LD_LIBRARY_PATH wherever PREFIX is.
 install: capi
 	install -d $(PREFIX)/lib/pkgconfig $(PREFIX)/include
-	install -m 755 $(LIBDIR)/libikid.so $(PREFIX)/lib/
+	install -m 755 $(LIBDIR)/libikid.so $(PREFIX)/lib/libikid.so.$(VERSION)
+	ln -sf libikid.so.$(VERSION) $(PREFIX)/lib/libikid.so.$(SOMAJOR)
+	ln -sf libikid.so.$(SOMAJOR) $(PREFIX)/lib/libikid.so
 	install -m 644 $(LIBDIR)/libikid.a $(PREFIX)/lib/
 	install -m 644 include/ikid.h $(PREFIX)/include/
 	sed -e 's|@PREFIX@|$(abspath $(PREFIX))|' -e 's|@VERSION@|$(VERSION)|' crates/ikid-capi/ikid.pc.in > $(PREFIX)/lib/pkgconfig/ikid.pc

@@ -7,6 +7,21 @@
 #include <stddef.h>
 #include <stdint.h>
 
+/* IKID_DEPRECATED(note) marks the old names: in the spelling the compiler knows, or nothing.
+ * Define it before including this header to override it (empty silences the warnings). */
+#ifndef IKID_DEPRECATED
+#if (defined(__cplusplus) && __cplusplus >= 201402L) || (defined(__STDC_VERSION__) && __STDC_VERSION__ >= 202311L)
+#define IKID_DEPRECATED(note) [[deprecated(note)]]
+#elif defined(__GNUC__) || defined(__clang__)
+#define IKID_DEPRECATED(note) __attribute__((deprecated(note)))
+#elif defined(_MSC_VER)
+#define IKID_DEPRECATED(note) __declspec(deprecated(note))
+#else
+#define IKID_DEPRECATED(note)
+#endif
+#endif
+
+
 // Frame status bit (`ikid_tracker_flags.status`): a missing marker was filled, or the
 // estimate was made without it.
 #define IKID_FRAME_FILLED 1
@@ -199,7 +214,7 @@ const char *ikid_model_feature_set(const struct ikid_model *model);
 //
 // # Safety
 // `model` must be NULL or a live handle.
-__attribute__((deprecated("use ikid_model_name, ikid_model_task or ikid_model_feature_set")))
+IKID_DEPRECATED("use ikid_model_name, ikid_model_task or ikid_model_feature_set")
 const char *ikid_model_describe(const struct ikid_model *model,
                                 uint32_t field);
 
@@ -228,7 +243,7 @@ size_t ikid_model_predict_rows(const struct ikid_model *model, size_t n_frames);
 //
 // # Safety
 // As `ikid_model_predict_rows`.
-__attribute__((deprecated("renamed ikid_model_predict_rows")))
+IKID_DEPRECATED("renamed ikid_model_predict_rows")
 size_t ikid_predict_rows(const struct ikid_model *model,
                          size_t n_frames);
 
@@ -252,7 +267,7 @@ enum ikid_status ikid_model_predict(const struct ikid_model *model,
 //
 // # Safety
 // As `ikid_model_predict`.
-__attribute__((deprecated("renamed ikid_model_predict")))
+IKID_DEPRECATED("renamed ikid_model_predict")
 enum ikid_status ikid_predict(const struct ikid_model *model,
                               const float *frames,
                               size_t n_frames,

@@ -130,7 +130,7 @@ def test_python_run_equals_python_push(trial):
     tracker = ikid.Tracker(**SUBJECT)
     pushed = [tracker.push(f) for f in frames]
     assert all(p is None for p in pushed[:3])
-    stacked = np.stack(pushed[3:])  # type: ignore[arg-type]
+    stacked = np.stack([p.values for p in pushed[3:] if p is not None])
     for k, name in enumerate(KEYS):
         assert stacked[:, k].tobytes() == out[name][3:600].tobytes()
 

@@ -53,7 +53,7 @@ def test_wrong_shapes_are_refused(model, frames):
         model.predict(frames[:, :17])
     with pytest.raises(ikid.InputError, match="2-D"):
         model.predict(frames[0])
-    with pytest.raises(ikid.InputError, match="17 values.*expects 18"):
+    with pytest.raises(ikid.InputError, match="17 values, expected 18: a marker frame"):
         model.stream().push(frames[0, :17])
 
 

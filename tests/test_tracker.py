@@ -117,14 +117,15 @@ def test_push_equals_run_and_accepts_float32_and_lists(trial: D.Recording) -> No
     batch = ikid.Tracker(**subject(trial)).run(frames)
     one = ikid.Tracker(**subject(trial))
     rows = [one.push(f) for f in frames]
-    assert all(r is not None and r.shape == (4, 3) for r in rows)
-    stacked = np.stack(rows)  # type: ignore[arg-type]
+    assert all(r is not None and r.values.shape == (4, 3) for r in rows)
+    stacked = np.stack([r.values for r in rows if r is not None])
     for k, name in enumerate(("q", "qd", "qdd", "tau")):
         np.testing.assert_array_equal(stacked[:, k], batch[name])
     f32 = ikid.Tracker(**subject(trial))
     a = f32.push(frames[0].astype(np.float32))
     b = ikid.Tracker(**subject(trial)).push(frames[0].astype(np.float32).astype(np.float64).tolist())
-    np.testing.assert_array_equal(a, b)
+    assert a is not None and b is not None
+    np.testing.assert_array_equal(a.values, b.values)
 
 
 def test_missing_markers_are_left_out_and_reported(trial: D.Recording) -> None:

@@ -118,9 +118,12 @@ fn noise_drift<'py>(
     with_noise(py, markers, |m| noise::drift(m, amplitude, rate_hz, seed))
 }
 
-/// Occlusion bursts: markers set to NaN for `min_s`–`max_s` seconds.
+/// Occlusion bursts: markers set to NaN for `min_s`–`max_s` seconds. Each frame starts a
+/// burst on a marker with probability `bursts_per_second / rate_hz`; `markers_affected` lists
+/// the marker indices (frame order) that may disappear, all six when empty (the default).
 #[pyfunction]
 #[pyo3(signature = (markers, bursts_per_second, min_s, max_s, rate_hz, seed, markers_affected=Vec::new()))]
+#[pyo3(text_signature = "(markers, bursts_per_second, min_s, max_s, rate_hz, seed, markers_affected=[])")]
 #[allow(clippy::too_many_arguments)]
 fn noise_occlusion<'py>(
     py: Python<'py>,

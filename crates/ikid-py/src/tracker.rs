@@ -13,9 +13,11 @@ use ikid::tracker::{
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use pyo3::types::PyTuple;
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Tracker>()?;
+    m.add_class::<TrackerEstimate>()?;
     m.add("DEFAULT_JERK_NOISE", DEFAULT_JERK_NOISE)?;
     m.add("REFINER_OUTPUTS", refiner_outputs())?;
     m.add("REFINER_GATE_NOISE", REFINER_GATE_NOISE)?;
@@ -26,8 +28,27 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 /// body model that learns each marker coordinate's noise as it goes (see the core's
 /// `tracker` module). Gives angles (rad), velocities (rad/s), accelerations (rad/s²) and
 /// torques (N·m) for every frame once a frame with every marker has started it; a missing
-/// marker (NaN) simply corrects nothing. With `refiner` (a `refine` model, e.g.
-/// `ikid.load("wrist-track")`) a network over the tracker's recent states corrects q and q̈.
+/// marker (NaN) simply corrects nothing.
+///
+/// Arguments (all optional):
+///
+/// - ``length_scale``, ``mass_scale``: the subject's segment lengths (and marker offsets) and
+///   masses relative to the default subject (1.0).
+/// - ``marker_shift``: ``(6, 3)`` metres added to each marker's offset in its segment's frame
+///   (frame order), or None.
+/// - ``rate_hz``: the rate frames are pushed at, Hz.
+/// - ``jerk_noise``: spectral density of the joint jerk the motion model allows, rad²/s⁵
+///   (``ikid.DEFAULT_JERK_NOISE``): larger follows faster moves with less lag and passes
+///   more noise.
+/// - ``noise_memory_s``: how far back the marker-noise estimate looks, seconds.
+/// - ``initial_marker_noise``: marker noise (standard deviation, m) assumed before any has
+///   been measured.
+/// - ``refiner``: a ``refine`` model (e.g. ``ikid.load("wrist-track")``) whose network over
+///   the tracker's recent states corrects q and q̈; None for the filter alone.
+/// - ``calibration``: an ``ikid.Calibration`` of the subject's marker placement (from
+///   ``ikid.calibrate`` or ``ikid.load_calibration``); turns ``relative_hand`` on.
+/// - ``relative_hand``: measure the hand by its orientation only (for real subjects, whose
+///   wrist centre the body model does not know).
 #[pyclass(module = "ikid")]
 pub struct Tracker {
     inner: CoreTracker,
@@ -41,6 +62,11 @@ fn rows(out: &TrackerOutput) -> [[f64; N_COORDINATES]; 4] {
 impl Tracker {
     #[new]
     #[pyo3(signature = (length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=1000.0, jerk_noise=DEFAULT_JERK_NOISE, noise_memory_s=10.0, initial_marker_noise=1e-3, refiner=None, calibration=None, relative_hand=false))]
+    // jerk_noise's default written out for help() (pyo3 shows a constant as `...`); a test
+    // checks it is DEFAULT_JERK_NOISE.
+    #[pyo3(
+        text_signature = "(length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=1000.0, jerk_noise=3000.0, noise_memory_s=10.0, initial_marker_noise=0.001, refiner=None, calibration=None, relative_hand=False)"
+    )]
     #[allow(clippy::too_many_arguments)]
     fn new(
         length_scale: f64,
@@ -68,21 +94,21 @@ impl Tracker {
         self.inner.refiner().map(|m| Model { inner: m.clone() })
     }
 
-    /// One marker frame (18 values, m, lab; NaN = missing) → a `(4, 3)` float64 array, rows
-    /// `q`, `qd`, `qdd`, `tau`; or `None` until a frame with every marker started the filter.
-    /// Holds the GIL (a push takes microseconds).
-    fn push<'py>(&mut self, py: Python<'py>, frame: &Bound<'py, PyAny>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+    /// Push one marker frame: ``frame`` holds 18 values (the six markers' x, y, z in metres in
+    /// the lab frame, ``ikid.MARKERS`` order; NaN = missing, float32 or float64). Returns a
+    /// ``TrackerEstimate`` (``q``, ``qd``, ``qdd``, ``tau``, the ``status`` bits of
+    /// ``ikid.FRAME_STATUS``, ``missing``, ``noise``, ``refined``; ``numpy.asarray`` of it is the
+    /// ``(4, 3)`` array of the four rows), or None until a frame with every marker started
+    /// the filter. Holds the GIL (a push takes microseconds).
+    fn push<'py>(&mut self, frame: &Bound<'py, PyAny>) -> PyResult<Option<TrackerEstimate>> {
         let tracker = &mut self.inner;
-        with_frame_f64(frame, |values| match tracker.push(values).py_err()? {
-            None => Ok(None),
-            Some(out) => Ok(Some(PyArray2::from_owned_array(py, numpy::ndarray::Array2::from(rows(&out).to_vec())))),
-        })
+        with_frame_f64(frame, |values| Ok(tracker.push(values).py_err()?.map(|out| TrackerEstimate::from(&out))))
     }
 
     /// Every frame of `frames` `(n, 18)` in order; returns a dict of `(n, 3)` float64 arrays
     /// `q`, `qd`, `qdd`, `tau`, the `(n,)` uint8 `missing` (bit i: marker i missing), `(n,)`
     /// `noise` (mean learned hand-marker noise, m; NaN before the start), `refined` (bool) and
-    /// `status` (uint8 bits, ``ikid.STATUS``: markers rejected, poses held, restarts,
+    /// `status` (uint8 bits, ``ikid.FRAME_STATUS``: markers rejected, poses held, restarts,
     /// implausible angles), and `start`,
     /// the first frame with an estimate (rows before it are NaN: the filter waits for a frame
     /// with every marker). Continues from the tracker's state. Releases the GIL.
@@ -168,5 +194,128 @@ impl Tracker {
     fn __repr__(&self) -> String {
         let s = self.inner.settings();
         format!("Tracker(rate_hz={}, jerk_noise={:e})", s.rate_hz, s.jerk_noise)
+    }
+}
+
+/// One frame's estimate from ``Tracker.push``: ``q``, ``qd``, ``qdd``, ``tau`` (``(3,)``
+/// float64 each: rad, rad/s, rad/s², N·m, ``ikid.COORDINATES`` order), ``status`` (bits of
+/// ``ikid.FRAME_STATUS``: markers rejected, a pose held, a restart, an implausible angle),
+/// ``missing`` (bit i: marker i was missing), ``noise`` (mean learned hand-marker noise, m)
+/// and ``refined``. As an array (``numpy.asarray(estimate)``, indexing, unpacking
+/// ``q, qd, qdd, tau = estimate``) it is the ``(4, 3)`` float64 array of the four rows.
+#[pyclass(module = "ikid", frozen)]
+pub struct TrackerEstimate {
+    rows: [[f64; N_COORDINATES]; 4],
+    /// ``ikid.FRAME_STATUS`` bits of this estimate.
+    #[pyo3(get)]
+    status: u32,
+    /// Bit i set: marker i (``ikid.MARKERS`` order) was missing in this frame.
+    #[pyo3(get)]
+    missing: u32,
+    /// Mean noise (standard deviation) of the hand markers measured so far, m.
+    #[pyo3(get)]
+    noise: f64,
+    /// Whether the refiner corrected this estimate.
+    #[pyo3(get)]
+    refined: bool,
+}
+
+impl From<&TrackerOutput> for TrackerEstimate {
+    fn from(out: &TrackerOutput) -> Self {
+        TrackerEstimate {
+            rows: rows(out),
+            status: u32::from(out.status),
+            missing: u32::from(out.missing),
+            noise: out.noise,
+            refined: out.refined,
+        }
+    }
+}
+
+impl TrackerEstimate {
+    fn row<'py>(&self, py: Python<'py>, k: usize) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.rows[k])
+    }
+
+    fn array<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        PyArray2::from_owned_array(py, numpy::ndarray::Array2::from(self.rows.to_vec()))
+    }
+}
+
+#[pymethods]
+impl TrackerEstimate {
+    /// Joint angles, rad.
+    #[getter]
+    fn q<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.row(py, 0)
+    }
+
+    /// Joint velocities, rad/s.
+    #[getter]
+    fn qd<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.row(py, 1)
+    }
+
+    /// Joint accelerations, rad/s².
+    #[getter]
+    fn qdd<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.row(py, 2)
+    }
+
+    /// Joint torques, N·m.
+    #[getter]
+    fn tau<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.row(py, 3)
+    }
+
+    /// The ``(4, 3)`` float64 array of rows ``q``, ``qd``, ``qdd``, ``tau`` (a new copy).
+    #[getter]
+    fn values<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        self.array(py)
+    }
+
+    /// The ``(4, 3)`` array (``numpy.asarray(estimate)``), in ``dtype`` if given.
+    #[pyo3(signature = (dtype=None, copy=None))]
+    fn __array__<'py>(
+        &self,
+        py: Python<'py>,
+        dtype: Option<&Bound<'py, PyAny>>,
+        copy: Option<bool>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        if copy == Some(false) {
+            return Err(pyo3::exceptions::PyValueError::new_err(
+                "a TrackerEstimate's array is always a new copy (copy=False cannot be honoured)",
+            ));
+        }
+        let array = self.array(py).into_any();
+        match dtype {
+            Some(dtype) if !dtype.is_none() => array.call_method1("astype", (dtype,)),
+            _ => Ok(array),
+        }
+    }
+
+    /// Indexes the ``(4, 3)`` array (``estimate[0]`` is ``q``).
+    fn __getitem__<'py>(&self, py: Python<'py>, key: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+        self.array(py).into_any().get_item(key)
+    }
+
+    fn __len__(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// Unpacks as the four rows: ``q, qd, qdd, tau = estimate``.
+    fn __iter__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let rows: Vec<_> = (0..self.rows.len()).map(|k| self.row(py, k)).collect();
+        PyTuple::new(py, rows)?.into_any().try_iter().map(Bound::into_any)
+    }
+
+    fn __repr__(&self) -> String {
+        let [q, _, _, tau] = self.rows;
+        format!(
+            "TrackerEstimate(q={q:?}, tau={tau:?}, status={}, missing={}, refined={})",
+            self.status,
+            self.missing,
+            if self.refined { "True" } else { "False" }
+        )
     }
 }

@@ -108,8 +108,10 @@ pub enum Error {
         /// The value.
         value: f32,
     },
-    /// A frame (one time step of input) has the wrong number of values.
-    #[error("frame has {found} values, the model's feature set {feature_set:?} expects {expected}")]
+    /// A frame (one time step of input) has the wrong number of values. The message names
+    /// what the caller gives (a marker frame for every model that reads markers), not the
+    /// features the model computes from it.
+    #[error("frame has {found} values, expected {expected}: {}", frame_of(feature_set))]
     FrameLength {
         /// Feature set of the model.
         feature_set: &'static str,
@@ -328,6 +330,17 @@ impl Error {
             Error::NonFiniteOutput { value, .. } => Error::NonFiniteOutput { frame, value },
             other => other,
         }
+    }
+}
+
+/// What a frame of the feature set `feature_set` holds, for [`Error::FrameLength`]'s message:
+/// the joint-state and tracker-state sets read their own frames, every other set reads
+/// marker frames (`crate::features::FrameKind`; a test there checks each set's name here).
+pub fn frame_of(feature_set: &str) -> &'static str {
+    match feature_set {
+        "joint_state" => "a joint state (q, q̇, q̈ of the three coordinates)",
+        "tracker_state" => "a tracker state (its q, q̇, q̈ and marker noise)",
+        _ => "a marker frame (six markers' x, y, z in metres: RSP, USP, FAP, MC2, MC5, MCB)",
     }
 }
 

@@ -336,6 +336,24 @@ mod tests {
     }
 
     #[test]
+    fn a_short_frame_is_named_by_what_the_caller_gives() {
+        // Error::FrameLength names the frame kind (error.rs cannot see this module): a marker
+        // frame for every set that reads markers, whatever features it computes.
+        for set in FEATURE_SETS {
+            let message = set.check_frame(&[0.0; 2], 0).unwrap_err().to_string();
+            let want = match set.frame_kind() {
+                FrameKind::Markers => "a marker frame",
+                FrameKind::JointState => "a joint state",
+                FrameKind::TrackerState => "a tracker state",
+            };
+            assert!(
+                message.starts_with(&format!("frame has 2 values, expected {}: {want}", set.frame_len())),
+                "{set:?}: {message}"
+            );
+        }
+    }
+
+    #[test]
     fn every_set_names_every_value() {
         let kinds = FEATURE_SETS.map(|f| f.frame_kind().name());
         assert_eq!(

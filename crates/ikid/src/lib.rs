@@ -9,15 +9,109 @@
 //! Kalman filter over the body model giving angles, velocities, accelerations and torques per
 //! frame, optionally refined by a network.
 //!
-//! ```no_run
-//! let model = ikid::Model::load("wrist-ik.safetensors")?;
+//! Every type a caller passes is this crate's or std's: frames are slices of `f32` (or `f64`
+//! for the [`Tracker`]), and the [`nalgebra`] version the crate uses (for
+//! [`Calibration::from_matrices`]'s rotation matrices) is re-exported as `ikid::nalgebra`, so a
+//! host needs no nalgebra of its own. The shipped models are reachable by name through
+//! [`shipped`] (from the source tree, or compiled in with the feature `embedded-models`).
+//!
+//! # A model, frame by frame
+//!
+//! A [`Stream`] predicts once its window is full; [`Model::predict`] does a whole recording.
+//!
+//! ```
+//! use ikid::body::BodyModel;
+//!
+//! let model = ikid::shipped::load("wrist-ik")?;
+//! // Two seconds of a slow wrist movement at the model's rate, as the body model's markers
+//! // (six markers × x, y, z in metres, one frame after another).
+//! let rate = model.card().frame_rate_hz;
+//! let q: Vec<f64> = (0..2000).flat_map(|i| {
+//!     let t = i as f64 / rate;
+//!     [0.5 * (1.1 * t).sin(), -0.4 * (0.7 * t).sin(), 0.15 * (1.9 * t).cos()]
+//! }).collect();
+//! let frames: Vec<f32> = BodyModel::default().marker_frames(&q, 0.3)?.iter().map(|&v| v as f32).collect();
+//!
 //! let mut stream = model.stream();
-//! # let frames: Vec<[f32; 18]> = vec![];
-//! for frame in &frames {
+//! let mut last = None;
+//! for frame in frames.chunks_exact(model.frame_len()) {
 //!     if let Some(angles) = stream.push(frame)? {
-//!         println!("s_p {:.3} e_f {:.3} ad_ab {:.3} rad", angles[0], angles[1], angles[2]);
+//!         last = Some([angles[0], angles[1], angles[2]]); // s_p, e_f, ad_ab, rad
 //!     }
 //! }
+//! let last = last.expect("a prediction once the window is full");
+//! assert!((f64::from(last[0]) - q[q.len() - 3]).abs() < 0.1, "s_p {last:?}");
+//! # Ok::<(), ikid::Error>(())
+//! ```
+//!
+//! # The tracker: angles, velocities, accelerations and torques
+//!
+//! A [`Tracker`] takes the same `f32` frames (or `f64`) and gives q, q̇, q̈ and τ for every
+//! frame once one with every marker has started it, with [`status`] bits saying what it did.
+//!
+//! ```
+//! use ikid::body::BodyModel;
+//! use ikid::{Tracker, TrackerSettings};
+//!
+//! let settings = TrackerSettings { rate_hz: 1000.0, ..TrackerSettings::default() };
+//! let mut tracker = Tracker::new(BodyModel::default(), settings)?;
+//! tracker.set_refiner(Some(ikid::shipped::load("wrist-track")?))?; // optional
+//! let q: Vec<f64> = (0..500).flat_map(|i| [0.3, -0.2 * (i as f64 / 200.0).sin(), 0.1]).collect();
+//! let frames = BodyModel::default().marker_frames(&q, 0.3)?;
+//! let mut estimate = None;
+//! for frame in frames.chunks_exact(ikid::body::MARKER_FRAME_LEN) {
+//!     estimate = tracker.push(frame)?;
+//! }
+//! let out = estimate.expect("started on the first frame: every marker present");
+//! assert!((out.state.q[0] - 0.3).abs() < 0.05, "s_p {:?}", out.state.q);
+//! assert_eq!(out.status & ikid::status::IMPLAUSIBLE, 0);
+//! println!("tau {:?} N·m, status bits {:#x}", out.tau, out.status);
+//! # Ok::<(), ikid::Error>(())
+//! ```
+//!
+//! # Calibration
+//!
+//! A subject's marker placement, as two rotation matrices (e.g. the `"forearm"` and `"hand"`
+//! arrays of a file written by `ikid calibrate`), built with the re-exported nalgebra; a
+//! matrix that is not a rotation is refused.
+//!
+//! ```
+//! use ikid::nalgebra::{Matrix3, Rotation3, Vector3};
+//! use ikid::{Calibration, ErrorKind};
+//!
+//! let tilt = Rotation3::from_axis_angle(&Vector3::z_axis(), 10f64.to_radians()).into_inner();
+//! let calibration = Calibration::from_matrices(tilt, Matrix3::identity())?;
+//! let model = ikid::shipped::load("wrist-ik")?;
+//! let mut stream = model.stream();
+//! stream.set_calibration(Some(calibration))?;
+//!
+//! let sheared = Matrix3::new(1.0, 0.5, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+//! let err = Calibration::from_matrices(sheared, Matrix3::identity()).unwrap_err();
+//! assert_eq!(err.kind(), ErrorKind::Argument);
+//! # Ok::<(), ikid::Error>(())
+//! ```
+//!
+//! # Errors
+//!
+//! Every fallible call returns an [`Error`]; [`Error::kind`] sorts it into four
+//! [`ErrorKind`]s (what the C ABI's status codes and Python's exception classes are),
+//! [`Error::code`] gives a stable reason and [`Error::frame`] the frame it is about.
+//!
+//! ```
+//! use ikid::ErrorKind;
+//!
+//! let model = ikid::shipped::load("wrist-ik")?;
+//! let mut stream = model.stream();
+//! let err = stream.push(&[0.0; 17]).unwrap_err();
+//! assert_eq!((err.kind(), err.code()), (ErrorKind::Input, "frame_length"));
+//! assert!(err.to_string().contains("a marker frame"), "{err}");
+//!
+//! let err = ikid::Model::load("/nonexistent/wrist-ik.safetensors").unwrap_err();
+//! assert_eq!(err.kind(), ErrorKind::Io);
+//! let err = ikid::Model::from_bytes(b"not a model").unwrap_err();
+//! assert_eq!(err.kind(), ErrorKind::ModelFile);
+//! let err = ikid::shipped::load("wrist-xyz").unwrap_err();
+//! assert_eq!(err.kind(), ErrorKind::Argument);
 //! # Ok::<(), ikid::Error>(())
 //! ```
 
@@ -33,6 +127,7 @@ pub mod net;
 pub mod noise;
 pub mod reference;
 pub mod rng;
+pub mod shipped;
 pub mod status;
 pub mod stream;
 pub mod testing;
@@ -45,6 +140,10 @@ pub use gaps::{GapFiller, MissingMarkers};
 pub use model::{Model, ModelCard, OutputSpec};
 pub use stream::Stream;
 pub use tracker::{Tracker, TrackerOutput, TrackerSettings};
+
+/// The linear algebra crate of ikid's API, at the version ikid uses (for
+/// [`Calibration::from_matrices`]).
+pub use nalgebra;
 
 /// This crate's version.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
@@ -118,7 +217,8 @@ mod module_graph {
         let lib = code(&lib);
         let mut reexports = BTreeMap::new();
         for line in lib.lines().filter_map(|l| l.trim().strip_prefix("pub use ")) {
-            let (module, names) = line.trim_end_matches(';').split_once("::").expect("pub use module::names");
+            // `pub use nalgebra;` re-exports a crate, not one of the modules.
+            let Some((module, names)) = line.trim_end_matches(';').split_once("::") else { continue };
             for name in names.trim_matches(|c| c == '{' || c == '}').split(',') {
                 reexports.insert(name.trim().to_string(), module.to_string());
             }

@@ -10,7 +10,7 @@ Each job runs in a process of its own (forked on Linux: no start-up cost), at mo
 at a time, so the parent always knows which job a process was running. Workers ignore SIGINT
 (a terminal sends it to the whole process group: only the parent decides) and turn SIGTERM
 into an exception, so a worker stopped by the parent removes its temporary files on the way
-out (``ikid.io.atomic_output``); on Linux a worker is also sent SIGTERM if the parent dies
+out (``ikid.io.atomic_outputs``); on Linux a worker is also sent SIGTERM if the parent dies
 (``PR_SET_PDEATHSIG``). Results reach the parent as each job ends.
 """
 

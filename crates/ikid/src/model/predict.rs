@@ -5,7 +5,8 @@ use super::handle::Model;
 use crate::error::{Error, Result};
 use crate::gaps::{MissingMarkers, fill_gaps};
 use crate::net::BATCH;
-use std::sync::{Mutex, PoisonError};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 impl Model {
     /// Predictions for a recording of `n` frames: one per full window, `n - window + 1` rows
@@ -70,33 +71,38 @@ impl Model {
         const MIN_ROWS_PER_THREAD: usize = 256;
         let threads = threads.clamp(1, rows.div_ceil(MIN_ROWS_PER_THREAD).max(1));
         // Features, then windows, in blocks that threads claim in turn: a thread slowed by
-        // another process takes fewer blocks instead of holding the others up.
+        // another process takes fewer blocks instead of holding the others up. The workers own
+        // what they read (the model is shared by reference count, the frames and features are
+        // moved into an `Arc`) and hand back each block's values, which the caller copies.
         const FRAMES_PER_BLOCK: usize = 512;
         const ROWS_PER_BLOCK: usize = 8 * BATCH;
-        let mut features = vec![0f32; frames.len() / fl * nf];
-        let blocks = frames.chunks(FRAMES_PER_BLOCK * fl).zip(features.chunks_mut(FRAMES_PER_BLOCK * nf));
-        for_each_claimed(
-            blocks,
-            threads,
-            || (),
-            |(), b, (frames, features)| {
-                for (i, (frame, row)) in frames.chunks_exact(fl).zip(features.chunks_exact_mut(nf)).enumerate() {
-                    set.compute(frame, row, b * FRAMES_PER_BLOCK + i)?;
+        let n_frames = frames.len() / fl;
+        let frames: Arc<[f32]> = Arc::from(frames);
+        let blocks = for_each_claimed(n_frames.div_ceil(FRAMES_PER_BLOCK), threads, || (), {
+            let frames = Arc::clone(&frames);
+            move |(), b| {
+                let first = b * FRAMES_PER_BLOCK;
+                let block = &frames[first * fl..(first + FRAMES_PER_BLOCK).min(n_frames) * fl];
+                let mut features = vec![0f32; block.len() / fl * nf];
+                for (i, (frame, row)) in block.chunks_exact(fl).zip(features.chunks_exact_mut(nf)).enumerate() {
+                    set.compute(frame, row, first + i)?;
                 }
-                Ok(())
-            },
-        )?;
-        let net = self.net();
-        // Windows of consecutive frames are contiguous slices of the feature rows; row r is the
-        // prediction for frame r + w - 1, the number its errors carry.
-        let window = |r: usize| &features[r * nf..(r + w) * nf];
-        let scratch = || (net.scratch(), net.batch_scratch());
-        for_each_claimed(
-            out.chunks_mut(ROWS_PER_BLOCK * no),
-            threads,
-            scratch,
-            |(scratch, batch_scratch), b, chunk| {
-                let mut row = b * ROWS_PER_BLOCK;
+                Ok(features)
+            }
+        })?;
+        let features: Arc<[f32]> = blocks.concat().into();
+        let model = self.clone();
+        let scratch = move || (model.net().scratch(), model.net().batch_scratch());
+        let model = self.clone();
+        let blocks =
+            for_each_claimed(rows.div_ceil(ROWS_PER_BLOCK), threads, scratch, move |(scratch, batch_scratch), b| {
+                let net = model.net();
+                // Windows of consecutive frames are contiguous slices of the feature rows; row r
+                // is the prediction for frame r + w - 1, the number its errors carry.
+                let window = |r: usize| &features[r * nf..(r + w) * nf];
+                let first = b * ROWS_PER_BLOCK;
+                let mut chunk = vec![0f32; ((first + ROWS_PER_BLOCK).min(rows) - first) * no];
+                let mut row = first;
                 let mut groups = chunk.chunks_exact_mut(BATCH * no);
                 for group in &mut groups {
                     net.run_batch(std::array::from_fn(|s| window(row + s)), batch_scratch, group, row + w - 1)?;
@@ -106,42 +112,72 @@ impl Model {
                     net.run(window(row), scratch, out, row + w - 1)?;
                     row += 1;
                 }
-                Ok(())
-            },
-        )?;
+                Ok(chunk)
+            })?;
+        for (chunk, values) in out.chunks_mut(ROWS_PER_BLOCK * no).zip(blocks) {
+            chunk.copy_from_slice(&values);
+        }
         Ok(rows)
     }
 }
 
-/// Runs `work` on every item on up to `threads` threads (the calling one included), each
-/// thread claiming the next item in order and keeping its own `state`. Returns the error of the
-/// earliest failing item: every item before it was claimed and run to the end.
-fn for_each_claimed<T: Send, S>(
-    items: impl Iterator<Item = T> + Send,
+/// What one thread of [`for_each_claimed`] did: its items' results, and the item it stopped
+/// at with its error, if one failed.
+type Claimed<R> = (Vec<(usize, R)>, Option<(usize, Error)>);
+
+/// Runs `work` on items `0..n_items` on up to `threads` threads (the calling one included),
+/// each thread claiming the next item in order and keeping its own `state`; returns the
+/// items' results in item order, or the error of the earliest failing item (every item before
+/// it was claimed and run to the end).
+///
+/// The threads are spawned here and joined before returning, and are not scoped: a scope
+/// keeps a handle to the calling thread (`std::thread::current`), which a C host's main
+/// thread never frees, and valgrind reports it as possibly lost in every host that predicts.
+/// So `work` and `state` own what they use (`'static`).
+fn for_each_claimed<S, R: Send + 'static>(
+    n_items: usize,
     threads: usize,
-    state: impl Fn() -> S + Sync,
-    work: impl Fn(&mut S, usize, T) -> Result<()> + Sync,
-) -> Result<()> {
-    let queue = Mutex::new(items.enumerate());
-    let worker = || -> Option<(usize, Error)> {
-        let mut state = state();
-        loop {
-            // Only `next` runs under the lock, and it does not panic: no poisoning to handle.
-            let (i, item) = queue.lock().unwrap_or_else(PoisonError::into_inner).next()?;
-            if let Err(e) = work(&mut state, i, item) {
-                return Some((i, e));
+    state: impl Fn() -> S + Send + Sync + 'static,
+    work: impl Fn(&mut S, usize) -> Result<R> + Send + Sync + 'static,
+) -> Result<Vec<R>> {
+    let next = Arc::new(AtomicUsize::new(0));
+    let shared = Arc::new((state, work));
+    let worker = {
+        let (next, shared) = (Arc::clone(&next), Arc::clone(&shared));
+        move || -> Claimed<R> {
+            let (state, work) = &*shared;
+            let mut state = state();
+            let mut done = Vec::new();
+            loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= n_items {
+                    return (done, None);
+                }
+                match work(&mut state, i) {
+                    Ok(r) => done.push((i, r)),
+                    Err(e) => return (done, Some((i, e))),
+                }
             }
         }
     };
-    let failed = if threads <= 1 {
-        worker()
-    } else {
-        std::thread::scope(|scope| {
-            let others: Vec<_> = (1..threads).map(|_| scope.spawn(worker)).collect();
-            let mine = worker();
-            let others = others.into_iter().map(|h| h.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)));
-            others.chain([mine]).flatten().min_by_key(|&(i, _)| i)
-        })
-    };
-    failed.map_or(Ok(()), |(_, e)| Err(e))
+    let others: Vec<_> = (1..threads.min(n_items)).map(|_| std::thread::spawn(worker.clone())).collect();
+    let mine = worker();
+    let mut results: Vec<Option<R>> = std::iter::repeat_with(|| None).take(n_items).collect();
+    let mut failed: Option<(usize, Error)> = None;
+    let outcomes = others.into_iter().map(|h| h.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)));
+    for (done, error) in outcomes.chain([mine]) {
+        for (i, r) in done {
+            results[i] = Some(r);
+        }
+        if let Some((i, e)) = error
+            && failed.as_ref().is_none_or(|(j, _)| i < *j)
+        {
+            failed = Some((i, e));
+        }
+    }
+    match failed {
+        Some((_, e)) => Err(e),
+        // Without a failure every item was claimed and run.
+        None => Ok(results.into_iter().flatten().collect()),
+    }
 }

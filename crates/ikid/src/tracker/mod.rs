@@ -355,8 +355,15 @@ impl Tracker {
     /// is broken that long is re-learned, a segment's shape once a new one has held as long as
     /// the old one had. An infinite value is an error (NaN means missing); nothing else a frame
     /// holds stops the tracker.
-    pub fn push(&mut self, frame: &[f64]) -> Result<Option<TrackerOutput>> {
-        let mut step = self.begin(frame)?;
+    ///
+    /// The frame's values are `f32` (as [`Stream::push`](crate::Stream::push) takes them) or
+    /// `f64`; `f32` values are widened exactly.
+    pub fn push<V: Copy + Into<f64>>(&mut self, frame: &[V]) -> Result<Option<TrackerOutput>> {
+        if frame.len() != MARKER_FRAME_LEN {
+            return Err(Error::FrameLength { feature_set: "markers", found: frame.len(), expected: MARKER_FRAME_LEN });
+        }
+        let frame: [f64; MARKER_FRAME_LEN] = std::array::from_fn(|i| frame[i].into());
+        let mut step = self.begin(&frame)?;
         // 1. The forearm, 2. the hand's markers, 1b. the forearm through a gap of one marker.
         self.measure_forearm(&mut step);
         self.check_hand(&mut step);
@@ -388,11 +395,8 @@ impl Tracker {
     /// Checks a frame and starts its [`Step`]: a frame of the wrong length or with an infinite
     /// value is an error; markers no arm could hold (wrong units, a ghost far away) are all
     /// rejected; a left arm is mirrored into a right one.
-    fn begin(&mut self, frame: &[f64]) -> Result<Step> {
+    fn begin(&mut self, frame: &[f64; MARKER_FRAME_LEN]) -> Result<Step> {
         let index = self.frames;
-        if frame.len() != MARKER_FRAME_LEN {
-            return Err(Error::FrameLength { feature_set: "markers", found: frame.len(), expected: MARKER_FRAME_LEN });
-        }
         if let Some(i) = frame.iter().position(|v| v.is_infinite()) {
             return Err(Error::NonFiniteInput {
                 frame: index,
@@ -485,6 +489,25 @@ mod tests {
     /// Bit patterns of an output (NaN compares equal to the same NaN).
     fn bits(out: &TrackerOutput) -> (Vec<u64>, u8, bool, u64) {
         (out.values().iter().map(|v| v.to_bits()).collect(), out.missing, out.refined, out.noise.to_bits())
+    }
+
+    #[test]
+    fn f32_frames_are_the_f64_frames_they_widen_to() {
+        // The frame type of Stream::push (f32) is taken as is: the same estimates, bit for bit,
+        // as the same values given as f64; a short frame is refused either way.
+        let body = BodyModel::default();
+        let q = trajectory(300, 1000.0);
+        let narrow: Vec<f32> = frames(&body, &q, 0.2).iter().map(|&v| v as f32).collect();
+        let wide: Vec<f64> = narrow.iter().map(|&v| f64::from(v)).collect();
+        let mut a = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut b = Tracker::new(body, TrackerSettings::default()).unwrap();
+        for (x, y) in narrow.chunks_exact(MARKER_FRAME_LEN).zip(wide.chunks_exact(MARKER_FRAME_LEN)) {
+            let (x, y) = (a.push(x).unwrap().unwrap(), b.push(y).unwrap().unwrap());
+            assert_eq!((bits(&x), x.status), (bits(&y), y.status));
+        }
+        let err = a.push(&narrow[..17]).unwrap_err();
+        assert!(matches!(err, Error::FrameLength { found: 17, expected: 18, .. }), "{err}");
+        assert!(err.to_string().contains("a marker frame"), "{err}");
     }
 
     #[test]

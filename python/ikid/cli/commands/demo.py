@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
         est = tracker.push(frame)
         track_ns[i] = time.perf_counter_ns() - t
         if est is not None:
-            tracked_q[i], tracked_tau[i] = est[0], est[3]
+            tracked_q[i], tracked_tau[i] = est.q, est.tau
 
     print("4. errors against the simulator's ground truth (same frames)")
     ref = ikid.reference_ik(trial.markers)
