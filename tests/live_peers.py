@@ -182,12 +182,13 @@ class FakeQtm:
     would: 3D in mm, NaN for a hidden marker, its own frame numbers (from 1) and µs capture
     time stamps (this machine's monotonic clock, so a reader can time the path). ``drop``: frame
     indices never sent; ``disconnect_at``: the connection is closed before that frame (the
-    next connection streams from it); ``hide``: (first, end, ikid marker) hidden."""
+    next connection streams from it); ``hide``: (first, end, ikid marker) hidden; ``burst``:
+    every frame sent at once (stamped at the rate all the same: a reader that cannot keep up)."""
 
     def __init__(
-        self, frames: np.ndarray, rate: float = 1000.0, drop=(), disconnect_at=None, hide=None
+        self, frames: np.ndarray, rate: float = 1000.0, drop=(), disconnect_at=None, hide=None, burst=False
     ) -> None:
-        self.frames, self.rate, self.drop, self.hide = frames, rate, set(drop), hide
+        self.frames, self.rate, self.drop, self.hide, self.burst = frames, rate, set(drop), hide, burst
         self.disconnect_at = disconnect_at
         self.listener = socket.create_server(("127.0.0.1", 0))
         self.listener.settimeout(20)
@@ -254,7 +255,8 @@ class FakeQtm:
             if self.hide and self.hide[0] <= k < self.hide[1]:
                 m = 1 + 5 - self.hide[2]
                 xyz[3 * m : 3 * m + 3] = np.nan
-            pace(start, k - first, self.rate)
+            if not self.burst:
+                pace(start, k - first, self.rate)
             body = THREE_D.pack(len(source_labels()), 0, 0) + xyz.tobytes()
             component = COMPONENT.pack(COMPONENT.size + len(body), 1) + body
             conn.sendall(

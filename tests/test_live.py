@@ -235,6 +235,25 @@ def test_qtm_source_with_hidden_markers_dropped_frames_and_a_reconnection(tmp_pa
             np.testing.assert_allclose([float(v) for v in row[3:]], expected[k], rtol=2e-6, atol=1e-6)
 
 
+def test_a_reader_that_falls_behind_takes_the_newest_frame_and_counts_the_rest(tmp_path):
+    """QTM sends 3000 frames at once: more than --max-lag's worth waits at each read, so ikid
+    takes the newest and counts the others as skipped; every frame is either read or skipped."""
+    n = 3000
+    server = FakeQtm(trial_frames(n), burst=True)
+    try:
+        r = _qtm_stream(server, tmp_path, "--max-lag", "0.002", count=n)
+    finally:
+        server.close()
+    _, rows = _header_and_rows(r.stdout)
+    summary = _summary(r.stderr)
+    skipped = _count(summary, "skipped")
+    assert skipped > 0 and len(rows) + skipped == n, summary
+    assert _count(summary, "lost (by frame number)") == 0 and "refused" not in summary, summary
+    assert r.returncode == 3
+    numbers = [int(row[0]) for row in rows]
+    assert numbers == sorted(numbers) and numbers[-1] == n  # the newest is always taken
+
+
 def test_the_fake_qtm_server_speaks_qualisys_own_client(tmp_path):
     """qtm-rt (Qualisys' Python SDK) reads the fake server's parameters and frames as it
     reads QTM's: the tests' server is checked against the real client, not against ikid's."""

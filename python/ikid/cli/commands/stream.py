@@ -419,7 +419,19 @@ def _run(args: argparse.Namespace, source, rate_hz: float | None, refusal_reason
             continue
         if len(batch) > max_backlog:
             notes["skipped"] += len(batch) - 1
+            for f in batch[:-1]:  # skipped, not lost: their numbers and times still count
+                try:
+                    if f.number is not None:
+                        losses.number(f.number)
+                    elif f.time is not None:
+                        losses.time(f.time)
+                except ikid.InputError:
+                    pass
             batch = batch[-1:]
+            # What follows does not continue what the window holds (and may be further ahead
+            # than a clock glitch's bound): the streams start again from the newest frame.
+            for s in streams:
+                s.reset()
         for f in batch:
             if args.count is not None and frame >= args.count:
                 break
