@@ -414,3 +414,31 @@ def test_sources_and_sinks_are_named_and_checked():
             [*IKID, "stream", *argv], capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL
         )
         assert r.returncode == 2 and all(w in r.stderr for w in words), (argv, r.stderr)
+
+
+def test_the_tracker_path_writes_each_value_with_its_standard_deviation():
+    n = 400
+    frames = trial_frames(n)
+    frames[200:230, 12:15] = np.nan  # MC5 hidden: the tracker goes on without it
+    r = subprocess.run(
+        [*IKID, "stream", "--tracker", "--time"],
+        input=_stamped_lines(frames, np.arange(n) * 1e-3).replace("nan", ""),
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    header, rows = _header_and_rows(r.stdout)
+    names = [c[0] for c in ikid._native.COORDINATES]
+    values = names + [f"{c}_moment" for c in names]
+    assert header[2:] == [h for v in values for h in (v, f"{v}_sd")]
+    # The oracle: ikid.Tracker on the same frames in this process.
+    tracker = ikid.Tracker()
+    for k, row in enumerate(rows):
+        out = tracker.push(frames[k])
+        sd = tracker.output_sd
+        if out is None:
+            assert row[1] == "filling" and row[2] == ""
+            continue
+        got = np.array([float(v) for v in row[2:]]).reshape(6, 2)
+        np.testing.assert_allclose(got[:, 0], np.concatenate([out[0], out[3]]), rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(got[:, 1], np.concatenate([sd[0], sd[1]]), rtol=1e-6)
+        assert np.all(got[:, 1] > 0)

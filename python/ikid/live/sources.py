@@ -14,7 +14,7 @@ import struct
 import time
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator
-from typing import BinaryIO, NamedTuple
+from typing import Any, BinaryIO, NamedTuple
 
 import numpy as np
 
@@ -63,8 +63,8 @@ def marker_columns(
 ) -> np.ndarray:
     """Indices into a source's channels of ikid's 18 marker values (ikid's marker order, x y z
     each), from the source's marker label -> its three channels and the marker map."""
-    columns = []
-    absent = []
+    columns: list[int] = []
+    absent: list[str] = []
     for m in ikid_marker_names():
         label = marker_map.label_of(m)
         if label not in positions:
@@ -125,7 +125,7 @@ class LslSource:
         self.lost_error = LostError
         self.name, self.marker_map = name, marker_map
         self.reconnected = 0
-        self.inlet = None
+        self.inlet: Any = None  # a pylsl.StreamInlet once open
         if not self._open(timeout_s):
             raise _native.InputError(
                 f"--source lsl:{name}: no LSL stream named {name!r} found within {timeout_s:g} s"

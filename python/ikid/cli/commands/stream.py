@@ -44,6 +44,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--torque-model", default=None, help="a second model on the same frames (e.g. wrist-chain)"
     )
     p.add_argument(
+        "--tracker",
+        action="store_true",
+        help="run ikid.Tracker (the extended Kalman filter over the body model) instead of the networks: "
+        "angles and torques (<coordinate>_moment), each followed by its standard deviation (<name>_sd, "
+        "from the filter's covariance; see docs/live.md for how far to trust it)",
+    )
+    p.add_argument(
         "--udp",
         type=PORT,
         default=None,
@@ -216,6 +223,8 @@ class _Losses:
         self.last_time: float | None = None
         self.candidate: int | None = None
         self.candidate_frames = 0
+        #: Time stamps in a row more than MAX_JUMP_S after the last counted one.
+        self.jumps = 0
 
     def number(self, n: int) -> None:
         last = self.last_number
@@ -233,6 +242,17 @@ class _Losses:
         self.last_number, self.candidate, self.candidate_frames = n, None, 0
 
     def time(self, t: float) -> None:
+        if self.last_time is not None and t - self.last_time > self.MAX_JUMP_S:
+            # A glitch of the source's clock, not frames lost (ikid.Stream refuses it; the
+            # tracker, which takes no stamps, runs on): not counted, and the new place only
+            # once REANCHOR_FRAMES stamps in a row say so.
+            self.jumps += 1
+            if self.jumps < self.REANCHOR_FRAMES:
+                self.last_time += 1.0 / self.rate_hz
+                return
+            self.last_time, self.jumps = t, 0
+            return
+        self.jumps = 0
         if self.last_time is not None and t > self.last_time:
             self.lost += max(0, round((t - self.last_time) * self.rate_hz) - 1)
         self.last_time = t
@@ -242,11 +262,12 @@ class _Losses:
         is counted from its place."""
         if self.last_time is not None:
             self.last_time += 1.0 / self.rate_hz
+        self.jumps += 1
 
     def restart(self) -> None:
         """After a reconnection: the source's numbering and clock may start again."""
         self.last_number = self.last_time = self.candidate = None
-        self.candidate_frames = 0
+        self.candidate_frames = self.jumps = 0
 
 
 def _text_frames(lines, frame_len: int, with_time: bool, with_number: bool):
@@ -371,7 +392,54 @@ def run(args: argparse.Namespace) -> int:
             source.close()
 
 
+class _TrackerStream:
+    """ikid.Tracker behind the stream's interface: per frame, each angle and torque followed by
+    its standard deviation (``Tracker.output_sd``); None until the filter has started. The
+    tracker takes no time stamps (it runs at its rate) and gives no per-frame status bits here."""
+
+    def __init__(self, rate_hz: float, calibration) -> None:
+        from ikid.io.storage import coordinate_names, moment_names
+
+        self.rate_hz = rate_hz
+        self.calibration = calibration
+        self.tracker = ikid.Tracker(rate_hz=rate_hz, calibration=calibration)
+        values = coordinate_names() + moment_names()
+        self.output_names = [n for v in values for n in (v, f"{v}_sd")]
+        self.output_units = [u for k in range(len(values)) for u in 2 * ["rad" if k < 3 else "N*m"]]
+        self.filled_markers: list[str] = []
+        self.status = math.nan
+        self.time_reanchors = 0
+
+    def push(self, frame: np.ndarray, time: float | None = None) -> np.ndarray | None:
+        out = self.tracker.push(frame)
+        sd = self.tracker.output_sd
+        if out is None or sd is None:
+            return None
+        values = np.concatenate([out[0], out[3]])
+        return np.column_stack([values, np.concatenate([sd[0], sd[1]])]).ravel()
+
+    def reset(self) -> None:
+        self.tracker = ikid.Tracker(rate_hz=self.rate_hz, calibration=self.calibration)
+
+
 def _run(args: argparse.Namespace, source, rate_hz: float | None, refusal_reason) -> int:
+    if args.tracker:
+        return _run_with(args, source, refusal_reason, *_tracker_streams(args, rate_hz))
+    return _run_with(args, source, refusal_reason, *_model_streams(args, rate_hz))
+
+
+def _tracker_streams(args: argparse.Namespace, rate_hz: float | None):
+    if args.torque_model or args.model != "wrist-ik" or args.missing_markers:
+        raise ikid.InputError(
+            "--tracker gives angles and torques itself: no --model, --torque-model or --missing-markers"
+        )
+    calibration = ikid.load_calibration(args.calibration) if args.calibration else None
+    stream = _TrackerStream(rate_hz or 1000.0, calibration)
+    # The tracker reads marker frames: the 18 values every source gives.
+    return [stream], stream.output_names, stream.output_units, stream.rate_hz, len(ikid.marker_names()) * 3
+
+
+def _model_streams(args: argparse.Namespace, rate_hz: float | None):
     unchecked = args.allow_unchecked_model
     models = [_model_for(args.model, "ikid stream --model", ("ik", "chain"), rate_hz, unchecked)]
     if args.torque_model:
@@ -385,11 +453,17 @@ def _run(args: argparse.Namespace, source, rate_hz: float | None, refusal_reason
     calibration = ikid.load_calibration(args.calibration) if args.calibration else None
     streams = [m.stream(missing_markers=args.missing_markers, calibration=calibration) for m in models]
     names = [n for m in models for n in m.output_names]
+    units = [u for m in models for u in m.output_units]
+    return streams, names, units, rate, models[0].frame_len
+
+
+def _run_with(
+    args: argparse.Namespace, source, refusal_reason, streams, names, units, rate, frame_len
+) -> int:
     sink = None
     if args.sink is not None:
         from ikid.live.sinks import LslSink
 
-        units = [u for m in models for u in m.output_units]
         sink = LslSink(args.sink[4:], names, units, rate)
     live = source is not None
     out = sys.stdout
@@ -402,7 +476,7 @@ def _run(args: argparse.Namespace, source, rate_hz: float | None, refusal_reason
         lines = (
             _udp_lines(args.udp, args.count, args.idle) if args.udp is not None else _stdin_lines(args.count)
         )
-        batches = _text_frames(lines, models[0].frame_len, args.time, args.frame_number)
+        batches = _text_frames(lines, frame_len, args.time, args.frame_number)
         timed, numbered = args.time, args.frame_number
     # A consumer that falls behind takes the newest frame: older ones waiting are skipped.
     max_backlog = max(1, round(args.max_lag * rate))
