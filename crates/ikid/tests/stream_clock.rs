@@ -7,9 +7,12 @@ use ikid::testing::{random_frames, random_model};
 
 const N: usize = 3000;
 
+/// Per frame pushed: the error's message if refused, else the output if any.
+type Pushed = Vec<Result<Option<Vec<f32>>, String>>;
+
 /// Outputs of `stamps` (one per frame; `None` = frame not pushed) through a fresh stream:
 /// per frame, `Err` if refused, else the output if any.
-fn run(stamps: &[Option<f64>]) -> (Vec<Result<Option<Vec<f32>>, String>>, ikid::Stream) {
+fn run(stamps: &[Option<f64>]) -> (Pushed, ikid::Stream) {
     let model = random_model(FeatureSet::Angles, 5, &[16], 3, 4); // 1000 Hz, window 5
     let frames = random_frames(FeatureSet::Angles, stamps.len(), 21);
     let mut stream = model.stream();
