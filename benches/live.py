@@ -117,6 +117,12 @@ def main() -> None:
         ["--source", "lsl:bench-restart", *mapping], env, 2000,
     )  # fmt: skip
     print(f"lsl restart run: {summary.strip()}", flush=True)
+    floor = harness_floor(d)
+    print(
+        f"harness alone (fake QTM server -> ikid's QTM client in this process; no model, no CSV, no pipe): "
+        f"p50 {np.percentile(floor, 50):.0f} µs, p99 {np.percentile(floor, 99):.0f} µs",
+        flush=True,
+    )
     med = {k: np.median(np.array(v), axis=0) for k, v in results.items()}
     coverage = sigma_coverage()
     print(
@@ -124,6 +130,30 @@ def main() -> None:
         f"qtm_p99_us={med['qtm'][1]:.0f} frames={frames} lost={lost} reconnected={reconnected} "
         f"sigma_coverage={coverage}"
     )
+
+
+def harness_floor(d: Path) -> np.ndarray:
+    """Latency (µs) of the path without ikid's work: the same fake QTM server process read by
+    ikid's QTM client here, each frame timed as it arrives. On a loaded machine the source's
+    pacer itself sends late (stamps are capture times): that tail is not ikid's."""
+    from ikid.io.mapping import MarkerMap
+    from ikid.live import QtmSource
+
+    port_file = d / "qtm-port-floor"
+    peer = subprocess.Popen([*PEERS, "qtm-server", "--frames", str(FRAMES), "--port-file", str(port_file)])
+    try:
+        deadline = time.monotonic() + 30
+        while not (port_file.exists() and port_file.read_text()) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        source = QtmSource("127.0.0.1", int(port_file.read_text()), MarkerMap.load(d / "lab.toml"), 10)
+        lat: list[float] = []
+        end = time.monotonic() + 60
+        while len(lat) < FRAMES - 10 and time.monotonic() < end:
+            lat.extend((time.monotonic() - f.time) * 1e6 for f in source.read(0.5) if f.time is not None)
+        source.close()
+    finally:
+        peer.kill()
+    return np.array(lat)
 
 
 def sigma_coverage() -> str:
