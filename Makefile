@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel wheel-portable sdist demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf compare-rates realdata exam
+.PHONY: all venv wheel wheel-portable sdist demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf compare-rates realdata exam live
 
 all: wheel
 
@@ -242,6 +242,13 @@ mutants: $(CARGO_MUTANTS)
 		--shard $(MUTANTS_SHARD) --sharding round-robin --profile quick -o target/mutants > target/mutants.log 2>&1 \
 		|| test -f target/mutants/mutants.out/outcomes.json || (tail -30 target/mutants.log; exit 1)
 	$(PYTHON) tools/mutants_summary.py target/mutants/mutants.out --min-score $(MUTANTS_MIN_SCORE)
+
+# Live sources (issue #30, docs/live.md): the live tests, then source -> ikid latency on the
+# loopback at 1 kHz (LSL and a fake QTM server, 3 runs each, medians), a source restart, and
+# one closing `live: ...` line. Not in make check's fast tier's time budget (~1 min).
+live: $(WHEEL_STAMP)
+	cd tests && ../$(PY) -m pytest -q -p no:cacheprovider test_live.py
+	$(PY) benches/live.py
 
 # Criterion benches, per-push latency distribution, the Python overhead and a 10^7-push soak
 # (zero allocations, flat memory), written to docs/performance.md.

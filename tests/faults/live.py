@@ -114,6 +114,9 @@ TIME_FAULTS: dict[str, Fault] = {
     "time-duplicated": _time_edit(lambda t: t.__setitem__(K0, t[K0 - 1])),
     "time-nan": _time_edit(lambda t: t.__setitem__(K0, np.nan)),
     "time-inf": _time_edit(lambda t: t.__setitem__(K0, np.inf)),
+    # A source's clock glitch: one stamp far ahead (issue #30: it used to lock the stream out).
+    "time-600s-ahead": _time_edit(lambda t: t.__setitem__(K0, t[K0] + 600.0)),
+    "time-1e300": _time_edit(lambda t: t.__setitem__(K0, 1e300)),
 }
 
 

@@ -256,8 +256,9 @@ pub struct Stream {
 impl Stream {
     /// Pushes one frame; returns `None` until the window is full, then the prediction for
     /// this frame (float32 array of `n_outputs`). A refused frame leaves the window as it was.
-    /// With `time` (seconds), a gap of more than 1.5 frame periods restarts the window and
-    /// time that does not increase is refused. Holds the GIL (a push takes microseconds);
+    /// With `time` (seconds), a gap of more than 1.5 frame periods (up to 1 s) restarts the
+    /// window; a stamp that jumps (further ahead, or not after the last) is refused alone
+    /// unless three in a row continue from each other (`time_reanchors`). Holds the GIL (a push takes microseconds);
     /// `push_many` releases it.
     #[pyo3(signature = (frame, time = None))]
     fn push<'py>(
@@ -283,6 +284,13 @@ impl Stream {
     #[getter]
     fn gap_restarts(&self) -> u64 {
         self.inner.gap_restarts()
+    }
+
+    /// Times `push(..., time=)` took a jumped clock as the source's new one (three stamps in
+    /// a row that continue from each other after a jump).
+    #[getter]
+    fn time_reanchors(&self) -> u64 {
+        self.inner.time_reanchors()
     }
 
     /// Times the gap filler took a new place as real after three frames in a row that were

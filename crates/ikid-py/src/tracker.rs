@@ -105,6 +105,15 @@ impl Tracker {
         with_frame_f64(frame, |values| Ok(tracker.push(values).py_err()?.map(|out| TrackerEstimate::from(&out))))
     }
 
+    /// Standard deviations of the last estimate from the filter's covariance: a `(2, 3)`
+    /// float64 array, rows `q` (rad) and `tau` (N·m, linearised), or `None` before the start.
+    /// They measure the filter's own state, not a refiner's correction.
+    #[getter]
+    fn output_sd<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
+        let sd = self.inner.output_sd()?;
+        Some(PyArray2::from_owned_array(py, numpy::ndarray::Array2::from(vec![sd.q, sd.tau])))
+    }
+
     /// Every frame of `frames` `(n, 18)` in order; returns a dict of `(n, 3)` float64 arrays
     /// `q`, `qd`, `qdd`, `tau`, the `(n,)` uint8 `missing` (bit i: marker i missing), `(n,)`
     /// `noise` (mean learned hand-marker noise, m; NaN before the start), `refined` (bool) and

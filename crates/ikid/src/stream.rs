@@ -8,6 +8,29 @@ use crate::model::Model;
 use crate::net::Scratch;
 use crate::status;
 
+/// Largest gap in time stamps taken as frames lost, s: a stamp further ahead of the last
+/// accepted frame (or behind it) is a clock glitch until [`TIME_REANCHOR_FRAMES`] stamps in a
+/// row continue from it; one bad stamp is refused alone and the stream goes on.
+pub const MAX_TIME_GAP_S: f64 = 1.0;
+
+/// Consecutive stamps, each one period (0.5–1.5) after the one before, that must all jump
+/// from the last accepted frame's time before the stream takes them as the source's new clock
+/// (a source restarted, its clock reset): the last of them is accepted and the window restarts.
+pub const TIME_REANCHOR_FRAMES: u32 = 3;
+
+/// How a frame's time stamp follows the last accepted one's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum TimeStep {
+    /// One period later (0.5–1.5), or the first frame.
+    Follows,
+    /// Frames lost: more than 1.5 periods, at most [`MAX_TIME_GAP_S`], later.
+    Gap,
+    /// The [`TIME_REANCHOR_FRAMES`]-th stamp in a row continuing a jump: the new clock.
+    Reanchor,
+    /// A jump not (yet) confirmed: refused.
+    Jump,
+}
+
 /// A causal stream over a [`Model`]: push one frame at a time, get the prediction for the
 /// newest frame once the window is full.
 ///
@@ -45,6 +68,11 @@ pub struct Stream {
     /// Time of the last frame accepted by [`push_at`](Stream::push_at), seconds.
     last_time: Option<f64>,
     gap_restarts: u64,
+    /// The last time stamp refused for jumping ([`MAX_TIME_GAP_S`] ahead, or behind), and how
+    /// many refused stamps in a row continue from each other at the model's rate.
+    time_candidate: Option<f64>,
+    time_candidate_frames: u32,
+    time_reanchors: u64,
     /// The subject's marker placement, applied to each (filled) frame before its features.
     calibration: Option<Calibration>,
     /// Frames pushed since the stream was made (accepted or refused): the next frame's
@@ -81,6 +109,9 @@ impl Stream {
             filled_mask: 0,
             last_time: None,
             gap_restarts: 0,
+            time_candidate: None,
+            time_candidate_frames: 0,
+            time_reanchors: 0,
             calibration: None,
             pushed: 0,
             status: 0,
@@ -279,51 +310,64 @@ impl Stream {
 
     /// [`push`](Self::push) for a frame stamped with its acquisition time (seconds, any
     /// origin). Frames are expected one period of the model's rate apart; after a gap of
-    /// more than 1.5 periods (dropped frames) the window restarts, as after
-    /// [`reset`](Self::reset), so no output mixes frames further apart than the network was
-    /// trained on: outputs resume once the window has refilled. Time that does not
-    /// increase is refused, and so is a frame less than half a period after the previous one
-    /// (a source at a faster rate than the model's would be silently mis-timed; resample it).
+    /// more than 1.5 periods (dropped frames), up to [`MAX_TIME_GAP_S`], the window restarts,
+    /// as after [`reset`](Self::reset), so no output mixes frames further apart than the
+    /// network was trained on: outputs resume once the window has refilled. A frame less than
+    /// half a period after the previous one is refused (a source at a faster rate than the
+    /// model's would be silently mis-timed; resample it).
+    ///
+    /// A stamp that jumps (more than [`MAX_TIME_GAP_S`] ahead, or not after the last accepted
+    /// frame's) is refused alone and changes nothing the next good frame sees: one glitch of
+    /// the source's clock never ends the stream. Only [`TIME_REANCHOR_FRAMES`] jumped stamps in
+    /// a row, each a period after the one before, are taken as the source's new clock (it was
+    /// restarted): the last of them is accepted, the window restarts and
+    /// [`time_reanchors`](Self::time_reanchors) counts it.
     pub fn push_at(&mut self, time_s: f64, frame: &[f32]) -> Result<Option<&[f32]>> {
         let index = self.pushed;
         self.pushed += 1;
-        let gap = self.check_time(time_s)?;
-        if gap {
+        let step = self.check_time(time_s)?;
+        if step == TimeStep::Jump {
+            return Err(self.refuse_jump(time_s));
+        }
+        let restart = step != TimeStep::Follows;
+        if restart {
             // The frame before the gap is no guide to this one (nor to the next, should this
             // one be refused: it comes after the same gap).
             self.filler.forget_last_frame();
         }
         self.prepare(frame, index)?;
-        if gap {
+        if restart {
             // Restart the window only for a frame that is accepted: a refused one leaves the
             // stream as it was.
             self.head = 0;
             self.filled = 0;
-            self.gap_restarts += 1;
+            if step == TimeStep::Gap {
+                self.gap_restarts += 1;
+            } else {
+                self.time_reanchors += 1;
+            }
         }
         self.last_time = Some(time_s);
+        self.time_candidate = None;
+        self.time_candidate_frames = 0;
         let produced = self.advance(index)?.is_some();
         Ok(produced.then_some(&self.output[..]))
     }
 
-    /// Refuses a time that does not follow the last frame's at the model's rate; true after
-    /// a gap of more than 1.5 periods. Changes nothing.
-    fn check_time(&self, time_s: f64) -> Result<bool> {
+    /// Where `time_s` stands against the last accepted frame's time (and against the jumped
+    /// stamps before it); an error for a stamp refused outright. Changes nothing.
+    fn check_time(&self, time_s: f64) -> Result<TimeStep> {
         if !time_s.is_finite() {
             return Err(Error::BadArgument {
                 what: "time",
                 detail: format!("is {time_s}, expected a finite number of seconds"),
             });
         }
-        if let Some(last) = self.last_time {
-            if time_s <= last {
-                return Err(Error::BadArgument {
-                    what: "time",
-                    detail: format!("{time_s} s does not follow the previous frame's {last} s"),
-                });
-            }
-            let rate = self.model.card().frame_rate_hz;
-            if (time_s - last) * rate < 0.5 {
+        let Some(last) = self.last_time else { return Ok(TimeStep::Follows) };
+        let rate = self.model.card().frame_rate_hz;
+        let periods = (time_s - last) * rate;
+        if time_s > last && time_s - last <= MAX_TIME_GAP_S {
+            if periods < 0.5 {
                 return Err(Error::BadArgument {
                     what: "time",
                     detail: format!(
@@ -334,9 +378,39 @@ impl Stream {
                     ),
                 });
             }
-            return Ok((time_s - last) * rate > 1.5);
+            return Ok(if periods > 1.5 { TimeStep::Gap } else { TimeStep::Follows });
         }
-        Ok(false)
+        // A jump: the source's new clock only if it continues the jumped stamps before it.
+        let continues = self.time_candidate.is_some_and(|c| (0.5..=1.5).contains(&((time_s - c) * rate)));
+        if continues && self.time_candidate_frames + 1 >= TIME_REANCHOR_FRAMES {
+            return Ok(TimeStep::Reanchor);
+        }
+        Ok(TimeStep::Jump)
+    }
+
+    /// Remembers a jumped stamp (to re-anchor on should more continue from it) and says why
+    /// it was refused.
+    fn refuse_jump(&mut self, time_s: f64) -> Error {
+        let rate = self.model.card().frame_rate_hz;
+        let continues = self.time_candidate.is_some_and(|c| (0.5..=1.5).contains(&((time_s - c) * rate)));
+        self.time_candidate_frames = if continues { self.time_candidate_frames + 1 } else { 1 };
+        self.time_candidate = Some(time_s);
+        let last = self.last_time.unwrap_or(f64::NAN);
+        let what = if time_s <= last {
+            format!("{time_s} s does not follow the previous frame's {last} s")
+        } else {
+            format!(
+                "{time_s} s is {:.6e} s after the previous frame's {last} s (more than {MAX_TIME_GAP_S} s)",
+                time_s - last
+            )
+        };
+        Error::BadArgument {
+            what: "time",
+            detail: format!(
+                "{what}: refused as a glitch of the source's clock ({} of {TIME_REANCHOR_FRAMES} stamps in a row that would make it the new clock)",
+                self.time_candidate_frames
+            ),
+        }
     }
 
     /// Frames pushed since the stream was made, refused ones included (the next frame's
@@ -348,6 +422,12 @@ impl Stream {
     /// Times [`push_at`](Self::push_at) restarted the window after a gap.
     pub fn gap_restarts(&self) -> u64 {
         self.gap_restarts
+    }
+
+    /// Times [`push_at`](Self::push_at) took a jumped clock as the source's new one
+    /// ([`TIME_REANCHOR_FRAMES`] stamps in a row).
+    pub fn time_reanchors(&self) -> u64 {
+        self.time_reanchors
     }
 
     /// Pushes `frames` (whole frames back to back, e.g. a packet from the acquisition
@@ -419,6 +499,8 @@ impl Stream {
     pub fn reset(&mut self) {
         self.filler.forget_last_frame();
         self.last_time = None;
+        self.time_candidate = None;
+        self.time_candidate_frames = 0;
         self.head = 0;
         self.filled = 0;
     }

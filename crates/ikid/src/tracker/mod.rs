@@ -100,7 +100,7 @@ pub use checks::{
     missing_markers,
 };
 pub use ekf::{GATE_CHI2, GATE_FLOOR_M, MANOEUVRE_NIS, MAX_ITERATIONS, RELINEARISE_RAD};
-pub use output::{MIN_REPORTED_NOISE, TRACKER_VALUES, TrackerOutput};
+pub use output::{MIN_REPORTED_NOISE, TRACKER_VALUES, TrackerOutput, TrackerSd};
 pub use placement::{LIVE_PLACEMENT_S, TEMPLATE_S};
 pub use refiner::{REFINER_GATE_NOISE, REFINER_TRUST, refiner_gate, refiner_outputs};
 pub use settings::{DEFAULT_JERK_NOISE, TrackerSettings};

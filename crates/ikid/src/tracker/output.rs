@@ -79,6 +79,50 @@ impl Tracker {
     }
 }
 
+/// Standard deviations of a frame's estimate, from the filter's covariance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackerSd {
+    /// Of each angle, rad, coordinate order: the square root of the covariance's diagonal.
+    pub q: [f64; N_COORDINATES],
+    /// Of each torque, N·m: the covariance of the state carried through the inverse dynamics
+    /// linearised at the estimate (J P Jᵀ, J by central differences).
+    pub tau: [f64; N_COORDINATES],
+}
+
+impl Tracker {
+    /// The standard deviations of the filter's last estimate ([`TrackerSd`]), or `None`
+    /// before it started (or after a reset). They describe the filter's own state: a refined
+    /// output (a refiner moved it) is not what they measure.
+    pub fn output_sd(&self) -> Option<TrackerSd> {
+        let (x, p) = self.state.as_ref()?;
+        let forearm = self.forearm?.rotation.to_rotation_matrix();
+        let state_of = |x: &super::StateVector| JointState {
+            q: [x[0], x[1], x[2]],
+            qd: [x[3], x[4], x[5]],
+            qdd: [x[6], x[7], x[8]],
+        };
+        let mut jacobian = nalgebra::SMatrix::<f64, N_COORDINATES, { 3 * N_COORDINATES }>::zeros();
+        for k in 0..3 * N_COORDINATES {
+            // A step a small share of the state's own spread (angles, velocities, accelerations
+            // differ by orders of magnitude).
+            let h = (p[(k, k)].sqrt() * 1e-3).max(1e-7);
+            let (mut up, mut down) = (*x, *x);
+            up[k] += h;
+            down[k] -= h;
+            let tau_up = reference::inverse_dynamics_at(&self.body, &forearm, &state_of(&up)).ok()?;
+            let tau_down = reference::inverse_dynamics_at(&self.body, &forearm, &state_of(&down)).ok()?;
+            for c in 0..N_COORDINATES {
+                jacobian[(c, k)] = (tau_up[c] - tau_down[c]) / (2.0 * h);
+            }
+        }
+        let tau_cov = jacobian * p * jacobian.transpose();
+        Some(TrackerSd {
+            q: std::array::from_fn(|c| p[(c, c)].max(0.0).sqrt()),
+            tau: std::array::from_fn(|c| tau_cov[(c, c)].max(0.0).sqrt()),
+        })
+    }
+}
+
 #[cfg(test)]
 #[allow(clippy::needless_range_loop)] // the checks index truth and estimate side by side
 mod tests {

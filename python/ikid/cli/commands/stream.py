@@ -1,10 +1,12 @@
-"""`ikid stream`: live frames (stdin or UDP) in, one CSV line per frame out."""
+"""`ikid stream`: live frames (stdin, UDP, Lab Streaming Layer, Qualisys QTM) in, one CSV line
+per frame out (and optionally an LSL stream)."""
 
 from __future__ import annotations
 
 import argparse
 import math
 import sys
+import time
 from collections import Counter
 
 import numpy as np
@@ -17,15 +19,22 @@ from ikid.cli.options import PORT, POSITIVE, POSITIVE_INT, unchecked_option
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "stream",
-        help="live frames (stdin or UDP on 127.0.0.1) -> one CSV line per frame",
+        help="live frames (stdin, UDP on 127.0.0.1, LSL, QTM) -> one CSV line per frame",
         description="Frames in, one result line out per frame (CSV: frame,status,outputs).\n\n"
         "  ikid stream < frames.csv                          # 18 numbers per line (m)\n"
         "  ikid stream --time --torque-model wrist-chain < frames.csv   # time first\n"
         "  ikid stream --udp 9870 --count 100000 --idle 5     # datagrams, 'END' stops\n"
-        "  ikid stream --udp 9870 --frame-number --time       # 'N,t,x1,...,z6': lost frames counted\n\n"
+        "  ikid stream --udp 9870 --frame-number --time       # 'N,t,x1,...,z6': lost frames counted\n"
+        "  ikid stream --source lsl:Qualisys --map lab.toml --sink lsl:ikid   # LSL in and out\n"
+        "  ikid stream --source qtm:192.168.0.10 --map lab.toml             # QTM's real-time server\n\n"
+        "Live sources (lsl:, qtm:) give their labels (mapped with --map's [markers]), rate and time\n"
+        "stamps; a hidden marker is a gap; a bad time stamp is refused alone; a source that goes\n"
+        "away is reconnected; frames older than --max-lag when read are skipped (counted). See\n"
+        "docs/live.md.\n\n"
         "At the end, a summary on stderr: frames received, ok, filled, filling, refused (by\n"
-        "reason) and lost (counted from the source's frame numbers, --frame-number, or its\n"
-        "times, --time). UDP asks for an 8 MiB receive buffer for bursts and says if it got less.\n\n"
+        "reason), lost (counted from the source's frame numbers, --frame-number, or its\n"
+        "times, --time), skipped, reconnections and time re-anchors. UDP asks for an 8 MiB receive\n"
+        "buffer for bursts and says if it got less.\n\n"
         "Exit status: 0 every frame was processed; 3 frames were lost or refused; 2 an error\n"
         "(or, with --strict, the first refused frame).",
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -35,15 +44,51 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--torque-model", default=None, help="a second model on the same frames (e.g. wrist-chain)"
     )
     p.add_argument(
+        "--tracker",
+        action="store_true",
+        help="run ikid.Tracker (the extended Kalman filter over the body model) instead of the networks: "
+        "angles and torques (<coordinate>_moment), each followed by its standard deviation (<name>_sd, "
+        "from the filter's covariance; see docs/live.md for how far to trust it)",
+    )
+    p.add_argument(
         "--udp",
         type=PORT,
         default=None,
         metavar="PORT",
         help="read datagrams on 127.0.0.1:PORT (0: any free port)",
     )
+    p.add_argument(
+        "--source",
+        default=None,
+        metavar="SPEC",
+        help="a live source: lsl:<stream name> (Lab Streaming Layer) or qtm:<host>[:<port>] (Qualisys "
+        "Track Manager's real-time server, port 22223 by default); stdin when absent",
+    )
+    p.add_argument(
+        "--map", metavar="TOML", help="live sources: which of the source's marker labels is which ikid marker"
+    )
+    p.add_argument(
+        "--sink",
+        default=None,
+        metavar="SPEC",
+        help="also publish each output frame: lsl:<stream name> (outputs and status bits, stamped "
+        "with the source frame's time); the CSV on stdout stays",
+    )
+    p.add_argument(
+        "--max-lag",
+        type=POSITIVE,
+        default=0.05,
+        metavar="S",
+        help="live sources: when more than this many seconds of frames wait to be read, only the "
+        "newest is processed and the others are counted as skipped (default 0.05)",
+    )
     p.add_argument("--count", type=POSITIVE_INT, default=None, help="stop after this many frames")
     p.add_argument(
-        "--idle", type=POSITIVE, default=10.0, help="UDP: stop after this many seconds without a frame"
+        "--idle",
+        type=POSITIVE,
+        default=10.0,
+        help="UDP and live sources: stop after this many seconds without a frame (a lost live "
+        "source is reconnected within it)",
     )
     p.add_argument(
         "--time",
@@ -160,51 +205,247 @@ def _udp_lines(port: int, count: int | None, idle_s: float):
 
 class _Losses:
     """Frames lost between those received: from the source's frame numbers (a jump of k is
-    k - 1 lost), else from its times (a gap of k periods is k - 1 lost). A frame whose number
-    is not after the last one's is refused (late or repeated)."""
+    k - 1 lost), else from its times (a gap of k periods is k - 1 lost). A frame number that is
+    not after the last one (late or repeated), or far ahead of it, is refused alone; only
+    ``REANCHOR_FRAMES`` such numbers in a row, each one after the other, are taken as the
+    source's new numbering (it was restarted), as ikid.Stream does with time stamps."""
+
+    #: Numbers in a row that make a jumped numbering the source's new one.
+    REANCHOR_FRAMES = 3
+    #: Largest jump in frame numbers counted as frames lost, s of frames at the stream's rate.
+    MAX_JUMP_S = 1.0
 
     def __init__(self, rate_hz: float) -> None:
         self.rate_hz = rate_hz
         self.lost = 0
+        self.reanchors = 0
         self.last_number: int | None = None
         self.last_time: float | None = None
+        self.candidate: int | None = None
+        self.candidate_frames = 0
+        #: Time stamps in a row more than MAX_JUMP_S after the last counted one.
+        self.jumps = 0
 
     def number(self, n: int) -> None:
-        if self.last_number is not None:
-            if n <= self.last_number:
-                raise ikid.InputError(f"frame number {n} after {self.last_number} (late or repeated)")
-            self.lost += n - self.last_number - 1
-        self.last_number = n
+        last = self.last_number
+        if last is not None and not 0 < n - last <= max(1, round(self.MAX_JUMP_S * self.rate_hz)):
+            follows = self.candidate is not None and n == self.candidate + 1
+            self.candidate_frames = self.candidate_frames + 1 if follows else 1
+            self.candidate = n
+            if self.candidate_frames < self.REANCHOR_FRAMES:
+                what = "late or repeated" if n <= last else "too far ahead"
+                raise ikid.InputError(f"frame number {n} after {last} ({what})")
+            self.reanchors += 1
+            last = None
+        if last is not None:
+            self.lost += n - last - 1
+        self.last_number, self.candidate, self.candidate_frames = n, None, 0
 
     def time(self, t: float) -> None:
+        if self.last_time is not None and t - self.last_time > self.MAX_JUMP_S:
+            # A glitch of the source's clock, not frames lost (ikid.Stream refuses it; the
+            # tracker, which takes no stamps, runs on): not counted, and the new place only
+            # once REANCHOR_FRAMES stamps in a row say so.
+            self.jumps += 1
+            if self.jumps < self.REANCHOR_FRAMES:
+                self.last_time += 1.0 / self.rate_hz
+                return
+            self.last_time, self.jumps = t, 0
+            return
+        self.jumps = 0
         if self.last_time is not None and t > self.last_time:
             self.lost += max(0, round((t - self.last_time) * self.rate_hz) - 1)
         self.last_time = t
 
+    def refused_in_place(self) -> None:
+        """A frame came but its time stamp was refused: it is not lost, and the next one's gap
+        is counted from its place."""
+        if self.last_time is not None:
+            self.last_time += 1.0 / self.rate_hz
+        self.jumps += 1
+
+    def restart(self) -> None:
+        """After a reconnection: the source's numbering and clock may start again."""
+        self.last_number = self.last_time = self.candidate = None
+        self.candidate_frames = self.jumps = 0
+
+
+def _text_frames(lines, frame_len: int, with_time: bool, with_number: bool):
+    """Text lines -> LiveFrame (an unreadable or over-long line as its error)."""
+    from ikid.live import MAX_LINE_BYTES, LiveFrame
+
+    for line in lines:
+        if line is None:
+            yield [LiveFrame(None, None, None, f"line longer than {MAX_LINE_BYTES} bytes")]
+            continue
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        try:
+            number, t, x = _parse_frame(line, frame_len, with_time, with_number)
+        except ikid.InputError as e:
+            yield [LiveFrame(None, None, None, str(e))]
+            continue
+        yield [LiveFrame(number, t, x)]
+
+
+def _live_frames(source, idle_s: float, notes: Counter):
+    """Batches of frames from a live source until ``idle_s`` s pass without one; a lost
+    source is reconnected within that time (counted in ``notes``)."""
+    from ikid.live import SourceLost
+
+    last = time.monotonic()
+    while True:
+        try:
+            batch = source.read(min(0.1, idle_s))
+        except SourceLost as e:
+            print(f"ikid stream: {e}; reconnecting (up to {idle_s:g} s)", file=sys.stderr, flush=True)
+            notes["disconnected"] += 1
+            if not source.reconnect(time.monotonic() + idle_s):
+                print(
+                    f"ikid stream: the source did not come back within {idle_s:g} s, stopping",
+                    file=sys.stderr,
+                )
+                notes["not reconnected"] += 1
+                return
+            print(f"ikid stream: reconnected to the {source.kind} source", file=sys.stderr, flush=True)
+            notes["reconnected"] += 1
+            yield None  # the caller restarts its streams: what follows is not continuous
+            last = time.monotonic()
+            continue
+        if batch:
+            last = time.monotonic()
+            yield batch
+        elif time.monotonic() - last > idle_s:
+            print(f"ikid stream: no frame for {idle_s:g} s, stopping", file=sys.stderr)
+            return
+
+
+def _stdin_lines(count: int | None):
+    from ikid.live import bounded_lines
+
+    # The binary buffer read in bounded pieces: a line with no end never fills memory.
+    source = bounded_lines(sys.stdin.buffer) if hasattr(sys.stdin, "buffer") else iter(sys.stdin)
+    for k, line in enumerate(source):
+        if count is not None and k >= count:
+            return
+        yield line
+
+
+#: Substring of ikid.Stream's refusal of a time stamp that jumped (see Stream::push_at).
+_CLOCK_GLITCH = "glitch of the source's clock"
+
 
 def run(args: argparse.Namespace) -> int:
-    """Frames (text lines) from stdin or UDP -> one CSV line per frame on stdout:
-    ``frame,status,<outputs>``; status ``ok``, ``filled:<markers>``, ``filling`` (window not
-    full yet) or ``refused:<reason>`` (outputs empty). Nothing is skipped silently: the summary
-    on stderr counts frames received, refused (by reason) and lost; exit status 0 if every
-    frame was processed, 3 if frames were lost or refused, 2 on an error."""
+    """Frames from stdin, UDP or a live source -> one CSV line per frame on stdout:
+    ``frame,status,<outputs>`` (``frame,time,status,<outputs>`` for a live source); status
+    ``ok``, ``filled:<markers>``, ``filling`` (window not full yet) or ``refused:<reason>``
+    (outputs empty). Nothing is skipped silently: the summary on stderr counts frames received,
+    refused (by reason), lost, skipped and reconnections; exit status 0 if every frame was
+    processed, 3 if frames were lost, skipped or refused, 2 on an error."""
+    from ikid.io.mapping import MarkerMap
     from ikid.pipeline import refusal_reason
 
+    if args.udp is not None and args.source is not None:
+        raise ikid.InputError("--udp and --source name two sources; give one")
+    if args.map and args.source is None:
+        raise ikid.InputError("--map is for a live source's labels (--source lsl:... or qtm:...)")
+    if args.sink is not None and not (args.sink.startswith("lsl:") and len(args.sink) > 4):
+        raise ikid.InputError(
+            f"--sink {args.sink!r}: expected lsl:<stream name> (the CSV on stdout always stays)"
+        )
     stdin = None
-    if args.udp is None:
+    if args.udp is None and args.source is None:
         try:
             stdin = sys.stdin.fileno()
         except (AttributeError, OSError, ValueError):
             pass
     _refuse_over_inputs(
         [_stdout_fd()],
-        [stdin, args.calibration, _model_file(args.model), _model_file(args.torque_model)],
+        [stdin, args.calibration, args.map, _model_file(args.model), _model_file(args.torque_model)],
     )
+    source = None
+    rate_hz = args.rate
+    if args.source is not None:
+        from ikid.live import open_source
+
+        marker_map = MarkerMap.load(args.map) if args.map else MarkerMap.identity()
+        source = open_source(args.source, marker_map, args.idle)
+        declared = f"{source.rate_hz:g} Hz" if source.rate_hz else "no declared rate"
+        print(
+            f"ikid stream: reading {args.source} at {declared} "
+            f"({len(source.labels)} markers, ikid's 6 mapped)",
+            file=sys.stderr,
+            flush=True,
+        )
+        if source.rate_hz is not None:
+            if args.rate is not None and not math.isclose(args.rate, source.rate_hz, rel_tol=1e-6):
+                source.close()
+                raise ikid.InputError(
+                    f"--rate {args.rate:g} but the {source.kind} source says it sends {source.rate_hz:g} Hz "
+                    "(--rate is for a source that declares no rate)"
+                )
+            rate_hz = source.rate_hz
+    try:
+        return _run(args, source, rate_hz, refusal_reason)
+    finally:
+        if source is not None:
+            source.close()
+
+
+class _TrackerStream:
+    """ikid.Tracker behind the stream's interface: per frame, each angle and torque followed by
+    its standard deviation (``Tracker.output_sd``); None until the filter has started. The
+    tracker takes no time stamps (it runs at its rate) and gives no per-frame status bits here."""
+
+    def __init__(self, rate_hz: float, calibration) -> None:
+        from ikid.io.storage import coordinate_names, moment_names
+
+        self.rate_hz = rate_hz
+        self.calibration = calibration
+        self.tracker = ikid.Tracker(rate_hz=rate_hz, calibration=calibration)
+        values = coordinate_names() + moment_names()
+        self.output_names = [n for v in values for n in (v, f"{v}_sd")]
+        self.output_units = [u for k in range(len(values)) for u in 2 * ["rad" if k < 3 else "N*m"]]
+        self.filled_markers: list[str] = []
+        self.status = math.nan
+        self.time_reanchors = 0
+
+    def push(self, frame: np.ndarray, time: float | None = None) -> np.ndarray | None:
+        out = self.tracker.push(frame)
+        sd = self.tracker.output_sd
+        if out is None or sd is None:
+            return None
+        self.status = float(out.status)  # the frame's status bits, for the sink's status channel
+        values = np.concatenate([out.q, out.tau])
+        return np.column_stack([values, np.concatenate([sd[0], sd[1]])]).ravel()
+
+    def reset(self) -> None:
+        self.tracker = ikid.Tracker(rate_hz=self.rate_hz, calibration=self.calibration)
+
+
+def _run(args: argparse.Namespace, source, rate_hz: float | None, refusal_reason) -> int:
+    if args.tracker:
+        return _run_with(args, source, refusal_reason, *_tracker_streams(args, rate_hz))
+    return _run_with(args, source, refusal_reason, *_model_streams(args, rate_hz))
+
+
+def _tracker_streams(args: argparse.Namespace, rate_hz: float | None):
+    if args.torque_model or args.model != "wrist-ik" or args.missing_markers:
+        raise ikid.InputError(
+            "--tracker gives angles and torques itself: no --model, --torque-model or --missing-markers"
+        )
+    calibration = ikid.load_calibration(args.calibration) if args.calibration else None
+    stream = _TrackerStream(rate_hz or 1000.0, calibration)
+    # The tracker reads marker frames: the 18 values every source gives.
+    return [stream], stream.output_names, stream.output_units, stream.rate_hz, len(ikid.marker_names()) * 3
+
+
+def _model_streams(args: argparse.Namespace, rate_hz: float | None):
     unchecked = args.allow_unchecked_model
-    models = [_model_for(args.model, "ikid stream --model", ("ik", "chain"), args.rate, unchecked)]
+    models = [_model_for(args.model, "ikid stream --model", ("ik", "chain"), rate_hz, unchecked)]
     if args.torque_model:
         models.append(
-            _model_for(args.torque_model, "ikid stream --torque-model", ("chain",), args.rate, unchecked)
+            _model_for(args.torque_model, "ikid stream --torque-model", ("chain",), rate_hz, unchecked)
         )
     rate = models[0].frame_rate_hz
     for m in models:
@@ -213,71 +454,152 @@ def run(args: argparse.Namespace) -> int:
     calibration = ikid.load_calibration(args.calibration) if args.calibration else None
     streams = [m.stream(missing_markers=args.missing_markers, calibration=calibration) for m in models]
     names = [n for m in models for n in m.output_names]
+    units = [u for m in models for u in m.output_units]
+    return streams, names, units, rate, models[0].frame_len
+
+
+def _run_with(
+    args: argparse.Namespace, source, refusal_reason, streams, names, units, rate, frame_len
+) -> int:
+    sink = None
+    if args.sink is not None:
+        from ikid.live.sinks import LslSink
+
+        sink = LslSink(args.sink[4:], names, units, rate)
+    live = source is not None
     out = sys.stdout
-    out.write("frame,status," + ",".join(names) + "\n")
-    lines = (
-        _udp_lines(args.udp, args.count, args.idle)
-        if args.udp is not None
-        else (line for k, line in enumerate(sys.stdin) if args.count is None or k < args.count)
-    )
+    out.write("frame," + ("time," if live else "") + "status," + ",".join(names) + "\n")
+    notes: Counter = Counter()
+    if live:
+        batches = _live_frames(source, args.idle, notes)
+        timed, numbered = True, source.kind == "qtm"
+    else:
+        lines = (
+            _udp_lines(args.udp, args.count, args.idle) if args.udp is not None else _stdin_lines(args.count)
+        )
+        batches = _text_frames(lines, frame_len, args.time, args.frame_number)
+        timed, numbered = args.time, args.frame_number
+    # A consumer that falls behind takes the newest frame: older ones waiting are skipped.
+    max_backlog = max(1, round(args.max_lag * rate))
     counts: Counter = Counter()
     refused: Counter = Counter()
     losses = _Losses(rate)
     frame = 0
-    for line in lines:
-        if not line.strip() or line.lstrip().startswith("#"):
+    flush = args.flush or live
+    for batch in batches:
+        if batch is None:  # reconnected: what follows does not continue what came before
+            for s in streams:
+                s.reset()
+            losses.restart()
             continue
-        status, values, label = "ok", "", frame
-        try:
-            try:
-                number, t, x = _parse_frame(line, models[0].frame_len, args.time, args.frame_number)
-            except ikid.InputError as e:
-                raise _Refused(str(e), "unreadable line") from None
-            if number is not None:
-                label = number
+        if len(batch) > max_backlog:
+            notes["skipped"] += len(batch) - 1
+            for f in batch[:-1]:  # skipped, not lost: their numbers and times still count
                 try:
-                    losses.number(number)
-                except ikid.InputError as e:
-                    raise _Refused(str(e), "late or repeated frame number") from None
-            elif t is not None:
-                losses.time(t)
+                    if f.number is not None:
+                        losses.number(f.number)
+                    elif f.time is not None:
+                        losses.time(f.time)
+                except ikid.InputError:
+                    pass
+            batch = batch[-1:]
+            # What follows does not continue what the window holds (and may be further ahead
+            # than a clock glitch's bound): the streams start again from the newest frame.
+            for s in streams:
+                s.reset()
+        for f in batch:
+            if args.count is not None and frame >= args.count:
+                break
+            status, values, label = "ok", "", f.number if f.number is not None else frame
             try:
-                results = [s.push(x, time=t) for s in streams]
-            except ikid.InputError as e:
-                # The line's frame column is the one to read: the reason alone goes in the status.
-                raise _Refused(e.reason or str(e), refusal_reason(e)) from e
-            ready = [r for r in results if r is not None]
-            if len(ready) < len(results):
-                status = "filling"
-            else:
-                values = ",".join(f"{v:.7g}" for r in ready for v in r)
-                filled = streams[0].filled_markers
-                if filled:
-                    status = "filled:" + "+".join(filled)
-        except _Refused as e:
-            status = "refused:" + e.detail.replace(",", ";").replace("\n", " ")
-            refused[e.key] += 1
-            if args.strict:
-                print(f"ikid: error: frame {label}: {e.detail}", file=sys.stderr)
-                return 2
-        out.write(f"{label},{status},{values}\n")
-        if args.flush:
-            out.flush()
-        counts[status.split(":")[0]] += 1
-        frame += 1
+                if f.error is not None:
+                    raise _Refused(f.error, "unreadable frame" if live else "unreadable line")
+                if f.number is not None:
+                    try:
+                        losses.number(f.number)
+                    except ikid.InputError as e:
+                        key = (
+                            "frame number too far ahead"
+                            if "too far ahead" in str(e)
+                            else "late or repeated frame number"
+                        )
+                        raise _Refused(str(e), key) from None
+                try:
+                    results = [s.push(f.values, time=f.time) for s in streams]
+                except ikid.InputError as e:
+                    if _CLOCK_GLITCH in str(e):
+                        if f.number is None:
+                            losses.refused_in_place()
+                        raise _Refused(e.reason or str(e), "time stamp jumped (refused alone)") from e
+                    if f.number is None and f.time is not None:
+                        losses.time(f.time)
+                    if "resample the source" in str(e):
+                        raise _Refused(
+                            e.reason or str(e), "time stamp too soon (the source is faster than the model)"
+                        ) from e
+                    # The line's frame column is the one to read: the reason alone goes in the status.
+                    raise _Refused(e.reason or str(e), refusal_reason(e)) from e
+                if f.number is None and f.time is not None:
+                    losses.time(f.time)
+                ready = [r for r in results if r is not None]
+                if len(ready) < len(results):
+                    status = "filling"
+                else:
+                    output = np.concatenate(ready) if len(ready) > 1 else ready[0]
+                    values = ",".join(f"{v:.7g}" for v in output)
+                    filled = streams[0].filled_markers
+                    if filled:
+                        status = "filled:" + "+".join(filled)
+                    if sink is not None:
+                        sink.publish(output, streams[0].status, f.time if f.time is not None else _lsl_now())
+            except _Refused as e:
+                status = "refused:" + e.detail.replace(",", ";").replace("\n", " ")
+                refused[e.key] += 1
+                if args.strict:
+                    print(f"ikid: error: frame {label}: {e.detail}", file=sys.stderr)
+                    return 2
+            stamp = ("" if f.time is None else f"{f.time:.6f}") + "," if live else ""
+            out.write(f"{label},{stamp}{status},{values}\n")
+            if flush:
+                out.flush()
+            counts[status.split(":")[0]] += 1
+            frame += 1
+        if args.count is not None and frame >= args.count:
+            break
     out.flush()
     parts = [f"{counts[k]} {k}" for k in ("ok", "filled", "filling", "refused") if counts[k]]
-    if args.frame_number or args.time:
-        parts.append(f"{losses.lost} lost (by {'frame number' if args.frame_number else 'time'})")
+    if numbered or timed:
+        parts.append(f"{losses.lost} lost (by {'frame number' if numbered else 'time'})")
     else:
         parts.append("lost not counted (no frame numbers or times: --frame-number, --time)")
+    skipped = notes["skipped"]
+    if live:
+        parts.append(f"{skipped} skipped (read too late: newest taken)")
+        parts.append(f"{notes['reconnected']} reconnected")
+        if notes["not reconnected"]:
+            parts.append("the source was lost and did not come back")
+    reanchors = streams[0].time_reanchors + losses.reanchors
+    if reanchors:
+        parts.append(f"{reanchors} re-anchored (the source's clock or numbering restarted)")
+    if getattr(source, "ended", 0):
+        parts.append(f"{source.ended} end-of-data from QTM")
+    if sink is not None:
+        parts.append(f"{sink.published} published on lsl:{args.sink[4:]}")
     print(f"ikid stream: {frame} frames received at {rate:g} Hz: " + ", ".join(parts), file=sys.stderr)
     if refused:
         print(
             "ikid stream: refused: " + "; ".join(f"{n} {reason}" for reason, n in refused.most_common()),
             file=sys.stderr,
         )
-    return EXIT_FRAMES_LOST if refused or losses.lost else 0
+    if sink is not None:
+        sink.close()
+    return EXIT_FRAMES_LOST if refused or losses.lost or skipped or notes["not reconnected"] else 0
+
+
+def _lsl_now() -> float:
+    import pylsl
+
+    return pylsl.local_clock()
 
 
 class _Refused(Exception):

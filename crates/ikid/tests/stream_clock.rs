@@ -1,0 +1,100 @@
+//! A source's clock that misbehaves never ends a stream: one bad stamp is refused alone, and
+//! only a run of stamps that agree with each other is taken as the source's new clock.
+
+use ikid::FeatureSet;
+use ikid::stream::{MAX_TIME_GAP_S, TIME_REANCHOR_FRAMES};
+use ikid::testing::{random_frames, random_model};
+
+const N: usize = 3000;
+
+/// Per frame pushed: the error's message if refused, else the output if any.
+type Pushed = Vec<Result<Option<Vec<f32>>, String>>;
+
+/// Outputs of `stamps` (one per frame; `None` = frame not pushed) through a fresh stream:
+/// per frame, `Err` if refused, else the output if any.
+fn run(stamps: &[Option<f64>]) -> (Pushed, ikid::Stream) {
+    let model = random_model(FeatureSet::Angles, 5, &[16], 3, 4); // 1000 Hz, window 5
+    let frames = random_frames(FeatureSet::Angles, stamps.len(), 21);
+    let mut stream = model.stream();
+    let out = frames
+        .chunks_exact(18)
+        .zip(stamps)
+        .filter_map(|(frame, t)| {
+            t.map(|t| stream.push_at(t, frame).map(|o| o.map(<[f32]>::to_vec)).map_err(|e| e.to_string()))
+        })
+        .collect();
+    (out, stream)
+}
+
+fn regular() -> Vec<Option<f64>> {
+    (0..N).map(|i| Some(i as f64 * 1e-3)).collect()
+}
+
+#[test]
+fn one_bad_stamp_is_refused_alone_and_what_follows_is_as_without_it() {
+    for bad in [600.0, 1e300, -5.0, 0.5 - 1e-3, 0.5 - 2e-3] {
+        let mut stamps = regular();
+        stamps[500] = Some(bad);
+        let (glitched, stream) = run(&stamps);
+        let refused: Vec<usize> = (0..N).filter(|&i| glitched[i].is_err()).collect();
+        assert_eq!(refused, vec![500], "stamp {bad}: {:?}", glitched[500]);
+        let err = glitched[500].as_ref().unwrap_err();
+        assert!(err.contains("glitch of the source's clock"), "{err}");
+        assert_eq!(stream.time_reanchors(), 0);
+        // The oracle: the same frames with frame 500 never sent (a lost frame).
+        let mut dropped = regular();
+        dropped[500] = None;
+        let (clean, _) = run(&dropped);
+        let after_glitch: Vec<_> = glitched[501..].iter().map(|r| r.clone().unwrap()).collect();
+        let after_drop: Vec<_> = clean[500..].iter().map(|r| r.clone().unwrap()).collect();
+        assert_eq!(after_glitch, after_drop, "stamp {bad}");
+    }
+}
+
+#[test]
+fn a_repeated_stamp_is_refused_alone() {
+    let mut stamps = regular();
+    stamps[700] = stamps[699];
+    let (out, _) = run(&stamps);
+    assert_eq!((0..N).filter(|&i| out[i].is_err()).collect::<Vec<_>>(), vec![700]);
+    assert!(out[700].as_ref().unwrap_err().contains("does not follow"), "{:?}", out[700]);
+}
+
+#[test]
+fn a_clock_reset_is_taken_as_the_new_clock_after_a_few_frames() {
+    // From frame 1000 the source's clock restarts from 0 (the source was restarted).
+    let stamps: Vec<_> = (0..N).map(|i| Some(if i < 1000 { i as f64 } else { (i - 1000) as f64 } * 1e-3)).collect();
+    let (out, stream) = run(&stamps);
+    let k = TIME_REANCHOR_FRAMES as usize;
+    let refused: Vec<usize> = (0..N).filter(|&i| out[i].is_err()).collect();
+    assert_eq!(refused, (1000..1000 + k - 1).collect::<Vec<_>>());
+    assert_eq!(stream.time_reanchors(), 1);
+    assert_eq!(stream.gap_restarts(), 0);
+    // The window restarts on the new clock: outputs again once it has refilled (5 frames).
+    let first_out = (1000..N).find(|&i| matches!(out[i], Ok(Some(_)))).unwrap();
+    assert_eq!(first_out, 1000 + k - 1 + 4);
+}
+
+#[test]
+fn a_long_stall_costs_the_reanchor_frames_and_a_short_one_none() {
+    let jump = MAX_TIME_GAP_S + 1.0;
+    let stamps: Vec<_> = (0..N).map(|i| Some(i as f64 * 1e-3 + if i >= 1500 { jump } else { 0.0 })).collect();
+    let (out, stream) = run(&stamps);
+    assert_eq!((0..N).filter(|&i| out[i].is_err()).count(), TIME_REANCHOR_FRAMES as usize - 1);
+    assert_eq!(stream.time_reanchors(), 1);
+    let short = MAX_TIME_GAP_S / 2.0;
+    let stamps: Vec<_> = (0..N).map(|i| Some(i as f64 * 1e-3 + if i >= 1500 { short } else { 0.0 })).collect();
+    let (out, stream) = run(&stamps);
+    assert!(out.iter().all(Result::is_ok));
+    assert_eq!((stream.gap_restarts(), stream.time_reanchors()), (1, 0));
+}
+
+#[test]
+fn scattered_bad_stamps_never_become_the_clock() {
+    // Every 10th stamp is garbage far ahead, each unlike the last: none is ever taken.
+    let stamps: Vec<_> =
+        (0..N).map(|i| Some(if i % 10 == 9 { 1e6 + i as f64 * 7.0 } else { i as f64 * 1e-3 })).collect();
+    let (out, stream) = run(&stamps);
+    assert_eq!((0..N).filter(|&i| out[i].is_err()).count(), N / 10);
+    assert_eq!(stream.time_reanchors(), 0);
+}
