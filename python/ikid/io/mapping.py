@@ -216,7 +216,7 @@ class MarkerMap:
 
     @property
     def one_hand_marker(self) -> bool:
-        """The hand is one marker (``HND``): its three are virtual (the core's ``body::hand_from_one_marker``)."""
+        """The hand is one marker (``HND``): its three are virtual (core ``body::hand_from_one_marker``)."""
         return _native.HAND_POINT[0] in self.labels
 
     @property
