@@ -6,15 +6,18 @@ with ``time``, then one row per frame. Column names come from the body model
 
 from __future__ import annotations
 
-import io
 import os
+import shutil
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ikid import _native
-from ikid.io._atomic import write_text_atomic
+from ikid.io._atomic import atomic_output, check_size
 from ikid.io.markers import FileFormatError, read_text_lines
 
 
@@ -140,25 +143,75 @@ def _check_rows(name: str, time, values, cols: int) -> tuple[np.ndarray, np.ndar
 def write_storage(path: str | os.PathLike[str], time, values, columns: list[str], in_degrees: bool) -> Path:
     """Any table -> OpenSim storage text (atomically). Refuses non-finite values."""
     time, values = _check_rows(Path(path).name, time, values, len(columns))
-    if not np.all(np.isfinite(values)):
-        row, col = np.argwhere(~np.isfinite(values))[0]
-        raise _native.InputError(
-            f"{Path(path).name}: value {columns[col]} at row {row} is {values[row, col]}; not written"
+    with storage_writer(path, columns, in_degrees) as table:
+        table.write(time, values)
+    return Path(path)
+
+
+class StorageWriter:
+    """The rows of one storage file, written a block at a time (:func:`storage_writer`)."""
+
+    def __init__(self, body, name: str, columns: list[str]) -> None:
+        self._body, self.name, self.columns = body, name, columns
+        self.rows = 0
+        self._last_time = -np.inf
+
+    def write(self, time, values) -> None:
+        """Appends rows ``time`` ``(k,)``, ``values`` ``(k, len(columns))``; refuses non-finite
+        values and time that does not increase (from the rows before, too)."""
+        time, values = _check_rows(self.name, time, values, len(self.columns))
+        if len(time) == 0:
+            return
+        if not time[0] > self._last_time:
+            raise _native.InputError(f"{self.name}: time must be finite and strictly increasing")
+        if not np.all(np.isfinite(values)):
+            row, col = np.argwhere(~np.isfinite(values))[0]
+            raise _native.InputError(
+                f"{self.name}: value {self.columns[col]} at row {self.rows + row} is {values[row, col]}; not written"
+            )
+        # Straight into the file: savetxt makes a class per call (a reference cycle), which
+        # would hold a text buffer of each block until the garbage collector ran.
+        np.savetxt(
+            self._body,
+            np.column_stack([time, values]),
+            fmt=["%.6f"] + ["%.10g"] * values.shape[1],
+            delimiter="\t",
+            encoding="utf-8",
         )
-    header = [
-        Path(path).name,
-        "version=1",
-        f"nRows={len(time)}",
-        f"nColumns={len(columns) + 1}",
-        f"inDegrees={'yes' if in_degrees else 'no'}",
-        "endheader",
-        "time\t" + "\t".join(columns),
-    ]
-    buf = io.StringIO()
-    np.savetxt(
-        buf, np.column_stack([time, values]), fmt=["%.6f"] + ["%.10g"] * values.shape[1], delimiter="\t"
-    )
-    return write_text_atomic(path, "\n".join(header) + "\n" + buf.getvalue())
+        self.rows += len(time)
+        self._last_time = float(time[-1])
+
+
+@contextmanager
+def storage_writer(path: str | os.PathLike[str], columns: list[str], in_degrees: bool) -> Iterator[StorageWriter]:
+    """A storage file written a block at a time, atomically (see :mod:`ikid.io._atomic`): the
+    rows go to an unnamed temporary file as they come, and when the block ends the header (its
+    ``nRows`` known then) and the rows become the file, checked for size, or nothing does. Memory
+    is one block's, whatever the number of rows."""
+    name = Path(path).name
+    with atomic_output(path) as tmp, tempfile.TemporaryFile(dir=tmp.parent) as body:
+        table = StorageWriter(body, name, list(columns))
+        yield table
+        header = "\n".join(
+            [
+                name,
+                "version=1",
+                f"nRows={table.rows}",
+                f"nColumns={len(columns) + 1}",
+                f"inDegrees={'yes' if in_degrees else 'no'}",
+                "endheader",
+                "time\t" + "\t".join(columns),
+            ]
+        ) + "\n"
+        head = header.encode("utf-8")
+        size = body.tell()
+        body.seek(0)
+        with open(tmp, "wb") as out:
+            out.write(head)
+            shutil.copyfileobj(body, out, 1 << 16)
+            out.flush()
+            os.fsync(out.fileno())
+        check_size(tmp, len(head) + size)
 
 
 #: The column of per-frame ``ikid.FRAME_STATUS`` bits that ikid's writers add (0: nothing
@@ -179,12 +232,45 @@ def write_mot(path: str | os.PathLike[str], time, q, status=None) -> Path:
     """Wrist angles ``(n, 3)`` in radians -> ``.mot`` in degrees (``inDegrees=yes``); with
     ``status`` ``(n,)``, each row's ``ikid.FRAME_STATUS`` bits in a last column
     (:data:`STATUS_COLUMN`)."""
-    values, columns = _with_status(np.degrees(np.asarray(q, np.float64)), coordinate_names(), status)
-    return write_storage(path, time, values, columns, in_degrees=True)
+    with mot_writer(path, with_status=status is not None) as write:
+        write(time, q, status)
+    return Path(path)
 
 
 def write_sto(path: str | os.PathLike[str], time, tau, status=None) -> Path:
     """Joint torques ``(n, 3)`` in N·m -> ``.sto`` with OpenSim's ``<coordinate>_moment`` columns
     (and ``status``, as :func:`write_mot`)."""
-    values, columns = _with_status(np.asarray(tau, np.float64), moment_names(), status)
-    return write_storage(path, time, values, columns, in_degrees=False)
+    with sto_writer(path, with_status=status is not None) as write:
+        write(time, tau, status)
+    return Path(path)
+
+
+#: Writes one block of rows: ``(time, values, status)`` (``status`` ``None`` for a file
+#: without the status column).
+BlockWrite = Callable[..., None]
+
+
+@contextmanager
+def mot_writer(path: str | os.PathLike[str], with_status: bool = True) -> Iterator[BlockWrite]:
+    """:func:`write_mot` a block of rows at a time (see :func:`storage_writer`)."""
+    columns = coordinate_names() + ([STATUS_COLUMN] if with_status else [])
+    with storage_writer(path, columns, in_degrees=True) as table:
+
+        def write(time, q, status=None) -> None:
+            values, _ = _with_status(np.degrees(np.asarray(q, np.float64)), [], status if with_status else None)
+            table.write(time, values)
+
+        yield write
+
+
+@contextmanager
+def sto_writer(path: str | os.PathLike[str], with_status: bool = True) -> Iterator[BlockWrite]:
+    """:func:`write_sto` a block of rows at a time (see :func:`storage_writer`)."""
+    columns = moment_names() + ([STATUS_COLUMN] if with_status else [])
+    with storage_writer(path, columns, in_degrees=False) as table:
+
+        def write(time, tau, status=None) -> None:
+            values, _ = _with_status(np.asarray(tau, np.float64), [], status if with_status else None)
+            table.write(time, values)
+
+        yield write
