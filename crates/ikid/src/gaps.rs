@@ -790,7 +790,19 @@ impl GapFiller {
             None => weight[3] = 0.0,
         }
         let seg = occluded as usize;
-        weight[3] *= PRIOR_WEIGHT / (1.0 + self.mean_square_step(seg) / (self.still_step * self.still_step));
+        // How still the segment is: as it has been, or as its visible markers say it is now if
+        // they moved more since the last frame (a filler that learned a still start must not
+        // hold the missing marker where it was once the wrist moves: early in pyomeca's trial
+        // that held MC5 and cost up to 23 degrees by the end of a 200-ms gap).
+        let moving_now = self.last.as_ref().map_or(0.0, |last| {
+            (0..3)
+                .filter(|&k| k != missing_k)
+                .map(|k| (marker(frame, first + k) - marker(last, first + k)).norm_squared())
+                .sum::<f64>()
+                / 2.0
+        });
+        let step = self.mean_square_step(seg).max(moving_now);
+        weight[3] *= PRIOR_WEIGHT / (1.0 + step / (self.still_step * self.still_step));
         // The joint centre, by inverse variance: it comes from the whole segment, the visible
         // markers from the occluded one (marker noise estimated from each segment's pair
         // distances; the centre's doubled for its lever).
