@@ -30,8 +30,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path, help="cargo-mutants' output folder (holding outcomes.json)")
     parser.add_argument("--min-score", type=float, default=0.95)
-    parser.add_argument("--record", metavar="WHAT", help="keep the closing line, the commit and WHAT was mutated")
-    parser.add_argument("--status", action="store_true", help="print the last recorded run and whether it is stale")
+    parser.add_argument(
+        "--record", metavar="WHAT", help="keep the closing line, the commit and WHAT was mutated"
+    )
+    parser.add_argument(
+        "--status", action="store_true", help="print the last recorded run and whether it is stale"
+    )
     args = parser.parse_args(argv)
     if args.status:
         print(status(args.out))

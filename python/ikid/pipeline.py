@@ -81,7 +81,9 @@ class Counts:
             if n:
                 self.bits[name] += n
         self.filling += int(np.count_nonzero(filling))
-        self.filling_only_per_frame += int(np.count_nonzero(filling & (status == _native.FRAME_STATUS["per_frame"])))
+        self.filling_only_per_frame += int(
+            np.count_nonzero(filling & (status == _native.FRAME_STATUS["per_frame"]))
+        )
         self.flagged += int(np.count_nonzero(status))
 
 
@@ -147,9 +149,13 @@ class Run:
         if self.flagged("filled"):
             parts.append(f"{self.flagged('filled')} with a filled marker")
         if self.flagged("rejected_marker"):
-            parts.append(f"{self.flagged('rejected_marker')} with a marker that jumped, replaced by a fill (flagged)")
+            parts.append(
+                f"{self.flagged('rejected_marker')} with a marker that jumped, replaced by a fill (flagged)"
+            )
         if self.flagged("swapped"):
-            parts.append(f"{self.flagged('swapped')} with swapped labels, used under their right labels (flagged)")
+            parts.append(
+                f"{self.flagged('swapped')} with swapped labels, used under their right labels (flagged)"
+            )
         if self.flagged("outside_training"):
             parts.append(f"{self.flagged('outside_training')} outside the model's training range (flagged)")
         if self.flagged("per_frame"):
@@ -226,6 +232,7 @@ def check_rate(model: _native.Model, rate_hz: float, source: str, allow_resample
 
 #: A shipped per-rate model's name: its family's name and its rate (``wrist-ik-100hz``).
 _PER_RATE = re.compile(r"^(?P<family>.+)-(?P<rate>\d+(?:\.\d+)?)hz$")
+
 
 def family_members(name: str | os.PathLike[str]) -> list[_native.Model]:
     """The shipped models of family ``name``, slowest first: ``name`` itself and every shipped
@@ -347,7 +354,9 @@ def run_model(
         )
     if rate_hz is None and len(time) > 1:
         rate_hz = 1.0 / float(np.median(np.diff(time)))
-    blocks = ((time[k : k + BLOCK_FRAMES], frames[k : k + BLOCK_FRAMES]) for k in range(0, len(time), BLOCK_FRAMES))
+    blocks = (
+        (time[k : k + BLOCK_FRAMES], frames[k : k + BLOCK_FRAMES]) for k in range(0, len(time), BLOCK_FRAMES)
+    )
     return run_blocks(
         model,
         blocks,
@@ -391,7 +400,9 @@ def run_blocks(
         rate_hz = model.frame_rate_hz
     if early_outputs is None:
         early_outputs = model.card.get("output_offset") is not None
-    stream = model.stream(missing_markers=missing_markers, calibration=calibration, early_outputs=early_outputs)
+    stream = model.stream(
+        missing_markers=missing_markers, calibration=calibration, early_outputs=early_outputs
+    )
     tally = _Tally(model.n_outputs, on_rows)
     bar = _progress(n_frames, source) if progress else None
     resampled_from = None
@@ -421,7 +432,9 @@ def run_blocks(
     finally:
         if bar is not None:
             bar.close()
-    family = family_members(model_arg) if how == "at_frames" and not isinstance(model_arg, _native.Model) else []
+    family = (
+        family_members(model_arg) if how == "at_frames" and not isinstance(model_arg, _native.Model) else []
+    )
     return tally.run(
         model,
         rate_hz,
@@ -722,7 +735,7 @@ def _hermite(
     return out, valid
 
 
-def _progress(total: int, label: str):
+def _progress(total: int | None, label: str):
     """A tqdm bar on stderr when it is a terminal (tqdm decides), else nothing."""
     try:
         from tqdm import tqdm

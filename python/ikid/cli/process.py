@@ -51,7 +51,9 @@ def _process_one(job: tuple[str, dict]) -> dict:
         first = next(data.blocks(), None)
         if first is None:
             raise ikid.InputError(f"{path}: no frames")
-        calibration = _subject_calibration(first.frames(mapping, whole=False), opt["calibration"], mapping, path)
+        calibration = _subject_calibration(
+            first.frames(mapping, whole=False), opt["calibration"], mapping, path
+        )
         runs = {}
 
         def frames_of_file():
@@ -70,6 +72,10 @@ def _process_one(job: tuple[str, dict]) -> dict:
                     continue
                 make, k = writers[kind]
                 write = files.enter_context(make(opt["outputs"][k]))
+
+                def to_file(_frames, t, values, status, write=write) -> None:
+                    write(t, values, status)
+
                 # A shipped family name (the default wrist-ik) runs its model for the file's rate
                 # (ikid.pipeline.pick_model); a file or a per-rate name is that model.
                 runs[kind] = run_blocks(
@@ -83,7 +89,7 @@ def _process_one(job: tuple[str, dict]) -> dict:
                     source=path,
                     progress=opt["progress"],
                     allow_unchecked=opt["allow_unchecked"],
-                    on_rows=lambda _i, t, v, st, write=write: write(t, v, st),
+                    on_rows=to_file,
                 )
                 if runs[kind].n_outputs == 0:
                     raise ikid.InputError(f"{path}: no frame gave {kind}: {runs[kind].summary()}")

@@ -152,7 +152,13 @@ class MarkerFile:
     def whole(data: MarkerData) -> MarkerFile:
         """A file read whole (a reader without blocks), as one block."""
         return MarkerFile(
-            data.labels, data.rate_hz, data.source, data.file_units, data.metadata, len(data), lambda: iter([data])
+            data.labels,
+            data.rate_hz,
+            data.source,
+            data.file_units,
+            data.metadata,
+            len(data),
+            lambda: iter([data]),
         )
 
 

@@ -167,7 +167,8 @@ class StorageWriter:
         if not np.all(np.isfinite(values)):
             row, col = np.argwhere(~np.isfinite(values))[0]
             raise _native.InputError(
-                f"{self.name}: value {self.columns[col]} at row {self.rows + row} is {values[row, col]}; not written"
+                f"{self.name}: value {self.columns[col]} at row {self.rows + row} is "
+                f"{values[row, col]}; not written"
             )
         # Straight into the file: savetxt makes a class per call (a reference cycle), which
         # would hold a text buffer of each block until the garbage collector ran.
@@ -183,7 +184,9 @@ class StorageWriter:
 
 
 @contextmanager
-def storage_writer(path: str | os.PathLike[str], columns: list[str], in_degrees: bool) -> Iterator[StorageWriter]:
+def storage_writer(
+    path: str | os.PathLike[str], columns: list[str], in_degrees: bool
+) -> Iterator[StorageWriter]:
     """A storage file written a block at a time, atomically (see :mod:`ikid.io._atomic`): the
     rows go to an unnamed temporary file as they come, and when the block ends the header (its
     ``nRows`` known then) and the rows become the file, checked for size, or nothing does. Memory
@@ -192,17 +195,20 @@ def storage_writer(path: str | os.PathLike[str], columns: list[str], in_degrees:
     with atomic_output(path) as tmp, tempfile.TemporaryFile(dir=tmp.parent) as body:
         table = StorageWriter(body, name, list(columns))
         yield table
-        header = "\n".join(
-            [
-                name,
-                "version=1",
-                f"nRows={table.rows}",
-                f"nColumns={len(columns) + 1}",
-                f"inDegrees={'yes' if in_degrees else 'no'}",
-                "endheader",
-                "time\t" + "\t".join(columns),
-            ]
-        ) + "\n"
+        header = (
+            "\n".join(
+                [
+                    name,
+                    "version=1",
+                    f"nRows={table.rows}",
+                    f"nColumns={len(columns) + 1}",
+                    f"inDegrees={'yes' if in_degrees else 'no'}",
+                    "endheader",
+                    "time\t" + "\t".join(columns),
+                ]
+            )
+            + "\n"
+        )
         head = header.encode("utf-8")
         size = body.tell()
         body.seek(0)
@@ -257,7 +263,9 @@ def mot_writer(path: str | os.PathLike[str], with_status: bool = True) -> Iterat
     with storage_writer(path, columns, in_degrees=True) as table:
 
         def write(time, q, status=None) -> None:
-            values, _ = _with_status(np.degrees(np.asarray(q, np.float64)), [], status if with_status else None)
+            values, _ = _with_status(
+                np.degrees(np.asarray(q, np.float64)), [], status if with_status else None
+            )
             table.write(time, values)
 
         yield write

@@ -113,7 +113,13 @@ _EMPTY_CELL = re.compile(r"(?<=\t)(?=\t|\n|$)", re.M)
 
 
 def _trc_blocks(
-    path: Path, labels: tuple[str, ...], rate: float, n_frames: int, scale: float, header: dict, block_frames: int
+    path: Path,
+    labels: tuple[str, ...],
+    rate: float,
+    n_frames: int,
+    scale: float,
+    header: dict,
+    block_frames: int,
 ) -> Iterator[MarkerData]:
     """The rows of a TRC after its header, ``block_frames`` at a time, checked as
     :func:`read_trc` always has (columns, numbers, NumFrames, increasing time)."""
@@ -126,7 +132,9 @@ def _trc_blocks(
         for _ in range(_HEADER_LINES):
             f.readline()
         while True:
-            raw_lines = f.readlines(1 << 22) if block_frames >= 4096 else [f.readline() for _ in range(block_frames)]
+            raw_lines = (
+                f.readlines(1 << 22) if block_frames >= 4096 else [f.readline() for _ in range(block_frames)]
+            )
             raw_lines = [r for r in raw_lines if r]
             if not raw_lines:
                 break
@@ -151,7 +159,8 @@ def _trc_blocks(
                     k = int(np.argmax(steps <= 0))
                     before = last_time if k == 0 else time[k - 1]
                     raise FileFormatError(
-                        f"{src}: time goes from {before} to {time[k]} s at frame {seen + k + 1}; it must increase"
+                        f"{src}: time goes from {before} to {time[k]} s at frame {seen + k + 1}; "
+                        "it must increase"
                     )
                 last_time = float(time[-1])
                 positions = rows[:, 2:].reshape(len(rows), len(labels), 3) * scale
@@ -173,7 +182,9 @@ def _parse_rows(chunk: list[str], first_lineno: int, width: int, src: str) -> np
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error")
-            rows = np.loadtxt(io.StringIO(_EMPTY_CELL.sub("nan", text)), delimiter="\t", ndmin=2, dtype=np.float64)
+            rows = np.loadtxt(
+                io.StringIO(_EMPTY_CELL.sub("nan", text)), delimiter="\t", ndmin=2, dtype=np.float64
+            )
         if rows.shape[1] == width:
             return rows
     except ValueError:
