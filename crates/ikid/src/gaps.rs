@@ -1269,15 +1269,15 @@ mod tests {
         assert!((0..18).all(|k| (f[k] - truth[k]).abs() < 5e-4), "{f:?}");
         // From here on MC2 and MC5 carry each other's labels (distances hold, positions jump):
         // each frame is put back under the true labels, bit for bit, and flagged swapped.
-        for i in 301..320 {
-            let mut f = frames[i];
+        for (i, truth) in frames.iter().enumerate().take(320).skip(301) {
+            let mut f = *truth;
             for k in 0..3 {
                 f.swap(9 + k, 12 + k);
             }
             assert_eq!(filler.fill(&mut f, i).unwrap(), 0, "frame {i}");
             assert_eq!(filler.status(), status::SWAPPED, "frame {i}");
             assert_eq!(filler.labels(), [0, 1, 2, 4, 3, 5], "frame {i}");
-            assert_eq!(f.map(f32::to_bits), frames[i].map(f32::to_bits), "frame {i}");
+            assert_eq!(f.map(f32::to_bits), truth.map(f32::to_bits), "frame {i}");
         }
         // The swapped labels with MC5 missing too: the marker labelled MC2 is MC5, and MC2
         // (missing) is filled.
