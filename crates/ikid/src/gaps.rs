@@ -490,10 +490,15 @@ impl GapFiller {
     }
 
     /// Where each marker would be now had it kept the velocity it had between the last two
-    /// accepted frames, over the frames refused since (`last` itself when only one is known).
+    /// accepted frames, over the frames refused since (`last` itself when only one is known,
+    /// or after more than [`REANCHOR_FRAMES`] refused: a velocity that old says nothing; a
+    /// 400-ms gap of two forearm markers took it 400 frames on, and the frames after it for
+    /// jumps).
     fn predicted(&self) -> Option<[f32; MARKER_FRAME_LEN]> {
         let last = self.last?;
-        let Some(before) = self.before_last else { return Some(last) };
+        let Some(before) = self.before_last.filter(|_| self.refused_since_last <= REANCHOR_FRAMES) else {
+            return Some(last);
+        };
         let steps = 1.0 + self.refused_since_last as f32;
         Some(std::array::from_fn(|k| last[k] + steps * (last[k] - before[k])))
     }
@@ -504,6 +509,9 @@ impl GapFiller {
     /// frames or with a segment of `frame` incomplete.
     fn predicted_relative(&self, frame: &[f32]) -> Option<[f32; MARKER_FRAME_LEN]> {
         let (last, before) = (self.last.as_ref()?, self.before_last.as_ref()?);
+        if self.refused_since_last > REANCHOR_FRAMES {
+            return None;
+        }
         let steps = 1.0 + self.refused_since_last as f64;
         let mut out = [f32::NAN; MARKER_FRAME_LEN];
         for s in 0..SEGMENTS.len() {
