@@ -19,6 +19,7 @@ __all__ = [
     "FEATURE_SETS",
     "feature_set_info",
     "fill_gaps",
+    "LabelCheck",
     "compute_features",
     "Calibration",
     "Model",
@@ -78,8 +79,9 @@ def fill_gaps(
     frames: _Floats, unfillable: str = "raise", rate_hz: float = 1000.0
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]: ...
 
+@final
 class LabelCheck:
-    def __init__(self, rate_hz: float) -> None: ...
+    def __new__(cls, rate_hz: float) -> LabelCheck: ...
     def labels(self, frames: _Floats) -> npt.NDArray[np.int8]: ...
 
 def build_model(
