@@ -57,7 +57,9 @@ def open_trc(
     else:
         check_readable(path, "TRC is tab-separated text", limit=max_bytes)
     with _open_text(path) as f:
-        raw = [f.readline() for _ in range(_HEADER_LINES)]
+        raw = [f.readline(MAX_LINE_BYTES + 1) for _ in range(_HEADER_LINES)]
+    for k, r in enumerate(raw):
+        _check_line_length(r, src, k + 1)
     lines = [_decoded(r, src).rstrip("\r\n") for r in raw]
     if not all(raw) or not lines[0].startswith("PathFileType"):
         raise FileFormatError(f"{src}:1: not a TRC file (expected a 'PathFileType' line and a 5-line header)")
@@ -97,6 +99,18 @@ def open_trc(
     return MarkerFile(labels, rate, src, header["Units"], {"header": header}, n_frames, blocks)
 
 
+#: Longest line a TRC reader takes, bytes: a row of 1,000 markers is ~40 kB.
+MAX_LINE_BYTES = 1 << 20
+
+
+def _check_line_length(raw: bytes, src: str, lineno: int) -> None:
+    if len(raw) > MAX_LINE_BYTES:
+        raise FileFormatError(
+            f"{src}:{lineno}: a line longer than {MAX_LINE_BYTES} bytes: not TRC text "
+            "(tab-separated rows, one per frame)"
+        )
+
+
 def _open_text(path: Path):
     return open(path, "rb")
 
@@ -130,12 +144,18 @@ def _trc_blocks(
     lineno = _HEADER_LINES
     with _open_text(path) as f:
         for _ in range(_HEADER_LINES):
-            f.readline()
+            f.readline(MAX_LINE_BYTES + 1)
         while True:
-            raw_lines = (
-                f.readlines(1 << 22) if block_frames >= 4096 else [f.readline() for _ in range(block_frames)]
-            )
-            raw_lines = [r for r in raw_lines if r]
+            # Lines of at most MAX_LINE_BYTES (a file of NUL bytes is one endless "line").
+            raw_lines = []
+            size = 0
+            while len(raw_lines) < block_frames and size < 1 << 22:
+                r = f.readline(MAX_LINE_BYTES + 1)
+                if not r:
+                    break
+                _check_line_length(r, src, lineno + len(raw_lines) + 1)
+                raw_lines.append(r)
+                size += len(r)
             if not raw_lines:
                 break
             # Up to block_frames rows per block (a chunk of ~4 MB of text, split as needed).
