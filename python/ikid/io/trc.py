@@ -147,7 +147,7 @@ def _trc_blocks(
             f.readline(MAX_LINE_BYTES + 1)
         while True:
             # Lines of at most MAX_LINE_BYTES (a file of NUL bytes is one endless "line").
-            raw_lines = []
+            raw_lines: list[bytes] = []
             size = 0
             while len(raw_lines) < block_frames and size < 1 << 22:
                 r = f.readline(MAX_LINE_BYTES + 1)
