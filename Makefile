@@ -15,7 +15,7 @@ CFLAGS_C := -std=c11 -O2 -Wall -Wextra -Werror -Iinclude
 LDLIBS_C := -L$(LIBDIR) -likid -Wl,-rpath,$(abspath $(LIBDIR)) -lpthread -lm
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
 
-.PHONY: all venv wheel wheel-portable sdist demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf compare-rates realdata exam live
+.PHONY: all venv wheel wheel-portable sdist demo data models models-track report check test test-rust test-python test-python-slow test-c faults lint fmt-check clippy ruff mypy stubtest bench bench-peers fuzz mutants clean capi c header check-header install compare-opensim compare-ekf compare-rates realdata exam live mutants-status
 
 all: wheel
 
@@ -113,7 +113,7 @@ report: wheel
 # torch/OpenSim/biorbd peers, the C programs under valgrind (a failure, not a skip, in CI when
 # valgrind is missing), the embedding programs and the sdist built from outside the repository,
 # 60 s of fuzzing, the fault suite and the portable wheel (built, audited, installed, run).
-check: lint test-rust test-python stubtest
+check: lint test-rust test-python stubtest mutants-status
 	@echo "make check: all passed"
 
 test: check test-python-slow fuzz faults wheel-portable
@@ -241,7 +241,13 @@ mutants: $(CARGO_MUTANTS)
 	PATH="$(abspath .tools/bin):$$PATH" $(CARGO) mutants -p ikid $(foreach f,$(MUTANTS_FILES),-f 'crates/ikid/src/$(f).rs') \
 		--shard $(MUTANTS_SHARD) --sharding round-robin --profile quick -o target/mutants > target/mutants.log 2>&1 \
 		|| test -f target/mutants/mutants.out/outcomes.json || (tail -30 target/mutants.log; exit 1)
-	$(PYTHON) tools/mutants_summary.py target/mutants/mutants.out --min-score $(MUTANTS_MIN_SCORE)
+	$(PYTHON) tools/mutants_summary.py target/mutants/mutants.out --min-score $(MUTANTS_MIN_SCORE) \
+		--record "$(MUTANTS_FILES), shard $(MUTANTS_SHARD)"
+
+# The last `make mutants` run's score, commit and date, and whether crates/ikid changed since:
+# printed by `make check`, so the score is seen on every change to the core.
+mutants-status:
+	@$(PYTHON) tools/mutants_summary.py target/mutants/mutants.out --status
 
 # Live sources (issue #30, docs/live.md): the live tests, then source -> ikid latency on the
 # loopback at 1 kHz (LSL and a fake QTM server, 3 runs each, medians), a source restart, and

@@ -45,6 +45,10 @@
 // speed beyond training): the output is the frame's per-frame solution.
 #define IKID_FRAME_PER_FRAME 64
 
+// Frame status bit: a marker was found where another marker of the frame belongs (labels
+// swapped in the recording); the markers were used under their right labels.
+#define IKID_FRAME_SWAPPED 128
+
 // Result of every fallible libikid call.
 typedef enum ikid_status {
   // Success.

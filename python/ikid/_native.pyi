@@ -20,6 +20,7 @@ __all__ = [
     "FEATURE_SETS",
     "feature_set_info",
     "fill_gaps",
+    "LabelCheck",
     "compute_features",
     "Calibration",
     "Model",
@@ -83,6 +84,12 @@ def compute_features(frames: _Floats, feature_set: str) -> npt.NDArray[np.float3
 def fill_gaps(
     frames: _Floats, unfillable: str = "raise", rate_hz: float = 1000.0
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]: ...
+
+@final
+class LabelCheck:
+    def __new__(cls, rate_hz: float) -> LabelCheck: ...
+    def labels(self, frames: _Floats) -> npt.NDArray[np.int8]: ...
+
 def build_model(
     card_json: str,
     weights: list[_Floats],
@@ -159,7 +166,7 @@ class Model:
     def layer_widths(self) -> list[int]: ...
     @property
     def has_checksum(self) -> bool: ...
-    def frame_status(self, features: _Floats, outputs: _Floats) -> npt.NDArray[np.uint8]: ...
+    def frame_status(self, features: _Floats, outputs: _Floats) -> npt.NDArray[np.uint16]: ...
     def predict(self, frames: _Floats, threads: int | None = None) -> npt.NDArray[np.float32]: ...
     @property
     def missing_markers(self) -> str: ...

@@ -21,9 +21,14 @@ card's ``frame_rate_hz`` (the suffix only finds the files). For a recording at r
    geodesic RMS with an output on 99.3 % of its valid frames, the next faster (100 Hz, 100 ms
    window) 6.11° and 95.8 %; on simulated trials at 70 Hz the 100 Hz member is better with noise
    (1.2e-4 vs 2.0e-4 rad² at 1 %), equal on clean markers — real markers, fast and clean, decide.
+   One stream runs over the model's grid once (:class:`_ModelGrid`: 10 s at 70 Hz is 10,000
+   pushes of the 1 kHz member, about 0.3 s; the earlier one stream per phase of the frames on
+   the grid made 100 streams of the whole trial, 4–30 s), and a frame's output is the outputs
+   of the grid points on either side of it interpolated linearly (within 1 ms at 1 kHz).
    Nothing is written between frames, and a missing frame stays missing: a grid point takes a
    recording frame's markers exactly where it falls on one, the cubic Hermite between two frames
    uses those two (never a missing one's neighbours), and no grid point is made inside a time gap.
+   The summary says so, and why: the family has no model at the recording's rate.
    ``--resample`` (``resample_to_model``) keeps the older behaviour: the whole recording resampled,
    outputs on the model's grid.
 
@@ -36,8 +41,8 @@ from __future__ import annotations
 import os
 import re
 from collections import Counter
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -54,14 +59,46 @@ def same_rate(a_hz: float, b_hz: float) -> bool:
 
 
 @dataclass
+class Counts:
+    """What a run's output rows carried, counted (all a summary needs; kept when the rows
+    themselves went to a file block by block)."""
+
+    rows: int = 0
+    #: Rows with each ``ikid.FRAME_STATUS`` bit, by name.
+    bits: Counter = field(default_factory=Counter)
+    #: Rows given while the window filled (early outputs), and those of them flagged
+    #: ``per_frame`` and nothing else.
+    filling: int = 0
+    filling_only_per_frame: int = 0
+    #: Rows with any bit set.
+    flagged: int = 0
+
+    def add(self, status: np.ndarray, filling: np.ndarray) -> None:
+        status = np.asarray(status, np.uint16)
+        self.rows += len(status)
+        for name, bit in _native.FRAME_STATUS.items():
+            n = int(np.count_nonzero(status & bit))
+            if n:
+                self.bits[name] += n
+        self.filling += int(np.count_nonzero(filling))
+        self.filling_only_per_frame += int(
+            np.count_nonzero(filling & (status == _native.FRAME_STATUS["per_frame"]))
+        )
+        self.flagged += int(np.count_nonzero(status))
+
+
+@dataclass
 class Run:
-    """Outputs for the frames that have one, in input order."""
+    """Outputs for the frames that have one, in input order (with ``on_rows``, see
+    :func:`run_blocks`, the rows went to it and these arrays are empty; :attr:`counts` holds
+    what the summary needs either way)."""
 
     time: np.ndarray
     #: Index of each output's frame in the (possibly resampled) input.
     frame: np.ndarray
     values: np.ndarray
-    #: True where the stream filled a missing marker of that frame.
+    #: True where the stream filled a marker missing in that frame (status bit ``filled``; a
+    #: marker rejected and replaced is ``rejected_marker``, labels put right ``swapped``).
     filled: np.ndarray
     n_frames: int
     #: Frames without an output, by reason (the window filling up is ``"window filling"``).
@@ -74,7 +111,7 @@ class Run:
     #: implausible), shown in the summary.
     examples: dict[str, str] = field(default_factory=dict)
     #: Each output row's ``ikid.FRAME_STATUS`` bits (filled, outside the training range).
-    status: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8))
+    status: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint16))
     #: The model that ran (its card's name) and its card's rate.
     model_name: str = ""
     model_rate_hz: float = 0.0
@@ -84,10 +121,20 @@ class Run:
     #: True for each output row given while the stream's window was filling (an early output:
     #: the per-frame solution).
     filling: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    #: The rows' status bits counted (see :class:`Counts`).
+    counts: Counts = field(default_factory=Counts)
+    #: The rates of the model's family (:func:`family_members`), when it ran as one.
+    family_rates_hz: tuple[float, ...] = ()
+
+    @property
+    def n_outputs(self) -> int:
+        """Output rows (written, or in :attr:`values`)."""
+        return self.counts.rows
 
     def flagged(self, bit: str) -> int:
         """Output rows carrying status bit ``bit`` (an ``ikid.FRAME_STATUS`` name)."""
-        return int(np.count_nonzero(self.status & _native.FRAME_STATUS[bit]))
+        _native.FRAME_STATUS[bit]  # a name that is not a bit is an error, not 0
+        return int(self.counts.bits.get(bit, 0))
 
     @property
     def clean(self) -> bool:
@@ -95,19 +142,24 @@ class Run:
         window's filling is not a flaw: its frames may lack an output, or carry the per-frame
         solution (``per_frame`` and nothing else)."""
         lost = sum(n for reason, n in self.refused.items() if reason != "window filling")
-        flagged = self.status.copy()
-        if len(self.filling):
-            flagged[self.filling & (flagged == _native.FRAME_STATUS["per_frame"])] = 0
-        return lost == 0 and not flagged.any()
+        return lost == 0 and self.counts.flagged - self.counts.filling_only_per_frame == 0
 
     def summary(self) -> str:
-        parts = [f"{len(self.time)}/{self.n_frames} frames with output"]
-        if self.filled.any():
-            parts.append(f"{int(self.filled.sum())} with a filled marker")
+        parts = [f"{self.n_outputs}/{self.n_frames} frames with output"]
+        if self.flagged("filled"):
+            parts.append(f"{self.flagged('filled')} with a filled marker")
+        if self.flagged("rejected_marker"):
+            parts.append(
+                f"{self.flagged('rejected_marker')} with a marker that jumped, replaced by a fill (flagged)"
+            )
+        if self.flagged("swapped"):
+            parts.append(
+                f"{self.flagged('swapped')} with swapped labels, used under their right labels (flagged)"
+            )
         if self.flagged("outside_training"):
             parts.append(f"{self.flagged('outside_training')} outside the model's training range (flagged)")
         if self.flagged("per_frame"):
-            early = int(np.count_nonzero(self.filling)) if len(self.filling) else 0
+            early = self.counts.filling
             beyond = self.flagged("per_frame") - early
             parts.append(
                 f"{self.flagged('per_frame')} per-frame solutions (flagged: {early} while the window filled, "
@@ -129,9 +181,16 @@ class Run:
         """Which model ran, at which rate, on which frames (for the summary line)."""
         head = f"model {self.model_name} ({self.model_rate_hz:g} Hz)"
         if self.at_recording_frames:
+            why = (
+                f" (its family has no model at {self.rate_hz:g} Hz, only at "
+                + ", ".join(f"{r:g}" for r in self.family_rates_hz)
+                + " Hz)"
+                if self.family_rates_hz
+                else ""
+            )
             return (
                 f"{head}, the {self.rate_hz:g} Hz recording resampled to it, "
-                f"outputs at the recording's frames"
+                f"outputs at the recording's frames{why}"
             )
         if self.resampled_from_hz:
             return f"{head}, outputs at its rate"
@@ -173,11 +232,6 @@ def check_rate(model: _native.Model, rate_hz: float, source: str, allow_resample
 
 #: A shipped per-rate model's name: its family's name and its rate (``wrist-ik-100hz``).
 _PER_RATE = re.compile(r"^(?P<family>.+)-(?P<rate>\d+(?:\.\d+)?)hz$")
-
-#: A recording frame runs on the model grid point within 1/(2·PHASE_STEPS) of a model period
-#: of it (0.05 ms at 100 Hz): frames are grouped by their phase on the model's grid in steps of
-#: 1/PHASE_STEPS period, one stream per group (70 Hz on a 100 Hz model: 7 groups).
-PHASE_STEPS = 100
 
 
 def family_members(name: str | os.PathLike[str]) -> list[_native.Model]:
@@ -256,6 +310,15 @@ def pick_model(
     return chosen, ("resample" if resample_to_model else "at_frames")
 
 
+#: Frames per block when :func:`run_model` runs over arrays (the same code as a file read in
+#: blocks, :func:`run_blocks`).
+BLOCK_FRAMES = 65536
+
+#: Called with each block of output rows, in order: ``(frame, time, values, status)`` (frame
+#: indices, seconds, ``(k, n_outputs)``, ``ikid.FRAME_STATUS`` bits).
+RowSink = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
+
+
 def run_model(
     model: _native.Model | str | os.PathLike[str],
     frames,
@@ -279,7 +342,9 @@ def run_model(
     whenever the model corrects its newest frame's features, as the IK models do): while a
     window fills (the first frames, and after a time gap) each frame gets its per-frame
     solution, flagged ``per_frame``, so every frame has an output. ``allow_unchecked``: a model
-    file without a checksum is loaded (with a warning; see :func:`ikid.load`)."""
+    file without a checksum is loaded (with a warning; see :func:`ikid.load`).
+
+    The arrays go through :func:`run_blocks` a block at a time, as a file of any length does."""
     frames = np.asarray(frames, np.float64)
     time = np.asarray(time, np.float64)
     if frames.ndim != 2 or time.shape != (len(frames),):
@@ -289,6 +354,45 @@ def run_model(
         )
     if rate_hz is None and len(time) > 1:
         rate_hz = 1.0 / float(np.median(np.diff(time)))
+    blocks = (
+        (time[k : k + BLOCK_FRAMES], frames[k : k + BLOCK_FRAMES]) for k in range(0, len(time), BLOCK_FRAMES)
+    )
+    return run_blocks(
+        model,
+        blocks,
+        rate_hz=rate_hz,
+        n_frames=len(time),
+        resample_to_model=resample_to_model,
+        missing_markers=missing_markers,
+        calibration=calibration,
+        source=source,
+        progress=progress,
+        early_outputs=early_outputs,
+        allow_unchecked=allow_unchecked,
+    )
+
+
+def run_blocks(
+    model: _native.Model | str | os.PathLike[str],
+    blocks: Iterable[tuple[np.ndarray, np.ndarray]],
+    *,
+    rate_hz: float | None,
+    n_frames: int | None = None,
+    resample_to_model: bool = False,
+    missing_markers: str | None = None,
+    calibration: _native.Calibration | None = None,
+    source: str = "frames",
+    progress: bool = False,
+    early_outputs: bool | None = None,
+    allow_unchecked: bool = False,
+    on_rows: RowSink | None = None,
+) -> Run:
+    """:func:`run_model` over a recording given as blocks of ``(time, frames)`` in order (a file
+    read in blocks, :func:`ikid.io.open_markers`), at ``rate_hz`` (the file's; ``None`` for a
+    single frame). With ``on_rows`` each block's output rows go to it as they are made and the
+    :class:`Run` keeps only their counts: memory independent of the recording's length. (A
+    run with ``resample_to_model`` holds the whole recording: it resamples it at once.)"""
+    model_arg = model
     model, how = pick_model(
         model, rate_hz, resample_to_model=resample_to_model, source=source, allow_unchecked=allow_unchecked
     )
@@ -296,50 +400,81 @@ def run_model(
         rate_hz = model.frame_rate_hz
     if early_outputs is None:
         early_outputs = model.card.get("output_offset") is not None
-    kw: dict[str, Any] = {
-        "missing_markers": missing_markers,
-        "calibration": calibration,
-        "early_outputs": early_outputs,
-    }
-    bar = _progress(len(frames), source) if progress else None
+    stream = model.stream(
+        missing_markers=missing_markers, calibration=calibration, early_outputs=early_outputs
+    )
+    tally = _Tally(model.n_outputs, on_rows)
+    bar = _progress(n_frames, source) if progress else None
+    resampled_from = None
     try:
-        if how == "at_frames":
-            return _run_at_recording_frames(model, frames, time, rate_hz, kw, bar)
-        resampled_from = None
         if how == "resample":
+            parts = list(blocks)
+            time = np.concatenate([t for t, _ in parts]) if parts else np.empty(0)
+            frames = np.concatenate([f for _, f in parts]) if parts else np.empty((0, model.frame_len))
             time, frames = resample(time, frames, model.frame_rate_hz)
             resampled_from, rate_hz = rate_hz, model.frame_rate_hz
-        tally = _Tally(len(frames))
-        stream = model.stream(**kw)
-        for i, (t, frame) in enumerate(zip(time, frames, strict=True)):
-            if bar is not None and i % 1000 == 999:
-                bar.update(1000)
-            tally.add(i, _push(stream, t, frame, model.window))
-        return tally.run(model, time, rate_hz, resampled_from, stream.gap_restarts)
+            blocks = [(time, frames)]
+        if how == "at_frames":
+            grid = _ModelGrid(model, stream, rate_hz, tally)
+            for time, frames in blocks:
+                grid.feed(np.asarray(time, np.float64), np.asarray(frames, np.float64))
+                if bar is not None:
+                    bar.update(len(time))
+            grid.finish()
+        else:
+            for time, frames in blocks:
+                time = np.asarray(time, np.float64)
+                for t, frame in zip(time, np.asarray(frames, np.float64), strict=True):
+                    tally.add(t, _push(stream, t, frame, model.window))
+                tally.flush()
+                if bar is not None:
+                    bar.update(len(time))
     finally:
         if bar is not None:
             bar.close()
+    family = (
+        family_members(model_arg) if how == "at_frames" and not isinstance(model_arg, _native.Model) else []
+    )
+    return tally.run(
+        model,
+        rate_hz,
+        resampled_from,
+        stream.gap_restarts,
+        at_frames=how == "at_frames",
+        family_rates=tuple(m.frame_rate_hz for m in family),
+    )
 
 
 class _Tally:
-    """Outcomes per frame, in frame order, into a :class:`Run`."""
+    """Outcomes per frame, in frame order, into a :class:`Run`: rows kept, or handed to a sink
+    a block at a time (:meth:`flush`)."""
 
-    def __init__(self, n: int) -> None:
-        self.n = n
-        self.rows: list = []
-        self.index: list[int] = []
-        self.filled: list[bool] = []
-        self.status: list[int] = []
-        self.filling: list[bool] = []
+    def __init__(self, n_outputs: int, on_rows: RowSink | None) -> None:
+        self.n_outputs = n_outputs
+        self.on_rows = on_rows
+        self.n = 0
+        self.kept: list[tuple[np.ndarray, ...]] = []
+        self._block()
+        self.counts = Counts()
         self.refused: Counter = Counter()
         self.examples: dict[str, str] = {}
 
-    def add(self, i: int, outcome: tuple) -> None:
+    def _block(self) -> None:
+        self.rows: list = []
+        self.index: list[int] = []
+        self.time: list[float] = []
+        self.status: list[int] = []
+        self.filling: list[bool] = []
+
+    def add(self, t: float, outcome: tuple) -> None:
+        """The next frame's outcome (``_push``'s)."""
+        i = self.n
+        self.n += 1
         if outcome[0] == "out":
-            _, values, filled, status, filling = outcome
+            _, values, _filled, status, filling = outcome
             self.rows.append(values)
             self.index.append(i)
-            self.filled.append(filled)
+            self.time.append(t)
             self.status.append(status)
             self.filling.append(filling)
         else:
@@ -348,25 +483,48 @@ class _Tally:
             if example is not None:
                 self.examples.setdefault(reason, f"frame {i}: {example}")
 
-    def run(self, model, time, rate_hz, resampled_from, gap_restarts, at_frames: bool = False) -> Run:
-        values = np.array(self.rows, np.float64).reshape(-1, model.n_outputs)
-        idx = np.array(self.index, np.int64)
+    def flush(self) -> None:
+        """The rows added since the last flush: counted, and kept or handed to the sink."""
+        values = np.array(self.rows, np.float64).reshape(-1, self.n_outputs)
+        status = np.array(self.status, np.uint16)
+        filling = np.array(self.filling, bool)
+        index = np.array(self.index, np.int64)
+        time = np.array(self.time, np.float64)
+        self.counts.add(status, filling)
+        if self.on_rows is not None:
+            if len(index):
+                self.on_rows(index, time, values, status)
+        else:
+            self.kept.append((index, time, values, status, filling))
+        self._block()
+
+    def run(self, model, rate_hz, resampled_from, gap_restarts, at_frames=False, family_rates=()) -> Run:
+        self.flush()
+        cols = list(zip(*self.kept, strict=True)) if self.kept else [[] for _ in range(5)]
+
+        def joined(parts, dtype, shape=(0,)):
+            return np.concatenate(parts).astype(dtype) if len(parts) else np.zeros(shape, dtype)
+
+        idx = joined(cols[0], np.int64)
+        status = joined(cols[3], np.uint16)
         return Run(
-            time[idx],
+            joined(cols[1], np.float64),
             idx,
-            values,
-            np.array(self.filled, bool),
+            joined(cols[2], np.float64, (0, model.n_outputs)).reshape(-1, model.n_outputs),
+            (status & _native.FRAME_STATUS["filled"]) != 0,
             self.n,
             self.refused,
             rate_hz,
             resampled_from,
             gap_restarts,
             self.examples,
-            np.array(self.status, np.uint8),
+            status,
             model.name,
             model.frame_rate_hz,
             at_frames,
-            np.array(self.filling, bool),
+            joined(cols[4], bool),
+            self.counts,
+            family_rates,
         )
 
 
@@ -383,50 +541,164 @@ def _push(stream: _native.Stream, t: float, frame: np.ndarray, window: int) -> t
         # Nothing no wrist can give is written as a number: the frame is counted instead.
         reason = "implausible outputs (far outside the model's training range), not written"
         return ("none", reason, np.array2string(np.asarray(out), precision=3))
-    return ("out", out, bool(stream.filled_markers), stream.status, stream.filled < window)
+    status = stream.status
+    filled = bool(status & _native.FRAME_STATUS["filled"])
+    return ("out", out, filled, status, stream.filled < window)
 
 
-def _run_at_recording_frames(
-    model: _native.Model, frames: np.ndarray, time: np.ndarray, rate_hz: float, kw: dict, bar
-) -> Run:
-    """``model`` at its own rate over a recording at ``rate_hz``, an output at each recording
-    frame's time: the frames are grouped by their phase on the model's grid (see
-    :data:`PHASE_STEPS`); each group gets its own stream over a grid of that phase, on which every
-    frame of the group is a grid point carrying the frame's own markers, the points between
-    frames interpolated (cubic Hermite from the two frames around them only), none made inside a
-    time gap (> 1.5 recording periods: the stream restarts after it, as live)."""
-    if len(time) < 2:
-        raise _native.InputError(f"resampling needs at least 2 frames, got {len(time)}")
-    if not np.all(np.isfinite(time)) or np.any(np.diff(time) <= 0):
-        raise _native.InputError("time must be finite and strictly increasing to resample")
-    period = 1.0 / model.frame_rate_hz
-    pos = (time - time[0]) / period
-    phase = np.round((pos - np.floor(pos)) * PHASE_STEPS).astype(np.int64) % PHASE_STEPS
-    gap = 1.5 / rate_hz
-    slopes = _local_slopes(time, frames, gap)
-    outcomes: list[tuple | None] = [None] * len(time)
-    restarts = 0
-    for b in np.unique(phase):
-        phi = b / PHASE_STEPS
-        members = np.flatnonzero(phase == b)
-        at = np.round(pos[members] - phi).astype(np.int64)
-        grid_t = time[0] + (phi + np.arange(at.max() + 1)) * period
-        values, valid = _hermite(time, frames, slopes, grid_t, gap)
-        values[at], grid_t[at], valid[at] = frames[members], time[members], True
-        frame_at = dict(zip(at.tolist(), members.tolist(), strict=True))
-        stream = model.stream(**kw)
-        for k in np.flatnonzero(valid):
-            outcome = _push(stream, grid_t[k], values[k], model.window)
-            i = frame_at.get(int(k))
-            if i is not None:
-                outcomes[i] = outcome
-                if bar is not None:
-                    bar.update(1)
-        restarts = max(restarts, stream.gap_restarts)
-    tally = _Tally(len(time))
-    for i, got in enumerate(outcomes):
-        tally.add(i, got or ("none", "not run", None))
-    return tally.run(model, time, rate_hz, None, restarts, at_frames=True)
+def _combine(a: tuple | None, b: tuple | None, w: float) -> tuple:
+    """A recording frame's outcome from those of the model's grid points before (``a``) and
+    after (``b``) it, ``w`` of the way to ``b``: the outputs interpolated linearly and the flags
+    of both when both have one, else the one that has."""
+    if a is not None and a[0] == "out" and b is not None and b[0] == "out":
+        values = (1.0 - w) * np.asarray(a[1], np.float64) + w * np.asarray(b[1], np.float64)
+        return ("out", values, a[2] or b[2], a[3] | b[3], a[4] or b[4])
+    for got in (a, b):
+        if got is not None and got[0] == "out":
+            return got
+    return a or b or ("none", "not run", None)
+
+
+class _ModelGrid:
+    """A model at its own rate over a recording at ``rate_hz``, fed in blocks, an output at each
+    recording frame's time. One stream runs over the model's grid (``t0 + k / model rate``,
+    ``t0`` the first frame's time): each grid point carries the markers the cubic Hermite
+    between the two recording frames around it gives (slopes from their present neighbours, as
+    :func:`_local_slopes`; a point between two frames is missing in a marker's columns where
+    either frame misses it), none is made inside a time gap (> 1.5 recording periods: the stream
+    restarts after it, as live), and a frame's output is the outputs of the grid points before
+    and after it interpolated linearly (within one model period; exactly the grid point's
+    output where the frame falls on one). Three recording frames are held between blocks (the
+    slopes at an interval's ends need the frames beyond them), so memory is bounded."""
+
+    #: Grid positions this close to an integer count as on the grid point (float rounding).
+    EPS = 1e-6
+
+    def __init__(self, model: _native.Model, stream: _native.Stream, rate_hz: float, tally: _Tally) -> None:
+        self.model, self.stream, self.tally = model, stream, tally
+        # Swapped labels are found at the recording's frames, before the grid's interpolation
+        # smears a swap into a motion (a "fill" stream over marker frames only).
+        self.labels = (
+            _native.LabelCheck(rate_hz)
+            if stream.missing_markers == "fill" and model.frame_kind == "markers" and model.frame_len == 18
+            else None
+        )
+        #: Global indices of frames whose labels were put right (their rows flagged swapped).
+        self.swapped: set[int] = set()
+        self.period = 1.0 / model.frame_rate_hz
+        self.gap = 1.5 / rate_hz
+        self.t0: float | None = None
+        self.time = np.empty(0)
+        self.values = np.empty((0, model.frame_len))
+        #: Global index of ``self.time[0]``, and the first interval not yet run (global index
+        #: of its first frame).
+        self.base = 0
+        self.next_interval = 0
+        #: Outcomes of the grid points that recording frames wait for.
+        self.outcomes: dict[int, tuple] = {}
+        #: The first frame whose outcome is not yet given.
+        self.next_frame = 0
+        self.n_seen = 0
+        #: Time of the end of the last interval run: grid points before it have run.
+        self.ran_until = -np.inf
+
+    def feed(self, time: np.ndarray, values: np.ndarray) -> None:
+        if len(time) == 0:
+            return
+        if not np.all(np.isfinite(time)) or np.any(np.diff(np.concatenate([self.time[-1:], time])) <= 0):
+            raise _native.InputError("time must be finite and strictly increasing to resample")
+        if self.t0 is None:
+            self.t0 = float(time[0])
+        if self.labels is not None:
+            values = self._put_right(values)
+        self.time = np.concatenate([self.time, time])
+        self.values = np.concatenate([self.values, values])
+        self.n_seen += len(time)
+        # Intervals whose two ends have their neighbours on both sides in hand.
+        self._run_intervals(last=self.base + len(self.time) - 3)
+
+    def _put_right(self, values: np.ndarray) -> np.ndarray:
+        """``values`` with each marker under the label the gap filler found it belongs to."""
+        assert self.labels is not None
+        labels = self.labels.labels(values)
+        moved = np.flatnonzero((labels != np.arange(6)).any(axis=1))
+        if len(moved) == 0:
+            return values
+        values = values.copy()
+        for k in moved:
+            row = values[k].reshape(6, 3).copy()
+            values[k] = np.where(labels[k][:, None] >= 0, row[labels[k]], np.nan).reshape(-1)
+            self.swapped.add(self.n_seen + int(k))
+        return values
+
+    def finish(self) -> None:
+        if self.n_seen < 2:
+            raise _native.InputError(f"resampling needs at least 2 frames, got {self.n_seen}")
+        self._run_intervals(last=self.base + len(self.time) - 2, final=True)
+        self._give_frames(upto=self.n_seen, final=True)
+
+    def _run_intervals(self, last: int, final: bool = False) -> None:
+        """Runs the grid points of the intervals ``next_interval .. last`` (global first
+        frames), then drops the frames no later interval needs."""
+        if last < self.next_interval:
+            return
+        time, values = self.time, self.values
+        slopes = _local_slopes(time, values, self.gap)
+        assert self.t0 is not None
+        for j in range(self.next_interval, last + 1):
+            m = j - self.base
+            t_a, t_b = time[m], time[m + 1]
+            if t_b - t_a <= self.gap:
+                k_first = int(np.ceil((t_a - self.t0) / self.period - self.EPS))
+                k_end = int(np.ceil((t_b - self.t0) / self.period - self.EPS))  # exclusive
+                if final and j == last and abs((t_b - self.t0) / self.period - (k_end)) < self.EPS:
+                    k_end += 1  # the last frame on a grid point: that point too
+                if k_end > k_first:
+                    grid_t = self.t0 + np.arange(k_first, k_end) * self.period
+                    pts, _ = _hermite(time[m : m + 2], values[m : m + 2], slopes[m : m + 2], grid_t, np.inf)
+                    # A grid point on a frame carries the frame's own markers, exactly.
+                    on_a = np.abs(grid_t - t_a) <= self.EPS * self.period
+                    pts[on_a] = values[m]
+                    on_b = np.abs(grid_t - t_b) <= self.EPS * self.period
+                    pts[on_b] = values[m + 1]
+                    for k, g, p in zip(range(k_first, k_end), grid_t, pts, strict=True):
+                        self.outcomes[k] = _push(self.stream, g, p, self.model.window)
+            self.next_interval = j + 1
+            self.ran_until = float(t_b)
+            self._give_frames(upto=j + 1)
+        # Keep the frame before the next interval (its slope's neighbour) and every frame
+        # still waiting for its outcome.
+        drop = min(self.next_interval - 1, self.next_frame) - self.base
+        if drop > 0:
+            self.time, self.values = time[drop:], values[drop:]
+            self.base += drop
+
+    def _give_frames(self, upto: int, final: bool = False) -> None:
+        """Gives the outcomes of frames ``next_frame .. upto - 1`` (global), whose grid points
+        have all run; forgets the grid points no later frame needs."""
+        assert self.t0 is not None
+        while self.next_frame < upto:
+            j = self.next_frame
+            t = float(self.time[j - self.base])
+            pos = (t - self.t0) / self.period
+            k0 = int(np.floor(pos + self.EPS))
+            w = max(pos - k0, 0.0)
+            if w <= self.EPS:
+                got = self.outcomes.get(k0)
+            elif not final and self.t0 + (k0 + 1) * self.period >= self.ran_until:
+                break  # its grid point after it is in an interval not run yet
+            else:
+                got = _combine(self.outcomes.get(k0), self.outcomes.get(k0 + 1), w)
+            got = got or ("none", "not run", None)
+            if j in self.swapped:
+                self.swapped.discard(j)
+                if got[0] == "out":
+                    got = (*got[:3], got[3] | _native.FRAME_STATUS["swapped"], got[4])
+            self.tally.add(t, got)
+            self.next_frame += 1
+            for k in [k for k in self.outcomes if k < k0]:
+                del self.outcomes[k]
+        self.tally.flush()
 
 
 def _local_slopes(time: np.ndarray, values: np.ndarray, gap: float) -> np.ndarray:
@@ -463,10 +735,24 @@ def _hermite(
     return out, valid
 
 
-def _progress(total: int, label: str):
+def _progress(total: int | None, label: str):
     """A tqdm bar on stderr when it is a terminal (tqdm decides), else nothing."""
     try:
         from tqdm import tqdm
     except ImportError:  # pragma: no cover - tqdm is a dependency of the wheel
         return None
     return tqdm(total=total, desc=label, unit="frame", unit_scale=True, leave=False, disable=None)
+
+
+def _run_at_recording_frames(
+    model: _native.Model, frames: np.ndarray, time: np.ndarray, rate_hz: float, kw: dict, bar=None
+) -> Run:
+    """``model`` at its own rate over a recording at ``rate_hz`` given whole, outputs at the
+    recording's frames (:class:`_ModelGrid`; what :func:`run_model` does for a family with no
+    member at the rate). ``kw``: the stream's options."""
+    stream = model.stream(**kw)
+    tally = _Tally(model.n_outputs, None)
+    grid = _ModelGrid(model, stream, rate_hz, tally)
+    grid.feed(np.asarray(time, np.float64), np.asarray(frames, np.float64))
+    grid.finish()
+    return tally.run(model, rate_hz, None, stream.gap_restarts, at_frames=True)

@@ -42,6 +42,9 @@ pub const IKID_FRAME_IMPLAUSIBLE: u32 = 32;
 /// Frame status bit: a correcting model's correction was withheld (its window's posture or
 /// speed beyond training): the output is the frame's per-frame solution.
 pub const IKID_FRAME_PER_FRAME: u32 = 64;
+/// Frame status bit: a marker was found where another marker of the frame belongs (labels
+/// swapped in the recording); the markers were used under their right labels.
+pub const IKID_FRAME_SWAPPED: u32 = 128;
 
 // cbindgen writes literals only: the values above are the core's (ikid::status), checked here.
 const _: () = {
@@ -53,5 +56,6 @@ const _: () = {
     assert!(IKID_FRAME_OUTSIDE_TRAINING == status::OUTSIDE_TRAINING as u32);
     assert!(IKID_FRAME_IMPLAUSIBLE == status::IMPLAUSIBLE as u32);
     assert!(IKID_FRAME_PER_FRAME == status::PER_FRAME as u32);
-    assert!(status::ALL.len() == 7);
+    assert!(IKID_FRAME_SWAPPED == status::SWAPPED as u32);
+    assert!(status::ALL.len() == 8);
 };

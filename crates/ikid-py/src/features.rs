@@ -13,6 +13,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(feature_set_info, m)?)?;
     m.add_function(wrap_pyfunction!(compute_features, m)?)?;
     m.add_function(wrap_pyfunction!(fill_gaps, m)?)?;
+    m.add_class::<LabelCheck>()?;
     Ok(())
 }
 
@@ -85,6 +86,52 @@ fn fill_gaps<'py>(
         let (filled, masks) = py.detach(|| ikid::gaps::fill_gaps(values, keep, rate_hz)).py_err()?;
         Ok((filled.into_pyarray(py).reshape([shape[0], shape[1]])?, masks.into_pyarray(py)))
     })
+}
+
+/// Finds swapped marker labels frame by frame, as a `"fill"` stream's gap filler does, for
+/// frames that are resampled before a stream sees them (`ikid.pipeline`): a swap must be found
+/// at the frames' own rate. Its state carries from call to call.
+#[pyclass(module = "ikid")]
+pub struct LabelCheck {
+    filler: ikid::gaps::GapFiller,
+    index: usize,
+}
+
+#[pymethods]
+impl LabelCheck {
+    /// A check for frames at `rate_hz`.
+    #[new]
+    fn new(rate_hz: f64) -> PyResult<Self> {
+        if !(rate_hz.is_finite() && rate_hz > 0.0) {
+            return Err(input(format!("rate_hz: {rate_hz}: expected a rate in Hz greater than 0")));
+        }
+        Ok(LabelCheck { filler: ikid::gaps::GapFiller::at_rate(rate_hz), index: 0 })
+    }
+
+    /// For marker frames `(n, 18)` (metres; the ones after those of the calls before): per frame
+    /// and label, the marker (0-5, as the frame came) that belongs under it, or -1 for none,
+    /// `(n, 6)` int8 — the identity unless labels were swapped.
+    fn labels<'py>(&mut self, py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<i8>>> {
+        const LEN: usize = ikid::body::MARKER_FRAME_LEN;
+        with_floats(frames, "frames", 2, |values, shape| {
+            if shape[1] != LEN {
+                return Err(input(format!("frames: {} columns, marker frames have {LEN}", shape[1])));
+            }
+            let mut out = Vec::with_capacity(shape[0] * 6);
+            let mut buf = [0f32; LEN];
+            for frame in values.chunks_exact(LEN) {
+                buf.copy_from_slice(frame);
+                // A frame the filler refuses keeps its labels (the stream decides about it).
+                let labels = match self.filler.fill(&mut buf, self.index) {
+                    Ok(_) => self.filler.labels(),
+                    Err(_) => [0, 1, 2, 3, 4, 5],
+                };
+                self.index += 1;
+                out.extend(labels.map(|l| if l == ikid::gaps::NO_MARKER { -1 } else { l as i8 }));
+            }
+            out.into_pyarray(py).reshape([shape[0], 6])
+        })
+    }
 }
 
 /// A feature set named by the caller: an unknown name is the caller's input error here (in a

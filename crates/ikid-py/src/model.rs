@@ -133,7 +133,7 @@ impl Model {
         py: Python<'py>,
         features: &Bound<'py, PyAny>,
         outputs: &Bound<'py, PyAny>,
-    ) -> PyResult<Bound<'py, PyArray1<u8>>> {
+    ) -> PyResult<Bound<'py, PyArray1<u16>>> {
         let (nf, no) = (self.inner.feature_set().feature_len(), self.inner.n_outputs());
         let features: Vec<f32> = with_floats(features, "features", 2, |v, shape| {
             if shape[1] != nf {
@@ -154,7 +154,7 @@ impl Model {
                 outputs.len() / no
             )));
         }
-        let bits: Vec<u8> = features
+        let bits: Vec<u16> = features
             .chunks_exact(nf)
             .zip(outputs.chunks_exact(no))
             .map(|(f, o)| self.inner.frame_status(f, o))
@@ -336,7 +336,7 @@ impl Stream {
     /// `ikid.FRAME_STATUS` bits of the last output: a filled marker, inputs outside the model's
     /// training envelope, an implausible output (write it as missing).
     #[getter]
-    fn status(&self) -> u8 {
+    fn status(&self) -> u16 {
         self.inner.status()
     }
 

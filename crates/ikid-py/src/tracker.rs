@@ -117,7 +117,7 @@ impl Tracker {
     /// Every frame of `frames` `(n, 18)` in order; returns a dict of `(n, 3)` float64 arrays
     /// `q`, `qd`, `qdd`, `tau`, the `(n,)` uint8 `missing` (bit i: marker i missing), `(n,)`
     /// `noise` (mean learned hand-marker noise, m; NaN before the start), `refined` (bool) and
-    /// `status` (uint8 bits, ``ikid.FRAME_STATUS``: markers rejected, poses held, restarts,
+    /// `status` (uint16 bits, ``ikid.FRAME_STATUS``: markers rejected, poses held, restarts,
     /// implausible angles), and `start`,
     /// the first frame with an estimate (rows before it are NaN: the filter waits for a frame
     /// with every marker). Continues from the tracker's state. Releases the GIL.
@@ -131,7 +131,7 @@ impl Tracker {
                 let mut missing = vec![0u8; n];
                 let mut noise = vec![f64::NAN; n];
                 let mut refined = vec![false; n];
-                let mut status = vec![0u8; n];
+                let mut status = vec![0u16; n];
                 let start = py
                     .detach(|| {
                         tracker.run(values, |i, o, _| {

@@ -10,34 +10,40 @@
 //! down as NaN rather than as a number.
 
 /// A missing marker was filled (stream) or the estimate was made without it (tracker).
-pub const FILLED: u8 = 1;
+pub const FILLED: u16 = 1;
 /// A present marker was rejected as implausible (it broke its segment's rigid shape, or it
-/// was too far from where the wrist could have moved it) and was not used.
-pub const REJECTED_MARKER: u8 = 2;
+/// was too far from where the wrist could have moved it) and was not used (a stream fills its
+/// place from the other markers, as a missing one's; [`FILLED`] is for markers missing in the
+/// recording).
+pub const REJECTED_MARKER: u16 = 2;
 /// The tracker lost the wrist (its markers agreed with one another but not with it) and
 /// restarted from its own solution at this frame — or did so, or held through a long gap, within
 /// the last [`LOST_S`](crate::tracker::LOST_S): its velocities and accelerations (so the
 /// torques) are still settling.
-pub const RESTARTED: u8 = 4;
+pub const RESTARTED: u16 = 4;
 /// A segment was not measured in this frame (its markers missing or rejected): its last pose
 /// was held, or the estimate was carried forward without a correction.
-pub const HELD: u8 = 8;
+pub const HELD: u16 = 8;
 /// The model's inputs for this frame lie outside the range it was trained on (its card's
 /// envelope): the output is an extrapolation.
-pub const OUTSIDE_TRAINING: u8 = 16;
+pub const OUTSIDE_TRAINING: u16 = 16;
 /// An output no wrist can give (an angle beyond its coordinate's range by more than
 /// [`RANGE_MARGIN_RAD`], a torque beyond [`torque_limit`], or outside the model's output
 /// envelope by more than its own width).
-pub const IMPLAUSIBLE: u8 = 32;
+pub const IMPLAUSIBLE: u16 = 32;
 
 /// A correcting model's correction was not applied: the output is the per-frame solution (the
 /// newest frame's own features, e.g. its angles read from the markers alone), because the
 /// window's posture or its speed lies beyond what the model was trained on, or (a stream with
 /// [`early outputs`](crate::Stream::set_early_outputs)) the window is still filling.
-pub const PER_FRAME: u8 = 64;
+pub const PER_FRAME: u16 = 64;
+
+/// A marker was found where another marker of the frame belongs (labels swapped in the
+/// recording, a labelling error): the markers were used under their right labels.
+pub const SWAPPED: u16 = 128;
 
 /// Every bit with its name (the CLI's legend and the bindings' constant tables).
-pub const ALL: [(u8, &str); 7] = [
+pub const ALL: [(u16, &str); 8] = [
     (FILLED, "filled"),
     (REJECTED_MARKER, "rejected_marker"),
     (RESTARTED, "restarted"),
@@ -45,6 +51,7 @@ pub const ALL: [(u8, &str); 7] = [
     (OUTSIDE_TRAINING, "outside_training"),
     (IMPLAUSIBLE, "implausible"),
     (PER_FRAME, "per_frame"),
+    (SWAPPED, "swapped"),
 ];
 
 /// How far beyond a coordinate's anatomical range ([`crate::body::COORDINATES`]) an angle may
@@ -82,7 +89,7 @@ pub fn torque_implausible(tau: f64, limit: f64) -> bool {
 }
 
 /// The names of the bits set in `status`, comma-separated ("" for 0).
-pub fn describe(status: u8) -> String {
+pub fn describe(status: u16) -> String {
     ALL.iter().filter(|(bit, _)| status & bit != 0).map(|(_, name)| *name).collect::<Vec<_>>().join(",")
 }
 
@@ -92,7 +99,7 @@ mod tests {
 
     #[test]
     fn bits_are_distinct_single_bits_and_named() {
-        let mut seen = 0u8;
+        let mut seen = 0u16;
         for (bit, name) in ALL {
             assert_eq!(bit.count_ones(), 1, "{name}");
             assert_eq!(seen & bit, 0, "{name} reuses a bit");

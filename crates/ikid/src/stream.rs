@@ -65,6 +65,8 @@ pub struct Stream {
     /// The pushed frame with its missing marker filled (Fill policy only).
     frame_buf: [f32; MARKER_FRAME_LEN],
     filled_mask: u8,
+    /// The filler's [`status`] bits for the last accepted frame (filled, rejected, swapped).
+    marker_status: u16,
     /// Time of the last frame accepted by [`push_at`](Stream::push_at), seconds.
     last_time: Option<f64>,
     gap_restarts: u64,
@@ -79,7 +81,7 @@ pub struct Stream {
     /// number, which its errors carry.
     pushed: usize,
     /// [`status`] bits of the last output.
-    status: u8,
+    status: u16,
     /// Give the per-frame solution while the window fills (correcting models only).
     early_outputs: bool,
 }
@@ -107,6 +109,7 @@ impl Stream {
             filler: GapFiller::at_rate(model.card().frame_rate_hz),
             frame_buf: [0.0; MARKER_FRAME_LEN],
             filled_mask: 0,
+            marker_status: 0,
             last_time: None,
             gap_restarts: 0,
             time_candidate: None,
@@ -248,11 +251,13 @@ impl Stream {
             // anything, so a refused frame leaves it and the window as they were.
             self.frame_buf.copy_from_slice(frame);
             let mask = self.filler.fill(&mut self.frame_buf, index)?;
+            let marker_status = self.filler.status();
             if let Some(calibration) = &self.calibration {
                 calibration.apply(&mut self.frame_buf, index)?;
             }
             set.compute(&self.frame_buf, &mut self.incoming, index)?;
             self.filled_mask = mask;
+            self.marker_status = marker_status;
         } else {
             if set.frame_len() == MARKER_FRAME_LEN {
                 // Refuse a marker that jumped (the filler watches complete frames either way).
@@ -268,6 +273,7 @@ impl Stream {
                 None => set.compute(frame, &mut self.incoming, index)?,
             }
             self.filled_mask = 0;
+            self.marker_status = 0;
         }
         if self.filler.reanchors() != reanchors {
             // The markers moved further than continuity allows and the filler took this frame
@@ -286,7 +292,7 @@ impl Stream {
         self.ring[self.head * nf..(self.head + 1) * nf].copy_from_slice(&self.incoming);
         self.head = (self.head + 1) % w;
         self.filled = (self.filled + 1).min(w);
-        let filled = if self.filled_mask != 0 { status::FILLED } else { 0 };
+        let filled = self.marker_status;
         if self.filled < w {
             if !self.early_outputs {
                 return Ok(None);
@@ -490,7 +496,7 @@ impl Stream {
     /// [`status::FILLED`], [`status::OUTSIDE_TRAINING`] (the newest frame's features beyond
     /// the model's training envelope), [`status::IMPLAUSIBLE`] (an output far beyond it),
     /// [`status::PER_FRAME`] (a correcting model's correction withheld, or an early output).
-    pub fn status(&self) -> u8 {
+    pub fn status(&self) -> u16 {
         self.status
     }
 

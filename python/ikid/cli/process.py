@@ -10,6 +10,8 @@ import time
 import traceback
 from pathlib import Path
 
+import numpy as np
+
 import ikid
 from ikid.cli import batch
 from ikid.cli.common import (
@@ -31,55 +33,76 @@ from ikid.io._atomic import atomic_outputs, remove_temporaries
 
 def _process_one(job: tuple[str, dict]) -> dict:
     """One marker file -> .mot (and .sto): read, map, check the rate, run, write. In a worker.
-    The outputs of one file replace the old ones together, or none does."""
-    from ikid.io import MarkerMap, read_markers, write_mot, write_sto
-    from ikid.pipeline import run_model
+    The file is read and its outputs written a block at a time (:func:`ikid.io.open_markers`,
+    :func:`ikid.pipeline.run_blocks`), so memory does not grow with its length. The outputs of
+    one file replace the old ones together, or none does."""
+    from contextlib import ExitStack
+
+    from ikid.io import MarkerMap, mot_writer, open_markers, sto_writer
+    from ikid.io.markers import check_markers_seen, seen_markers
+    from ikid.pipeline import run_blocks
 
     path, opt = job
     t0 = time.perf_counter()
     row: dict = {"file": path}
     try:
-        data = read_markers(path)
+        data = open_markers(path)
         mapping = MarkerMap.load(opt["map"]) if opt["map"] else None
-        frames = data.frames(mapping)
-        calibration = _subject_calibration(frames, opt["calibration"], mapping, path)
+        first = next(data.blocks(), None)
+        if first is None:
+            raise ikid.InputError(f"{path}: no frames")
+        calibration = _subject_calibration(
+            first.frames(mapping, whole=False), opt["calibration"], mapping, path
+        )
         runs = {}
-        for kind, name in (("angles", opt["ik_model"]), ("torques", opt.get("torque_model"))):
-            if name:
+
+        def frames_of_file():
+            """The file's (time, frames) blocks; after the last, every marker must have been seen."""
+            seen = np.zeros(6, bool)
+            for block in data.blocks():
+                frames = block.frames(mapping, whole=False)
+                seen |= seen_markers(frames)
+                yield block.time, frames
+            check_markers_seen(seen, mapping or MarkerMap.identity(), path)
+
+        # Coordinates the markers do not determine (a one-marker hand's s_p): not written.
+        undetermined = mapping.undetermined if mapping else {}
+        writers = {"angles": (mot_writer, 0), "torques": (sto_writer, 1)}
+        with atomic_outputs() as written, ExitStack() as files:
+            for kind, name in (("angles", opt["ik_model"]), ("torques", opt.get("torque_model"))):
+                if not name:
+                    continue
+                make, k = writers[kind]
+                write = files.enter_context(make(opt["outputs"][k], undetermined=undetermined))
+
+                def to_file(_frames, t, values, status, write=write) -> None:
+                    write(t, values, status)
+
                 # A shipped family name (the default wrist-ik) runs its model for the file's rate
                 # (ikid.pipeline.pick_model); a file or a per-rate name is that model.
-                runs[kind] = run_model(
+                runs[kind] = run_blocks(
                     name,
-                    frames,
-                    data.time,
+                    frames_of_file(),
                     rate_hz=data.rate_hz,
+                    n_frames=data.n_frames,
                     resample_to_model=opt["resample"],
                     missing_markers=opt["missing_markers"],
                     calibration=calibration,
                     source=path,
                     progress=opt["progress"],
                     allow_unchecked=opt["allow_unchecked"],
+                    on_rows=to_file,
                 )
-        # Coordinates the markers do not determine (a one-marker hand's s_p): not written.
-        undetermined = mapping.undetermined if mapping else {}
-        for kind, r in runs.items():
-            if len(r.time) == 0:
-                raise ikid.InputError(f"{path}: no frame gave {kind}: {r.summary()}")
-        with atomic_outputs() as written:
-            if "angles" in runs:
-                r = runs["angles"]
-                write_mot(opt["outputs"][0], r.time, r.values, status=r.status, undetermined=undetermined)
-            if "torques" in runs:
-                r = runs["torques"]
-                write_sto(opt["outputs"][1], r.time, r.values, status=r.status, undetermined=undetermined)
-        first = next(iter(runs.values()))
+                if runs[kind].n_outputs == 0:
+                    raise ikid.InputError(f"{path}: no frame gave {kind}: {runs[kind].summary()}")
+        first_run = next(iter(runs.values()))
         row.update(
             clean=all(r.clean for r in runs.values()),
             ok=True,
-            frames=len(data),
+            frames=data.n_frames,
             rate_hz=data.rate_hz,
             summary="; ".join(
-                [first.summary()]
+                [first_run.summary()]
                 + [f"{kind}: {r.model_note()}" for kind, r in list(runs.items())[1:]]
                 + [f"{name} not written: {why}" for name, why in undetermined.items()]
             ),

@@ -13,10 +13,20 @@ from ikid.io._atomic import WriteError, atomic_outputs
 from ikid.io.c3d import read_c3d, write_c3d
 from ikid.io.csv import read_csv_markers, write_csv, write_csv_markers
 from ikid.io.mapping import MarkerMap
-from ikid.io.markers import FileFormatError, MarkerData
+from ikid.io.markers import FileFormatError, MarkerData, MarkerFile
 from ikid.io.resample import resample
-from ikid.io.storage import Storage, read_mot, read_sto, read_storage, write_mot, write_sto, write_storage
-from ikid.io.trc import read_trc, write_trc
+from ikid.io.storage import (
+    Storage,
+    mot_writer,
+    read_mot,
+    read_sto,
+    read_storage,
+    sto_writer,
+    write_mot,
+    write_sto,
+    write_storage,
+)
+from ikid.io.trc import open_trc, read_trc, write_trc
 
 #: Marker file readers by suffix.
 MARKER_READERS = {".trc": read_trc, ".c3d": read_c3d, ".csv": read_csv_markers}
@@ -32,10 +42,22 @@ def read_markers(path: str | os.PathLike[str]) -> MarkerData:
     return reader(path)
 
 
+def open_markers(path: str | os.PathLike[str]) -> MarkerFile:
+    """A marker file to read in blocks (:class:`MarkerFile`): a ``.trc`` a block at a time, in
+    memory independent of its length; a ``.c3d`` or ``.csv`` read whole (their parsers read
+    whole files), as one block."""
+    from pathlib import Path
+
+    if Path(path).suffix.lower() == ".trc":
+        return open_trc(path)
+    return MarkerFile.whole(read_markers(path))
+
+
 __all__ = [
     "MARKER_READERS",
     "FileFormatError",
     "MarkerData",
+    "MarkerFile",
     "MarkerMap",
     "Storage",
     "WriteError",
@@ -45,6 +67,8 @@ __all__ = [
     "write_csv",
     "write_csv_markers",
     "read_markers",
+    "open_markers",
+    "open_trc",
     "read_mot",
     "read_storage",
     "read_sto",
@@ -52,6 +76,8 @@ __all__ = [
     "resample",
     "write_c3d",
     "write_mot",
+    "mot_writer",
+    "sto_writer",
     "write_storage",
     "write_sto",
     "write_trc",

@@ -9,6 +9,7 @@ coordinates that cannot be in the units the file claims.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -33,6 +34,8 @@ from ikid.io.mapping import MarkerMap
 #: which imports ``mapping``); re-exported here, where the readers have always found them.
 __all__ = [
     "MarkerData",
+    "MarkerFile",
+    "concatenate_blocks",
     "MarkerMap",
     "suffix",
     "MAX_FILE_BYTES",
@@ -86,26 +89,26 @@ class MarkerData:
                 f"{self.source}: no marker {label!r}; the file has {', '.join(self.labels)}"
             ) from None
 
-    def frames(self, mapping: MarkerMap | None = None) -> np.ndarray:
+    def frames(self, mapping: MarkerMap | None = None, *, whole: bool = True) -> np.ndarray:
         """ikid's ``(n, 18)`` frames (metres, float64, NaN = missing). ``mapping`` says which
-        label is which ikid marker (default: the labels are ikid's own names)."""
+        label is which ikid marker (default: the labels are ikid's own names). ``whole=False``
+        for one block of a file read in blocks: a marker missing throughout the block is not an
+        error there (:func:`check_markers_seen` checks the file once every block is read), and
+        the units are checked only if the block has a complete frame."""
         mapping = mapping or MarkerMap.identity()
         columns = np.concatenate([self.marker(label) for label in mapping.labels_in_ikid_order(self)], axis=1)
         source = self.source or "markers"
-        for j, name in enumerate(mapping.marker_names()):
-            seen = np.isfinite(columns[:, 3 * j : 3 * j + 3]).all(axis=1)
-            if not seen.any():
-                raise _native.InputError(
-                    f"{source}: marker {name} (label {mapping.label_of(name)!r}) is missing in every frame; "
-                    "ikid needs each marker in at least some frames"
-                )
         frames = mapping.ikid_frames(columns)
-        if mapping.one_hand_marker and not np.isfinite(frames[:, 9:]).all(axis=1).any():
-            raise _native.InputError(
-                f"{source}: no frame gives the hand's direction from its one marker "
-                f"({mapping.label_of(_native.HAND_POINT[0])}): it is never 3 cm or more from the wrist "
-                "markers' midpoint and off their line"
-            )
+        if whole:
+            check_markers_seen(seen_markers(columns), mapping, source)
+            if mapping.one_hand_marker and not np.isfinite(frames[:, 9:]).all(axis=1).any():
+                raise _native.InputError(
+                    f"{source}: no frame gives the hand's direction from its one marker "
+                    f"({mapping.label_of(_native.HAND_POINT[0])}): it is never 3 cm or more from the wrist "
+                    "markers' midpoint and off their line"
+                )
+        elif not np.isfinite(frames).all(axis=1).any():
+            return frames
         # Units: the core's one check (the markers' spread against what an arm spans), named
         # with the file and what its header claims.
         try:
@@ -115,6 +118,67 @@ class MarkerData:
                 f"{source}: {e.reason or e} (the file says its units are {self.file_units!r})"
             ) from None
         return frames
+
+
+def seen_markers(frames: np.ndarray) -> np.ndarray:
+    """``(6,)``: whether each of ikid's markers is seen in some frame of ``frames``."""
+    return np.isfinite(frames.reshape(len(frames), -1, 3)).all(axis=2).any(axis=0)
+
+
+def check_markers_seen(seen: np.ndarray, mapping: MarkerMap, source: str) -> None:
+    """An error naming the first of ikid's markers never seen (``seen`` as :func:`seen_markers`,
+    over every frame of a file: the map's own markers, or ikid's six as a block's frames have
+    them)."""
+    mapped = mapping.marker_names()
+    names = mapped if len(seen) == len(mapped) else ikid_marker_names()
+    for name, ok in zip(names, seen, strict=True):
+        if not ok:
+            label = f"label {mapping.label_of(name)!r}" if name in mapped else "made from the map's markers"
+            raise _native.InputError(
+                f"{source}: marker {name} ({label}) is missing in every frame; "
+                "ikid needs each marker in at least some frames"
+            )
+
+
+@dataclass(frozen=True)
+class MarkerFile:
+    """A marker file opened for reading in blocks: what its header says, and its frames as
+    :class:`MarkerData` blocks in order (:meth:`blocks`, each checked as it is read), so a file
+    of any length is read in bounded memory."""
+
+    labels: tuple[str, ...]
+    rate_hz: float
+    source: str
+    file_units: str
+    metadata: dict
+    #: Frames the header declares (the blocks end with an error if the file has another number).
+    n_frames: int
+    _blocks: Callable[[], Iterator[MarkerData]]
+
+    def blocks(self) -> Iterator[MarkerData]:
+        """The file's frames, a block at a time (a new pass over the file on each call)."""
+        return self._blocks()
+
+    @staticmethod
+    def whole(data: MarkerData) -> MarkerFile:
+        """A file read whole (a reader without blocks), as one block."""
+        return MarkerFile(
+            data.labels,
+            data.rate_hz,
+            data.source,
+            data.file_units,
+            data.metadata,
+            len(data),
+            lambda: iter([data]),
+        )
+
+
+def concatenate_blocks(file: MarkerFile, blocks: list[MarkerData]) -> MarkerData:
+    """The blocks of ``file`` as one :class:`MarkerData`."""
+    n_labels = len(file.labels)
+    time = np.concatenate([b.time for b in blocks]) if blocks else np.empty(0)
+    positions = np.concatenate([b.positions for b in blocks]) if blocks else np.empty((0, n_labels, 3))
+    return MarkerData(file.labels, time, positions, file.rate_hz, file.source, file.file_units, file.metadata)
 
 
 def suffix(path: str | os.PathLike[str]) -> str:

@@ -6,15 +6,18 @@ with ``time``, then one row per frame. Column names come from the body model
 
 from __future__ import annotations
 
-import io
 import os
+import shutil
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ikid import _native
-from ikid.io._atomic import write_text_atomic
+from ikid.io._atomic import atomic_output, check_size
 from ikid.io.markers import FileFormatError, read_text_lines
 
 
@@ -163,26 +166,82 @@ def write_storage(
     """Any table -> OpenSim storage text (atomically). Refuses non-finite values. ``notes``:
     more ``key=value`` header lines."""
     time, values = _check_rows(Path(path).name, time, values, len(columns))
-    if not np.all(np.isfinite(values)):
-        row, col = np.argwhere(~np.isfinite(values))[0]
-        raise _native.InputError(
-            f"{Path(path).name}: value {columns[col]} at row {row} is {values[row, col]}; not written"
+    with storage_writer(path, columns, in_degrees, notes) as table:
+        table.write(time, values)
+    return Path(path)
+
+
+class StorageWriter:
+    """The rows of one storage file, written a block at a time (:func:`storage_writer`)."""
+
+    def __init__(self, body, name: str, columns: list[str]) -> None:
+        self._body, self.name, self.columns = body, name, columns
+        self.rows = 0
+        self._last_time = -np.inf
+
+    def write(self, time, values) -> None:
+        """Appends rows ``time`` ``(k,)``, ``values`` ``(k, len(columns))``; refuses non-finite
+        values and time that does not increase (from the rows before, too)."""
+        time, values = _check_rows(self.name, time, values, len(self.columns))
+        if len(time) == 0:
+            return
+        if not time[0] > self._last_time:
+            raise _native.InputError(f"{self.name}: time must be finite and strictly increasing")
+        if not np.all(np.isfinite(values)):
+            row, col = np.argwhere(~np.isfinite(values))[0]
+            raise _native.InputError(
+                f"{self.name}: value {self.columns[col]} at row {self.rows + row} is "
+                f"{values[row, col]}; not written"
+            )
+        # Straight into the file: savetxt makes a class per call (a reference cycle), which
+        # would hold a text buffer of each block until the garbage collector ran.
+        np.savetxt(
+            self._body,
+            np.column_stack([time, values]),
+            fmt=["%.6f"] + ["%.10g"] * values.shape[1],
+            delimiter="\t",
+            encoding="utf-8",
         )
-    header = [
-        Path(path).name,
-        "version=1",
-        f"nRows={len(time)}",
-        f"nColumns={len(columns) + 1}",
-        f"inDegrees={'yes' if in_degrees else 'no'}",
-        *notes,
-        "endheader",
-        "time\t" + "\t".join(columns),
-    ]
-    buf = io.StringIO()
-    np.savetxt(
-        buf, np.column_stack([time, values]), fmt=["%.6f"] + ["%.10g"] * values.shape[1], delimiter="\t"
-    )
-    return write_text_atomic(path, "\n".join(header) + "\n" + buf.getvalue())
+        self.rows += len(time)
+        self._last_time = float(time[-1])
+
+
+@contextmanager
+def storage_writer(
+    path: str | os.PathLike[str], columns: list[str], in_degrees: bool, notes=()
+) -> Iterator[StorageWriter]:
+    """A storage file written a block at a time, atomically (see :mod:`ikid.io._atomic`): the
+    rows go to an unnamed temporary file as they come, and when the block ends the header (its
+    ``nRows`` known then) and the rows become the file, checked for size, or nothing does. Memory
+    is one block's, whatever the number of rows."""
+    name = Path(path).name
+    with atomic_output(path) as tmp, tempfile.TemporaryFile(dir=tmp.parent) as body:
+        table = StorageWriter(body, name, list(columns))
+        yield table
+        header = (
+            "\n".join(
+                [
+                    name,
+                    "version=1",
+                    f"nRows={table.rows}",
+                    f"nColumns={len(columns) + 1}",
+                    f"inDegrees={'yes' if in_degrees else 'no'}",
+                    *notes,
+                    "endheader",
+                    "time\t" + "\t".join(columns),
+                ]
+            )
+            + "\n"
+        )
+        head = header.encode("utf-8")
+        size = body.tell()
+        body.seek(0)
+        with open(tmp, "wb") as out:
+            out.write(head)
+            shutil.copyfileobj(body, out, 1 << 16)
+            out.flush()
+            os.fsync(out.fileno())
+        check_size(tmp, len(head) + size)
 
 
 #: The column of per-frame ``ikid.FRAME_STATUS`` bits that ikid's writers add (0: nothing
@@ -199,34 +258,70 @@ def _with_status(values: np.ndarray, columns: list[str], status) -> tuple[np.nda
     return np.column_stack([values, status.astype(np.float64)]), [*columns, STATUS_COLUMN]
 
 
-def _determined(
-    values: np.ndarray, names: list[str], undetermined
-) -> tuple[np.ndarray, list[str], list[str]]:
-    """The columns the markers determine, and the header line naming the others (not written)."""
-    values = np.asarray(values, np.float64)
-    skip = [k for k, c in enumerate(coordinate_names()) if c in (undetermined or ())]
-    keep = [k for k in range(len(names)) if k not in skip]
-    notes = [f"{NOT_DETERMINED_KEY}={','.join(names[k] for k in skip)}"] if skip else []
-    if values.ndim != 2 or values.shape[1] != len(names):
-        return values, names, notes  # write_storage names the wrong shape
-    return values[:, keep], [names[k] for k in keep], notes
-
-
 def write_mot(path: str | os.PathLike[str], time, q, status=None, undetermined=None) -> Path:
     """Wrist angles ``(n, 3)`` in radians -> ``.mot`` in degrees (``inDegrees=yes``); with
     ``status`` ``(n,)``, each row's ``ikid.FRAME_STATUS`` bits in a last column
     (:data:`STATUS_COLUMN`). Coordinates in ``undetermined`` (names) are not written: the
     header names them (:data:`NOT_DETERMINED_KEY`)."""
-    values, names, notes = _determined(
-        np.degrees(np.asarray(q, np.float64)), coordinate_names(), undetermined
-    )
-    values, columns = _with_status(values, names, status)
-    return write_storage(path, time, values, columns, in_degrees=True, notes=notes)
+    with mot_writer(path, with_status=status is not None, undetermined=undetermined) as write:
+        write(time, q, status)
+    return Path(path)
 
 
 def write_sto(path: str | os.PathLike[str], time, tau, status=None, undetermined=None) -> Path:
     """Joint torques ``(n, 3)`` in N·m -> ``.sto`` with OpenSim's ``<coordinate>_moment`` columns
     (and ``status`` and ``undetermined``, as :func:`write_mot`)."""
-    values, names, notes = _determined(np.asarray(tau, np.float64), moment_names(), undetermined)
-    values, columns = _with_status(values, names, status)
-    return write_storage(path, time, values, columns, in_degrees=False, notes=notes)
+    with sto_writer(path, with_status=status is not None, undetermined=undetermined) as write:
+        write(time, tau, status)
+    return Path(path)
+
+
+#: Writes one block of rows: ``(time, values, status)`` (``status`` ``None`` for a file
+#: without the status column).
+BlockWrite = Callable[..., None]
+
+
+def _skipped(names: list[str], undetermined) -> tuple[list[int], list[str]]:
+    """The indices of ``names`` (one per coordinate) the markers determine, and the header line
+    naming the others (not written)."""
+    skip = [k for k, c in enumerate(coordinate_names()) if c in (undetermined or ())]
+    notes = [f"{NOT_DETERMINED_KEY}={','.join(names[k] for k in skip)}"] if skip else []
+    return [k for k in range(len(names)) if k not in skip], notes
+
+
+@contextmanager
+def _coordinate_writer(
+    path: str | os.PathLike[str], names: list[str], in_degrees: bool, with_status: bool, undetermined
+) -> Iterator[BlockWrite]:
+    keep, notes = _skipped(names, undetermined)
+    columns = [names[k] for k in keep] + ([STATUS_COLUMN] if with_status else [])
+    with storage_writer(path, columns, in_degrees=in_degrees, notes=notes) as table:
+
+        def write(time, values, status=None) -> None:
+            values = np.asarray(values, np.float64)
+            if values.ndim == 2 and values.shape[1] == len(names):
+                values = values[:, keep]  # a wrong shape is named by the table's row check
+            if in_degrees:
+                values = np.degrees(values)
+            values, _ = _with_status(values, [], status if with_status else None)
+            table.write(time, values)
+
+        yield write
+
+
+@contextmanager
+def mot_writer(
+    path: str | os.PathLike[str], with_status: bool = True, undetermined=None
+) -> Iterator[BlockWrite]:
+    """:func:`write_mot` a block of rows at a time (see :func:`storage_writer`)."""
+    with _coordinate_writer(path, coordinate_names(), True, with_status, undetermined) as write:
+        yield write
+
+
+@contextmanager
+def sto_writer(
+    path: str | os.PathLike[str], with_status: bool = True, undetermined=None
+) -> Iterator[BlockWrite]:
+    """:func:`write_sto` a block of rows at a time (see :func:`storage_writer`)."""
+    with _coordinate_writer(path, moment_names(), False, with_status, undetermined) as write:
+        yield write

@@ -173,7 +173,7 @@ impl Model {
     /// more than [`ENVELOPE_MARGIN`] of its range, [`status::IMPLAUSIBLE`] if an output (`outputs`)
     /// lies beyond it by more than [`IMPLAUSIBLE_MARGIN`]. 0 for a model without an envelope.
     /// Allocation-free, a few dozen comparisons: cheap enough for every push.
-    pub fn frame_status(&self, newest: &[f32], outputs: &[f32]) -> u8 {
+    pub fn frame_status(&self, newest: &[f32], outputs: &[f32]) -> u16 {
         let Some(limits) = &self.inner.limits else { return 0 };
         let mut bits = 0;
         if outside(newest, &limits.input) {

@@ -214,7 +214,7 @@ struct Step {
     /// Bit `i`: marker `i` missing ([`missing_markers`]).
     missing: u8,
     /// [`status`] bits so far.
-    flags: u8,
+    flags: u16,
     /// The frame as used: all NaN when no arm could hold its markers, mirrored for a left arm.
     frame: [f64; MARKER_FRAME_LEN],
     /// Whether the forearm's pose was fitted to its three markers ...

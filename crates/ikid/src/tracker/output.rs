@@ -24,7 +24,7 @@ pub struct TrackerOutput {
     /// Whether a refiner corrected this estimate (false without one, and while its window fills).
     pub refined: bool,
     /// [`status`] bits: markers rejected, poses held, a restart, an implausible angle.
-    pub status: u8,
+    pub status: u16,
     /// Mean of the hand markers' noise (standard deviation) measured so far from the data
     /// alone, m (at least [`MIN_REPORTED_NOISE`]); what the refiner is told and gated by.
     pub noise: f64,

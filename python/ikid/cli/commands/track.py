@@ -88,8 +88,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Markers -> angles (.mot) and torques (.sto) with ``ikid.Tracker``: the causal Kalman
     tracker over the body model, for one subject (no network), at the recording's own rate.
-    Every row carries its status bits; a row no wrist can give is not written but counted."""
-    from ikid.io import MarkerMap, read_markers, write_mot, write_sto
+    Every row carries its status bits; a row no wrist can give is not written but counted.
+    The file is read, tracked and written a block at a time (memory independent of its length;
+    the tracker's state carries from block to block)."""
+    from contextlib import ExitStack
+
+    from ikid.io import MarkerMap, mot_writer, open_markers, sto_writer
+    from ikid.io.markers import check_markers_seen, seen_markers
 
     stem = _stem(args.output, Path(args.input).stem, create=False)
     refiner_file = None if args.refiner in ("auto", "", "none") else _model_file(args.refiner)
@@ -98,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
         [args.input, args.map, args.calibration, refiner_file],
         given=args.output,
     )
-    data = read_markers(args.input)
+    data = open_markers(args.input)
     refiner = None
     if args.refiner == "auto":
         from ikid.pipeline import family_members, same_rate
@@ -112,8 +117,12 @@ def run(args: argparse.Namespace) -> int:
             args.refiner, "ikid track --refiner", ("refine",), allow_unchecked=args.allow_unchecked_model
         )
     mapping = MarkerMap.load(args.map) if args.map else None
-    frames = data.frames(mapping)
-    calibration = _subject_calibration(frames, args.calibration, mapping, args.input)
+    first = next(data.blocks(), None)
+    if first is None:
+        raise ikid.InputError(f"{args.input}: no frames")
+    calibration = _subject_calibration(
+        first.frames(mapping, whole=False), args.calibration, mapping, args.input
+    )
     length_scale, mass_scale, size_from = _subject_size(args)
     try:
         tracker = ikid.Tracker(
@@ -124,34 +133,55 @@ def run(args: argparse.Namespace) -> int:
             refiner=refiner,
             calibration=calibration,
         )
-        out = tracker.run(frames)
     except ikid.IkidError as e:
         raise type(e)(_naming(args.input, e)) from None
-    k = out["start"]
-    status = out["status"]
     bits = ikid.FRAME_STATUS
-    keep = np.arange(len(frames)) >= k
-    implausible = keep & (status & bits["implausible"] != 0)
-    keep &= ~implausible  # nothing no wrist can do is written as a number
+    k: int | None = None  # the first frame with an estimate
+    n_frames = kept = lost = 0
+    counts = dict.fromkeys(bits, 0)
+    seen = np.zeros(6, bool)
+    flagged_after_start = False
     stem.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_outputs():  # the pair replaces the old pair, or neither is replaced
-        # Coordinates the markers do not determine (a one-marker hand's s_p) are not written.
-        undetermined = mapping.undetermined if mapping else {}
-        mot = write_mot(
-            _named(stem, ".mot"),
-            data.time[keep],
-            out["q"][keep],
-            status=status[keep],
-            undetermined=undetermined,
-        )
-        sto = write_sto(
-            _named(stem, ".sto"),
-            data.time[keep],
-            out["tau"][keep],
-            status=status[keep],
-            undetermined=undetermined,
-        )
-    counts = {name: int(np.count_nonzero(status[keep] & bit)) for name, bit in bits.items()}
+    mot, sto = _named(stem, ".mot"), _named(stem, ".sto")
+    # Coordinates the markers do not determine (a one-marker hand's s_p) are not written.
+    undetermined = mapping.undetermined if mapping else {}
+    # The pair replaces the old pair, or neither is replaced.
+    with atomic_outputs(), ExitStack() as files:
+        write_q = files.enter_context(mot_writer(mot, undetermined=undetermined))
+        write_tau = files.enter_context(sto_writer(sto, undetermined=undetermined))
+        for block in data.blocks():
+            frames = block.frames(mapping, whole=False)
+            seen |= seen_markers(frames)
+            try:
+                out = tracker.run(frames)
+            except ikid.InputError as e:
+                if k is None and "tracker never started" in str(e) and len(frames):
+                    n_frames += len(frames)  # not started yet: a later block may start it
+                    continue
+                raise type(e)(_naming(args.input, e)) from None
+            except ikid.IkidError as e:
+                raise type(e)(_naming(args.input, e)) from None
+            status = out["status"]
+            start = out["start"] if k is None else 0
+            if k is None:
+                k = n_frames + start
+            keep = np.arange(len(frames)) >= start
+            implausible = keep & (status & bits["implausible"] != 0)
+            keep &= ~implausible  # nothing no wrist can do is written as a number
+            write_q(block.time[keep], out["q"][keep], status[keep])
+            write_tau(block.time[keep], out["tau"][keep], status[keep])
+            for name, bit in bits.items():
+                counts[name] += int(np.count_nonzero(status[keep] & bit))
+            flagged_after_start |= bool(status[start:].any())
+            n_frames += len(frames)
+            kept += int(keep.sum())
+            lost += int(implausible.sum())
+        check_markers_seen(seen, mapping or MarkerMap.identity(), args.input)
+        if k is None:
+            raise ikid.InputError(
+                f"{args.input}: none of the {n_frames} frames has every marker present and consistent, "
+                "so the tracker never started"
+            )
     noise_mm = ", ".join(f"{v * 1e3:.2f}" for v in tracker.marker_noise)
     how = f"refined by {refiner.name}" if refiner else "not refined"
     placed = "uncalibrated"
@@ -160,18 +190,18 @@ def run(args: argparse.Namespace) -> int:
 
         placed = f"calibrated ({calibration_info(args.calibration)['method']}, {calibration.side} arm)"
     notes = [f"{n} {name.replace('_', ' ')}" for name, n in counts.items() if n]
-    if implausible.any():
-        notes.append(f"{int(implausible.sum())} implausible (not written)")
+    if lost:
+        notes.append(f"{lost} implausible (not written)")
     if tracker.restarts:
         notes.append(f"{tracker.restarts} restarts after losing the hand")
     print(
-        f"{args.input}: {int(keep.sum())}/{len(frames)} frames tracked from frame {k} "
+        f"{args.input}: {kept}/{n_frames} frames tracked from frame {k} "
         f"at {data.rate_hz:g} Hz, subject ×{length_scale:.3g} length, ×{mass_scale:.3g} mass ({size_from}), "
         f"{placed}, {how}; flagged: {', '.join(notes) or 'none'}; hand marker noise learned (mm): {noise_mm}"
         + "".join(f"; {name} not written: {why}" for name, why in undetermined.items())
         + f" -> {mot}, {sto}"
     )
-    if args.strict and (k > 0 or status[k:].any()):
+    if args.strict and (k > 0 or flagged_after_start):
         print(f"ikid: --strict: {args.input} has frames without an estimate or flagged", file=sys.stderr)
         return 3
     return 0
