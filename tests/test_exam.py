@@ -32,8 +32,8 @@ from ikid.interop.opensim import marker_positions  # noqa: E402
 from studies.exam import exam  # noqa: E402
 from studies.exam import markers as MK  # noqa: E402
 from studies.exam.biomod import write_biomod  # noqa: E402
-from studies.exam.lab_biomod import isb_forearm, to_ikid, write_lab_biomod  # noqa: E402
-from studies.exam.models import MODELS, build_osim  # noqa: E402
+from studies.exam.lab_biomod import to_ikid, write_lab_biomod  # noqa: E402
+from studies.exam.models import MODELS, build_osim, isb_forearm  # noqa: E402
 from studies.exam.truth import Mapping  # noqa: E402
 
 TRAINING = ROOT / "training"

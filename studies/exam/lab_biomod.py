@@ -33,23 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
-from studies.exam.models import GRAVITY
+from studies.exam.models import GRAVITY, isb_forearm
 
 DE_LEVA_HAND_OVER_FOREARM = 86.2 / 268.9
 DE_LEVA_HAND_COM = 0.790
 DE_LEVA_HAND_GYRATION = {"x": 0.513, "y": 0.401, "z": 0.628}  # deviation, long, flexion axes
-
-
-def isb_forearm(landmarks: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, float]:
-    """(rotation columns x y z, origin, forearm length) from the four landmarks (lab frame)."""
-    mid_sty = (landmarks["radial_styloid"] + landmarks["ulnar_styloid"]) / 2
-    mid_epi = (landmarks["lateral_epicondyle"] + landmarks["medial_epicondyle"]) / 2
-    y = mid_epi - mid_sty
-    length = float(np.linalg.norm(y))
-    y = y / length
-    x = np.cross(y, landmarks["radial_styloid"] - landmarks["ulnar_styloid"])
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, y, np.cross(x, y)]), mid_sty, length
 
 
 def _v(v) -> str:

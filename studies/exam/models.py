@@ -301,30 +301,37 @@ MODELS = {"rajagopal2016": rajagopal2016, "gonzalez1997": gonzalez1997}
 # --- placement in the lab and forward kinematics -----------------------------------------------
 
 
-def forearm_frame(model: WristModel) -> tuple[np.ndarray, np.ndarray]:
-    """The ISB forearm frame in the ulna's frame, from the model's own landmarks: y from the
+def isb_forearm(landmarks: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, float]:
+    """The ISB forearm frame of the four landmarks (any frame's coordinates): y from the
     mid-styloids to the mid-epicondyles, x = y × (ulnar → radial styloid) (volar for a right
-    arm), z = x × y; origin at the mid-styloids. Returns (rotation columns x y z, origin)."""
-    p = {k: np.array(v[1]) for k, v in model.points.items()}
+    arm), z = x × y; origin at the mid-styloids. Returns (rotation columns x y z, origin, the
+    distance between the two midpoints)."""
+    p = {k: np.asarray(v, float) for k, v in landmarks.items()}
     mid_sty = (p["radial_styloid"] + p["ulnar_styloid"]) / 2
     mid_epi = (p["lateral_epicondyle"] + p["medial_epicondyle"]) / 2
     y = mid_epi - mid_sty
-    y /= np.linalg.norm(y)
+    length = float(np.linalg.norm(y))
+    y = y / length
     x = np.cross(y, p["radial_styloid"] - p["ulnar_styloid"])
     x /= np.linalg.norm(x)
-    z = np.cross(x, y)
-    return np.column_stack([x, y, z]), mid_sty
+    return np.column_stack([x, y, np.cross(x, y)]), mid_sty, length
+
+
+def _landmarks(model: WristModel) -> dict[str, np.ndarray]:
+    names = ("radial_styloid", "ulnar_styloid", "lateral_epicondyle", "medial_epicondyle")
+    return {k: np.array(model.points[k][1]) for k in names}
+
+
+def forearm_frame(model: WristModel) -> tuple[np.ndarray, np.ndarray]:
+    """The ISB forearm frame in the ulna's frame, from the model's own landmarks
+    (:func:`isb_forearm`). Returns (rotation columns x y z, origin)."""
+    f, origin, _ = isb_forearm(_landmarks(model))
+    return f, origin
 
 
 def forearm_length(model: WristModel) -> float:
     """Mid-styloids to mid-epicondyles, m (what a lab measures with the landmarks)."""
-    p = {k: np.array(v[1]) for k, v in model.points.items()}
-    return float(
-        np.linalg.norm(
-            (p["radial_styloid"] + p["ulnar_styloid"]) / 2
-            - (p["lateral_epicondyle"] + p["medial_epicondyle"]) / 2
-        )
-    )
+    return isb_forearm(_landmarks(model))[2]
 
 
 def ulna_in_lab(model: WristModel, shoulder_flexion: float) -> tuple[np.ndarray, np.ndarray]:

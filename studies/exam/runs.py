@@ -122,27 +122,11 @@ def run_ikid(
         out[key] = res
     # The other calibrations, each with the bare filter: what the method costs.
     for method in methods[1:]:
-        if not out["calibrations"][method]["accepted"]:
-            continue
-        stem = f / f"track_none_{method}"
-        done, secs = ikid_cmd(
-            [
-                "track",
-                str(f / "task.trc"),
-                "-o",
-                str(stem),
-                "--calibration",
-                str(f / f"cal_{method}.json"),
-                "--refiner",
-                "none",
-                *runs["track"][1:],
-                *common,
-            ]
-        )
-        if done.returncode in (0, 3):
-            out["calibrations"][method]["q"] = read_rows(
-                Path(str(stem) + ".mot"), coordinate_names(), n, rate
-            )["values"]
+        if out["calibrations"][method]["accepted"]:
+            cal_file = f / f"cal_{method}.json"
+            q = track_bare(f, f / "task.trc", cal_file, rate, scales, n)
+            if q is not None:
+                out["calibrations"][method]["q"] = q
     return out
 
 

@@ -316,6 +316,11 @@ impl Tracker {
         let mut at = start.unwrap_or(Vector3::new(x[0], x[1], x[2]));
         let mut inflated = false;
         let mut iteration = 0;
+        // The manoeuvre test allows for the template's misfit (skin markers sliding with
+        // the posture): a misfit the prediction cannot remove is no manoeuvre, and treating
+        // it as one passed each frame's noise through to the angles and their derivatives
+        // (issue #28: skin markers with 1 % noise gave torques of 11 N·m).
+        let misfit = self.template_misfit_variance(self.noise_variance.iter().sum::<f64>() / N_HAND as f64);
         while iteration < MAX_ITERATIONS {
             let Some((predicted, jac)) = self.hand_prediction(forearm, &at, hand, centre.map(|c| c.ch)) else {
                 return;
@@ -327,11 +332,6 @@ impl Tracker {
             });
             let (mut xi, mut pi) = (prior, prior_p);
             let (mut nis, mut used) = (0.0, 0.0);
-            // The manoeuvre test allows for the template's misfit (skin markers sliding with
-            // the posture): a misfit the prediction cannot remove is no manoeuvre, and treating
-            // it as one passed each frame's noise through to the angles and their derivatives
-            // (issue #28: skin markers with 1 % noise gave torques of 11 N·m).
-            let misfit = self.template_misfit_variance(self.noise_variance.iter().sum::<f64>() / N_HAND as f64);
             for m in 0..4 {
                 for k in 0..3 {
                     // The fourth: the wrist centre (the forearm's point, where the hand's would be).
