@@ -15,7 +15,7 @@
 //! When one marker of a segment is missing and the other segment is whole, the whole segment
 //! gives the joint centre in the lab; the two visible markers plus that centre fix the
 //! occluded segment's pose (a weighted rigid fit: the centre by the two segments' marker
-//! noise), which places the missing marker — and the two visible ones, so the segment is
+//! noise and by how well one point fits this wrist's motion), which places the missing marker — and the two visible ones, so the segment is
 //! exactly rigid. The marker's previous position joins the fit as a prior, weighted by how
 //! still the segment has been ([`PRIOR_WEIGHT`]): it holds the one rotation the other points
 //! fix poorly. Anything
@@ -117,6 +117,8 @@ pub struct GapFiller {
     /// SCoRE normal equations `Σ MᵀM`, `Σ Mᵀd` with `M = [R_f, −R_h]`, `d = o_h − o_f`.
     normal: Matrix6<f64>,
     rhs: Vector6<f64>,
+    /// `Σ |d|²`: with `normal` and `rhs`, the fit's residual at any centre.
+    d_squared_sum: f64,
     complete_frames: u64,
     /// Joint centre in the forearm's and hand's technical frames, solved lazily from the sums.
     centre: Option<(Vector3<f64>, Vector3<f64>)>,
@@ -131,6 +133,9 @@ pub struct GapFiller {
     /// check off with it: a forearm marker back after 574 ms was refused for the 11 s after).
     last_fitted: u8,
     before_fitted: u8,
+    /// The markers of the last accepted frame as they were measured (NaN where missing): a
+    /// fill's visible markers' step since is how its segment moves now.
+    last_measured: Option<[f32; MARKER_FRAME_LEN]>,
     /// Frames refused since `last` was accepted: the motion check extrapolates over them.
     refused_since_last: u32,
     /// [`status`](crate::status) bits of the last frame [`fill`](Self::fill) accepted.
@@ -228,6 +233,7 @@ impl GapFiller {
             local_sum: [Vector3::zeros(); N_MARKERS],
             normal: Matrix6::zeros(),
             rhs: Vector6::zeros(),
+            d_squared_sum: 0.0,
             complete_frames: 0,
             centre: None,
             centre_is_current: true,
@@ -235,6 +241,7 @@ impl GapFiller {
             before_last: None,
             last_fitted: 0,
             before_fitted: 0,
+            last_measured: None,
             refused_since_last: 0,
             status: 0,
             refused_outliers: 0,
@@ -543,7 +550,8 @@ impl GapFiller {
     }
 
     /// Makes `frame` the last accepted one (the prior for the next fill and the motion check).
-    fn set_last(&mut self, frame: &[f32], fitted: u8) {
+    fn set_last(&mut self, frame: &[f32], fitted: u8, measured: &[f32; MARKER_FRAME_LEN]) {
+        self.last_measured = Some(*measured);
         self.before_last = if self.refused_since_last == 0 { self.last } else { None };
         self.before_fitted = self.last_fitted;
         self.last_fitted = fitted;
@@ -561,7 +569,8 @@ impl GapFiller {
         // A degenerate frame teaches nothing; whether it is usable is the feature set's call
         // (raw markers need no segment frames).
         if self.learn(frame, frame_index).is_ok() {
-            self.set_last(frame, 0);
+            let measured: [f32; MARKER_FRAME_LEN] = frame.try_into().expect("length checked");
+            self.set_last(frame, 0, &measured);
         }
         self.candidate = None;
         self.candidate_frames = 0;
@@ -641,7 +650,12 @@ impl GapFiller {
             (Some(predicted), true) => self.motion_outliers(frame, &predicted),
             _ => 0,
         };
-        self.pair_outliers(frame) | moved
+        // A marker last placed by a fill is not where it was: the fill's error (mm over a long
+        // gap on a wrist that is no hinge) is no jump. Measured against it, the marker coming
+        // back was refused, filled again from the fill, and so on to the end of the trial
+        // (the exam's Gonzalez wrist, a cluster marker back after 0.7 s: 8 mm, 35° to the end).
+        // Its distances to its segment's other markers still say whether it jumped.
+        self.pair_outliers(frame) | (moved & !self.last_fitted)
     }
 
     /// Markers whose distances to the other two of their segment break the rigid body.
@@ -705,6 +719,7 @@ impl GapFiller {
         self.before_last = None;
         self.last_fitted = 0;
         self.before_fitted = 0;
+        self.last_measured = None;
         self.refused_since_last = 0;
         self.last_complete_origin = None;
         self.smoothed = None;
@@ -774,6 +789,7 @@ impl GapFiller {
     fn fill_missing(&mut self, frame: &mut [f32], missing: u8, frame_index: usize) -> Result<u8> {
         let unfillable =
             |reason: &'static str| Error::MissingMarkers { frame: frame_index, markers: mask_names(missing), reason };
+        let measured: [f32; MARKER_FRAME_LEN] = (&*frame).try_into().expect("length checked");
         let per_segment = SEGMENTS.map(|s| (missing >> first_marker(s)) & 0b111);
         let (occluded, whole) = match per_segment {
             [m, 0] if m.count_ones() == 1 => (Segment::Forearm, Segment::Hand),
@@ -813,26 +829,31 @@ impl GapFiller {
             None => weight[3] = 0.0,
         }
         let seg = occluded as usize;
-        // How still the segment is: as it has been, or as its visible markers say it is now if
-        // they moved more since the last frame (a filler that learned a still start must not
-        // hold the missing marker where it was once the wrist moves: early in pyomeca's trial
-        // that held MC5 and cost up to 23 degrees by the end of a 200-ms gap).
-        // (Against a last frame whose markers were measured: a fill's fitted ones are not where
-        // the markers were, and their difference read as motion let the fill drift.)
-        let measured_last = self.last.as_ref().filter(|_| self.last_fitted & (0b111 << first) == 0);
-        let moving_now = measured_last.map_or(0.0, |last| {
-            (0..3)
+        // How still the segment has been, or as its visible markers say it is now if they
+        // moved more since they were last measured (a filler that learned a still start must
+        // not hold the missing marker where it was once the wrist moves: early in pyomeca's
+        // trial that held MC5 and cost up to 23 degrees by the end of a 200-ms gap). Measured
+        // against their last measurement, not the last frame's fitted positions: a fill's
+        // fitted markers are not where the markers were, and their difference read as motion
+        // let the fill drift.
+        let moving_now = self.last_measured.as_ref().and_then(|last| {
+            let (sum, n) = (0..3)
                 .filter(|&k| k != missing_k)
-                .map(|k| (marker(frame, first + k) - marker(last, first + k)).norm_squared())
-                .sum::<f64>()
-                / 2.0
+                .map(|k| marker(frame, first + k) - marker(last, first + k))
+                .filter(|d| d.iter().all(|v| v.is_finite()))
+                .fold((0.0, 0u32), |(sum, n), d| (sum + d.norm_squared(), n + 1));
+            (n > 0).then(|| sum / n as f64)
         });
-        let step = self.mean_square_step(seg).max(moving_now);
+        let step = self.mean_square_step(seg).max(moving_now.unwrap_or(0.0));
         weight[3] *= PRIOR_WEIGHT / (1.0 + step / (self.still_step * self.still_step));
         // The joint centre, by inverse variance: it comes from the whole segment, the visible
         // markers from the occluded one (marker noise estimated from each segment's pair
-        // distances; the centre's doubled for its lever).
-        weight[2] = (self.noise_variance(seg) + NOISE_FLOOR) / (2.0 * self.noise_variance(1 - seg) + NOISE_FLOOR);
+        // distances; the centre's doubled for its lever), and it is only as good as one point
+        // moving with both segments fits this wrist (the fit's residual: ~0 for a ball joint,
+        // millimetres for two carpal rows 20 mm apart).
+        let misfit = self.centre_misfit(c_forearm, c_hand);
+        weight[2] = (self.noise_variance(seg) + NOISE_FLOOR)
+            / (2.0 * self.noise_variance(1 - seg) + NOISE_FLOOR + misfit / 3.0);
         let (rot, t) = rigid_fit(&local, &lab, &weight)
             .ok_or_else(|| unfillable("the visible markers and the joint centre are collinear"))?;
         let filled = rot * missing_local + t;
@@ -853,7 +874,7 @@ impl GapFiller {
                 *dst = *v as f32;
             }
         }
-        self.set_last(frame, 0b111 << first);
+        self.set_last(frame, 0b111 << first, &measured);
         self.smoothed = None; // the running mean is of consecutive complete frames only
         self.candidate = None;
         self.candidate_frames = 0;
@@ -911,9 +932,22 @@ impl GapFiller {
         self.normal += mtm;
         let (a, b) = (sr_f.transpose() * d, -(sr_h.transpose() * d));
         self.rhs += Vector6::new(a.x, a.y, a.z, b.x, b.y, b.z);
+        self.d_squared_sum += d.norm_squared();
         self.complete_frames += 1;
         self.centre_is_current = false;
         Ok(())
+    }
+
+    /// Mean squared distance (m²) between the joint centre as the forearm and as the hand
+    /// carry it, over the complete frames learned: how far the wrist is from turning about
+    /// one point (`Σ|M x − d|²` expanded over the sums).
+    fn centre_misfit(&self, c_forearm: Vector3<f64>, c_hand: Vector3<f64>) -> f64 {
+        if self.complete_frames == 0 {
+            return 0.0;
+        }
+        let x = Vector6::new(c_forearm.x, c_forearm.y, c_forearm.z, c_hand.x, c_hand.y, c_hand.z);
+        let sum = (x.transpose() * self.normal * x)[0] - 2.0 * x.dot(&self.rhs) + self.d_squared_sum;
+        (sum / self.complete_frames as f64).max(0.0)
     }
 
     fn solve_centre(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
@@ -1248,6 +1282,91 @@ mod tests {
             if i >= 900 {
                 assert_eq!(mask, 0, "frame {i}: FAP refused after its gap");
                 assert_eq!(filler.status() & status::REJECTED_MARKER, 0, "frame {i}");
+            }
+        }
+    }
+
+    /// Markers of a wrist that turns about no single point (the Gonzalez model's two carpal
+    /// rows): flexion `f` about z through the origin, then deviation `d` about x through a
+    /// point `rows_apart` distal. Forearm plate fixed in the lab, hand plate 6–9 cm distal.
+    fn two_row_wrist(f: f64, d: f64, rows_apart: f64) -> [f32; 18] {
+        use nalgebra::{Rotation3, Vector3 as V};
+        let forearm = [V::new(0.02, 0.08, 0.01), V::new(-0.02, 0.1, 0.0), V::new(0.0, 0.2, 0.015)];
+        let hand = [V::new(0.025, -0.07, 0.01), V::new(-0.02, -0.075, 0.0), V::new(0.0, -0.09, 0.02)];
+        let row = V::new(0.0, -rows_apart, 0.0);
+        let flex = Rotation3::from_axis_angle(&V::z_axis(), f);
+        let dev = Rotation3::from_axis_angle(&V::x_axis(), d);
+        let mut out = [0.0f32; 18];
+        for (i, p) in forearm.iter().chain(hand.iter()).enumerate() {
+            let q = if i < 3 { *p } else { flex * (dev * (p - row) + row) };
+            for a in 0..3 {
+                out[3 * i + a] = q[a] as f32;
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_two_row_wrist_at_rest_keeps_a_missing_marker_and_takes_it_back() {
+        // 3 s of movement to learn from, then the hand rests at (0.3, 0.2) rad with a
+        // 0.1-mm/s drift while MC5 is gone for 0.7 s, then it comes back. The joint centre
+        // fits this wrist to millimetres only, so the rest's fill must lean on where the
+        // marker was; and the fill's error is no jump: the marker back is taken.
+        let moving = |i: usize| {
+            let t = i as f64 * 0.001;
+            let tau = std::f64::consts::TAU;
+            two_row_wrist(0.3 + 0.5 * (tau * 0.5 * t).sin(), 0.2 + 0.3 * (tau * 2.0 / 3.0 * t).sin(), 0.02)
+        };
+        let rest = |i: usize| two_row_wrist(0.3 + 1e-4 * (i as f64 * 0.001), 0.2, 0.02);
+        let mut filler = GapFiller::new();
+        for i in 0..3000 {
+            filler.fill(&mut moving(i), i).unwrap();
+        }
+        let mut worst = 0.0f32;
+        for i in 3000..4200 {
+            let truth = rest(i);
+            let mut f = truth;
+            let gone = (3300..4000).contains(&i);
+            if gone {
+                f[12..15].fill(f32::NAN);
+            }
+            let mask = filler.fill(&mut f, i).unwrap();
+            if gone {
+                worst = worst.max((12..15).map(|k| (f[k] - truth[k]).abs()).fold(0.0, f32::max));
+            } else if i >= 4000 {
+                assert_eq!(mask, 0, "frame {i}: MC5 refused after its gap");
+                assert_eq!(filler.status() & status::REJECTED_MARKER, 0, "frame {i}");
+                assert_eq!(f, truth, "frame {i}: the measured markers are the output");
+            }
+        }
+        assert!(worst < 5e-4, "MC5 {:.2} mm off at rest", 1e3 * worst);
+    }
+
+    #[test]
+    fn a_marker_back_from_a_fill_that_drifted_is_taken() {
+        // The two-row wrist keeps moving while MC5 is gone for 0.7 s: the fill, resting on a
+        // joint centre this wrist does not have, ends millimetres off. The marker back is
+        // where it is, not a jump from the fill: taken at once, never refused for the rest.
+        let tau = std::f64::consts::TAU;
+        let frame = |i: usize| {
+            let t = i.min(3400) as f64 * 0.001; // at rest from 3.4 s
+            two_row_wrist(0.3 + 0.5 * (tau * 0.5 * t).sin(), 0.2 + 0.3 * (tau * 2.0 / 3.0 * t).sin(), 0.06)
+        };
+        let mut filler = GapFiller::new();
+        let mut worst = 0.0f32;
+        for i in 0..5000 {
+            let truth = frame(i);
+            let mut f = truth;
+            let gone = (3000..3700).contains(&i);
+            if gone {
+                f[12..15].fill(f32::NAN);
+            }
+            let mask = filler.fill(&mut f, i).unwrap();
+            if gone {
+                worst = worst.max((12..15).map(|k| (f[k] - truth[k]).abs()).fold(0.0, f32::max));
+            } else if i >= 3700 {
+                assert_eq!(mask, 0, "frame {i}: MC5 refused after its gap ({:.1} mm off at worst in it)", 1e3 * worst);
+                assert_eq!(f, truth, "frame {i}");
             }
         }
     }
