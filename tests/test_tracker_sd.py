@@ -55,9 +55,10 @@ def test_sd_covers_about_68_percent_of_the_true_errors(noise):
     q_cover = np.mean((np.abs(out["q"] - trial.q) <= out["q_sd"])[keep])
     tau_cover = np.mean((np.abs(out["tau"] - trial.tau) <= out["tau_sd"])[keep])
     # 3500 frames × 3 coordinates, correlated in time: a band about the 0.683 a calibrated σ
-    # gives; a σ 20 % too small or too large falls outside it (0.55 / 0.78).
-    assert 0.60 < q_cover < 0.76, q_cover
-    assert 0.60 < tau_cover < 0.76, tau_cover
+    # gives. Measured: Gaussian 0.668 / 0.668, uniform 0.721 / 0.663; σ × 1.2 gives 0.752 /
+    # 0.761 and 0.804 / 0.754, σ / 1.2 gives 0.579 / 0.577 (Gaussian): out of it.
+    assert 0.62 < q_cover < 0.745, q_cover
+    assert 0.62 < tau_cover < 0.745, tau_cover
 
 
 def test_the_shipped_torque_scale_is_the_one_the_study_tunes():
