@@ -189,11 +189,7 @@ def run(args: argparse.Namespace) -> int:
                 "so the tracker never started"
             )
     noise_mm = ", ".join(f"{v * 1e3:.2f}" for v in tracker.marker_noise)
-    how = (
-        f"refined by {refiner.name} (no _sd columns: the filter's σ does not describe a refined estimate)"
-        if refiner
-        else "not refined, each value followed by its standard deviation (_sd)"
-    )
+    how = f"refined by {refiner.name}" if refiner else "not refined"
     placed = "uncalibrated"
     if calibration is not None:
         from ikid.calibration import calibration_info
@@ -209,6 +205,11 @@ def run(args: argparse.Namespace) -> int:
         f"at {data.rate_hz:g} Hz, subject ×{length_scale:.3g} length, ×{mass_scale:.3g} mass ({size_from}), "
         f"{placed}, {how}; flagged: {', '.join(notes) or 'none'}; hand marker noise learned (mm): {noise_mm}"
         + "".join(f"; {name} not written: {why}" for name, why in undetermined.items())
+        + (
+            "; each value followed by its standard deviation (_sd)"
+            if refiner is None
+            else "; no _sd columns (the filter's σ does not describe a refined estimate)"
+        )
         + f" -> {mot}, {sto}"
     )
     if args.strict and (k > 0 or flagged_after_start):
