@@ -8,7 +8,8 @@ use crate::errors::{IntoPy, input};
 use crate::model::Model;
 use ikid::body::{MARKER_FRAME_LEN, N_COORDINATES};
 use ikid::tracker::{
-    DEFAULT_JERK_NOISE, REFINER_GATE_NOISE, SD_SCALE_TAU, Tracker as CoreTracker, TrackerOutput, TrackerSettings, refiner_outputs,
+    DEFAULT_JERK_NOISE, REFINER_GATE_NOISE, SD_SCALE_TAU, Tracker as CoreTracker, TrackerOutput, TrackerSettings,
+    refiner_outputs,
 };
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
@@ -143,7 +144,8 @@ impl Tracker {
                             }
                             if let Some(s) = s {
                                 for (k, row) in [s.q, s.tau].iter().enumerate() {
-                                    sd[(k * n + i) * N_COORDINATES..(k * n + i + 1) * N_COORDINATES].copy_from_slice(row);
+                                    sd[(k * n + i) * N_COORDINATES..(k * n + i + 1) * N_COORDINATES]
+                                        .copy_from_slice(row);
                                 }
                             }
                             missing[i] = o.missing;
