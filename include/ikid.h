@@ -49,6 +49,10 @@
 // swapped in the recording); the markers were used under their right labels.
 #define IKID_FRAME_SWAPPED 128
 
+// Frame status bit: a stream's first output after it took its source's new clock (the source
+// was restarted): frames were lost before it.
+#define IKID_FRAME_RESYNCED 256
+
 // Result of every fallible libikid call.
 typedef enum ikid_status {
   // Success.
