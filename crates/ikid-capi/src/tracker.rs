@@ -284,7 +284,7 @@ pub unsafe extern "C" fn ikid_tracker_output_sd(
 ) -> ikid_status {
     guard(|| {
         let t = &unsafe { non_null(tracker, "tracker") }?.tracker;
-        const N: usize = 2 * ikid::body::N_COORDINATES;
+        const N: usize = 2 * ikid_core::body::N_COORDINATES;
         if out_len < N {
             return Err(Failure::new(
                 ikid_status::InvalidArgument,
