@@ -77,7 +77,8 @@ def coverage() -> dict[str, float]:
 
 def describe(c: dict[str, float]) -> str:
     per = "; ".join(
-        f"{name} {c[f'{name}/angles']:.3f} angles, {c[f'{name}/torques']:.3f} torques ({int(c[f'{name}/frames'])} frames)"
+        f"{name} {c[f'{name}/angles']:.3f} angles, {c[f'{name}/torques']:.3f} torques "
+        f"({int(c[f'{name}/frames'])} frames)"
         for name in CONDITIONS
     )
     return (

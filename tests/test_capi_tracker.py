@@ -50,7 +50,8 @@ def trial(tmp_path_factory):
         np.savetxt(d / f"{name}.csv", expected_rows(o), fmt="%.17g", delimiter=",")
     sd = plain.output_sd
     assert sd is not None
-    np.savetxt(d / "noise.csv", np.concatenate([plain.marker_noise, sd.ravel()])[None], fmt="%.17g", delimiter=",")
+    noise_and_sd = np.concatenate([plain.marker_noise, sd.ravel()])[None]
+    np.savetxt(d / "noise.csv", noise_and_sd, fmt="%.17g", delimiter=",")
     return d, frames, {None: out, "wrist-track": refined}
 
 

@@ -148,7 +148,8 @@ def test_sd_columns_follow_their_coordinates_declared_in_the_header_and_skip_und
     # A σ that is not finite is refused by name, never written; σ missing or unasked is refused.
     bad = sd.copy()
     bad[2, 1] = np.nan
-    for given, message in [(bad, f"value {names[1]}_moment_sd at row 2 is nan"), (None, "declares standard deviations")]:
+    refusals = [(bad, f"value {names[1]}_moment_sd at row 2 is nan"), (None, "declares standard deviations")]
+    for given, message in refusals:
         with pytest.raises(ikid.InputError, match=message):
             with sto_writer(tmp_path / "tau.sto", with_sd=True) as write:
                 write(time, q, np.zeros(n, np.uint16), given)

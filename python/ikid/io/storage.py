@@ -323,15 +323,20 @@ def _coordinate_writer(
                 values = values[:, keep]  # a wrong shape is named by the table's row check
             if with_sd:
                 if sd is None:
-                    raise _native.InputError(f"{table.name}: declares standard deviations but none were given")
+                    raise _native.InputError(
+                        f"{table.name}: declares standard deviations but none were given"
+                    )
                 sd = np.asarray(sd, np.float64)
                 if sd.shape != (len(values), len(names)):
                     raise _native.InputError(
-                        f"{table.name}: standard deviations: expected ({len(values)}, {len(names)}), got {sd.shape}"
+                        f"{table.name}: standard deviations: expected ({len(values)}, {len(names)}), "
+                        f"got {sd.shape}"
                     )
                 values = np.stack([values, sd[:, keep]], axis=2).reshape(len(values), -1)
             elif sd is not None:
-                raise _native.InputError(f"{table.name}: standard deviations given to a file without their columns")
+                raise _native.InputError(
+                    f"{table.name}: standard deviations given to a file without their columns"
+                )
             if in_degrees:
                 values = np.degrees(values)
             values, _ = _with_status(values, [], status if with_status else None)
