@@ -49,6 +49,10 @@
 // swapped in the recording); the markers were used under their right labels.
 #define IKID_FRAME_SWAPPED 128
 
+// Frame status bit: a stream's first output after it took its source's new clock (the source
+// was restarted): frames were lost before it.
+#define IKID_FRAME_RESYNCED 256
+
 // Result of every fallible libikid call.
 typedef enum ikid_status {
   // Success.
@@ -479,6 +483,18 @@ enum ikid_status ikid_tracker_reset(struct ikid_tracker *tracker);
 enum ikid_status ikid_tracker_marker_noise(const struct ikid_tracker *tracker,
                                            double *out,
                                            size_t out_len);
+
+// Writes the standard deviations of the last estimate to `out` (at least 6 doubles): each
+// angle's (rad), then each torque's (N·m), coordinate order (`ikid::Tracker::output_sd`: the
+// filter's covariance with the forearm's noise added; the torques' from the markers' noise
+// through the filter; docs/live.md measures their coverage). NaN before the filter started
+// (as the values are). They describe the filter's own estimate, not a refiner's correction.
+//
+// # Safety
+// `tracker` must be a live handle; `out` must point to `out_len` writable doubles.
+enum ikid_status ikid_tracker_output_sd(const struct ikid_tracker *tracker,
+                                        double *out,
+                                        size_t out_len);
 
 // Releases a tracker handle (NULL is ignored).
 //

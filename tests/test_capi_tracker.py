@@ -48,7 +48,10 @@ def trial(tmp_path_factory):
     assert (out["missing"][800:950] == 1 << 4).all() and refined["refined"][1000:].all()
     for name, o in (("expected", out), ("expected_refined", refined)):
         np.savetxt(d / f"{name}.csv", expected_rows(o), fmt="%.17g", delimiter=",")
-    np.savetxt(d / "noise.csv", plain.marker_noise[None], fmt="%.17g", delimiter=",")
+    sd = plain.output_sd
+    assert sd is not None
+    noise_and_sd = np.concatenate([plain.marker_noise, sd.ravel()])[None]
+    np.savetxt(d / "noise.csv", noise_and_sd, fmt="%.17g", delimiter=",")
     return d, frames, {None: out, "wrist-track": refined}
 
 

@@ -692,6 +692,21 @@ def test_track_writes_the_trackers_angles_and_torques(
     )
     bare = ikid.Tracker(length_scale=1.1, mass_scale=1.3).run(read_markers(tmp_path / "t.trc").frames(None))
     np.testing.assert_allclose(read_mot(tmp_path / "bare.mot")[1], bare["q"][1:], atol=1e-8)
+    # The bare filter's values each followed by its σ (declared in the header; degrees in the
+    # .mot); the refined files have none (the filter's σ does not describe a refined estimate).
+    from ikid.io.storage import coordinate_names, moment_names, read_storage, sd_columns
+
+    for ext, names, sd, unit in [
+        (".mot", coordinate_names(), bare["q_sd"][1:], np.degrees),
+        (".sto", moment_names(), bare["tau_sd"][1:], lambda v: v),
+    ]:
+        table = read_storage(tmp_path / f"bare{ext}")
+        want = [c for n in names for c in (n, f"{n}_sd")] + ["ikid_status"]
+        assert list(table.columns) == want, table.columns
+        assert sd_columns(table) == [f"{n}_sd" for n in names]
+        np.testing.assert_allclose(table.select([f"{n}_sd" for n in names]), unit(sd), rtol=1e-8)
+        refined = read_storage(tmp_path / "out" / f"t{ext}")
+        assert sd_columns(refined) == [] and not any(c.endswith("_sd") for c in refined.columns)
 
 
 # --- outputs: -o FOLDER/, outputs that go together, errors as messages -------------------------

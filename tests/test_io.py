@@ -129,6 +129,36 @@ def test_mot_and_sto_round_trip(trial, tmp_path):
     assert table.in_degrees and table.columns == tuple(ikid.coordinate_names())
 
 
+def test_sd_columns_follow_their_coordinates_declared_in_the_header_and_skip_undetermined(tmp_path):
+    from ikid.io.storage import mot_writer, read_storage, sd_columns, sto_writer
+
+    n = 5
+    time = np.arange(n) / 100.0
+    q = np.linspace(0.1, 0.5, 3 * n).reshape(n, 3)
+    sd = np.full((n, 3), 0.01) * np.arange(1, 4)
+    names = ikid.coordinate_names()
+    with mot_writer(tmp_path / "q.mot", undetermined={names[0]: "one hand marker"}, with_sd=True) as write:
+        write(time, q, np.zeros(n, np.uint16), sd)
+    table = read_storage(tmp_path / "q.mot")
+    # s_p not determined: neither it nor its σ is written.
+    assert table.columns == (names[1], f"{names[1]}_sd", names[2], f"{names[2]}_sd", "ikid_status")
+    assert sd_columns(table) == [f"{names[1]}_sd", f"{names[2]}_sd"]
+    np.testing.assert_allclose(table.select([f"{names[1]}_sd", f"{names[2]}_sd"]), np.degrees(sd[:, 1:]))
+    np.testing.assert_allclose(io.read_mot(tmp_path / "q.mot")[1][:, 1:], q[:, 1:], atol=1e-9)
+    # A σ that is not finite is refused by name, never written; σ missing or unasked is refused.
+    bad = sd.copy()
+    bad[2, 1] = np.nan
+    refusals = [(bad, f"value {names[1]}_moment_sd at row 2 is nan"), (None, "declares standard deviations")]
+    for given, message in refusals:
+        with pytest.raises(ikid.InputError, match=message):
+            with sto_writer(tmp_path / "tau.sto", with_sd=True) as write:
+                write(time, q, np.zeros(n, np.uint16), given)
+        assert not (tmp_path / "tau.sto").exists()
+    with pytest.raises(ikid.InputError, match="without their columns"):
+        with sto_writer(tmp_path / "tau.sto") as write:
+            write(time, q, np.zeros(n, np.uint16), sd)
+
+
 def test_storage_reads_radians_files_and_names_missing_columns(tmp_path):
     path = io.write_storage(
         tmp_path / "r.mot",

@@ -42,7 +42,7 @@ def test_a_flipped_sign_bit_in_a_shipped_model_is_refused(tmp_path, name):
 def test_frame_status_bits_are_the_c_headers():
     header = (ROOT / "include" / "ikid.h").read_text(encoding="utf-8")
     defined = {m[0].lower(): int(m[1]) for m in re.findall(r"#define IKID_FRAME_(\w+) (\d+)", header)}
-    assert defined == dict(_native.FRAME_STATUS) and len(defined) == 8
+    assert defined == dict(_native.FRAME_STATUS) and len(defined) == 9
 
 
 def _markers(seed: int) -> np.ndarray:

@@ -1,31 +1,65 @@
-"""The Tracker's standard deviations (``Tracker.output_sd``): there once the filter runs, and
-of the size of its real errors on a simulated trial with marker noise (the simulation's own
-angles and torques are the oracle)."""
+"""The Tracker's standard deviations (``Tracker.output_sd``, ``run``'s ``q_sd``/``tau_sd``):
+there once the filter runs, and calibrated — about 68 % of frames within ±1 σ — on a simulated
+trial no setting was chosen on (the simulation's own angles and torques are the oracle)."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import ikid
+from ikid import _native
+from studies import sigma_coverage as study
+
+# Held out from the study's tuning and scoring seeds alike.
+SEED = 9720
 
 
-def test_sd_is_none_before_the_start_and_of_the_size_of_the_errors():
-    trial = ikid.simulate(seed=9720, duration=2.0)
-    noisy = trial.with_noise("gaussian", 9721, sigma=1e-3)
+def test_the_study_tunes_and_scores_on_disjoint_seeds_and_this_test_on_neither():
+    assert not set(study.TUNE) & set(study.SCORE)
+    assert SEED not in study.TUNE + study.SCORE and SEED + 1 not in study.TUNE + study.SCORE
+
+
+def test_sd_is_none_before_the_start_and_push_and_run_agree():
+    trial = ikid.simulate(seed=SEED, duration=1.0).with_noise("gaussian", SEED + 1, sigma=1e-3)
     tracker = ikid.Tracker()
     assert tracker.output_sd is None
-    q_ratio, tau_ratio = [], []
-    for i, frame in enumerate(noisy.markers):
+    pushed = []
+    for frame in trial.markers:
         out = tracker.push(frame)
         sd = tracker.output_sd
         if out is None:
             assert sd is None
+            pushed.append(np.full((2, 3), np.nan))
             continue
         assert sd is not None and sd.shape == (2, 3) and np.all(np.isfinite(sd)) and np.all(sd > 0)
-        if i >= 500:
-            q_ratio.append(np.abs(out[0] - trial.q[i]) / sd[0])
-            tau_ratio.append(np.abs(out[3] - trial.tau[i]) / sd[1])
-    # Not a calibration claim (studies/sigma_coverage.py measures that): σ is neither a tiny nor
-    # a huge multiple of the error it stands for.
-    for ratio in (np.array(q_ratio), np.array(tau_ratio)):
-        assert 0.3 < np.mean(ratio <= 1.0) < 0.95, np.mean(ratio <= 1.0)
+        pushed.append(sd)
+    run = ikid.Tracker().run(np.asarray(trial.markers))
+    np.testing.assert_array_equal(run["q_sd"], np.array([p[0] for p in pushed]))
+    np.testing.assert_array_equal(run["tau_sd"], np.array([p[1] for p in pushed]))
+    assert np.all(np.isnan(run["q_sd"][: run["start"]]))
+
+
+@pytest.mark.parametrize(
+    "noise",
+    [("gaussian", {"sigma": 1e-3}), ("uniform", {"fraction": 0.05})],
+    ids=["gaussian-1mm-every-marker", "uniform-5pct-hand"],
+)
+def test_sd_covers_about_68_percent_of_the_true_errors(noise):
+    # Gaussian noise on every marker: the forearm's pose noise, which the filter's covariance
+    # does not count, is most of the angles' error (without it, 0.50 of frames were covered).
+    trial = ikid.simulate(seed=SEED, duration=4.0, shoulder_flexion=0.2)
+    noisy = trial.with_noise(noise[0], SEED + 1, **noise[1])
+    out = ikid.Tracker().run(np.asarray(noisy.markers))
+    keep = np.arange(len(trial.time)) >= max(out["start"], 500)
+    q_cover = np.mean((np.abs(out["q"] - trial.q) <= out["q_sd"])[keep])
+    tau_cover = np.mean((np.abs(out["tau"] - trial.tau) <= out["tau_sd"])[keep])
+    # 3500 frames × 3 coordinates, correlated in time: a band about the 0.683 a calibrated σ
+    # gives. Measured: Gaussian 0.668 / 0.668, uniform 0.721 / 0.663; σ × 1.2 gives 0.752 /
+    # 0.761 and 0.804 / 0.754, σ / 1.2 gives 0.579 / 0.577 (Gaussian): out of it.
+    assert 0.62 < q_cover < 0.745, q_cover
+    assert 0.62 < tau_cover < 0.745, tau_cover
+
+
+def test_the_shipped_torque_scale_is_the_one_the_study_tunes():
+    assert study.tuned_torque_scale() == pytest.approx(_native.SD_SCALE_TAU, abs=0.01)

@@ -30,6 +30,7 @@ __all__ = [
     "DEFAULT_JERK_NOISE",
     "REFINER_OUTPUTS",
     "REFINER_GATE_NOISE",
+    "SD_SCALE_TAU",
     "build_model",
     "forward_markers",
     "body_model",
@@ -202,6 +203,7 @@ class Stream:
     def model(self) -> Model: ...
 
 DEFAULT_JERK_NOISE: float
+SD_SCALE_TAU: float
 REFINER_OUTPUTS: list[str]
 REFINER_GATE_NOISE: float
 

@@ -304,6 +304,10 @@ def condition(ctx: dict, artefact: str, div: int) -> dict:
                 entry["clean_task"] = score(q_clean[scored], truth_q[scored], None, truth_tau, 0.0)
     if not job["keep"]:
         shutil.rmtree(folder, ignore_errors=True)
+    else:
+        # The truth beside the kept files (studies/sigma_exam.py scores the σ columns on it):
+        # angles on every frame, torques on the scored ones.
+        np.savez(folder / "truth.npz", q=truth_q, tau=truth_tau, scored_start=scored.start, rate_hz=rate)
     return row
 
 

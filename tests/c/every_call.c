@@ -121,6 +121,8 @@ int main(int argc, char **argv) {
     CHECK(ikid_tracker_push(tracker, frames64, 18, estimate, 12, &flags) == IKID_STATUS_OK && flags.ready && isfinite(estimate[0]), "ikid_tracker_push");
     double noise[9];
     CHECK(ikid_tracker_marker_noise(tracker, noise, 9) == IKID_STATUS_OK && noise[0] > 0, "ikid_tracker_marker_noise");
+    double sd[6];
+    CHECK(ikid_tracker_output_sd(tracker, sd, 6) == IKID_STATUS_OK && sd[0] > 0 && sd[5] > 0, "ikid_tracker_output_sd");
     CHECK(ikid_tracker_reset(tracker) == IKID_STATUS_OK, "ikid_tracker_reset");
     size_t block = 200, start = 99;
     double *block_out = malloc(block * 12 * sizeof *block_out);

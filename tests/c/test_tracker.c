@@ -5,7 +5,8 @@
  *   test_tracker FRAMES.csv EXPECTED.csv NOISE.csv REFINER EXPECTED_REFINED.csv NOT_A_REFINER
  * FRAMES.csv: 18 marker values per line (m, NaN = missing); EXPECTED*.csv: per frame q, qd, qdd,
  * tau (12), missing, refined, noise, from ikid.Tracker(length_scale=1.1, mass_scale=1.2).run
- * (NaN rows before the start); NOISE.csv: the unrefined tracker's marker_noise after the trial.
+ * (NaN rows before the start); NOISE.csv: the unrefined tracker's marker_noise after the trial,
+ * then its output_sd (q then tau).
  * All written with %.17g, so each double reads back exactly. Prints "N passed, N failed". */
 #include "ikid.h"
 
@@ -92,7 +93,7 @@ int main(int argc, char **argv) {
     size_t n = 0, n_expected = 0, n_refined = 0, n_noise = 0;
     double *frames = read_csv(argv[1], FRAME, &n);
     double *expected = read_csv(argv[2], EXPECTED_COLS, &n_expected);
-    double *noise_expected = read_csv(argv[3], 9, &n_noise);
+    double *noise_expected = read_csv(argv[3], 15, &n_noise);
     double *expected_refined = read_csv(argv[5], EXPECTED_COLS, &n_refined);
     CHECK(n > 100 && n_expected == n && n_refined == n && n_noise == 1, "fixture sizes %zu %zu %zu %zu", n, n_expected, n_refined, n_noise);
 
@@ -167,6 +168,11 @@ int main(int argc, char **argv) {
     }
     CHECK(mismatches == 0, "push vs Python: %d mismatches", mismatches);
     CHECK(ikid_tracker_marker_noise(tracker, noise, 10) == IKID_STATUS_OK && memcmp(noise, noise_expected, 9 * sizeof(double)) == 0, "marker noise vs Python");
+    double sd[7] = {7, 7, 7, 7, 7, 7, 42.0};
+    CHECK(ikid_tracker_output_sd(tracker, sd, 7) == IKID_STATUS_OK && memcmp(sd, noise_expected + 9, 6 * sizeof(double)) == 0 && sd[6] == 42.0, "output sd vs Python");
+    CHECK(ikid_tracker_output_sd(tracker, sd, 5) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "room for 5"), "short sd buffer");
+    CHECK(ikid_tracker_output_sd(tracker, NULL, 6) == IKID_STATUS_NULL_PARAMETER, "NULL sd buffer");
+    CHECK(ikid_tracker_output_sd(NULL, sd, 6) == IKID_STATUS_NULL_PARAMETER && contains(ikid_last_error(), "tracker is NULL"), "sd of NULL tracker");
 
     /* The fixture's own missing markers (NaN) were reported, not refused; and a NaN marker
        pushed now is missing, not an error. */
@@ -181,6 +187,7 @@ int main(int argc, char **argv) {
     /* Reset: the same trial again gives the same results (a whole-trial run this time). */
     CHECK(ikid_tracker_reset(NULL) == IKID_STATUS_NULL_PARAMETER, "reset NULL");
     CHECK(ikid_tracker_reset(tracker) == IKID_STATUS_OK && ikid_tracker_marker_noise(tracker, noise, 9) == IKID_STATUS_OK && noise[4] == 1e-3, "reset");
+    CHECK(ikid_tracker_output_sd(tracker, sd, 6) == IKID_STATUS_OK && isnan(sd[0]) && isnan(sd[5]), "no sd before the start");
     CHECK(run_in_blocks(tracker, frames, expected, n, n) == 0, "run over the whole trial vs Python");
 
     /* Run in blocks of 37 (a fresh tracker) equals Python too; start counts within a block. */

@@ -45,6 +45,9 @@ pub const IKID_FRAME_PER_FRAME: u32 = 64;
 /// Frame status bit: a marker was found where another marker of the frame belongs (labels
 /// swapped in the recording); the markers were used under their right labels.
 pub const IKID_FRAME_SWAPPED: u32 = 128;
+/// Frame status bit: a stream's first output after it took its source's new clock (the source
+/// was restarted): frames were lost before it.
+pub const IKID_FRAME_RESYNCED: u32 = 256;
 
 // cbindgen writes literals only: the values above are the core's (ikid::status), checked here.
 const _: () = {
@@ -57,5 +60,6 @@ const _: () = {
     assert!(IKID_FRAME_IMPLAUSIBLE == status::IMPLAUSIBLE as u32);
     assert!(IKID_FRAME_PER_FRAME == status::PER_FRAME as u32);
     assert!(IKID_FRAME_SWAPPED == status::SWAPPED as u32);
-    assert!(status::ALL.len() == 8);
+    assert!(IKID_FRAME_RESYNCED == status::RESYNCED as u32);
+    assert!(status::ALL.len() == 9);
 };

@@ -268,6 +268,38 @@ pub unsafe extern "C" fn ikid_tracker_marker_noise(
     })
 }
 
+/// Writes the standard deviations of the last estimate to `out` (at least 6 doubles): each
+/// angle's (rad), then each torque's (N·m), coordinate order (`ikid::Tracker::output_sd`: the
+/// filter's covariance with the forearm's noise added; the torques' from the markers' noise
+/// through the filter; docs/live.md measures their coverage). NaN before the filter started
+/// (as the values are). They describe the filter's own estimate, not a refiner's correction.
+///
+/// # Safety
+/// `tracker` must be a live handle; `out` must point to `out_len` writable doubles.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_tracker_output_sd(
+    tracker: *const ikid_tracker,
+    out: *mut f64,
+    out_len: usize,
+) -> ikid_status {
+    guard(|| {
+        let t = &unsafe { non_null(tracker, "tracker") }?.tracker;
+        const N: usize = 2 * ikid_core::body::N_COORDINATES;
+        if out_len < N {
+            return Err(Failure::new(
+                ikid_status::InvalidArgument,
+                format!("out has room for {out_len} doubles, {N} needed"),
+            ));
+        }
+        let values: [f64; N] = match t.output_sd() {
+            Some(sd) => std::array::from_fn(|i| if i < N / 2 { sd.q[i] } else { sd.tau[i - N / 2] }),
+            None => [f64::NAN; N],
+        };
+        unsafe { slice_mut(out, N, "out") }?.copy_from_slice(&values);
+        Ok(())
+    })
+}
+
 /// Releases a tracker handle (NULL is ignored).
 ///
 /// # Safety

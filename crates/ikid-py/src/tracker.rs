@@ -8,7 +8,8 @@ use crate::errors::{IntoPy, input};
 use crate::model::Model;
 use ikid::body::{MARKER_FRAME_LEN, N_COORDINATES};
 use ikid::tracker::{
-    DEFAULT_JERK_NOISE, REFINER_GATE_NOISE, Tracker as CoreTracker, TrackerOutput, TrackerSettings, refiner_outputs,
+    DEFAULT_JERK_NOISE, REFINER_GATE_NOISE, SD_SCALE_TAU, Tracker as CoreTracker, TrackerOutput, TrackerSettings,
+    refiner_outputs,
 };
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
@@ -19,6 +20,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Tracker>()?;
     m.add_class::<TrackerEstimate>()?;
     m.add("DEFAULT_JERK_NOISE", DEFAULT_JERK_NOISE)?;
+    m.add("SD_SCALE_TAU", SD_SCALE_TAU)?;
     m.add("REFINER_OUTPUTS", refiner_outputs())?;
     m.add("REFINER_GATE_NOISE", REFINER_GATE_NOISE)?;
     Ok(())
@@ -115,7 +117,8 @@ impl Tracker {
     }
 
     /// Every frame of `frames` `(n, 18)` in order; returns a dict of `(n, 3)` float64 arrays
-    /// `q`, `qd`, `qdd`, `tau`, the `(n,)` uint8 `missing` (bit i: marker i missing), `(n,)`
+    /// `q`, `qd`, `qdd`, `tau`, their standard deviations `q_sd`, `tau_sd` (``output_sd``
+    /// after each frame), the `(n,)` uint8 `missing` (bit i: marker i missing), `(n,)`
     /// `noise` (mean learned hand-marker noise, m; NaN before the start), `refined` (bool) and
     /// `status` (uint16 bits, ``ikid.FRAME_STATUS``: markers rejected, poses held, restarts,
     /// implausible angles), and `start`,
@@ -123,20 +126,27 @@ impl Tracker {
     /// with every marker). Continues from the tracker's state. Releases the GIL.
     fn run<'py>(&mut self, py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
         let tracker = &mut self.inner;
-        let (out, missing, noise, refined, status, start, n) =
+        let (out, sd, missing, noise, refined, status, start, n) =
             with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |values, n| {
                 // The core's `run` does the work; here its per-frame results are laid out as
                 // four (n, 3) blocks and three (n,) arrays.
                 let mut out = vec![f64::NAN; 4 * n * N_COORDINATES];
+                let mut sd = vec![f64::NAN; 2 * n * N_COORDINATES];
                 let mut missing = vec![0u8; n];
                 let mut noise = vec![f64::NAN; n];
                 let mut refined = vec![false; n];
                 let mut status = vec![0u16; n];
                 let start = py
                     .detach(|| {
-                        tracker.run(values, |i, o, _| {
+                        tracker.run_with_sd(values, |i, o, s, _| {
                             for (k, row) in rows(o).iter().enumerate() {
                                 out[(k * n + i) * N_COORDINATES..(k * n + i + 1) * N_COORDINATES].copy_from_slice(row);
+                            }
+                            if let Some(s) = s {
+                                for (k, row) in [s.q, s.tau].iter().enumerate() {
+                                    sd[(k * n + i) * N_COORDINATES..(k * n + i + 1) * N_COORDINATES]
+                                        .copy_from_slice(row);
+                                }
                             }
                             missing[i] = o.missing;
                             noise[i] = o.noise;
@@ -149,7 +159,7 @@ impl Tracker {
                     // Say why, where the core can: markers in the wrong units, most often.
                     ikid::body::check_recording_span(values).py_err()?;
                 }
-                Ok((out, missing, noise, refined, status, start, n))
+                Ok((out, sd, missing, noise, refined, status, start, n))
             })?;
         let Some(start) = start else {
             return Err(input(format!(
@@ -159,6 +169,10 @@ impl Tracker {
         let d = PyDict::new(py);
         for (k, name) in ["q", "qd", "qdd", "tau"].iter().enumerate() {
             let block = out[k * n * N_COORDINATES..(k + 1) * n * N_COORDINATES].to_vec();
+            d.set_item(*name, block.into_pyarray(py).reshape([n, N_COORDINATES])?)?;
+        }
+        for (k, name) in ["q_sd", "tau_sd"].iter().enumerate() {
+            let block = sd[k * n * N_COORDINATES..(k + 1) * n * N_COORDINATES].to_vec();
             d.set_item(*name, block.into_pyarray(py).reshape([n, N_COORDINATES])?)?;
         }
         d.set_item("missing", missing.into_pyarray(py))?;

@@ -42,8 +42,13 @@ pub const PER_FRAME: u16 = 64;
 /// recording, a labelling error): the markers were used under their right labels.
 pub const SWAPPED: u16 = 128;
 
+/// The stream took its source's new clock ([`TIME_REANCHOR_FRAMES`](crate::stream::TIME_REANCHOR_FRAMES)
+/// stamps in a row that jumped: the source was restarted) and this is its first output since:
+/// frames were lost before it, and its window holds the new clock's frames only.
+pub const RESYNCED: u16 = 256;
+
 /// Every bit with its name (the CLI's legend and the bindings' constant tables).
-pub const ALL: [(u16, &str); 8] = [
+pub const ALL: [(u16, &str); 9] = [
     (FILLED, "filled"),
     (REJECTED_MARKER, "rejected_marker"),
     (RESTARTED, "restarted"),
@@ -52,6 +57,7 @@ pub const ALL: [(u16, &str); 8] = [
     (IMPLAUSIBLE, "implausible"),
     (PER_FRAME, "per_frame"),
     (SWAPPED, "swapped"),
+    (RESYNCED, "resynced"),
 ];
 
 /// How far beyond a coordinate's anatomical range ([`crate::body::COORDINATES`]) an angle may

@@ -75,6 +75,8 @@ pub struct Stream {
     time_candidate: Option<f64>,
     time_candidate_frames: u32,
     time_reanchors: u64,
+    /// A new clock was taken and no output has been given since ([`status::RESYNCED`]).
+    resynced: bool,
     /// The subject's marker placement, applied to each (filled) frame before its features.
     calibration: Option<Calibration>,
     /// Frames pushed since the stream was made (accepted or refused): the next frame's
@@ -115,6 +117,7 @@ impl Stream {
             time_candidate: None,
             time_candidate_frames: 0,
             time_reanchors: 0,
+            resynced: false,
             calibration: None,
             pushed: 0,
             status: 0,
@@ -292,7 +295,9 @@ impl Stream {
         self.ring[self.head * nf..(self.head + 1) * nf].copy_from_slice(&self.incoming);
         self.head = (self.head + 1) % w;
         self.filled = (self.filled + 1).min(w);
-        let filled = self.marker_status;
+        // RESYNCED goes with the first output after a new clock (the window refilled).
+        let resynced = (self.filled >= w || self.early_outputs) && std::mem::take(&mut self.resynced);
+        let filled = self.marker_status | if resynced { status::RESYNCED } else { 0 };
         if self.filled < w {
             if !self.early_outputs {
                 return Ok(None);
@@ -351,6 +356,7 @@ impl Stream {
                 self.gap_restarts += 1;
             } else {
                 self.time_reanchors += 1;
+                self.resynced = true;
             }
         }
         self.last_time = Some(time_s);
@@ -509,5 +515,6 @@ impl Stream {
         self.time_candidate_frames = 0;
         self.head = 0;
         self.filled = 0;
+        self.resynced = false;
     }
 }

@@ -98,3 +98,34 @@ fn scattered_bad_stamps_never_become_the_clock() {
     assert_eq!((0..N).filter(|&i| out[i].is_err()).count(), N / 10);
     assert_eq!(stream.time_reanchors(), 0);
 }
+
+#[test]
+fn the_first_output_on_a_new_clock_and_only_it_is_flagged_resynced() {
+    use ikid::status::RESYNCED;
+    let model = random_model(FeatureSet::Angles, 5, &[16], 3, 4); // window 5
+    let frames = random_frames(FeatureSet::Angles, N, 21);
+    let reset_at = 1000;
+    let mut stream = model.stream();
+    let mut flagged = Vec::new();
+    for (i, frame) in frames.chunks_exact(18).enumerate() {
+        let t = if i < reset_at { i } else { i - reset_at } as f64 * 1e-3;
+        if let Ok(Some(_)) = stream.push_at(t, frame)
+            && stream.status() & RESYNCED != 0
+        {
+            flagged.push(i);
+        }
+    }
+    // Accepted from the third stamp on the new clock; its window full four frames later.
+    assert_eq!(flagged, vec![reset_at + TIME_REANCHOR_FRAMES as usize - 1 + 4]);
+    // A gap within the clock, or a reset, is no new clock.
+    let mut stream = model.stream();
+    for (i, frame) in frames.chunks_exact(18).enumerate() {
+        let t = i as f64 * 1e-3 + if i >= 1500 { MAX_TIME_GAP_S / 2.0 } else { 0.0 };
+        if i == 2000 {
+            stream.reset();
+        }
+        if let Ok(Some(_)) = stream.push_at(t, frame) {
+            assert_eq!(stream.status() & RESYNCED, 0, "frame {i}");
+        }
+    }
+}

@@ -289,18 +289,54 @@ def _skipped(names: list[str], undetermined) -> tuple[list[int], list[str]]:
     return [k for k in range(len(names)) if k not in skip], notes
 
 
+#: Suffix of the column holding the standard deviation of the column before it (same unit).
+SD_SUFFIX = "_sd"
+#: The header key listing a file's standard-deviation columns: ``ikid_sd=ra_wr_s_p_sd,...``.
+SD_KEY = "ikid_sd"
+
+
+def sd_columns(table: Storage) -> list[str]:
+    """The standard-deviation columns ``table``'s header declares (:data:`SD_KEY`)."""
+    return [n.strip() for n in table.header.get(SD_KEY, "").split(",") if n.strip()]
+
+
 @contextmanager
 def _coordinate_writer(
-    path: str | os.PathLike[str], names: list[str], in_degrees: bool, with_status: bool, undetermined
+    path: str | os.PathLike[str],
+    names: list[str],
+    in_degrees: bool,
+    with_status: bool,
+    undetermined,
+    with_sd: bool = False,
 ) -> Iterator[BlockWrite]:
     keep, notes = _skipped(names, undetermined)
-    columns = [names[k] for k in keep] + ([STATUS_COLUMN] if with_status else [])
+    # Each coordinate followed by its standard deviation; a coordinate not written has none.
+    columns = [c for k in keep for c in ([names[k], names[k] + SD_SUFFIX] if with_sd else [names[k]])]
+    if with_sd:
+        notes = [*notes, f"{SD_KEY}={','.join(names[k] + SD_SUFFIX for k in keep)}"]
+    columns += [STATUS_COLUMN] if with_status else []
     with storage_writer(path, columns, in_degrees=in_degrees, notes=notes) as table:
 
-        def write(time, values, status=None) -> None:
+        def write(time, values, status=None, sd=None) -> None:
             values = np.asarray(values, np.float64)
             if values.ndim == 2 and values.shape[1] == len(names):
                 values = values[:, keep]  # a wrong shape is named by the table's row check
+            if with_sd:
+                if sd is None:
+                    raise _native.InputError(
+                        f"{table.name}: declares standard deviations but none were given"
+                    )
+                sd = np.asarray(sd, np.float64)
+                if sd.shape != (len(values), len(names)):
+                    raise _native.InputError(
+                        f"{table.name}: standard deviations: expected ({len(values)}, {len(names)}), "
+                        f"got {sd.shape}"
+                    )
+                values = np.stack([values, sd[:, keep]], axis=2).reshape(len(values), -1)
+            elif sd is not None:
+                raise _native.InputError(
+                    f"{table.name}: standard deviations given to a file without their columns"
+                )
             if in_degrees:
                 values = np.degrees(values)
             values, _ = _with_status(values, [], status if with_status else None)
@@ -311,17 +347,20 @@ def _coordinate_writer(
 
 @contextmanager
 def mot_writer(
-    path: str | os.PathLike[str], with_status: bool = True, undetermined=None
+    path: str | os.PathLike[str], with_status: bool = True, undetermined=None, with_sd: bool = False
 ) -> Iterator[BlockWrite]:
-    """:func:`write_mot` a block of rows at a time (see :func:`storage_writer`)."""
-    with _coordinate_writer(path, coordinate_names(), True, with_status, undetermined) as write:
+    """:func:`write_mot` a block of rows at a time (see :func:`storage_writer`). With ``with_sd``
+    each angle is followed by its standard deviation (``<coordinate>_sd``, degrees, listed in the
+    header's :data:`SD_KEY` line), given to each write as ``sd`` ``(k, 3)`` in radians."""
+    with _coordinate_writer(path, coordinate_names(), True, with_status, undetermined, with_sd) as write:
         yield write
 
 
 @contextmanager
 def sto_writer(
-    path: str | os.PathLike[str], with_status: bool = True, undetermined=None
+    path: str | os.PathLike[str], with_status: bool = True, undetermined=None, with_sd: bool = False
 ) -> Iterator[BlockWrite]:
-    """:func:`write_sto` a block of rows at a time (see :func:`storage_writer`)."""
-    with _coordinate_writer(path, moment_names(), False, with_status, undetermined) as write:
+    """:func:`write_sto` a block of rows at a time (see :func:`storage_writer`; ``with_sd`` as
+    :func:`mot_writer`: ``<coordinate>_moment_sd``, N·m)."""
+    with _coordinate_writer(path, moment_names(), False, with_status, undetermined, with_sd) as write:
         yield write

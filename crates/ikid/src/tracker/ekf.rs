@@ -255,7 +255,7 @@ impl Tracker {
     /// relative to the centroid of the markers present in `hand` (the measured centroid is
     /// taken as it is: only the hand's orientation is predicted); `None` there with fewer than
     /// two present, which carry no orientation.
-    fn hand_prediction(
+    pub(super) fn hand_prediction(
         &self,
         forearm: &Isometry3<f64>,
         q: &Vector3<f64>,

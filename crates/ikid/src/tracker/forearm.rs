@@ -74,6 +74,15 @@ impl ForearmTurn {
     }
 }
 
+impl ForearmTurn {
+    /// Covariance of one whole pose's orientation error, rad² (lab frame): white noise of
+    /// variance σ² in each orientation has a second difference of variance (1 + 4 + 1)σ², and
+    /// at a lab's rate a forearm's own turn adds little to that.
+    pub(super) fn orientation_noise(&self) -> Matrix3<f64> {
+        self.variance / 6.0
+    }
+}
+
 impl Roll {
     pub(super) fn idle() -> Self {
         Roll { active: false, rate: 0.0, p: Matrix2::zeros() }

@@ -100,7 +100,7 @@ pub use checks::{
     missing_markers,
 };
 pub use ekf::{GATE_CHI2, GATE_FLOOR_M, MANOEUVRE_NIS, MAX_ITERATIONS, RELINEARISE_RAD};
-pub use output::{MIN_REPORTED_NOISE, TRACKER_VALUES, TrackerOutput, TrackerSd};
+pub use output::{MIN_REPORTED_NOISE, SD_SCALE_TAU, TRACKER_VALUES, TrackerOutput, TrackerSd};
 pub use placement::{LIVE_PLACEMENT_S, TEMPLATE_S};
 pub use refiner::{REFINER_GATE_NOISE, REFINER_TRUST, refiner_gate, refiner_outputs};
 pub use settings::{DEFAULT_JERK_NOISE, TrackerSettings};
@@ -454,6 +454,16 @@ impl Tracker {
     /// numbered by its index in `frames`; the frames before it stay pushed (and were handed to
     /// `each`). Does not allocate (beyond what `each` does).
     pub fn run(&mut self, frames: &[f64], mut each: impl FnMut(usize, &TrackerOutput, bool)) -> Result<Option<usize>> {
+        self.run_observed(frames, |_, i, out, estimated| each(i, out, estimated))
+    }
+
+    /// [`run`](Self::run), with the tracker itself handed to `each` after every frame (what
+    /// its state says of that frame: [`output_sd`](Self::output_sd)).
+    pub(super) fn run_observed(
+        &mut self,
+        frames: &[f64],
+        mut each: impl FnMut(&Self, usize, &TrackerOutput, bool),
+    ) -> Result<Option<usize>> {
         if !frames.len().is_multiple_of(MARKER_FRAME_LEN) {
             return Err(Error::BadArgument {
                 what: "frames",
@@ -465,9 +475,9 @@ impl Tracker {
             match self.push(frame).map_err(|e| e.renumbered(i))? {
                 Some(out) => {
                     start.get_or_insert(i);
-                    each(i, &out, true);
+                    each(self, i, &out, true);
                 }
-                None => each(i, &TrackerOutput::waiting(missing_markers(frame)), false),
+                None => each(self, i, &TrackerOutput::waiting(missing_markers(frame)), false),
             }
         }
         Ok(start)

@@ -486,11 +486,15 @@ def _run_with(
     losses = _Losses(rate)
     frame = 0
     flush = args.flush or live
+    # The source restarted (reconnected, or its numbering re-anchored): the next output published
+    # carries the RESYNCED bit, as ikid.Stream's own after its clock re-anchors.
+    resynced = False
     for batch in batches:
         if batch is None:  # reconnected: what follows does not continue what came before
             for s in streams:
                 s.reset()
             losses.restart()
+            resynced = True
             continue
         if len(batch) > max_backlog:
             notes["skipped"] += len(batch) - 1
@@ -516,7 +520,9 @@ def _run_with(
                     raise _Refused(f.error, "unreadable frame" if live else "unreadable line")
                 if f.number is not None:
                     try:
+                        reanchors = losses.reanchors
                         losses.number(f.number)
+                        resynced |= losses.reanchors != reanchors
                     except ikid.InputError as e:
                         key = (
                             "frame number too far ahead"
@@ -551,7 +557,11 @@ def _run_with(
                     if filled:
                         status = "filled:" + "+".join(filled)
                     if sink is not None:
-                        sink.publish(output, streams[0].status, f.time if f.time is not None else _lsl_now())
+                        bits = streams[0].status
+                        if resynced and not math.isnan(bits):
+                            bits = float(int(bits) | ikid.FRAME_STATUS["resynced"])
+                        sink.publish(output, bits, f.time if f.time is not None else _lsl_now())
+                    resynced = False
             except _Refused as e:
                 status = "refused:" + e.detail.replace(",", ";").replace("\n", " ")
                 refused[e.key] += 1

@@ -31,7 +31,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "filter over the body model that learns each marker coordinate's noise, refined by the shipped "
         "wrist-track network.\n\n"
         "  ikid track trial.c3d -o out/trial --length-scale 1.1 --mass-scale 1.3"
-        "   # out/trial.mot, out/trial.sto",
+        "   # out/trial.mot, out/trial.sto\n\n"
+        "With --refiner none each angle and torque is followed by its standard deviation "
+        "(<name>_sd, listed in the header's ikid_sd line; docs/live.md measures how well it covers).",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", help="marker file (.c3d, .trc, .csv)")
@@ -147,8 +149,11 @@ def run(args: argparse.Namespace) -> int:
     undetermined = mapping.undetermined if mapping else {}
     # The pair replaces the old pair, or neither is replaced.
     with atomic_outputs(), ExitStack() as files:
-        write_q = files.enter_context(mot_writer(mot, undetermined=undetermined))
-        write_tau = files.enter_context(sto_writer(sto, undetermined=undetermined))
+        # Each value followed by its standard deviation (the filter's: Tracker.output_sd), unless
+        # a refiner moves the estimate: the filter's σ does not describe a refined one (docs/live.md).
+        with_sd = refiner is None
+        write_q = files.enter_context(mot_writer(mot, undetermined=undetermined, with_sd=with_sd))
+        write_tau = files.enter_context(sto_writer(sto, undetermined=undetermined, with_sd=with_sd))
         for block in data.blocks():
             frames = block.frames(mapping, whole=False)
             seen |= seen_markers(frames)
@@ -168,8 +173,9 @@ def run(args: argparse.Namespace) -> int:
             keep = np.arange(len(frames)) >= start
             implausible = keep & (status & bits["implausible"] != 0)
             keep &= ~implausible  # nothing no wrist can do is written as a number
-            write_q(block.time[keep], out["q"][keep], status[keep])
-            write_tau(block.time[keep], out["tau"][keep], status[keep])
+            q_sd, tau_sd = (out["q_sd"][keep], out["tau_sd"][keep]) if with_sd else (None, None)
+            write_q(block.time[keep], out["q"][keep], status[keep], q_sd)
+            write_tau(block.time[keep], out["tau"][keep], status[keep], tau_sd)
             for name, bit in bits.items():
                 counts[name] += int(np.count_nonzero(status[keep] & bit))
             flagged_after_start |= bool(status[start:].any())
@@ -199,6 +205,11 @@ def run(args: argparse.Namespace) -> int:
         f"at {data.rate_hz:g} Hz, subject ×{length_scale:.3g} length, ×{mass_scale:.3g} mass ({size_from}), "
         f"{placed}, {how}; flagged: {', '.join(notes) or 'none'}; hand marker noise learned (mm): {noise_mm}"
         + "".join(f"; {name} not written: {why}" for name, why in undetermined.items())
+        + (
+            "; each value followed by its standard deviation (_sd)"
+            if refiner is None
+            else "; no _sd columns (the filter's σ does not describe a refined estimate)"
+        )
         + f" -> {mot}, {sto}"
     )
     if args.strict and (k > 0 or flagged_after_start):
