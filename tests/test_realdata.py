@@ -266,9 +266,9 @@ def test_a_styloid_marker_that_is_also_the_styloid_landmark_calibrates_pyomeca_w
     tool, tmp_path
 ):
     # STYLr as RSP and as radial_styloid (one label for both): 1.55° (calibration check), ik 1.69°,
-    # track 1.57°. Both styloid markers in the cluster (STYLr/STYLu as RSP/USP) read 12.8° off: they
-    # sit on the radius and the ulna, which turn about each other in pronation, so they are no rigid
-    # cluster (measured in tools/realdata.py, not bounded here).
+    # track 1.57°. Both styloid markers in the cluster (STYLr/STYLu as RSP/USP) read 12.8° off the
+    # radius-fixed reference (ik 12.7°, track 4.1°): the ulna stays while the radius turns about it,
+    # so the three turn with neither bone; that map is refused, saying what to map instead.
     styloids = tool.pyomeca_styloids(DATA, tmp_path, [])
     radial = styloids["radial styloid as RSP"]
     assert radial["calibrated"], radial["calibrate_out"]
@@ -279,7 +279,9 @@ def test_a_styloid_marker_that_is_also_the_styloid_landmark_calibrates_pyomeca_w
         radial["track"].rms_valid,
     )
     both = styloids["both styloids as RSP/USP"]
-    assert both["calibrated"], both["calibrate_out"]  # the shared labels are accepted
+    assert not both["calibrated"] and both["ik"] is None and both["track"] is None, both["calibrate_out"]
+    assert "'Daphnee:STYLu' is forearm marker USP and landmark ulnar_styloid" in both["calibrate_out"]
+    assert "the ulnar styloid in [landmarks] only" in both["calibrate_out"], both["calibrate_out"]
 
 
 def test_a_calibration_from_one_frame_is_refused_saying_how_many_and_what_to_record(tool, tmp_path):
@@ -330,3 +332,34 @@ def test_the_mirror_method_refuses_what_it_cannot_know_saying_what_to_record(res
     cmd = ["calibrate", "--static", static, "--frames", frames, "--map", str(right_map)]
     done = tool.run(cmd + ["--method", "mirror", "--from", right, "-o", str(out)], [])
     assert done.returncode == 2 and "this one is of the right arm too" in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize(
+    "hand",
+    [
+        ("LARM_elb", "WRIST2", "INDEX"),  # an elbow marker and a forearm marker in the "hand"
+        ("LARM_elb", "LARMm", "LARMl"),  # a "hand" that is all forearm: it does not move with the wrist
+        ("WRIST2", "MEDH", "LATH"),  # one forearm marker among the hand's
+    ],
+)
+def test_a_map_naming_nonsense_is_flagged_before_any_angle_and_the_real_maps_are_not(tool, hand):
+    # pyomeca's box task: each segment's markers keep their distances within 12 mm (skin), the
+    # racing plates within 1 mm, Plug-in Gait's forearm within 5 mm; across a joint 18-120 mm.
+    rec = next(r for r in tool.RECORDINGS if r.name == "pyomeca")
+    data = read_markers(DATA / rec.trial)
+    assert (
+        MarkerMap.from_dict({"markers": rec.markers}).stretched_segments(
+            data.frames(MarkerMap.from_dict({"markers": rec.markers}))
+        )
+        == []
+    )
+    labels = [f"Daphnee:{h}" if h != "WRIST2" else rec.markers["FAP"] for h in hand]
+    forearm = {**rec.markers}
+    if rec.markers["FAP"] in labels:  # the forearm marker now in the hand: the forearm takes another
+        forearm["FAP"] = "Daphnee:LARMm" if "Daphnee:LARMm" not in labels else "Daphnee:LARMl"
+    mapping = MarkerMap.from_dict(
+        {"markers": {**forearm, "MC2": labels[0], "MC5": labels[1], "MCB": labels[2]}}
+    )
+    found = mapping.stretched_segments(data.frames(mapping))
+    assert found and all("one of them seems to be on another segment" in f for f in found), found
+    assert any("the hand's markers" in f for f in found), found

@@ -829,11 +829,10 @@ def pig_summary(p: dict) -> list[str]:
 # --- styloid markers that are also landmarks -----------------------------------------------------
 
 # Two of pyomeca's maps whose markers are also landmarks: the styloid markers both in the forearm's
-# cluster (STYLr/STYLu as RSP/USP), and STYLr alone there with two markers on the radius. The styloids
-# sit on two bones that turn about each other in pronation, and ikid's technical frame (Gram-Schmidt
-# from RSP towards USP) takes the three as one rigid body: the first reads 12.8° off (an ISB frame
-# built anew each frame from the four landmarks, 8.4°), the second 1.55° (the reference's own cluster
-# 1.96°).
+# cluster (STYLr/STYLu as RSP/USP), and STYLr alone there with two markers on the radius. The ulna stays
+# while the radius turns about it in pronation, and the reference's forearm is the radius: the first
+# read 12.8° off (ik 12.7°, track 4.1°; any cluster holding STYLu 7.8-17°) and is refused by the marker
+# map, saying what to map instead; the second reads 1.55° (the reference's own cluster 1.96°).
 PYOMECA_STYLOIDS = {
     "both styloids as RSP/USP": {
         "RSP": "Daphnee:STYLr",
@@ -869,7 +868,8 @@ def styloid_line(styloids: dict) -> str:
     for name, st in styloids.items():
         used = ", ".join(f"{m}={lab.split(':')[-1]}" for m, lab in st["markers"].items())
         if not st["calibrated"]:
-            parts.append(f"{name} ({used}): calibration FAILED: {st['calibrate_out'].splitlines()[-1]}")
+            why = st["calibrate_out"].splitlines()[-1] if st["calibrate_out"] else ""
+            parts.append(f"{name} ({used}): refused: {why}")
             continue
         ik, tr, ge = st["ik"], st["track"], st["geometry"]
         parts.append(

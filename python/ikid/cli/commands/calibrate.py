@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import warnings
 
 import numpy as np
 
@@ -106,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
     calibration JSON recording the method, the side and the marker map."""
     from ikid.calibration import calibrate_functional, calibrate_mirror, calibrate_neutral
     from ikid.io import MarkerMap, read_markers
-    from ikid.io.mapping import landmark_names
+    from ikid.io.mapping import MarkerMapWarning, landmark_names
 
     def _frame_selection(spec: str, n: int, source: str) -> np.ndarray:
         """Frame numbers (0-based) from "0-9", "41,76,220" or "0-4,10-14"; each within the file."""
@@ -141,6 +142,9 @@ def run(args: argparse.Namespace) -> int:
         ikid.check_marker_units(neutral)
     except ikid.IkidError as e:
         raise type(e)(_naming(args.static, e)) from None
+    # Over the whole file (a static trial shows little; a task trial shows a marker across a joint).
+    for problem in mapping.stretched_segments(neutral):
+        warnings.warn(f"{args.static}: {problem}", MarkerMapWarning, stacklevel=1)
     if chosen is not None:
         neutral = neutral[chosen]
     method = args.method
