@@ -1264,6 +1264,10 @@ def main(argv: list[str] | None = None) -> int:
         for r in results:
             u = r["probes"]["uncalibrated"]
             u.message = u.message.replace(str(work), "$WORK").replace(str(folder), "$REALDATA")
+        for st in styloids.values():
+            st["calibrate_out"] = (
+                st["calibrate_out"].replace(str(work), "$WORK").replace(str(folder), "$REALDATA")
+            )
         left["attempts"] = [
             (h, f, m.replace(str(work), "$WORK").replace(str(folder), "$REALDATA"))
             for h, f, m in left["attempts"]
