@@ -488,3 +488,118 @@ def test_a_calibration_of_the_other_arm_an_edited_side_or_a_repeated_key_is_refu
     out = tmp_path / "out"
     assert cli(["ik", str(trial), "--calibration", str(path), "-o", str(out)]) == 2
     assert not list(tmp_path.glob("out*"))
+
+
+def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    r = np.zeros(np.shape(angle) + (3, 3))
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    r[..., axis, axis] = 1.0
+    r[..., i, i], r[..., j, j], r[..., i, j], r[..., j, i] = c, c, -s, s
+    return r
+
+
+def _plate(centre, turn: float) -> np.ndarray:
+    """An equilateral plate (43 mm sides) in its segment's y-z plane (x volar: on the back)."""
+    a = turn + np.arange(3) * 2 * np.pi / 3
+    return np.asarray(centre) + 0.043 / np.sqrt(3) * np.stack([0 * a, np.cos(a), np.sin(a)], axis=1)
+
+
+def _mirrored_arms(q: np.ndarray, turn_left: float = 0.0) -> tuple[np.ndarray, list[str]]:
+    """Both arms, built by hand in their anatomical frames so the truth is known: the same plates
+    on each, the left arm the mirror image (lab z negated) of a right arm placed elsewhere; its
+    hand turned by the angles `q` (ikid's, radians: Rot(-y, s_p) Rot(z, e_f) Rot(x, ad_ab)), the
+    right arm's held at zero. Landmarks: all four on the right, the lateral epicondyle on the left."""
+    forearm, hand = _plate((-0.03, 0.08, 0.0), 0.0), _plate((-0.025, -0.06, 0.0), 0.3)
+    landmarks = np.array([[0, 0.25, 0.035], [0, 0.25, -0.035], [0, 0, 0.028], [0, 0, -0.028]], float)
+    columns, labels = [], []
+    for side, pose, origin, plate_turn in (
+        ("R", _rot(0, 0.3) @ _rot(1, -0.5) @ _rot(2, 0.8), np.array([0.2, 1.0, 0.3]), 0.0),
+        ("L", _rot(0, -0.6) @ _rot(1, 0.2) @ _rot(2, 2.0), np.array([-0.1, 0.9, 0.4]), turn_left),
+    ):
+        angles = q if side == "L" else np.zeros_like(q)
+        wrist = _rot(1, -angles[:, 0]) @ _rot(2, angles[:, 1]) @ _rot(0, angles[:, 2])
+        mirror = np.array([1.0, 1.0, -1.0]) if side == "L" else np.ones(3)
+        fa = _plate((-0.03, 0.08, 0.0), plate_turn) if side == "L" else forearm
+        points = [np.broadcast_to(p, (len(q), 3)) for p in fa]
+        points += [np.einsum("nij,j->ni", wrist, p) for p in hand]
+        points += [np.broadcast_to(p, (len(q), 3)) for p in (landmarks if side == "R" else landmarks[:1])]
+        for p in points:
+            columns.append((origin + p @ pose.T) * mirror)
+        labels += [f"F{side}{k}" for k in (1, 2, 3)] + [f"G{side}{k}" for k in (1, 2, 3)]
+        labels += ["LE_R", "ME_R", "RS_R", "US_R"] if side == "R" else ["LE_L"]
+    return np.concatenate(columns, axis=1), labels
+
+
+def _arm_map(side: str, forearm: tuple[str, str, str], landmarks: dict[str, str]) -> str:
+    s = side[0].upper()
+    lines = [f'side = "{side}"', "[markers]"]
+    lines += [f'{m} = "{lab}"' for m, lab in zip(("RSP", "USP", "FAP"), forearm, strict=True)]
+    lines += [f'{m} = "G{s}{k}"' for m, k in (("MC2", 1), ("MC5", 2), ("MCB", 3))]
+    lines += ["[landmarks]"] + [f'{k} = "{v}"' for k, v in landmarks.items()]
+    return "\n".join(lines) + "\n"
+
+
+def test_mirror_calibration_reads_a_hand_built_left_arms_angles_and_refuses_what_it_cannot_know(
+    tmp_path, capsys
+):
+    t = np.linspace(0.0, 1.0, 70)
+    q = np.zeros((70, 3))
+    q[20:] = np.stack([0.4 * np.sin(6 * t[20:]), 0.7 * np.sin(9 * t[20:]), 0.25 * np.cos(5 * t[20:])], axis=1)
+    q[20:] -= q[20]  # from the neutral posture (the first 20 frames)
+    positions, labels = _mirrored_arms(q)
+    trial = io.write_trc(tmp_path / "both.trc", t, positions, 70.0, labels)
+    lms = {"lateral_epicondyle": "LE_R", "medial_epicondyle": "ME_R", "radial_styloid": "RS_R"}
+    (tmp_path / "right.toml").write_text(
+        _arm_map("right", ("FR1", "FR2", "FR3"), lms | {"ulnar_styloid": "US_R"})
+    )
+    left_landmark = {"lateral_epicondyle": "LE_L"}
+    (tmp_path / "left.toml").write_text(_arm_map("left", ("FL1", "FL2", "FL3"), left_landmark))
+    right, left = tmp_path / "right.json", tmp_path / "left.json"
+    base = ["calibrate", "--static", str(trial), "--frames", "0-19"]
+    assert cli(base + ["--map", str(tmp_path / "right.toml"), "-o", str(right)]) == 0
+    assert cli(base + ["--map", str(tmp_path / "left.toml"), "--from", str(right), "-o", str(left)]) == 0
+    out = capsys.readouterr().out
+    assert "Calibration(mirror, left arm" in out and "lateral_epicondyle 0 mm (0.0°)" in out, out
+    info = ikid.calibration.calibration_info(left)
+    assert info["method"] == "mirror" and info["provenance"]["mirror_from"] == str(right)
+    # The oracle: the left arm's hand was turned by q.
+    frames = io.read_markers(trial).frames(MarkerMap.load(tmp_path / "left.toml"))
+    got = _native.compute_features(ikid.load_calibration(left).apply(frames), "angles")
+    np.testing.assert_allclose(got, q, atol=1e-4)
+
+    def refused(forearm, landmarks, match):
+        (tmp_path / "bad.toml").write_text(_arm_map("left", forearm, landmarks))
+        cmd = base + [
+            "--map",
+            str(tmp_path / "bad.toml"),
+            "--from",
+            str(right),
+            "-o",
+            str(tmp_path / "bad.json"),
+        ]
+        assert cli(cmd) == 2
+        err = capsys.readouterr().err
+        assert match in err, err
+        assert not (tmp_path / "bad.json").exists()
+
+    # The plates' markers named the other way round: the epicondyle says how to name them.
+    refused(
+        ("FL3", "FL2", "FL1"),
+        left_landmark,
+        "give RSP the label now given to FAP, give FAP the label now given to RSP",
+    )
+    # No landmark on the left: the equilateral plate pairs six ways.
+    refused(("FL1", "FL2", "FL3"), {}, "paired 6 ways")
+    # The left plate turned 40° on its forearm: not mounted alike.
+    positions, labels = _mirrored_arms(q, turn_left=np.radians(40.0))
+    trial = io.write_trc(tmp_path / "both.trc", t, positions, 70.0, labels)
+    refused(("FL1", "FL2", "FL3"), left_landmark, "the clusters are not mounted alike")
+    # Another method's calibration, or none from landmarks, cannot be mirrored.
+    assert (
+        cli(
+            base + ["--map", str(tmp_path / "left.toml"), "--from", str(left), "-o", str(tmp_path / "x.json")]
+        )
+        == 2
+    )
+    assert "the mirror method takes the other arm's landmarks calibration" in capsys.readouterr().err

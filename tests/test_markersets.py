@@ -65,8 +65,8 @@ def write_arm(path, positions: np.ndarray, rate: float, prefix: str = "R"):
 
 def test_a_marker_may_be_a_landmark_of_its_own_segment_only():
     six = {"RSP": "A", "USP": "B", "FAP": "C", "MC2": "D", "MC5": "E", "MCB": "F"}
-    both = MarkerMap.from_dict({"markers": six, "landmarks": {"radial_styloid": "A", "ulnar_styloid": "B"}})
-    assert both.landmarks == {"radial_styloid": "A", "ulnar_styloid": "B"}
+    radial = MarkerMap.from_dict({"markers": six, "landmarks": {"radial_styloid": "A", "ulnar_styloid": "G"}})
+    assert radial.landmarks == {"radial_styloid": "A", "ulnar_styloid": "G"}
     with pytest.raises(
         FileFormatError,
         match=r"label 'D' is given to marker MC2 \(on the hand\) and to landmark radial_styloid \(on the "
@@ -75,6 +75,53 @@ def test_a_marker_may_be_a_landmark_of_its_own_segment_only():
         MarkerMap.from_dict({"markers": six, "landmarks": {"radial_styloid": "D"}})
     with pytest.raises(FileFormatError, match="label 'A' is given to both RSP and USP"):
         MarkerMap.from_dict({"markers": {**six, "USP": "A"}})
+
+
+def test_a_forearm_marker_on_the_ulnar_styloid_is_refused_unless_the_hand_is_one_marker():
+    # The ulna stays while the radius turns about it: three forearm markers one of which is on the
+    # ulna read part of the pronation as wrist rotation (pyomeca, STYLr/STYLu as RSP/USP: 12.8° off).
+    six = {"RSP": "A", "USP": "B", "FAP": "C", "MC2": "D", "MC5": "E", "MCB": "F"}
+    for landmarks in ({"radial_styloid": "A", "ulnar_styloid": "B"}, {"ulnar_styloid": "C"}):
+        marker = "USP" if landmarks["ulnar_styloid"] == "B" else "FAP"
+        with pytest.raises(
+            FileFormatError,
+            match=rf"label '{landmarks['ulnar_styloid']}' is forearm marker {marker} and landmark "
+            r"ulnar_styloid: a marker on the ulna.*how much cannot be known from them.*the ulnar styloid "
+            r"in \[landmarks\] only",
+        ):
+            MarkerMap.from_dict({"markers": six, "landmarks": landmarks})
+    # Plug-in Gait's wrist bar (one hand marker): its forearm is built anew each frame.
+    assert MarkerMap.plug_in_gait("right").landmarks["ulnar_styloid"] == "RWRB"
+
+
+def test_a_segment_whose_markers_do_not_keep_their_distances_is_named_before_any_angle(tmp_path, capsys):
+    # The body model's arm flexing and deviating; white noise on every marker (the thesis' 5 %
+    # uniform noise, and 3 mm Gaussian) is the markers' own, not a segment's stretch.
+    t = np.linspace(0.0, 2.0, 200)
+    q = np.stack([0.2 * np.sin(t), 0.6 * np.sin(3 * t), 0.3 * np.cos(2 * t)], axis=1)
+    frames = ikid.forward_markers(q)
+    six = {"RSP": "A", "USP": "B", "FAP": "C", "MC2": "D", "MC5": "E", "MCB": "F"}
+    good = MarkerMap.from_dict({"markers": six})
+    for noisy in (
+        frames,
+        ikid._native.noise_uniform(frames, 0.05, 1),
+        ikid._native.noise_gaussian(frames, 0.003, 2),
+    ):
+        assert good.stretched_segments(noisy) == []
+    # A "hand" with an elbow marker (fixed to the forearm, 20 cm from the wrist) for MC2.
+    elbow = frames[:, 6:9] + (frames[:, 6:9] - frames[:, 0:3]) * 0.5
+    wrong = frames.copy()
+    wrong[:, 9:12] = elbow
+    mapping = MarkerMap.from_dict({"markers": {**six, "MC2": "ELB"}})
+    found = mapping.stretched_segments(wrong)
+    assert len(found) == 2 and all("the hand's markers MC2 ('ELB') and" in f for f in found), found
+    assert "one of them seems to be on another segment" in found[0], found
+    # Through the command line: said before the angles are written (a warning, the run goes on).
+    path = io.write_trc(tmp_path / "t.trc", t, wrong, 100.0, ["A", "B", "C", "ELB", "E", "F"])
+    (tmp_path / "m.toml").write_text('[markers]\nRSP="A"\nUSP="B"\nFAP="C"\nMC2="ELB"\nMC5="E"\nMCB="F"\n')
+    cli(["ik", str(path), "--map", str(tmp_path / "m.toml"), "-o", str(tmp_path / "o.mot")])
+    err = capsys.readouterr().err
+    assert "ikid: warning: " in err and "the hand's markers MC2 ('ELB') and" in err, err
 
 
 def test_a_map_says_a_hand_is_three_markers_or_one():

@@ -14,7 +14,9 @@ Writes ``docs/realdata.md`` and ``docs/realdata/*.png``; the last line printed i
     realdata: pyomeca_ik=<deg> pyomeca_track=<deg> racing_ik=<deg> racing_track=<deg>
               left_in_range=<%|refused> left_r=<r|refused> pig_ik=<deg> pig_track=<deg> diverged=<count>
 
-(racing on its gimbal_ok frames; pig: the Plug-in Gait trial, both arms, e_f and ad_ab — what its one
+(racing on its gimbal_ok frames; left: the racing left arm, calibrated by the mirror method, the
+smaller of ik's and track's share of frames within the coordinates' ranges ± 45° and of their e_f's
+Pearson r against the right arm's; pig: the Plug-in Gait trial, both arms, e_f and ad_ab — what its one
 hand marker determines — against Vicon's converted wrist angles, means removed, worst;
 diverged = trials and probes whose track output is non-finite or
 more than 100° off the reference anywhere, garbage frames included; the left arm if non-finite).
@@ -410,6 +412,8 @@ LEFT_MARKERS = {
     "MC5": "GloveL2",
     "MCB": "GloveL3",
 }
+# The left arm's one landmark: with the plates' shape it says how they pair with the right arm's.
+LEFT_LANDMARKS = {"lateral_epicondyle": "LateralEpicondyleL"}
 
 
 @dataclass
@@ -630,76 +634,99 @@ def median_posture_frames(data, markers: dict[str, str], k: int = 10) -> list[in
 
 
 def left_arm(folder: Path, work: Path, right: dict, log: list[str]) -> dict:
-    """The racing recording's left arm: calibrated from neutral frames (the right arm's), tracked;
-    no reference there, so: finite, no 360° jumps, in range, and e_f against the right arm's. Its
-    plates and lateral epicondyle do not give the forearm's axes, so the calibration may be refused
-    (what to record said): then nothing is tracked."""
+    """The racing recording's left arm: plates and a lateral epicondyle only. Calibrated as a lab
+    would (docs/markersets.md): `ikid calibrate --method mirror --from <the right arm's calibration>`
+    with the left's lateral epicondyle in the map, the hand at the 10 frames nearest one another
+    near the left arm's median posture (the rule the reference chose the right arm's neutral frames
+    by); the map first names the plates' markers in label order and, if the calibration says they
+    pair the other way, as it says. Then `ik` and `track`; no reference there, so: finite, no 360°
+    jumps, in range (both paths), and e_f against the right arm's (ik against ik, track against
+    track). Refused (what to record said): nothing is tracked."""
     import ikid
     from ikid.io import read_markers
 
     rec = next(r for r in RECORDINGS if r.name == "racing")
     trial = folder / rec.trial
     mapping = work / "racing_left.toml"
-    mapping.write_text(
-        map_toml(Recording("racing_left", rec.trial, rec.reference, LEFT_MARKERS, {}, "", "left"))
-    )
     cal = work / "racing_left.json"
-    out: dict = {}
+    out: dict = {"attempts": []}
     data = read_markers(trial)
     n = len(data)
-    for how, chosen in (
-        ("the right arm's neutral frames", right["ref"]["meta"]["neutral_frames"]),
-        (
-            "the 10 frames nearest one another near the left arm's median posture",
-            median_posture_frames(data, LEFT_MARKERS),
-        ),
-    ):
-        neutral = ",".join(str(i) for i in chosen)
-        cmd = [
-            "calibrate",
-            "--static",
-            str(trial),
-            "--frames",
-            neutral,
-            "--map",
-            str(mapping),
-            "-o",
-            str(cal),
-        ]
+    chosen = median_posture_frames(data, LEFT_MARKERS)
+    neutral = ",".join(str(i) for i in chosen)
+    markers = dict(LEFT_MARKERS)
+    for _ in range(2):
+        mapping.write_text(
+            map_toml(Recording("racing_left", rec.trial, rec.reference, markers, LEFT_LANDMARKS, "", "left"))
+        )
+        forearm = ", ".join(f"{m}={markers[m]}" for m in ("RSP", "USP", "FAP"))
+        cmd = ["calibrate", "--static", str(trial), "--frames", neutral, "--map", str(mapping)]
+        cmd += ["--method", "mirror", "--from", str(right["cal_path"]), "-o", str(cal)]
         done = run(cmd, log)
-        out.setdefault("attempts", []).append((how, neutral, (done.stdout + done.stderr).strip()))
-        if done.returncode == 0:
+        message = (done.stdout + done.stderr).strip()
+        out["attempts"].append((forearm, neutral, message))
+        # What the refusal says to change in the map: "give RSP the label now given to FAP, ...".
+        moves = re.findall(r"give (\w+) the label now given to (\w+)", message)
+        if done.returncode == 0 or not moves:
             break
-    out["calibrate_out"] = (done.stdout + done.stderr).strip()
+        markers = {**markers, **{a: markers[b] for a, b in moves}}
+    out["calibrate_out"] = message
     out["calibrated"] = done.returncode == 0
-    out["neutral_how"] = how
+    out["markers"] = markers
+    nan = float("nan")
     if not out["calibrated"]:
-        # Refused (the neutral method cannot know where plates sit on the forearm): nothing is
-        # tracked, so nothing is written and nothing diverged.
-        nan = float("nan")
-        out.update(run=None, in_range=nan, written=0.0, jumps=(nan, nan), diverged=False)
-        out.update(ef_correlation=nan, ef_frames=0)
+        out.update(run=None, ik=None, in_range=nan, in_range_by={}, written=0.0, jumps=(nan, nan))
+        out.update(diverged=False, ef_correlation=nan, ef_by={}, ef_frames=0)
         return out
-    got = track_file(
-        trial, mapping, cal if done.returncode == 0 else None, work / "racing_left_track", n, log
-    )
+    got = track_file(trial, mapping, cal, work / "racing_left_track", n, log)
     out["run"] = got
-    q = got.q
-    written = np.isfinite(q).all(axis=1)
+    out["ik"] = ik_file(trial, mapping, cal, work / "racing_left_ik.mot", n, log)
     lo = np.array([c[2][0] for c in ikid._native.COORDINATES]) - np.radians(RANGE_MARGIN_DEG)
     hi = np.array([c[2][1] for c in ikid._native.COORDINATES]) + np.radians(RANGE_MARGIN_DEG)
-    inside = written & np.all((q >= lo) & (q <= hi), axis=1)
-    out["in_range"] = float(inside.sum() / n)  # rows not written (implausible) count as outside
-    out["written"] = float(written.sum() / n)
-    out["jumps"] = jumps(q)
-    out["diverged"] = got.returncode != 0 or not np.isfinite(q[written]).all()
-    right_q = right["probes"]["base"].q
-    both = written & np.isfinite(right_q).all(axis=1)
-    out["ef_correlation"] = (
-        float(np.corrcoef(q[both, 1], right_q[both, 1])[0, 1]) if both.sum() > 2 else float("nan")
-    )
-    out["ef_frames"] = int(both.sum())
+    right_by = {
+        "ik": np.radians(right["ik"].angles) if right["ik"] else None,
+        "track": right["probes"]["base"].q,
+    }
+    out["in_range_by"], out["ef_by"], out["written_by"] = {}, {}, {}
+    for path, q in (("ik", out["ik"].q), ("track", got.q)):
+        written = np.isfinite(q).all(axis=1)
+        inside = written & np.all((q >= lo) & (q <= hi), axis=1)
+        out["in_range_by"][path] = float(inside.sum() / n)  # rows not written count as outside
+        out["written_by"][path] = float(written.sum() / n)
+        right_q = right_by[path]
+        both = written & np.isfinite(right_q).all(axis=1) if right_q is not None else np.zeros(n, bool)
+        out["ef_by"][path] = float(np.corrcoef(q[both, 1], right_q[both, 1])[0, 1]) if both.sum() > 2 else nan
+        if path == "track":
+            out["ef_frames"] = int(both.sum())
+    out["in_range"] = min(out["in_range_by"].values())
+    out["ef_correlation"] = min(out["ef_by"].values())
+    out["written"] = min(out["written_by"].values())
+    out["jumps"] = jumps(got.q)
+    out["diverged"] = got.returncode != 0 or not np.isfinite(got.q[np.isfinite(got.q).all(axis=1)]).all()
     return out
+
+
+def ik_file(path: Path, mapping: Path, cal: Path, out: Path, n: int, log: list[str]) -> Run:
+    """`ikid ik` one marker file (``--resample`` if it refuses the rate); rows placed at frame
+    numbers (time x rate), NaN where none."""
+    from ikid.io import read_markers
+    from ikid.io.storage import read_storage
+
+    args = ["ik", str(path), "-o", str(out), "--map", str(mapping), "--calibration", str(cal)]
+    done = run(args, log)
+    if done.returncode != 0 and "--resample" in done.stderr:
+        done = run(args + ["--resample"], log)
+    q = np.full((n, 3), np.nan)
+    status = np.full(n, -1, np.int64)
+    if done.returncode != 0:
+        return Run(q, status, done.returncode, (done.stdout + done.stderr).strip())
+    rate = read_markers(path).rate_hz
+    table = read_storage(out)
+    rows = np.rint(table.time * rate).astype(int)
+    keep = (rows >= 0) & (rows < n) & (np.abs(table.time * rate - rows) < 0.25)
+    angles = table.select(["ra_wr_s_p", "ra_wr_e_f", "ra_wr_ad_ab"])
+    q[rows[keep]] = (np.radians(angles) if table.in_degrees else angles)[keep]
+    return Run(q, status, 0, (done.stdout + done.stderr).strip())
 
 
 # --- Plug-in Gait: one hand marker, against Vicon's own wrist angles ---------------------------
@@ -802,11 +829,10 @@ def pig_summary(p: dict) -> list[str]:
 # --- styloid markers that are also landmarks -----------------------------------------------------
 
 # Two of pyomeca's maps whose markers are also landmarks: the styloid markers both in the forearm's
-# cluster (STYLr/STYLu as RSP/USP), and STYLr alone there with two markers on the radius. The styloids
-# sit on two bones that turn about each other in pronation, and ikid's technical frame (Gram-Schmidt
-# from RSP towards USP) takes the three as one rigid body: the first reads 12.8° off (an ISB frame
-# built anew each frame from the four landmarks, 8.4°), the second 1.55° (the reference's own cluster
-# 1.96°).
+# cluster (STYLr/STYLu as RSP/USP), and STYLr alone there with two markers on the radius. The ulna stays
+# while the radius turns about it in pronation, and the reference's forearm is the radius: the first
+# read 12.8° off (ik 12.7°, track 4.1°; any cluster holding STYLu 7.8-17°) and is refused by the marker
+# map, saying what to map instead; the second reads 1.55° (the reference's own cluster 1.96°).
 PYOMECA_STYLOIDS = {
     "both styloids as RSP/USP": {
         "RSP": "Daphnee:STYLr",
@@ -842,7 +868,8 @@ def styloid_line(styloids: dict) -> str:
     for name, st in styloids.items():
         used = ", ".join(f"{m}={lab.split(':')[-1]}" for m, lab in st["markers"].items())
         if not st["calibrated"]:
-            parts.append(f"{name} ({used}): calibration FAILED: {st['calibrate_out'].splitlines()[-1]}")
+            why = st["calibrate_out"].splitlines()[-1] if st["calibrate_out"] else ""
+            parts.append(f"{name} ({used}): refused: {why}")
             continue
         ik, tr, ge = st["ik"], st["track"], st["geometry"]
         parts.append(
@@ -912,11 +939,15 @@ def plot_left(left: dict, right: dict, path: Path) -> None:
     for k, ax in enumerate(axes):
         ax.plot(t, np.degrees(right["probes"]["base"].q[:, k]), "C1", lw=1, label="right arm (ikid track)")
         ax.plot(t, np.degrees(left["run"].q[:, k]), "C2", lw=1, label="left arm (ikid track)")
+        ax.plot(t, np.degrees(left["ik"].q[:, k]), "C2", lw=1, ls=":", label="left arm (ikid ik)")
         ax.set_ylabel(f"{names[k]}, °")
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time, s")
-    fig.suptitle(f"racing: left arm vs right arm, e_f correlation {left['ef_correlation']:.2f}")
+    fig.suptitle(
+        f"racing: left arm (mirror calibration) vs right arm, e_f correlation ik {left['ef_by']['ik']:.2f}, "
+        f"track {left['ef_by']['track']:.2f}"
+    )
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=90)
@@ -1003,35 +1034,36 @@ def probe_report(results: list[dict], left: dict) -> list[str]:
         lines.append(f"| {r['rec'].name} | {u.returncode} | {msg.replace(str(REPO) + '/', '')} |")
     lines += [
         "",
-        "### 5. The racing left arm (`ForearmL1-3`, `GloveL1-3`; no reference angles)",
+        "### 5. The racing left arm (`ForearmL1-3`, `GloveL1-3`, `LateralEpicondyleL`; no reference angles)",
         "",
-        f'Calibrated by `ikid calibrate --frames <neutral frames>` with `side = "left"` in the map '
-        f"(method neutral): the right arm's neutral frames first, else (the left hand moves there) the 10 "
-        f"frames nearest one another among those nearest the left arm's median posture (as the "
-        f"reference chose the right arm's); tracked by `ikid track --calibration`. Bounds: no divergence, no "
-        f"360° jumps, angles within the coordinates' ranges ± {RANGE_MARGIN_DEG:g}° on ≥ "
-        f"{100 * IN_RANGE_MIN:g} % of frames (a row not written counts as outside).",
+        "Calibrated by `ikid calibrate --method mirror --from <the right arm's calibration above>` "
+        '(`side = "left"`, the lateral epicondyle in the map\'s `[landmarks]`; docs/markersets.md): the '
+        "right forearm's anatomical frame in its plate, taken to the left plate, checked by the plates' "
+        "shape and by where the left epicondyle lies against where the right arm's frame puts it (which "
+        "also tells how the equilateral plates' markers pair); the hand at the 10 frames nearest one another "
+        "near the left arm's median posture (the rule the reference chose the right arm's by). The map names "
+        "the plate's markers in label order first and, when the calibration says they pair the other way, as "
+        "it says. Tracked by `ikid track` and `ikid ik`. Bounds: no divergence, no 360° jumps, angles "
+        f"within the coordinates' ranges ± {RANGE_MARGIN_DEG:g}° on ≥ {100 * IN_RANGE_MIN:g} % of frames "
+        "(a row not written counts as outside); e_f against the right arm's (ik against ik, track "
+        "against track).",
         "",
         *[
-            f"- calibration from {how} ({frames}): {msg.splitlines()[-1] if msg else ''}"
-            for how, frames, msg in left["attempts"]
+            f"- calibration with {forearm} (frames {frames}): {msg.splitlines()[-1] if msg else ''}"
+            for forearm, frames, msg in left["attempts"]
         ],
     ]
     if left["run"] is None:
-        return lines + [
-            "- **refused**: the left arm's plates and lateral epicondyle give the forearm no axes the "
-            "neutral method can know (it keeps the body model's placement of RSP, USP and FAP), so "
-            "nothing is tracked and nothing written; the refusal says what to record (landmarks, or a "
-            "functional movement).",
-            "",
-        ]
+        return lines + ["- **refused**: nothing is tracked and nothing written.", ""]
     return lines + [
-        f"- written rows: {100 * left['written']:.1f} % of frames; within range ± {RANGE_MARGIN_DEG:g}°: "
-        f"{100 * left['in_range']:.1f} %",
-        f"- largest step between consecutive outputs: {left['jumps'][0]:.1f}° per angle, "
+        *[
+            f"- `{path}`: written rows {100 * left['written_by'][path]:.1f} % of frames; within range "
+            f"± {RANGE_MARGIN_DEG:g}°: {100 * left['in_range_by'][path]:.1f} %; e_f left vs right (Pearson): "
+            f"**{left['ef_by'][path]:.2f}**"
+            for path in ("ik", "track")
+        ],
+        f"- largest step between consecutive `track` outputs: {left['jumps'][0]:.1f}° per angle, "
         f"{left['jumps'][1]:.1f}° geodesic; diverged: {'yes' if left['diverged'] else 'no'}",
-        f"- flexion/extension, left vs right arm (Pearson, {left['ef_frames']} frames with both): "
-        f"**{left['ef_correlation']:.2f}**",
         "",
         "![racing left arm](realdata/racing_left.png)",
         "",
@@ -1077,11 +1109,13 @@ def probe_summary(results: list[dict], left: dict) -> list[str]:
         why = left["calibrate_out"].splitlines()[-1]
         lines.append(f"racing left arm: calibration refused, nothing written: {why}")
         return lines
+    forearm = ", ".join(f"{m}={left['markers'][m]}" for m in ("RSP", "USP", "FAP"))
     lines.append(
-        f"racing left arm: {'calibrated' if left['calibrated'] else 'NOT calibrated'}; "
-        f"in range ±{RANGE_MARGIN_DEG:g}° {100 * left['in_range']:.1f} % of frames; "
-        f"largest step {left['jumps'][0]:.1f}°; e_f correlation with the right arm "
-        f"{left['ef_correlation']:.2f} ({left['ef_frames']} frames); diverged {int(left['diverged'])}"
+        f"racing left arm: calibrated (mirror, {forearm}); "
+        f"in range ±{RANGE_MARGIN_DEG:g}° ik {100 * left['in_range_by']['ik']:.1f} % / track "
+        f"{100 * left['in_range_by']['track']:.1f} % of frames; largest step {left['jumps'][0]:.1f}°; e_f "
+        f"correlation with the right arm ik {left['ef_by']['ik']:.2f} / track {left['ef_by']['track']:.2f} "
+        f"({left['ef_frames']} frames); diverged {int(left['diverged'])}"
     )
     return lines
 
@@ -1230,6 +1264,10 @@ def main(argv: list[str] | None = None) -> int:
         for r in results:
             u = r["probes"]["uncalibrated"]
             u.message = u.message.replace(str(work), "$WORK").replace(str(folder), "$REALDATA")
+        for st in styloids.values():
+            st["calibrate_out"] = (
+                st["calibrate_out"].replace(str(work), "$WORK").replace(str(folder), "$REALDATA")
+            )
         left["attempts"] = [
             (h, f, m.replace(str(work), "$WORK").replace(str(folder), "$REALDATA"))
             for h, f, m in left["attempts"]
@@ -1266,7 +1304,8 @@ def main(argv: list[str] | None = None) -> int:
         for name in ("pyomeca", "racing")
         for key in ("ik", "track")
     )
-    # The racing left arm: refused (nothing written) unless a method gives its forearm's axes.
+    # The racing left arm: the smaller of ik's and track's share in range and e_f correlation;
+    # refused (nothing written) if the mirror calibration is.
     left_last = (
         "left_in_range=refused left_r=refused"
         if left["run"] is None

@@ -118,6 +118,16 @@ class Calibration:
     @staticmethod
     def functional(neutral_frames: _Floats, movement_frames: _Floats, side: str = "right") -> Calibration: ...
     @staticmethod
+    def mirrored(
+        other: Calibration,
+        cluster: _Floats,
+        other_landmarks: _Floats,
+        neutral_frames: _Floats,
+        landmarks: _Floats | None = None,
+        landmark_frames: _Floats | None = None,
+        side: str = "left",
+    ) -> Calibration: ...
+    @staticmethod
     def body_model() -> Calibration: ...
     @staticmethod
     def from_matrices(forearm: _Floats, hand: _Floats, side: str = "right") -> Calibration: ...

@@ -15,7 +15,10 @@ The measurement itself is the core's (``crates/ikid/src/calibration.rs``, :class
 - **neutral**: the neutral posture alone (the forearm keeps the body model's placement);
 - **functional**: the neutral posture plus any movement mixing flexion and deviation, the
   forearm's rotation held (the two axes by least squares);
-- **movements**: a static trial and single-coordinate movements (one axis per trial).
+- **movements**: a static trial and single-coordinate movements (one axis per trial);
+- **mirror**: the other arm's landmarks calibration, for a forearm carrying the same cluster
+  mounted alike (mirror image), checked against this arm's cluster and any landmark it has; the
+  hand from this arm's neutral frames (:func:`calibrate_mirror`).
 
 A left arm is mirrored into a right arm (lab z negated) when measured and when applied, so its
 angles keep their anatomical signs. The file records the method, the side and the marker map;
@@ -86,6 +89,56 @@ def calibrate_functional(neutral_frames, movement_frames, *, side: str = "right"
     "left"."""
     return Calibration.functional(
         np.asarray(neutral_frames, np.float64), np.asarray(movement_frames, np.float64), side
+    )
+
+
+def calibrate_mirror(
+    other: str | os.PathLike[str],
+    neutral_frames,
+    landmarks=None,
+    *,
+    landmark_frames=None,
+    side: str | None = None,
+) -> Calibration:
+    """Measure a :class:`Calibration` of one arm from the other arm's calibration file ``other``
+    (written by :func:`save_calibration` from that arm's landmarks): its forearm frame, for a
+    forearm whose cluster is the same and mounted as its mirror image, and the hand from this
+    arm's ``neutral_frames`` ``(n, 18)``. ``landmarks`` ``(m, 12)`` (``Calibration.LANDMARKS``
+    order, NaN where this arm has none; the lateral epicondyle alone is enough) seen with
+    ``landmark_frames`` ``(m, 18)`` (default: the neutral frames) check which of this cluster's
+    markers matches which of the other's and that the two are mounted alike. ``side``: this
+    arm (default: the other side). Refused (``ikid.InputError``), saying what to record or
+    change, when that cannot be known or does not hold."""
+    path = Path(other)
+    info = calibration_info(path)
+    geometry = ((info.get("report") or {}).get("landmarks") or {}).get("geometry")
+    if info.get("method") != "landmarks" or geometry is None:
+        raise InputError(
+            f"{path}: the mirror method takes the other arm's landmarks calibration, which records its "
+            f"forearm's cluster and landmarks; this one is {info.get('method')!r}"
+            + (
+                ""
+                if geometry is not None or info.get("method") != "landmarks"
+                else " written by an older ikid"
+            )
+            + ": calibrate the other arm with `ikid calibrate` from its epicondyles and styloids"
+        )
+    names = [name for name, _ in Calibration.LANDMARKS]
+    try:
+        cluster = np.asarray(geometry["cluster_mm"], np.float64) / 1e3
+        at = geometry["landmarks_mm"]
+        others = np.array([[np.nan] * 3 if at.get(k) is None else at[k] for k in names], np.float64) / 1e3
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
+        raise InputError(f"{path}: the report's landmarks geometry is malformed ({e})") from None
+    side = side or ("left" if info["side"] == "right" else "right")
+    return Calibration.mirrored(
+        load_calibration(path),
+        cluster,
+        others,
+        np.asarray(neutral_frames, np.float64),
+        None if landmarks is None else np.asarray(landmarks, np.float64),
+        None if landmark_frames is None else np.asarray(landmark_frames, np.float64),
+        side,
     )
 
 

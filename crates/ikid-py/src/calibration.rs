@@ -4,9 +4,10 @@ use crate::conv::{with_f64_rows, with_floats};
 use crate::errors::{IntoPy, input};
 use ikid::body::{COORDINATES, MARKER_FRAME_LEN};
 use ikid::calibration::{
-    HAND_LANDMARK_FRAME_LEN, HAND_LANDMARKS, LANDMARK_FRAME_LEN, LANDMARKS, LandmarkTrial, Method, Side,
+    ForearmGeometry, HAND_LANDMARK_FRAME_LEN, HAND_LANDMARKS, LANDMARK_FRAME_LEN, LANDMARKS, LandmarkTrial, Method,
+    Side,
 };
-use nalgebra::Matrix3;
+use nalgebra::{Matrix3, Vector3};
 use numpy::{IntoPyArray, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyDictMethods};
@@ -162,6 +163,78 @@ impl Calibration {
         Ok(Calibration { inner, method: report.method, report: Some(report) })
     }
 
+    /// Takes the forearm's frame from the other arm's calibration `other` for a forearm carrying
+    /// the same cluster mounted alike (the mirror method), the hand's from this arm's neutral
+    /// frames `(n, 18)`. `cluster` `(3, 3)`: the other arm's RSP, USP, FAP in its forearm's
+    /// technical frame, metres; `other_landmarks` `(4, 3)`: its landmarks there
+    /// (`Calibration.LANDMARKS` order, NaN = not measured) — both as its calibration's report
+    /// records them (`report["landmarks"]["geometry"]`, in mm). `landmarks` `(m, 12)` with
+    /// `landmark_frames` `(m, 18)` (default: the neutral frames): this arm's landmarks, NaN where
+    /// not recorded (one is enough to tell how the cluster's markers pair). `side`: this arm.
+    /// Releases the GIL.
+    #[staticmethod]
+    #[pyo3(signature = (other, cluster, other_landmarks, neutral_frames, landmarks = None, landmark_frames = None, side = "left"))]
+    #[allow(clippy::too_many_arguments)]
+    fn mirrored(
+        py: Python<'_>,
+        other: &Calibration,
+        cluster: &Bound<'_, PyAny>,
+        other_landmarks: &Bound<'_, PyAny>,
+        neutral_frames: &Bound<'_, PyAny>,
+        landmarks: Option<&Bound<'_, PyAny>>,
+        landmark_frames: Option<&Bound<'_, PyAny>>,
+        side: &str,
+    ) -> PyResult<Self> {
+        let side = side_of(side)?;
+        let points3 = |obj: &Bound<'_, PyAny>, what: &str, rows: usize| {
+            with_f64_rows(obj, what, 3, |v, n| {
+                if n != rows {
+                    return Err(input(format!("{what}: expected {rows} rows of x, y, z, got {n}")));
+                }
+                Ok((0..rows).map(|r| Vector3::new(v[3 * r], v[3 * r + 1], v[3 * r + 2])).collect::<Vec<_>>())
+            })
+        };
+        let c = points3(cluster, "cluster", 3)?;
+        if c.iter().any(|p| !p.iter().all(|v| v.is_finite())) {
+            return Err(input("cluster: every marker of the other arm's cluster must be finite"));
+        }
+        let l = points3(other_landmarks, "other_landmarks", 4)?;
+        let geometry = ForearmGeometry {
+            cluster: [c[0], c[1], c[2]],
+            landmarks: std::array::from_fn(|k| l[k].iter().all(|v| v.is_finite()).then_some(l[k])),
+        };
+        let neutral = frames_of(neutral_frames, "neutral_frames")?;
+        let points = match landmarks {
+            Some(l) => Some(with_floats(l, "landmarks", 2, |values, shape| {
+                if shape[1] != LANDMARK_FRAME_LEN {
+                    return Err(input(format!(
+                        "landmarks: {} columns, a landmark frame has {LANDMARK_FRAME_LEN}",
+                        shape[1]
+                    )));
+                }
+                Ok(values.to_vec())
+            })?),
+            None => None,
+        };
+        let beside = match (landmark_frames, &points) {
+            (Some(f), Some(_)) => Some(frames_of(f, "landmark_frames")?),
+            (Some(_), None) => return Err(input("landmark_frames given without landmarks")),
+            (None, _) => None,
+        };
+        let other = other.inner;
+        let (inner, report) = py
+            .detach(|| {
+                let trial = points.as_ref().map(|l| LandmarkTrial {
+                    markers: beside.as_deref().unwrap_or(&neutral),
+                    landmarks: l,
+                    hand_landmarks: None,
+                });
+                ikid::Calibration::mirrored(&other, &geometry, &neutral, trial, side)
+            })
+            .py_err()?;
+        Ok(Calibration { inner, method: report.method, report: Some(report) })
+    }
+
     /// The body model's own placement (what an uncalibrated stream assumes).
     #[staticmethod]
     fn body_model() -> Self {
@@ -249,6 +322,15 @@ impl Calibration {
                 ld.set_item("epicondyle_span_mm", l.epicondyle_span_mm)?;
                 ld.set_item("styloid_axis_deg", l.styloid_axis_deg)?;
                 ld.set_item("length_scale", l.length_scale)?;
+                let g = PyDict::new(py);
+                let mm = |v: &Vector3<f64>| [1e3 * v.x, 1e3 * v.y, 1e3 * v.z];
+                g.set_item("cluster_mm", l.geometry.cluster.iter().map(mm).collect::<Vec<_>>())?;
+                let at = PyDict::new(py);
+                for (lm, p) in LANDMARKS.iter().zip(&l.geometry.landmarks) {
+                    at.set_item(lm.name, p.as_ref().map(mm))?;
+                }
+                g.set_item("landmarks_mm", at)?;
+                ld.set_item("geometry", g)?;
                 match &l.hand {
                     Some(h) => {
                         let hd = PyDict::new(py);
@@ -276,6 +358,26 @@ impl Calibration {
                 d.set_item("functional", fd)?;
             }
             None => d.set_item("functional", py.None())?,
+        }
+        match &r.mirror {
+            Some(m) => {
+                let md = PyDict::new(py);
+                md.set_item("from", m.from.name())?;
+                md.set_item("frames", m.frames)?;
+                md.set_item("cluster_mm", m.cluster_mm)?;
+                let at = PyDict::new(py);
+                for &(k, mm, deg) in &m.landmarks {
+                    let one = PyDict::new(py);
+                    one.set_item("mm", mm)?;
+                    one.set_item("deg", deg)?;
+                    at.set_item(LANDMARKS[k].name, one)?;
+                }
+                md.set_item("landmarks", at)?;
+                md.set_item("other_pairings", m.other_pairings)?;
+                md.set_item("next_pairing_deg", m.next_pairing_deg)?;
+                d.set_item("mirror", md)?;
+            }
+            None => d.set_item("mirror", py.None())?,
         }
         let moves = PyDict::new(py);
         for (j, range, purity) in &r.movements {

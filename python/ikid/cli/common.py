@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import stat
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -182,9 +183,15 @@ def _subject_calibration(frames: np.ndarray, calibration: str | None, mapping, s
     placement, after checking that it can read these markers at all (units, then placement:
     an uncalibrated real recording reads 50-170° off). Errors name ``source``."""
     from ikid.calibration import check_calibration_map
+    from ikid.io import MarkerMap
+    from ikid.io.mapping import MarkerMapWarning
 
     try:
         ikid.check_marker_units(frames)
+        # A segment whose markers do not keep their distances names a marker of another one
+        # (a "hand" with an elbow marker): said before any angle is written.
+        for problem in (mapping or MarkerMap.identity()).stretched_segments(frames):
+            warnings.warn(f"{source}: {problem}", MarkerMapWarning, stacklevel=2)
         if calibration:
             check_calibration_map(calibration, mapping)
             return ikid.load_calibration(calibration)

@@ -53,6 +53,19 @@ if TYPE_CHECKING:
     from ikid.io.markers import MarkerData
 
 
+#: How much the distance between two markers of one segment may change over a recording (its
+#: 10th to 90th percentile, the markers' frame-to-frame noise taken out), metres: on the real
+#: recordings' forearms and hands skin markers change by up to 12 mm and rigid plates by 1 mm,
+#: while a "segment" with a marker across the wrist or the elbow changes by 18-120 mm.
+MAX_SEGMENT_STRETCH_M = 0.015
+# The 10th-90th percentile range of a Gaussian, in standard deviations.
+_P10_P90_SIGMAS = 2.563
+
+
+class MarkerMapWarning(UserWarning):
+    """A marker map that the recording's markers contradict (:meth:`MarkerMap.stretched_segments`)."""
+
+
 @dataclass(frozen=True)
 class MarkerMap:
     """ikid marker name -> the label a lab's files use for it; optionally the arm's side and
@@ -147,6 +160,23 @@ class MarkerMap:
                     "segment "
                     "only: give the landmark its own label"
                 )
+        # The wrist's angles are the hand's in the radius (its proximal bone; ISB). Three forearm
+        # markers one of which is on the ulna (which stays while the radius turns about it in
+        # pronation) are no body the hand turns against: they read a share of the pronation as
+        # wrist rotation, which they cannot tell apart (pyomeca: 8-14 deg off the radius-fixed
+        # reference). A one-marker hand builds its forearm anew each frame and is not concerned.
+        ulnar = str(landmarks.get("ulnar_styloid", "")).strip()
+        if hand_point not in markers and segment_of.get(seen.get(ulnar, ""), "") == "forearm":
+            raise FileFormatError(
+                f"{source}: label {ulnar!r} is forearm marker {seen[ulnar]} and landmark ulnar_styloid: "
+                "a marker on the ulna, which stays while the radius turns about it in pronation. The "
+                "hand's angles are measured from the radius, and three forearm markers one of which is on "
+                "the ulna turn with neither bone: they read part of the forearm's pronation as wrist "
+                "rotation, and how much cannot be known from them (measured on a real recording: 8-14 "
+                "degrees off). Name as RSP, USP and FAP three markers on the distal radius or a cluster "
+                "strapped to it (the radial styloid may be one of them), and the ulnar styloid in "
+                "[landmarks] only"
+            )
         return MarkerMap(
             {m: markers[m].strip() for m in names},
             source,
@@ -231,6 +261,44 @@ class MarkerMap:
             "Y-Z-X order "
             "gives first is not known; flexion and deviation are the hand's direction in the forearm"
         }
+
+    def stretched_segments(self, frames: np.ndarray) -> list[str]:
+        """What says that a segment's markers, as this map names them, are not on one segment:
+        per pair of markers of a segment (frames ``(n, 18)``, ikid's order, metres) whose
+        distance changes over the frames by more than :data:`MAX_SEGMENT_STRETCH_M` (10th-90th
+        percentile, less the markers' own noise measured from consecutive frames), a sentence
+        naming both and their labels. Empty when none does, or with under 20 frames of the pair;
+        a wrist that does not move does not show a marker across it. A one-marker hand's
+        virtual markers are rigid by construction and not checked."""
+        frames = np.asarray(frames, np.float64).reshape(len(frames), 6, 3)
+        names = ikid_marker_names()
+        found = []
+        for segment, first in (("forearm", 0), ("hand", 3)):
+            if segment == "hand" and self.one_hand_marker:
+                continue
+            for a, b in ((0, 1), (0, 2), (1, 2)):
+                d = np.linalg.norm(frames[:, first + a] - frames[:, first + b], axis=1)
+                seen = np.isfinite(d)
+                if seen.sum() < 20:
+                    continue
+                lo, hi = np.percentile(d[seen], [10, 90])
+                step = np.diff(d)
+                step = step[np.isfinite(step)]
+                # Noise variance from consecutive frames (median of chi-square(1) is 0.4549).
+                noise = float(np.median(step**2)) / 2 / 0.4549 if len(step) else 0.0
+                spread = (hi - lo) / _P10_P90_SIGMAS
+                stretch = _P10_P90_SIGMAS * np.sqrt(max(spread**2 - noise, 0.0))
+                if stretch > MAX_SEGMENT_STRETCH_M:
+                    ma, mb = names[first + a], names[first + b]
+                    found.append(
+                        f"the {segment}'s markers {ma} ({self.labels.get(ma, ma)!r}) and {mb} "
+                        f"({self.labels.get(mb, mb)!r}) are {1e3 * lo:.0f}-{1e3 * hi:.0f} mm apart "
+                        f"(10th-90th percentile; {1e3 * stretch:.0f} mm beyond the markers' noise), and "
+                        "one segment's markers keep their distances within "
+                        f"{1e3 * MAX_SEGMENT_STRETCH_M:.0f} mm: one of them seems to be on another segment "
+                        "(across the wrist or the elbow); check the labels the marker map gives them"
+                    )
+        return found
 
     def ikid_frames(self, columns: np.ndarray) -> np.ndarray:
         """ikid's ``(n, 18)`` frames from the mapped labels' columns (``labels_in_ikid_order``):

@@ -155,6 +155,7 @@ impl Calibration {
             neutral_uncertainty_deg: held.uncertainty_deg,
             landmarks: None,
             functional: Some(report),
+            mirror: None,
         };
         Ok((calibration, report))
     }

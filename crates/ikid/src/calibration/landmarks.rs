@@ -19,6 +19,9 @@ pub(super) fn forearm_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Re
     side.to_right(&mut landmarks);
     let mut sums = [Vector3::zeros(); 4];
     let mut counts = [0usize; 4];
+    // The cluster's own shape in its technical frame, over the same frames.
+    let mut cluster = [Vector3::zeros(); 3];
+    let mut cluster_frames = 0usize;
     let mut seen_anywhere = [0usize; 4];
     for (i, (f, l)) in
         markers.chunks_exact(MARKER_FRAME_LEN).zip(landmarks.chunks_exact(LANDMARK_FRAME_LEN)).enumerate()
@@ -31,6 +34,11 @@ pub(super) fn forearm_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Re
             continue;
         }
         let (origin, b) = technical_frame(f, Segment::Forearm, i)?;
+        for (k, c) in cluster.iter_mut().enumerate() {
+            let p = Vector3::new(f[3 * k] as f64, f[3 * k + 1] as f64, f[3 * k + 2] as f64);
+            *c += b.transpose() * (p - origin);
+        }
+        cluster_frames += 1;
         for k in (0..4).filter(|&k| seen[k]) {
             let p = Vector3::new(l[3 * k] as f64, l[3 * k + 1] as f64, l[3 * k + 2] as f64);
             sums[k] += b.transpose() * (p - origin);
@@ -90,6 +98,10 @@ pub(super) fn forearm_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Re
         styloid_axis_deg,
         length_scale: long.norm() / body::BodyModel::default().forearm.length,
         hand: None,
+        geometry: ForearmGeometry {
+            cluster: cluster.map(|c| c / cluster_frames as f64),
+            landmarks: [le, me, rs, us].map(Some),
+        },
     };
     Ok((Rotation3::from_matrix_unchecked(axes.transpose()), report))
 }

@@ -59,11 +59,13 @@ use crate::features::{technical_frame, technical_in_anatomical};
 
 mod functional;
 mod landmarks;
+mod mirror;
 mod movements;
 mod neutral;
 mod placement;
 
 use landmarks::{forearm_from_landmarks, hand_from_landmarks};
+pub use mirror::{ForearmGeometry, MAX_MIRROR_CLUSTER_M, MAX_MIRROR_LANDMARK_DEG, MirrorReport};
 pub use neutral::SUBJECT_SCALES;
 use neutral::neutral_posture;
 pub use placement::{
@@ -166,6 +168,9 @@ pub enum Method {
     /// Neutral posture plus the flexion and deviation axes fitted to any movement mixing them
     /// ([`Calibration::functional`]).
     Functional,
+    /// The other arm's forearm frame, mirrored onto clusters mounted alike; the hand at this
+    /// arm's neutral posture ([`Calibration::mirrored`]).
+    Mirror,
 }
 
 impl Method {
@@ -178,6 +183,7 @@ impl Method {
             Method::Landmarks => "landmarks",
             Method::Neutral => "neutral",
             Method::Functional => "functional",
+            Method::Mirror => "mirror",
         }
     }
 }
@@ -267,6 +273,8 @@ pub struct CalibrationReport {
     pub landmarks: Option<LandmarkReport>,
     /// What the functional fit measured, for [`Method::Functional`].
     pub functional: Option<FunctionalReport>,
+    /// How the clusters and landmarks of the two arms matched, for [`Method::Mirror`].
+    pub mirror: Option<MirrorReport>,
 }
 
 /// The functional fit ([`Calibration::functional`]) as it came out.
@@ -309,6 +317,9 @@ pub struct LandmarkReport {
     pub length_scale: f64,
     /// The hand's own landmarks, when given: the hand's frame came from them.
     pub hand: Option<HandLandmarkReport>,
+    /// The forearm's cluster and landmarks in its technical frame: what
+    /// [`Calibration::mirrored`] takes to the other arm.
+    pub geometry: ForearmGeometry,
 }
 
 /// The hand's landmarks as the calibration saw them.
@@ -1064,6 +1075,7 @@ mod tests {
             (Method::Landmarks, "landmarks"),
             (Method::Neutral, "neutral"),
             (Method::Functional, "functional"),
+            (Method::Mirror, "mirror"),
         ];
         for (method, name) in names {
             assert_eq!(method.name(), name);

@@ -46,6 +46,7 @@ impl Calibration {
             neutral_uncertainty_deg: held.uncertainty_deg,
             landmarks: None,
             functional: None,
+            mirror: None,
         };
         let mut measured = Vec::new();
         for &(j, frames) in movements {

@@ -56,6 +56,7 @@ impl Calibration {
             neutral_uncertainty_deg: held.uncertainty_deg,
             landmarks: landmark_report,
             functional: None,
+            mirror: None,
         };
         Ok((Calibration { forearm, hand, side }, report))
     }

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import warnings
 
 import numpy as np
 
@@ -26,6 +27,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "  # static trial + movements of one coordinate each:\n"
         "  ikid calibrate --static s01_static.c3d --movement ra_wr_e_f=s01_flex.c3d \\\n"
         "      --movement ra_wr_s_p=s01_pron.c3d --map lab.toml -o s01.json\n"
+        "  # an arm without landmarks, its cluster the mirror image of the other arm's (mounted alike):\n"
+        "  ikid calibrate --static s01_task.c3d --frames 0-9 --map left.toml --method mirror \\\n"
+        "      --from s01_right.json -o s01_left.json\n"
         "  ikid ik s01_task.c3d -o s01_task.mot --map lab.toml --calibration s01.json\n\n"
         "landmarks: the forearm's ISB frame (y from the mid-styloids to the mid-epicondyles, "
         "x = y x (ulnar -> radial styloid), z = x x y), each landmark averaged in the forearm cluster's "
@@ -39,6 +43,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "fitted by least squares to a movement mixing both, pronation held; the neutral frames read zero; "
         "the axes' signs come from the forearm markers' placement (within 60 degrees of the body model's), "
         "the hand's cluster may sit any way round. "
+        "mirror: the forearm's frame of the other arm's landmarks calibration (--from), for a forearm "
+        "cluster that is the same and mounted as its mirror image, checked: the cluster's shape, and a "
+        "landmark of this arm (the map's [landmarks], any of them; the lateral epicondyle is enough) where "
+        "the other arm's frame puts it, which also says which marker matches which on a symmetric plate; "
+        "the hand's frame from this arm's neutral frames. "
         'A left arm (side = "left" in the map, or --side left) is mirrored into a right arm: its angles keep '
         "their anatomical signs.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -56,10 +65,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--method",
-        choices=["auto", "landmarks", "neutral", "functional", "movements"],
+        choices=["auto", "landmarks", "neutral", "functional", "movements", "mirror"],
         default="auto",
-        help="auto (default): movements if --movement is given, functional if --motion is, landmarks if "
-        "the map names them, else neutral",
+        help="auto (default): movements if --movement is given, functional if --motion is, mirror if --from "
+        "is, landmarks if the map names them, else neutral",
+    )
+    p.add_argument(
+        "--from",
+        dest="mirror_from",
+        metavar="JSON",
+        help="mirror method: the other arm's calibration (from its landmarks; same session, same clusters)",
     )
     p.add_argument(
         "--motion",
@@ -90,8 +105,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Landmarks and/or neutral frames, or static + single-coordinate movement files -> a
     calibration JSON recording the method, the side and the marker map."""
-    from ikid.calibration import calibrate_functional, calibrate_neutral
+    from ikid.calibration import calibrate_functional, calibrate_mirror, calibrate_neutral
     from ikid.io import MarkerMap, read_markers
+    from ikid.io.mapping import MarkerMapWarning, landmark_names
 
     def _frame_selection(spec: str, n: int, source: str) -> np.ndarray:
         """Frame numbers (0-based) from "0-9", "41,76,220" or "0-4,10-14"; each within the file."""
@@ -114,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
     movement_files = [spec.partition("=")[2] or None for spec in args.movement]
     _refuse_over_inputs(
         [args.output],
-        [args.static, args.landmarks, args.motion, args.map, *movement_files],
+        [args.static, args.landmarks, args.motion, args.map, args.mirror_from, *movement_files],
         given=args.output,
     )
     mapping = MarkerMap.load(args.map) if args.map else MarkerMap.identity()
@@ -126,6 +142,9 @@ def run(args: argparse.Namespace) -> int:
         ikid.check_marker_units(neutral)
     except ikid.IkidError as e:
         raise type(e)(_naming(args.static, e)) from None
+    # Over the whole file (a static trial shows little; a task trial shows a marker across a joint).
+    for problem in mapping.stretched_segments(neutral):
+        warnings.warn(f"{args.static}: {problem}", MarkerMapWarning, stacklevel=1)
     if chosen is not None:
         neutral = neutral[chosen]
     method = args.method
@@ -135,6 +154,8 @@ def run(args: argparse.Namespace) -> int:
             if args.movement
             else "functional"
             if args.motion
+            else "mirror"
+            if args.mirror_from
             else ("landmarks" if mapping.landmarks else "neutral")
         )
     if method != "movements" and args.movement:
@@ -144,6 +165,12 @@ def run(args: argparse.Namespace) -> int:
             "ikid: error: --method functional needs --motion FILE (a movement mixing flexion and deviation)"
             if method == "functional"
             else f"ikid: error: --motion is for --method functional, not {method}"
+        )
+    if (method == "mirror") != bool(args.mirror_from):
+        raise SystemExit(
+            "ikid: error: --method mirror needs --from JSON (the other arm's landmarks calibration)"
+            if method == "mirror"
+            else f"ikid: error: --from is for --method mirror, not {method}"
         )
     if args.motion_frames and not args.motion:
         raise SystemExit("ikid: error: --motion-frames selects frames of --motion; give --motion FILE")
@@ -187,6 +214,33 @@ def run(args: argparse.Namespace) -> int:
             neutral, points, landmark_frames=beside, side=side, hand_landmarks=hand_points
         )
         provenance["landmarks"] = args.landmarks or args.static
+    elif method == "mirror":
+        source = read_markers(args.landmarks) if args.landmarks else static
+        where = chosen if (chosen is not None and not args.landmarks) else slice(None)
+        named = mapping.landmarks
+        absent = [
+            f"{named[k]} ({k})" for k in landmark_names() if k in named and named[k] not in source.labels
+        ]
+        if absent:
+            raise ikid.InputError(
+                f"{source.source or args.static}: landmark label(s) {', '.join(absent)} not found; the file "
+                f"has {', '.join(source.labels) or 'no labels'}"
+            )
+        nan = np.full((len(source), 3), np.nan)
+        points = np.concatenate(
+            [source.marker(named[k]) if k in named else nan for k in landmark_names()], axis=1
+        )[where]
+        beside = neutral if source is static else source.frames(mapping)[where]
+        seen = np.isfinite(points).any()
+        cal = calibrate_mirror(
+            args.mirror_from,
+            neutral,
+            points if seen else None,
+            landmark_frames=beside if seen else None,
+            side=side,
+        )
+        provenance["mirror_from"] = args.mirror_from
+        provenance["landmarks"] = args.landmarks or args.static
     elif method == "functional":
         motion = read_markers(args.motion)
         moving = motion.frames(mapping)
@@ -221,6 +275,20 @@ def run(args: argparse.Namespace) -> int:
             f"functional fit over {fn['frames']} frames: flexion {fn['flexion_range_deg']:.0f}°, deviation "
             f"{fn['deviation_range_deg']:.0f}°, pronation held at {-fn['supination_held_deg']:.0f}° "
             f"(residual {fn['residual_deg']:.1f}° RMS beside {fn['noise_deg']:.1f}° of marker noise)"
+        )
+    if r.get("mirror"):
+        mi = r["mirror"]
+        checked = ", ".join(f"{k} {v['mm']:.0f} mm ({v['deg']:.1f}°)" for k, v in mi["landmarks"].items())
+        details.append(
+            f"forearm mirrored from the {mi['from']} arm's calibration ({args.mirror_from}): cluster within "
+            f"{mi['cluster_mm']:.1f} mm of its mirror image over {mi['frames']} frames"
+            + (f"; {checked} from where it puts it" if checked else "; no landmark of this arm checked it")
+            + (
+                f" (the {mi['other_pairings']} other pairings of the markers the cluster's shape allows: "
+                f"{mi['next_pairing_deg']:.0f}° or more)"
+                if mi["other_pairings"] and mi["next_pairing_deg"] is not None
+                else ""
+            )
         )
     if r.get("landmarks"):
         lm = r["landmarks"]
