@@ -50,7 +50,7 @@ def errors_over_sd(seeds: list[int], condition: str) -> tuple[np.ndarray, np.nda
         trial = ikid.simulate(seed=seed, duration=DURATION_S, shoulder_flexion=SHOULDERS[k % len(SHOULDERS)])
         if noise is not None:
             trial = trial.with_noise(noise[0], seed + 1, **noise[1])
-        out = ikid.Tracker(rate_hz=RATE_HZ).run(np.asarray(trial.markers))
+        out = ikid.Tracker(rate_hz=RATE_HZ).run(np.asarray(trial.markers), sd=True)
         keep = np.arange(len(trial.time)) >= max(out["start"], SETTLE_S * RATE_HZ)
         angles.append((np.abs(out["q"] - trial.q) / out["q_sd"])[keep])
         torques.append((np.abs(out["tau"] - trial.tau) / out["tau_sd"])[keep])

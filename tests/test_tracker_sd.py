@@ -34,7 +34,8 @@ def test_sd_is_none_before_the_start_and_push_and_run_agree():
             continue
         assert sd is not None and sd.shape == (2, 3) and np.all(np.isfinite(sd)) and np.all(sd > 0)
         pushed.append(sd)
-    run = ikid.Tracker().run(np.asarray(trial.markers))
+    run = ikid.Tracker().run(np.asarray(trial.markers), sd=True)
+    assert "q_sd" not in ikid.Tracker().run(np.asarray(trial.markers))  # only when asked: it costs
     np.testing.assert_array_equal(run["q_sd"], np.array([p[0] for p in pushed]))
     np.testing.assert_array_equal(run["tau_sd"], np.array([p[1] for p in pushed]))
     assert np.all(np.isnan(run["q_sd"][: run["start"]]))
@@ -50,7 +51,7 @@ def test_sd_covers_about_68_percent_of_the_true_errors(noise):
     # does not count, is most of the angles' error (without it, 0.50 of frames were covered).
     trial = ikid.simulate(seed=SEED, duration=4.0, shoulder_flexion=0.2)
     noisy = trial.with_noise(noise[0], SEED + 1, **noise[1])
-    out = ikid.Tracker().run(np.asarray(noisy.markers))
+    out = ikid.Tracker().run(np.asarray(noisy.markers), sd=True)
     keep = np.arange(len(trial.time)) >= max(out["start"], 500)
     q_cover = np.mean((np.abs(out["q"] - trial.q) <= out["q_sd"])[keep])
     tau_cover = np.mean((np.abs(out["tau"] - trial.tau) <= out["tau_sd"])[keep])

@@ -117,28 +117,30 @@ impl Tracker {
     }
 
     /// Every frame of `frames` `(n, 18)` in order; returns a dict of `(n, 3)` float64 arrays
-    /// `q`, `qd`, `qdd`, `tau`, their standard deviations `q_sd`, `tau_sd` (``output_sd``
-    /// after each frame), the `(n,)` uint8 `missing` (bit i: marker i missing), `(n,)`
+    /// `q`, `qd`, `qdd`, `tau`, with ``sd=True`` their standard deviations `q_sd`, `tau_sd`
+    /// (``output_sd`` after each frame; off by default: it costs several times the filter), the `(n,)` uint8 `missing` (bit i: marker i missing), `(n,)`
     /// `noise` (mean learned hand-marker noise, m; NaN before the start), `refined` (bool) and
     /// `status` (uint16 bits, ``ikid.FRAME_STATUS``: markers rejected, poses held, restarts,
     /// implausible angles), and `start`,
     /// the first frame with an estimate (rows before it are NaN: the filter waits for a frame
     /// with every marker). Continues from the tracker's state. Releases the GIL.
-    fn run<'py>(&mut self, py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
+    #[pyo3(signature = (frames, sd=false))]
+    fn run<'py>(&mut self, py: Python<'py>, frames: &Bound<'py, PyAny>, sd: bool) -> PyResult<Bound<'py, PyDict>> {
+        let with_sd = sd;
         let tracker = &mut self.inner;
         let (out, sd, missing, noise, refined, status, start, n) =
             with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |values, n| {
                 // The core's `run` does the work; here its per-frame results are laid out as
                 // four (n, 3) blocks and three (n,) arrays.
                 let mut out = vec![f64::NAN; 4 * n * N_COORDINATES];
-                let mut sd = vec![f64::NAN; 2 * n * N_COORDINATES];
+                let mut sd = vec![f64::NAN; if with_sd { 2 * n * N_COORDINATES } else { 0 }];
                 let mut missing = vec![0u8; n];
                 let mut noise = vec![f64::NAN; n];
                 let mut refined = vec![false; n];
                 let mut status = vec![0u16; n];
                 let start = py
                     .detach(|| {
-                        tracker.run_with_sd(values, |i, o, s, _| {
+                        tracker.run_with_sd(values, with_sd, |i, o, s, _| {
                             for (k, row) in rows(o).iter().enumerate() {
                                 out[(k * n + i) * N_COORDINATES..(k * n + i + 1) * N_COORDINATES].copy_from_slice(row);
                             }
@@ -171,7 +173,7 @@ impl Tracker {
             let block = out[k * n * N_COORDINATES..(k + 1) * n * N_COORDINATES].to_vec();
             d.set_item(*name, block.into_pyarray(py).reshape([n, N_COORDINATES])?)?;
         }
-        for (k, name) in ["q_sd", "tau_sd"].iter().enumerate() {
+        for (k, name) in ["q_sd", "tau_sd"].iter().enumerate().filter(|_| with_sd) {
             let block = sd[k * n * N_COORDINATES..(k + 1) * n * N_COORDINATES].to_vec();
             d.set_item(*name, block.into_pyarray(py).reshape([n, N_COORDINATES])?)?;
         }

@@ -216,15 +216,17 @@ impl Tracker {
         (e_forearm.iter().chain(e_all.iter()).all(|v| v.is_finite())).then_some((e_forearm, e_all))
     }
 
-    /// [`run`](Self::run), handing `each` every frame's standard deviations too
-    /// ([`output_sd`](Self::output_sd) after that frame; `None` without an estimate).
+    /// [`run`](Self::run), handing `each` every frame's standard deviations too when `sd`
+    /// ([`output_sd`](Self::output_sd) after that frame; `None` without an estimate or
+    /// without `sd`: it costs several times the filter's own step).
     pub fn run_with_sd(
         &mut self,
         frames: &[f64],
+        sd: bool,
         mut each: impl FnMut(usize, &TrackerOutput, Option<TrackerSd>, bool),
     ) -> Result<Option<usize>> {
         self.run_observed(frames, |tracker, i, out, estimated| {
-            each(i, out, if estimated { tracker.output_sd() } else { None }, estimated)
+            each(i, out, if estimated && sd { tracker.output_sd() } else { None }, estimated)
         })
     }
 }

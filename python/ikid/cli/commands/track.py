@@ -158,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
             frames = block.frames(mapping, whole=False)
             seen |= seen_markers(frames)
             try:
-                out = tracker.run(frames)
+                out = tracker.run(frames, sd=with_sd)
             except ikid.InputError as e:
                 if k is None and "tracker never started" in str(e) and len(frames):
                     n_frames += len(frames)  # not started yet: a later block may start it
