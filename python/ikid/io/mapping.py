@@ -296,7 +296,9 @@ class MarkerMap:
                         f"(10th-90th percentile; {1e3 * stretch:.0f} mm beyond the markers' noise), and "
                         "one segment's markers keep their distances within "
                         f"{1e3 * MAX_SEGMENT_STRETCH_M:.0f} mm: one of them seems to be on another segment "
-                        "(across the wrist or the elbow); check the labels the marker map gives them"
+                        "(across the wrist or the elbow), or they slide on the skin that far; check the "
+                        "labels the marker map gives them, and expect skin markers' angles to carry that "
+                        "sliding"
                     )
         return found
 
