@@ -231,7 +231,7 @@ fuzz: $(CARGO_FUZZ)
 # each with its reason, in .cargo/mutants.toml. Fails below MUTANTS_MIN_SCORE; the last line
 # reads `mutants: viable=<n> caught=<n> missed=<n> score=<0.xx>`.
 CARGO_MUTANTS := .tools/bin/cargo-mutants
-MUTANTS_FILES ?= features net/mlp gaps tracker/* calibration stream
+MUTANTS_FILES ?= features net/mlp gaps tracker/* calibration/* stream
 MUTANTS_SHARD ?= 0/6
 MUTANTS_MIN_SCORE ?= 0.95
 $(CARGO_MUTANTS):
