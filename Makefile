@@ -238,6 +238,7 @@ $(CARGO_MUTANTS):
 	$(CARGO) install cargo-mutants --version 27.1.0 --locked --root .tools
 
 mutants: $(CARGO_MUTANTS)
+	mkdir -p target
 	PATH="$(abspath .tools/bin):$$PATH" $(CARGO) mutants -p ikid $(foreach f,$(MUTANTS_FILES),-f 'crates/ikid/src/$(f).rs') \
 		--shard $(MUTANTS_SHARD) --sharding round-robin --profile quick -o target/mutants > target/mutants.log 2>&1 \
 		|| test -f target/mutants/mutants.out/outcomes.json || (tail -30 target/mutants.log; exit 1)
