@@ -211,3 +211,28 @@ fn a_jump_the_arms_motion_would_hide_is_caught_by_the_marker_distances() {
     let err = (marker(&f, 4) - marker(&t, 4)).norm();
     assert!(err < 3e-3, "MC5 filled {} mm from the truth", 1e3 * err);
 }
+
+#[test]
+fn a_fills_fitted_markers_carry_no_velocity_into_the_next_frame() {
+    // USP slips 4 mm on the skin (within what its distances and motion allow, so it is kept),
+    // then FAP drops for one frame: the fill puts the forearm's markers where the placement
+    // learned before the slip has them, USP millimetres from where it is measured. That
+    // difference is the fit, not motion: the next complete frame, USP where it has been since
+    // the slip, must be taken as it is, not refused as a jump from where a velocity read off
+    // the fit would send it.
+    let body = BodyModel::default();
+    let mut truth = frames(&body, 420, 0.01, 1.0, |_| Vector3::zeros());
+    for f in &mut truth[390..] {
+        f[4] += 0.004;
+    }
+    let mut filler = learned(&truth, 400, 100.0);
+    let mut f = truth[400];
+    f[6..9].fill(f32::NAN);
+    assert_eq!(filler.fill(&mut f, 400).unwrap(), 1 << 2);
+    let off = (marker(&f, 1) - marker(&truth[400], 1)).norm();
+    assert!(off > 2e-3, "USP fitted {} mm from where it is measured", 1e3 * off);
+    for (i, t) in truth.iter().enumerate().skip(401) {
+        assert_eq!(filler.fill(&mut t.clone(), i).unwrap(), 0, "frame {i}");
+        assert_eq!(filler.status(), 0, "frame {i}");
+    }
+}
