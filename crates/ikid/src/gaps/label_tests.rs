@@ -236,3 +236,40 @@ fn a_fills_fitted_markers_carry_no_velocity_into_the_next_frame() {
         assert_eq!(filler.status(), 0, "frame {i}");
     }
 }
+
+#[test]
+fn a_swap_right_after_refused_frames_is_put_right_from_the_velocity_before_them() {
+    // The racer's swaying arm, the wrist turning slowly: three frames with MC2 and MCB missing
+    // (unfillable, refused), then MC2 and MC5 swap labels for good. Four frames on from the
+    // last accepted one, where the markers were heading in the lab is centimetres off (by hand
+    // below: it cannot tell MC2 from MC5); where the hand's markers were heading in the
+    // forearm's frame, moved on over the refused frames, can. The swap must be found in its
+    // first frame and followed: every frame the truth, flagged swapped.
+    let body = BodyModel::default();
+    let omega = 2.0 * std::f64::consts::PI * 1.5;
+    let truth = frames(&body, 600, 0.04, 1.0, |t| Vector3::new(0.2 * (omega * t).sin(), 0.0, 0.0));
+    // The arm at its turn (most acceleration) when the swap comes.
+    let start = 502;
+    let mut filler = learned(&truth, start, 25.0);
+    for (i, t) in truth.iter().enumerate().take(start + 3).skip(start) {
+        let mut f = *t;
+        f[9..12].fill(f32::NAN);
+        f[15..18].fill(f32::NAN);
+        assert!(filler.fill(&mut f, i).is_err(), "frame {i}");
+    }
+    let heading = |m: usize| 5.0 * marker(&truth[start - 1], m) - 4.0 * marker(&truth[start - 2], m);
+    let near = |from: usize, to: usize| {
+        let here = marker(&truth[start + 3], from);
+        (here - heading(from)).norm() <= SWAP_RATIO * (here - heading(to)).norm()
+    };
+    assert!(!(near(3, 4) && near(4, 3)), "the lab's prediction alone would find this swap");
+    for (i, t) in truth.iter().enumerate().skip(start + 3) {
+        let mut f = *t;
+        for k in 0..3 {
+            f.swap(9 + k, 12 + k);
+        }
+        assert_eq!(filler.fill(&mut f, i).unwrap(), 0, "frame {i}");
+        assert_eq!(filler.status(), status::SWAPPED, "frame {i}");
+        assert_eq!(f.map(f32::to_bits), t.map(f32::to_bits), "frame {i}");
+    }
+}
