@@ -239,7 +239,7 @@ fn a_fills_fitted_markers_carry_no_velocity_into_the_next_frame() {
 
 #[test]
 fn a_swap_right_after_refused_frames_is_put_right_from_the_velocity_before_them() {
-    // The racer's swaying arm, the wrist turning slowly: three frames with MC2 and MCB missing
+    // The racer's swaying arm, the wrist at up to 2.6 rad/s: three frames with MC2 and MCB missing
     // (unfillable, refused), then MC2 and MC5 swap labels for good. Four frames on from the
     // last accepted one, where the markers were heading in the lab is centimetres off (by hand
     // below: it cannot tell MC2 from MC5); where the hand's markers were heading in the
@@ -247,7 +247,7 @@ fn a_swap_right_after_refused_frames_is_put_right_from_the_velocity_before_them(
     // first frame and followed: every frame the truth, flagged swapped.
     let body = BodyModel::default();
     let omega = 2.0 * std::f64::consts::PI * 1.5;
-    let truth = frames(&body, 600, 0.04, 1.0, |t| Vector3::new(0.2 * (omega * t).sin(), 0.0, 0.0));
+    let truth = frames(&body, 600, 0.04, 2.0, |t| Vector3::new(0.2 * (omega * t).sin(), 0.0, 0.0));
     // The arm at its turn (most acceleration) when the swap comes.
     let start = 502;
     let mut filler = learned(&truth, start, 25.0);
