@@ -273,3 +273,59 @@ fn a_swap_right_after_refused_frames_is_put_right_from_the_velocity_before_them(
         assert_eq!(f.map(f32::to_bits), t.map(f32::to_bits), "frame {i}");
     }
 }
+
+#[test]
+fn a_calibrations_centre_holds_until_the_wrist_has_moved_enough_to_locate_its_own() {
+    // The default subject told its own calibration (the seed is the true centre: the wrist,
+    // the body model's segments' common origin), markers with ±1 mm noise, the wrist turning
+    // by ±1° for two seconds at 100 Hz: far too little motion to locate the centre against
+    // that noise (it takes ±10° about every axis, SEED_FRAMES frames of it to outweigh the
+    // seed). The centre the filler reports must stay near the wrist (the noise moves it
+    // millimetres), where the motion alone would put it centimetres off.
+    let body = BodyModel::default();
+    let pose = body.forearm_pose(0.2);
+    let wrist = pose.translation.vector;
+    let mut rng = crate::rng::SplitMix::new(9);
+    let mut filler = GapFiller::at_rate(100.0);
+    filler.set_calibration(Some(&Calibration::body_model()));
+    let still = body.marker_frame(&[0.0; 3], &pose).map(|v| v as f32);
+    for i in 0..200 {
+        let t = i as f64 * 0.01;
+        let a = 1f64.to_radians();
+        let q = [a * (7.0 * t).sin(), a * (5.0 * t + 1.0).sin(), a * (3.0 * t + 0.5).sin()];
+        let mut f = body.marker_frame(&q, &pose).map(|v| (v + rng.uniform(-1e-3, 1e-3)) as f32);
+        assert_eq!(filler.fill(&mut f, i).unwrap(), 0);
+    }
+    let (c_f, c_h) = filler.joint_centre().expect("seeded");
+    for (segment, c) in [(Segment::Forearm, c_f), (Segment::Hand, c_h)] {
+        let (o, r) = technical_frame(&still, segment, 0).unwrap();
+        let miss = (r * c + o - wrist).norm();
+        assert!(miss < 5e-3, "{segment:?}: the centre {} mm off the wrist", 1e3 * miss);
+    }
+}
+
+#[test]
+fn the_centre_learned_from_enough_motion_takes_over_from_a_calibrations() {
+    // A subject 15 % larger told the default calibration: the seed sits about a centimetre
+    // off. Four seconds of the trial's motion (±46°, ±34° and ±17° about the three axes, far
+    // more than SEED_FRAMES frames of ±10°) locate the centre on their own; it must then be
+    // the subject's wrist, within a millimetre.
+    let body = BodyModel::scaled(1.15, 1.0);
+    let truth = frames(&body, 400, 0.01, 1.0, |_| Vector3::zeros());
+    let wrist = body.forearm_pose(0.2).translation.vector;
+    let mut filler = GapFiller::at_rate(100.0);
+    filler.set_calibration(Some(&Calibration::body_model()));
+    let (seed_f, _) = calibration_joint_centre(&Calibration::body_model());
+    let (o, r) = technical_frame(&truth[0], Segment::Forearm, 0).unwrap();
+    let seed_miss = (r * seed_f + o - wrist).norm();
+    assert!(seed_miss > 5e-3, "the seed is {} mm off the wrist", 1e3 * seed_miss);
+    for (i, t) in truth.iter().enumerate() {
+        assert_eq!(filler.fill(&mut t.clone(), i).unwrap(), 0);
+    }
+    let (c_f, c_h) = filler.joint_centre().expect("seeded");
+    for (segment, c) in [(Segment::Forearm, c_f), (Segment::Hand, c_h)] {
+        let (o, r) = technical_frame(&truth[399], segment, 0).unwrap();
+        let miss = (r * c + o - wrist).norm();
+        assert!(miss < 1e-3, "{segment:?}: the centre {} mm off the wrist", 1e3 * miss);
+    }
+}
