@@ -231,13 +231,14 @@ fuzz: $(CARGO_FUZZ)
 # each with its reason, in .cargo/mutants.toml. Fails below MUTANTS_MIN_SCORE; the last line
 # reads `mutants: viable=<n> caught=<n> missed=<n> score=<0.xx>`.
 CARGO_MUTANTS := .tools/bin/cargo-mutants
-MUTANTS_FILES ?= features net/mlp gaps tracker/* calibration stream
+MUTANTS_FILES ?= features net/mlp gaps tracker/* calibration/* stream
 MUTANTS_SHARD ?= 0/6
 MUTANTS_MIN_SCORE ?= 0.95
 $(CARGO_MUTANTS):
 	$(CARGO) install cargo-mutants --version 27.1.0 --locked --root .tools
 
 mutants: $(CARGO_MUTANTS)
+	mkdir -p target
 	PATH="$(abspath .tools/bin):$$PATH" $(CARGO) mutants -p ikid $(foreach f,$(MUTANTS_FILES),-f 'crates/ikid/src/$(f).rs') \
 		--shard $(MUTANTS_SHARD) --sharding round-robin --profile quick -o target/mutants > target/mutants.log 2>&1 \
 		|| test -f target/mutants/mutants.out/outcomes.json || (tail -30 target/mutants.log; exit 1)

@@ -52,3 +52,22 @@ def test_a_run_is_scored_recorded_and_shown_current_then_stale(tmp_path, capsys,
     record = json.loads((out / mutants_summary.RECORD).read_text())
     (out / mutants_summary.RECORD).write_text(json.dumps(record | {"commit": before}))
     assert "STALE: crates/ikid changed in" in mutants_summary.status(out)
+
+
+def test_files_of_the_same_name_in_two_modules_are_told_apart(tmp_path, monkeypatch):
+    # calibration/mod.rs and tracker/mod.rs: the status line names each by its path under src/.
+    if not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout")
+    monkeypatch.chdir(ROOT)
+    outcomes = [
+        {"scenario": {"Mutant": {"file": f"crates/ikid/src/{f}", "name": n}}, "summary": s}
+        for f, n, s in [
+            ("calibration/mod.rs", "a", "CaughtMutant"),
+            ("calibration/mod.rs", "b", "MissedMutant"),
+            ("tracker/mod.rs", "c", "CaughtMutant"),
+        ]
+    ]
+    (tmp_path / "outcomes.json").write_text(json.dumps({"outcomes": outcomes}))
+    mutants_summary.main([str(tmp_path), "--record", "calibration/* tracker/*"])
+    shown = mutants_summary.status(tmp_path)
+    assert "calibration/mod 1/2" in shown and "tracker/mod 1/1" in shown, shown

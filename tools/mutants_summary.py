@@ -100,7 +100,7 @@ def status(out: Path) -> str:
     except (ValueError, KeyError, TypeError) as e:
         return f"mutants: {path} is not a record of a run ({e}): run `make mutants` again"
     files = ", ".join(
-        f"{Path(f).stem} {c.get('caught', 0)}/{c.get('caught', 0) + c.get('missed', 0)}"
+        f"{_short(f)} {c.get('caught', 0)}/{c.get('caught', 0) + c.get('missed', 0)}"
         for f, c in r.get("per_file", {}).items()
     )
     head = f"{line} (last `make mutants`: {what}, at {commit[:10]}, {date}; per file caught/viable: {files})"
@@ -111,6 +111,12 @@ def status(out: Path) -> str:
         n = len(changed.splitlines())
         return head + f"\nmutants: STALE: crates/ikid changed in {n} commit(s) since; run `make mutants`"
     return head + "\nmutants: current (crates/ikid unchanged since)"
+
+
+def _short(file: str) -> str:
+    """A mutated file's name under the crate's src/, without .rs (`tracker/mod`, `gaps`): the
+    stem alone would name calibration/mod.rs and tracker/mod.rs alike."""
+    return file.split("src/", 1)[-1].removesuffix(".rs")
 
 
 if __name__ == "__main__":

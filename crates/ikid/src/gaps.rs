@@ -1084,6 +1084,9 @@ fn rigid_fit<const N: usize>(
 }
 
 #[cfg(test)]
+mod label_tests;
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use crate::body::BodyModel;

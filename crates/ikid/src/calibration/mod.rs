@@ -562,6 +562,9 @@ fn default_local_markers() -> &'static [Vector3<f64>; 6] {
 }
 
 #[cfg(test)]
+mod held_tests;
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use crate::features::FeatureSet;
