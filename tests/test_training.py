@@ -171,7 +171,11 @@ def test_occlusion_bursts_hide_one_marker_at_a_time_after_the_warmup():
     assert 0.05 < missing.any(axis=1).mean() < 0.8
     filled, mask = ikid.fill_gaps(occluded.markers)
     assert np.array_equal(mask != 0, missing.any(axis=1))
-    assert np.abs(filled - rec.markers).max() < 1e-4  # clean: back within 0.1 mm
+    # Clean: back within 0.2 mm (0.14 where the wrist slows to a stop and the fill's prior,
+    # which holds a resting segment's marker, leans on where it was; 0.1 mm before the prior
+    # followed the last 50 ms rather than the whole trial — on a wrist that is no ball joint
+    # that choice cost 8 mm at rest, issue #28's exam).
+    assert np.abs(filled - rec.markers).max() < 2e-4
 
 
 def test_gaps_are_filled_at_the_recordings_rate():

@@ -230,7 +230,9 @@ fn a_fills_fitted_markers_carry_no_velocity_into_the_next_frame() {
     f[6..9].fill(f32::NAN);
     assert_eq!(filler.fill(&mut f, 400).unwrap(), 1 << 2);
     let off = (marker(&f, 1) - marker(&truth[400], 1)).norm();
-    assert!(off > 2e-3, "USP fitted {} mm from where it is measured", 1e3 * off);
+    // (2-3 mm before the fill weighed the joint centre by how well one point fits the
+    // wrist: the slip is that misfit, so the fit now leans on the measured markers, ~1 mm.)
+    assert!(off > 5e-4, "USP fitted {} mm from where it is measured", 1e3 * off);
     for (i, t) in truth.iter().enumerate().skip(401) {
         assert_eq!(filler.fill(&mut t.clone(), i).unwrap(), 0, "frame {i}");
         assert_eq!(filler.status(), 0, "frame {i}");
