@@ -690,7 +690,9 @@ def test_track_writes_the_trackers_angles_and_torques(
         )
         == 0
     )
-    bare = ikid.Tracker(length_scale=1.1, mass_scale=1.3).run(read_markers(tmp_path / "t.trc").frames(None), sd=True)
+    bare = ikid.Tracker(length_scale=1.1, mass_scale=1.3).run(
+        read_markers(tmp_path / "t.trc").frames(None), sd=True
+    )
     np.testing.assert_allclose(read_mot(tmp_path / "bare.mot")[1], bare["q"][1:], atol=1e-8)
     # The bare filter's values each followed by its σ (declared in the header; degrees in the
     # .mot); the refined files have none (the filter's σ does not describe a refined estimate).
