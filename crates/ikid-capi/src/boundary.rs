@@ -153,6 +153,22 @@ pub(crate) unsafe fn slice_mut<'a, T>(ptr: *mut T, len: usize, what: &str) -> Re
     Ok(unsafe { std::slice::from_raw_parts_mut(ptr, len) })
 }
 
+/// Copies `values` to `out`, a caller's buffer of `out_len` doubles; too small a buffer is
+/// refused, naming both sizes.
+///
+/// # Safety
+/// As [`slice_mut`]: a non-NULL `out` must point to `out_len` writable doubles.
+pub(crate) unsafe fn write_doubles(out: *mut f64, out_len: usize, values: &[f64]) -> Result<(), Failure> {
+    if out_len < values.len() {
+        return Err(Failure::new(
+            ikid_status::InvalidArgument,
+            format!("out has room for {out_len} doubles, {} needed", values.len()),
+        ));
+    }
+    unsafe { slice_mut(out, values.len(), "out") }?.copy_from_slice(values);
+    Ok(())
+}
+
 fn check_size<T>(len: usize, what: &str) -> Result<(), Failure> {
     match len.checked_mul(std::mem::size_of::<T>()) {
         Some(bytes) if bytes <= isize::MAX as usize => Ok(()),

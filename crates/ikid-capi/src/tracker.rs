@@ -2,7 +2,9 @@
 //! per marker frame), one thread at a time per tracker. Conversion only: every call forwards
 //! to the core's `Tracker`.
 
-use crate::boundary::{Failure, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut};
+use crate::boundary::{
+    Failure, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut, write_doubles,
+};
 use crate::calibration::calibration_from;
 use crate::model::ikid_model;
 use ikid_core::body::{BodyModel, MARKER_FRAME_LEN};
@@ -256,15 +258,7 @@ pub unsafe extern "C" fn ikid_tracker_marker_noise(
 ) -> ikid_status {
     guard(|| {
         let t = &unsafe { non_null(tracker, "tracker") }?.tracker;
-        let noise = t.marker_noise();
-        if out_len < noise.len() {
-            return Err(Failure::new(
-                ikid_status::InvalidArgument,
-                format!("out has room for {out_len} doubles, {} needed", noise.len()),
-            ));
-        }
-        unsafe { slice_mut(out, noise.len(), "out") }?.copy_from_slice(&noise);
-        Ok(())
+        unsafe { write_doubles(out, out_len, &t.marker_noise()) }
     })
 }
 
@@ -285,18 +279,11 @@ pub unsafe extern "C" fn ikid_tracker_output_sd(
     guard(|| {
         let t = &unsafe { non_null(tracker, "tracker") }?.tracker;
         const N: usize = 2 * ikid_core::body::N_COORDINATES;
-        if out_len < N {
-            return Err(Failure::new(
-                ikid_status::InvalidArgument,
-                format!("out has room for {out_len} doubles, {N} needed"),
-            ));
-        }
         let values: [f64; N] = match t.output_sd() {
             Some(sd) => std::array::from_fn(|i| if i < N / 2 { sd.q[i] } else { sd.tau[i - N / 2] }),
             None => [f64::NAN; N],
         };
-        unsafe { slice_mut(out, N, "out") }?.copy_from_slice(&values);
-        Ok(())
+        unsafe { write_doubles(out, out_len, &values) }
     })
 }
 
