@@ -1,7 +1,7 @@
 //! Frame-by-frame inference over a fixed ring window, without heap allocation per frame.
 
 use crate::body::MARKER_FRAME_LEN;
-use crate::calibration::Calibration;
+use crate::calibration::{Calibration, MarkerShapes};
 use crate::error::{Error, Result};
 use crate::gaps::{GapFiller, MissingMarkers};
 use crate::model::Model;
@@ -79,6 +79,9 @@ pub struct Stream {
     resynced: bool,
     /// The subject's marker placement, applied to each (filled) frame before its features.
     calibration: Option<Calibration>,
+    /// The subject's marker shapes, learned from the first frames the calibration is applied
+    /// to: each segment's orientation is fitted to them by least squares.
+    shapes: MarkerShapes,
     /// Frames pushed since the stream was made (accepted or refused): the next frame's
     /// number, which its errors carry.
     pushed: usize,
@@ -119,6 +122,7 @@ impl Stream {
             time_reanchors: 0,
             resynced: false,
             calibration: None,
+            shapes: MarkerShapes::new(model.card().frame_rate_hz),
             pushed: 0,
             status: 0,
             early_outputs: false,
@@ -177,6 +181,7 @@ impl Stream {
         // the first complete frame instead of waiting for the wrist to move about every axis.
         self.filler.set_calibration(calibration.as_ref());
         self.calibration = calibration;
+        self.shapes = MarkerShapes::new(self.model.card().frame_rate_hz);
         Ok(())
     }
 
@@ -256,7 +261,8 @@ impl Stream {
             let mask = self.filler.fill(&mut self.frame_buf, index)?;
             let marker_status = self.filler.status();
             if let Some(calibration) = &self.calibration {
-                calibration.apply(&mut self.frame_buf, index)?;
+                // The shapes are learned from markers as measured, never from filled ones.
+                calibration.apply_fitted(&mut self.frame_buf, index, &mut self.shapes, mask == 0)?;
             }
             set.compute(&self.frame_buf, &mut self.incoming, index)?;
             self.filled_mask = mask;
@@ -270,7 +276,7 @@ impl Stream {
                 Some(calibration) => {
                     set.check_frame(frame, index)?;
                     self.frame_buf.copy_from_slice(frame);
-                    calibration.apply(&mut self.frame_buf, index)?;
+                    calibration.apply_fitted(&mut self.frame_buf, index, &mut self.shapes, true)?;
                     set.compute(&self.frame_buf, &mut self.incoming, index)?;
                 }
                 None => set.compute(frame, &mut self.incoming, index)?,

@@ -1,9 +1,10 @@
 //! A stream's calibration and last output, as a user of the Rust API sees them: the
 //! calibration moves every frame before the network reads it (the same as calibrating the
-//! frames first), and `output()` is what the last push returned.
+//! frames first, each segment fitted to the marker shapes of the first frames), and
+//! `output()` is what the last push returned.
 
 use ikid::testing::{random_frames, random_model};
-use ikid::{Calibration, FeatureSet};
+use ikid::{Calibration, FeatureSet, MarkerShapes};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 /// A placement 12° and 20° away from the body model's, about skew axes.
@@ -27,9 +28,10 @@ fn a_calibrated_stream_equals_an_uncalibrated_one_on_calibrated_frames() {
     assert_eq!(calibrated.calibration(), Some(&cal));
     let (mut plain, mut raw) = (model.stream(), model.stream());
     let mut differs = 0;
+    let mut shapes = MarkerShapes::new(model.card().frame_rate_hz);
     for (i, frame) in frames.chunks_exact(18).enumerate() {
         let mut moved = frame.to_vec();
-        cal.apply(&mut moved, i).unwrap();
+        cal.apply_fitted(&mut moved, i, &mut shapes, true).unwrap();
         let got = calibrated.push(frame).unwrap().map(<[f32]>::to_vec);
         let want = plain.push(&moved).unwrap().map(<[f32]>::to_vec);
         assert_eq!(got, want, "frame {i}");

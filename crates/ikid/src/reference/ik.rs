@@ -76,6 +76,29 @@ pub fn segment_markers(body: &BodyModel, pose: &Isometry3<f64>, segment: Segment
     std::array::from_fn(|k| pose * Point3::from(body.marker_offsets[first + k]))
 }
 
+/// The rigid motion taking the `template` points onto the `measured` ones by weighted least
+/// squares (Kabsch); `None` if they are collinear.
+pub fn fit_points(
+    template: &[Vector3<f64>; 3],
+    measured: &[Vector3<f64>; 3],
+    weights: [f64; 3],
+) -> Option<Isometry3<f64>> {
+    let total: f64 = weights.iter().sum();
+    let tc = (0..3).map(|k| template[k] * weights[k]).sum::<Vector3<f64>>() / total;
+    let mc = (0..3).map(|k| measured[k] * weights[k]).sum::<Vector3<f64>>() / total;
+    let h: Matrix3<f64> = (0..3).map(|k| (template[k] - tc) * (measured[k] - mc).transpose() * weights[k]).sum();
+    let svd = h.svd(true, true);
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    if svd.singular_values.iter().filter(|&&s| s > 1e-15).count() < 2 {
+        return None;
+    }
+    let d = (v_t.transpose() * u.transpose()).determinant().signum();
+    let r = v_t.transpose() * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * u.transpose();
+    let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+    let translation = mc - rotation * tc;
+    Some(Isometry3::from_parts(Translation3::from(translation), rotation))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

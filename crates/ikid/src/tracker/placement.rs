@@ -2,16 +2,18 @@
 //! own first frames, and each marker's recent place (skin markers slide); the rigid fit of a
 //! segment to three points.
 
-use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Vector3};
 
 use super::Tracker;
 use super::centre::JointCentre;
 use crate::body::{self, MARKER_FRAME_LEN, Segment};
 use crate::features::technical_frame;
 
-/// How long a calibrated segment's template is averaged over, s: its complete, rigid frames
-/// from the first one (see `Tracker::take_template`).
-pub const TEMPLATE_S: f64 = 0.5;
+/// How long a calibrated segment's template is averaged over (see `Tracker::take_template`):
+/// the calibration's, as a stream's marker shapes.
+pub use crate::calibration::TEMPLATE_S;
+/// The rigid fit of a segment to three points (shared with the calibration's streams).
+pub(crate) use crate::reference::fit_points;
 
 /// How long a marker's recent placement on its segment looks back, s (see [`Tracker::push`]):
 /// skin markers slide with the posture, and the pose from two of a segment's markers is the
@@ -74,29 +76,6 @@ impl Tracker {
             self.live[k] += w * (local - self.live[k]);
         }
     }
-}
-
-/// The rigid motion taking the `template` points onto the `measured` ones by weighted least
-/// squares (Kabsch); `None` if they are collinear.
-pub(super) fn fit_points(
-    template: &[Vector3<f64>; 3],
-    measured: &[Vector3<f64>; 3],
-    weights: [f64; 3],
-) -> Option<Isometry3<f64>> {
-    let total: f64 = weights.iter().sum();
-    let tc = (0..3).map(|k| template[k] * weights[k]).sum::<Vector3<f64>>() / total;
-    let mc = (0..3).map(|k| measured[k] * weights[k]).sum::<Vector3<f64>>() / total;
-    let h: Matrix3<f64> = (0..3).map(|k| (template[k] - tc) * (measured[k] - mc).transpose() * weights[k]).sum();
-    let svd = h.svd(true, true);
-    let (u, v_t) = (svd.u?, svd.v_t?);
-    if svd.singular_values.iter().filter(|&&s| s > 1e-15).count() < 2 {
-        return None;
-    }
-    let d = (v_t.transpose() * u.transpose()).determinant().signum();
-    let r = v_t.transpose() * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * u.transpose();
-    let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
-    let translation = mc - rotation * tc;
-    Some(Isometry3::from_parts(Translation3::from(translation), rotation))
 }
 
 #[cfg(test)]
