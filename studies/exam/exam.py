@@ -663,6 +663,7 @@ def main() -> None:
         default=",".join(MK.LAYOUTS),
         help=f"marker layouts to run (default {','.join(MK.LAYOUTS)})",
     )
+    parser.add_argument("--models", help=f"models to run (default: all of {','.join(MODELS)})")
     parser.add_argument("--doc", default=str(ROOT / "docs" / "exam.md"), help="page to write")
     parser.add_argument("--json", default=str(ROOT / "target" / "exam.json"), help="numbers to write")
     parser.add_argument("--render", metavar="JSON", help="only rewrite the page from a run's numbers")
@@ -675,6 +676,10 @@ def main() -> None:
     start = time.perf_counter()
     models = list(MODELS)[:1] if args.quick else list(MODELS)
     poses = POSES_DEG[:1] if args.quick else POSES_DEG
+    if args.models:
+        models = args.models.split(",")
+        if unknown_models := [m for m in models if m not in MODELS]:
+            parser.error(f"--models: {unknown_models} not among the exam's models {list(MODELS)}")
     if args.poses:
         poses = tuple(float(p) for p in args.poses.split(","))
         if unknown := [p for p in poses if p not in POSES_DEG]:
