@@ -159,6 +159,21 @@ def test_sd_columns_follow_their_coordinates_declared_in_the_header_and_skip_und
             write(time, q, np.zeros(n, np.uint16), sd)
 
 
+def test_a_block_with_every_row_refused_writes_nothing_and_the_next_block_its_rows(tmp_path):
+    # `ikid track` reads in blocks and writes each one's plausible rows: a block where every row
+    # was refused gave a reshape traceback (issue #28's exam, a skin-marker trial).
+    from ikid.io.storage import mot_writer, read_storage
+
+    names = ikid.coordinate_names()
+    q, sd = np.full((2, 3), 0.2), np.full((2, 3), 0.01)
+    with mot_writer(tmp_path / "q.mot", with_sd=True) as write:
+        write(np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.uint16), np.zeros((0, 3)))
+        write(np.array([0.01, 0.02]), q, np.zeros(2, np.uint16), sd)
+    table = read_storage(tmp_path / "q.mot")
+    assert table.columns[:2] == (names[0], f"{names[0]}_sd")
+    np.testing.assert_allclose(table.select([names[0], f"{names[0]}_sd"]), np.degrees([[0.2, 0.01]] * 2))
+
+
 def test_storage_reads_radians_files_and_names_missing_columns(tmp_path):
     path = io.write_storage(
         tmp_path / "r.mot",

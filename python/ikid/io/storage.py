@@ -332,7 +332,8 @@ def _coordinate_writer(
                         f"{table.name}: standard deviations: expected ({len(values)}, {len(names)}), "
                         f"got {sd.shape}"
                     )
-                values = np.stack([values, sd[:, keep]], axis=2).reshape(len(values), -1)
+                # Each value then its σ; an empty block (every row refused) stays empty.
+                values = np.stack([values, sd[:, keep]], axis=2).reshape(len(values), 2 * len(keep))
             elif sd is not None:
                 raise _native.InputError(
                     f"{table.name}: standard deviations given to a file without their columns"
