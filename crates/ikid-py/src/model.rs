@@ -258,6 +258,9 @@ impl Model {
     }
 }
 
+/// Two arrays (`Stream.sd_terms`).
+type Pair<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
+
 /// A causal frame-by-frame stream. One thread at a time.
 #[pyclass(module = "ikid")]
 pub struct Stream {
@@ -377,7 +380,7 @@ impl Stream {
     /// corrections (3,))`, rad², for studies fitting a card's `uncertainty`; `None` for a model
     /// that does not read per-frame angles, or before enough frames.
     #[getter]
-    fn sd_terms<'py>(&self, py: Python<'py>) -> Option<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+    fn sd_terms<'py>(&self, py: Python<'py>) -> Option<Pair<'py>> {
         self.inner.sd_terms().map(|(n, d)| (PyArray1::from_slice(py, &n), PyArray1::from_slice(py, &d)))
     }
 }
