@@ -144,3 +144,29 @@ def test_sd_is_refused_for_a_model_without_coefficients(tmp_path, capsys):
     assert cli(["ik", str(trc), "-o", str(tmp_path / "x.mot"), "--model", str(bare), "--sd"]) == 2
     assert "has no uncertainty in its card" in capsys.readouterr().err
     assert not (tmp_path / "x.mot").exists()
+
+
+def test_stream_sd_follows_each_output_by_its_sd(monkeypatch, capsys):
+    import io
+    import sys
+
+    trial = ikid.simulate(seed=SEED, duration=0.2).with_noise("uniform", SEED + 1, fraction=0.01)
+    frames = trial.markers.astype(np.float32).astype(np.float64)
+    buf = io.StringIO()
+    np.savetxt(buf, frames, delimiter=",", fmt="%.9g")
+    monkeypatch.setattr(sys, "stdin", io.StringIO(buf.getvalue()))
+    assert cli(["stream", "--model", "wrist-ik", "--torque-model", "wrist-chain", "--sd"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    names = [*coordinate_names(), *coordinate_names()]
+    assert lines[0].split(",") == ["frame", "status", *[x for n in names for x in (n, f"{n}_sd")]]
+    # The oracle: both models' streams in this process; a row once both have a value and a σ.
+    streams = [ikid.load("wrist-ik").stream(), ikid.load("wrist-chain").stream()]
+    for frame, line in zip(frames, lines[1:], strict=True):
+        got = [(s.push(frame), s.output_sd) for s in streams]
+        _, status, values = line.split(",", 2)
+        if any(out is None or sd is None for out, sd in got):
+            assert status == "filling" and values == "", line
+            continue
+        want = np.concatenate([np.column_stack([out, sd]).ravel() for out, sd in got])
+        np.testing.assert_allclose([float(v) for v in values.split(",")], want, rtol=2e-6, atol=1e-9)
+        assert np.all(want[1::2] > 0)
