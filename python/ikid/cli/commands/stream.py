@@ -477,7 +477,8 @@ def _model_streams(args: argparse.Namespace, rate_hz: float | None):
         if m.frame_len != models[0].frame_len:
             raise ikid.InputError(f"models {models[0].name!r} and {m.name!r} read different frames")
     calibration = ikid.load_calibration(args.calibration) if args.calibration else None
-    streams = [m.stream(missing_markers=args.missing_markers, calibration=calibration) for m in models]
+    plain = [m.stream(missing_markers=args.missing_markers, calibration=calibration) for m in models]
+    streams: list[ikid.Stream | _WithSd] = list(plain)
     names = [n for m in models for n in m.output_names]
     units = [u for m in models for u in m.output_units]
     if args.sd:
@@ -485,7 +486,7 @@ def _model_streams(args: argparse.Namespace, rate_hz: float | None):
 
         for m in models:
             _check_uncertainty(m.name, m, "ikid stream --sd")
-        streams = [_WithSd(s) for s in streams]
+        streams = [_WithSd(s) for s in plain]
         names = [x for n in names for x in (n, f"{n}_sd")]
         units = [u for unit in units for u in (unit, unit)]
     return streams, names, units, rate, models[0].frame_len
