@@ -374,6 +374,18 @@ enum ikid_status ikid_stream_filled_markers(const struct ikid_stream *stream, ui
 // `stream` must be a live handle; `status` must point to writable storage.
 enum ikid_status ikid_stream_status(const struct ikid_stream *stream, uint32_t *status);
 
+// Writes the standard deviation of each output of the last push into `out` (room for
+// `out_len` doubles, at least `n_outputs`), output units (`ikid::Stream::output_sd`: the
+// model card's `uncertainty`, see `crates/ikid/src/model/uncertainty.rs`). NaN when there is
+// none: the card has no `uncertainty`, the last push gave no output, or too few frames came
+// since the window (re)started to tell the markers' noise.
+//
+// # Safety
+// `stream` must be a live handle; `out` must point to `out_len` writable doubles.
+enum ikid_status ikid_stream_output_sd(const struct ikid_stream *stream,
+                                       double *out,
+                                       size_t out_len);
+
 // Pushes `n_frames` frames (`n_frames × frame_len` floats, e.g. a packet from the
 // acquisition system) and writes one row of `n_outputs` into `out` for each frame that
 // completes a window; `*rows` receives the row count. On failure (a refused frame)

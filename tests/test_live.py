@@ -455,3 +455,54 @@ def test_the_tracker_path_writes_each_value_with_its_standard_deviation():
         np.testing.assert_allclose(got[:, 0], np.concatenate([out[0], out[3]]), rtol=1e-6, atol=1e-9)
         np.testing.assert_allclose(got[:, 1], np.concatenate([sd[0], sd[1]]), rtol=1e-6)
         assert np.all(got[:, 1] > 0)
+
+
+def test_the_lsl_sink_carries_the_networks_standard_deviations(lab):
+    """``--sd``: each output followed by its σ (``Stream.output_sd``) on the sink, channels named
+    ``<output>_sd`` in the output's unit; a frame before its σ is known is not published."""
+    import json
+
+    d, env = lab
+    n, name, sink = 300, f"qualisys-{os.getpid()}-sd", f"ikid-{os.getpid()}-sd"
+    ready = d / "sink-ready"
+    outlet = subprocess.Popen(
+        [*PEERS, "lsl-outlet", name, "--frames", str(n), "--ready", str(ready)],
+        env=env, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    stream = subprocess.Popen(
+        [*IKID, "stream", "--source", f"lsl:{name}", "--map", str(d / "lab.toml"), "--sink", f"lsl:{sink}",
+         "--count", str(n), "--idle", "10", "--sd"],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    reader = subprocess.Popen(
+        [*PEERS, "lsl-inlet", sink, "--samples", str(n), "--ready", str(ready), "--timeout", "5"],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        out, err = stream.communicate(timeout=60)
+        got, reader_err = reader.communicate(timeout=30)
+        outlet.wait(timeout=30)
+    finally:
+        for p in (outlet, stream, reader):
+            p.kill()
+    assert stream.returncode == 0, err
+    _, rows = _header_and_rows(out)
+    times = np.array([float(r[1]) for r in rows])
+    # The oracle: the same frames and times through ikid.Stream in this process.
+    s = ikid.load("wrist-ik").stream()
+    expected = []
+    for f, t in zip(_as_sent_in_mm(trial_frames(n + 50)[:n]), times, strict=True):
+        value = s.push(f.astype(np.float32), time=float(t))
+        sd = s.output_sd
+        expected.append(None if value is None or sd is None else np.column_stack([value, sd]).ravel())
+    lines = got.strip().splitlines()
+    meta = json.loads(lines[0])
+    names = ikid.load("wrist-ik").output_names
+    assert [c["label"] for c in meta["channels"]] == [*(x for v in names for x in (v, f"{v}_sd")), "status"]
+    assert [c["unit"] for c in meta["channels"]] == ["rad"] * 6 + ["bits"]
+    samples = [json.loads(line) for line in lines[1:]]
+    with_output = [k for k in range(n) if expected[k] is not None]
+    assert len(samples) == len(with_output) and len(with_output) > n - 60, reader_err
+    values = np.array([smp[2:8] for smp in samples])
+    np.testing.assert_allclose(values, np.array([expected[k] for k in with_output]), rtol=1e-6)
+    assert np.all(values[:, 1::2] > 0)

@@ -125,6 +125,10 @@ class Run:
     counts: Counts = field(default_factory=Counts)
     #: The rates of the model's family (:func:`family_members`), when it ran as one.
     family_rates_hz: tuple[float, ...] = ()
+    #: Each output row's standard deviations ``(n, n_outputs)`` (``Stream.output_sd``), NaN
+    #: where the stream gave none (a model whose card has no ``uncertainty``, or the first
+    #: frames after the window restarted).
+    sd: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def n_outputs(self) -> int:
@@ -314,9 +318,10 @@ def pick_model(
 #: blocks, :func:`run_blocks`).
 BLOCK_FRAMES = 65536
 
-#: Called with each block of output rows, in order: ``(frame, time, values, status)`` (frame
-#: indices, seconds, ``(k, n_outputs)``, ``ikid.FRAME_STATUS`` bits).
-RowSink = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
+#: Called with each block of output rows, in order: ``(frame, time, values, status, sd)``
+#: (frame indices, seconds, ``(k, n_outputs)``, ``ikid.FRAME_STATUS`` bits, standard
+#: deviations ``(k, n_outputs)``, NaN where the stream gave none: see :attr:`Run.sd`).
+RowSink = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
 
 
 def run_model(
@@ -465,14 +470,16 @@ class _Tally:
         self.time: list[float] = []
         self.status: list[int] = []
         self.filling: list[bool] = []
+        self.sd: list = []
 
     def add(self, t: float, outcome: tuple) -> None:
         """The next frame's outcome (``_push``'s)."""
         i = self.n
         self.n += 1
         if outcome[0] == "out":
-            _, values, _filled, status, filling = outcome
+            _, values, _filled, status, filling, sd = outcome
             self.rows.append(values)
+            self.sd.append(sd)
             self.index.append(i)
             self.time.append(t)
             self.status.append(status)
@@ -490,17 +497,18 @@ class _Tally:
         filling = np.array(self.filling, bool)
         index = np.array(self.index, np.int64)
         time = np.array(self.time, np.float64)
+        sd = np.array(self.sd, np.float64).reshape(-1, self.n_outputs)
         self.counts.add(status, filling)
         if self.on_rows is not None:
             if len(index):
-                self.on_rows(index, time, values, status)
+                self.on_rows(index, time, values, status, sd)
         else:
-            self.kept.append((index, time, values, status, filling))
+            self.kept.append((index, time, values, status, filling, sd))
         self._block()
 
     def run(self, model, rate_hz, resampled_from, gap_restarts, at_frames=False, family_rates=()) -> Run:
         self.flush()
-        cols = list(zip(*self.kept, strict=True)) if self.kept else [[] for _ in range(5)]
+        cols = list(zip(*self.kept, strict=True)) if self.kept else [[] for _ in range(6)]
 
         def joined(parts, dtype, shape=(0,)):
             return np.concatenate(parts).astype(dtype) if len(parts) else np.zeros(shape, dtype)
@@ -525,12 +533,14 @@ class _Tally:
             joined(cols[4], bool),
             self.counts,
             family_rates,
+            joined(cols[5], np.float64, (0, model.n_outputs)).reshape(-1, model.n_outputs),
         )
 
 
 def _push(stream: _native.Stream, t: float, frame: np.ndarray, window: int) -> tuple:
-    """One frame through ``stream``: ``("out", values, filled, status, filling)`` (``filling``:
-    an early output, the window not yet full) or ``("none", reason, example message or None)``."""
+    """One frame through ``stream``: ``("out", values, filled, status, filling, sd)``
+    (``filling``: an early output, the window not yet full; ``sd``: the outputs' standard
+    deviations, NaN without) or ``("none", reason, example message or None)``."""
     try:
         out = stream.push(frame, time=float(t))
     except _native.InputError as e:
@@ -543,16 +553,20 @@ def _push(stream: _native.Stream, t: float, frame: np.ndarray, window: int) -> t
         return ("none", reason, np.array2string(np.asarray(out), precision=3))
     status = stream.status
     filled = bool(status & _native.FRAME_STATUS["filled"])
-    return ("out", out, filled, status, stream.filled < window)
+    sd = stream.output_sd
+    sd = np.full(len(out), np.nan) if sd is None else sd
+    return ("out", out, filled, status, stream.filled < window, sd)
 
 
 def _combine(a: tuple | None, b: tuple | None, w: float) -> tuple:
     """A recording frame's outcome from those of the model's grid points before (``a``) and
-    after (``b``) it, ``w`` of the way to ``b``: the outputs interpolated linearly and the flags
-    of both when both have one, else the one that has."""
+    after (``b``) it, ``w`` of the way to ``b``: the outputs (and their standard deviations: NaN
+    if either has none) interpolated linearly and the flags of both when both have one, else
+    the one that has."""
     if a is not None and a[0] == "out" and b is not None and b[0] == "out":
         values = (1.0 - w) * np.asarray(a[1], np.float64) + w * np.asarray(b[1], np.float64)
-        return ("out", values, a[2] or b[2], a[3] | b[3], a[4] or b[4])
+        sd = (1.0 - w) * a[5] + w * b[5]
+        return ("out", values, a[2] or b[2], a[3] | b[3], a[4] or b[4], sd)
     for got in (a, b):
         if got is not None and got[0] == "out":
             return got
@@ -693,7 +707,7 @@ class _ModelGrid:
             if j in self.swapped:
                 self.swapped.discard(j)
                 if got[0] == "out":
-                    got = (*got[:3], got[3] | _native.FRAME_STATUS["swapped"], got[4])
+                    got = (*got[:3], got[3] | _native.FRAME_STATUS["swapped"], *got[4:])
             self.tally.add(t, got)
             self.next_frame += 1
             for k in [k for k in self.outcomes if k < k0]:

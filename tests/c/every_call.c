@@ -92,6 +92,9 @@ int main(int argc, char **argv) {
     for (size_t i = 0; i < info.window; i++)
         CHECK(ikid_stream_push(stream, frames + i * 18, 18, row, 16, &ready) == IKID_STATUS_OK, "ikid_stream_push");
     CHECK(ready && memcmp(row, out, info.n_outputs * sizeof *row) == 0, "stream equals predict");
+    double row_sd[16];
+    CHECK(ikid_stream_output_sd(stream, row_sd, 16) == IKID_STATUS_OK && row_sd[0] > 0 && isfinite(row_sd[2]), "ikid_stream_output_sd");
+    CHECK(ikid_stream_output_sd(stream, row_sd, 2) == IKID_STATUS_INVALID_ARGUMENT && strstr(ikid_last_error(), "room for 2") != NULL, "short sd buffer");
     uint32_t bits = 99;
     CHECK(ikid_stream_status(stream, &bits) == IKID_STATUS_OK && bits != 99, "ikid_stream_status");
     CHECK(ikid_stream_filled_markers(stream, &bits) == IKID_STATUS_OK && bits == 0, "ikid_stream_filled_markers");

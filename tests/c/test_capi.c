@@ -140,6 +140,10 @@ int main(int argc, char **argv) {
     /* Reset empties the window. */
     CHECK(ikid_stream_reset(stream) == IKID_STATUS_OK && ikid_stream_reset(NULL) == IKID_STATUS_NULL_PARAMETER, "reset");
     CHECK(ikid_stream_push(stream, frames, 18, out, 3, &ready) == IKID_STATUS_OK && !ready, "after reset");
+    double sd3[3];
+    CHECK(ikid_stream_output_sd(stream, sd3, 3) == IKID_STATUS_OK && isnan(sd3[0]) && isnan(sd3[2]), "no sd without an output");
+    CHECK(ikid_stream_output_sd(NULL, sd3, 3) == IKID_STATUS_NULL_PARAMETER && contains(ikid_last_error(), "stream is NULL"), "sd of NULL stream");
+    CHECK(ikid_stream_output_sd(stream, NULL, 3) == IKID_STATUS_NULL_PARAMETER, "NULL sd buffer");
 
     /* push_many in packets of 7 equals the expected rows. */
     ikid_stream_reset(stream);

@@ -159,14 +159,23 @@ pub(crate) unsafe fn slice_mut<'a, T>(ptr: *mut T, len: usize, what: &str) -> Re
 /// # Safety
 /// As [`slice_mut`]: a non-NULL `out` must point to `out_len` writable doubles.
 pub(crate) unsafe fn write_doubles(out: *mut f64, out_len: usize, values: &[f64]) -> Result<(), Failure> {
-    if out_len < values.len() {
+    unsafe { doubles_out(out, out_len, values.len()) }?.copy_from_slice(values);
+    Ok(())
+}
+
+/// The first `n` doubles of `out`, a caller's buffer of `out_len` doubles; too small a buffer
+/// is refused, naming both sizes.
+///
+/// # Safety
+/// As [`slice_mut`]: a non-NULL `out` must point to `out_len` writable doubles.
+pub(crate) unsafe fn doubles_out<'a>(out: *mut f64, out_len: usize, n: usize) -> Result<&'a mut [f64], Failure> {
+    if out_len < n {
         return Err(Failure::new(
             ikid_status::InvalidArgument,
-            format!("out has room for {out_len} doubles, {} needed", values.len()),
+            format!("out has room for {out_len} doubles, {n} needed"),
         ));
     }
-    unsafe { slice_mut(out, values.len(), "out") }?.copy_from_slice(values);
-    Ok(())
+    unsafe { slice_mut(out, n, "out") }
 }
 
 fn check_size<T>(len: usize, what: &str) -> Result<(), Failure> {

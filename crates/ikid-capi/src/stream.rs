@@ -1,6 +1,8 @@
 //! Stream handles: frame-by-frame inference, one thread at a time per stream.
 
-use crate::boundary::{Failure, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut};
+use crate::boundary::{
+    Failure, doubles_out, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut,
+};
 use crate::calibration::calibration_from;
 use crate::model::{ikid_model, recording_args};
 use ikid_core::Stream;
@@ -210,6 +212,31 @@ pub unsafe extern "C" fn ikid_stream_status(stream: *const ikid_stream, status: 
     guard(|| {
         let s = &unsafe { non_null(stream, "stream") }?.stream;
         *unsafe { non_null_mut(status, "status") }? = u32::from(s.status());
+        Ok(())
+    })
+}
+
+/// Writes the standard deviation of each output of the last push into `out` (room for
+/// `out_len` doubles, at least `n_outputs`), output units (`ikid::Stream::output_sd`: the
+/// model card's `uncertainty`, see `crates/ikid/src/model/uncertainty.rs`). NaN when there is
+/// none: the card has no `uncertainty`, the last push gave no output, or too few frames came
+/// since the window (re)started to tell the markers' noise.
+///
+/// # Safety
+/// `stream` must be a live handle; `out` must point to `out_len` writable doubles.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_output_sd(
+    stream: *const ikid_stream,
+    out: *mut f64,
+    out_len: usize,
+) -> ikid_status {
+    guard(|| {
+        let s = &unsafe { non_null(stream, "stream") }?.stream;
+        let dst = unsafe { doubles_out(out, out_len, s.model().n_outputs()) }?;
+        match s.output_sd() {
+            Some(sd) => dst.copy_from_slice(sd),
+            None => dst.fill(f64::NAN),
+        }
         Ok(())
     })
 }

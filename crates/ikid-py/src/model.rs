@@ -222,6 +222,18 @@ impl Model {
         Ok(Stream { inner })
     }
 
+    /// This model with its card's `uncertainty` (the per-frame standard deviations'
+    /// coefficients, JSON; `None` removes it), checked as a loaded card is; tensors and their
+    /// checksum unchanged. `save` it to keep it.
+    #[pyo3(signature = (uncertainty))]
+    fn with_uncertainty(&self, uncertainty: Option<&str>) -> PyResult<Self> {
+        let card = match uncertainty {
+            None => None,
+            Some(json) => Some(ikid::model::SdCard::from_json(json).py_err()?),
+        };
+        Ok(Model { inner: self.inner.with_uncertainty(card).py_err()? })
+    }
+
     /// Writes the model file (atomically: never a partial file).
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         py.detach(|| self.inner.save(&path)).py_err()
@@ -245,6 +257,9 @@ impl Model {
         )
     }
 }
+
+/// Two arrays (`Stream.sd_terms`).
+type Pair<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
 
 /// A causal frame-by-frame stream. One thread at a time.
 #[pyclass(module = "ikid")]
@@ -351,6 +366,22 @@ impl Stream {
     #[getter]
     fn model(&self) -> Model {
         Model { inner: self.inner.model().clone() }
+    }
+
+    /// Standard deviation of each output of the last push (float64, output units), or `None`:
+    /// the model's card has no `uncertainty`, the push gave no output, or too few frames came
+    /// since the window (re)started to tell the markers' noise.
+    #[getter]
+    fn output_sd<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.inner.output_sd().map(|sd| PyArray1::from_slice(py, sd))
+    }
+
+    /// The running means behind `output_sd`: `(angle noise variances (3,), mean squared
+    /// corrections (3,))`, rad², for studies fitting a card's `uncertainty`; `None` for a model
+    /// that does not read per-frame angles, or before enough frames.
+    #[getter]
+    fn sd_terms<'py>(&self, py: Python<'py>) -> Option<Pair<'py>> {
+        self.inner.sd_terms().map(|(n, d)| (PyArray1::from_slice(py, &n), PyArray1::from_slice(py, &d)))
     }
 }
 

@@ -4,7 +4,7 @@ use crate::body::MARKER_FRAME_LEN;
 use crate::calibration::{Calibration, MarkerShapes};
 use crate::error::{Error, Result};
 use crate::gaps::{GapFiller, MissingMarkers};
-use crate::model::Model;
+use crate::model::{Model, SdState};
 use crate::net::Scratch;
 use crate::status;
 
@@ -89,6 +89,8 @@ pub struct Stream {
     status: u16,
     /// Give the per-frame solution while the window fills (correcting models only).
     early_outputs: bool,
+    /// The outputs' standard deviations, for a model whose card says how ([`SdState`]).
+    sd: Option<SdState>,
 }
 
 impl Model {
@@ -126,6 +128,11 @@ impl Stream {
             pushed: 0,
             status: 0,
             early_outputs: false,
+            // Models that read per-frame angles keep the σ's running means even without the
+            // card's coefficients (a study fits them from these), remembering a window.
+            sd: crate::model::uncertainty::ANGLE_FEATURE_SETS
+                .contains(&model.card().feature_set.as_str())
+                .then(|| SdState::new(model.card().uncertainty.clone(), model.n_outputs(), model.window() as f64)),
             model,
         }
     }
@@ -301,6 +308,12 @@ impl Stream {
         self.ring[self.head * nf..(self.head + 1) * nf].copy_from_slice(&self.incoming);
         self.head = (self.head + 1) % w;
         self.filled = (self.filled + 1).min(w);
+        if let Some(sd) = &mut self.sd {
+            if self.filled == 1 {
+                sd.restart(); // a new window: the frames before it say nothing of this one's noise
+            }
+            sd.accept(&self.incoming);
+        }
         // RESYNCED goes with the first output after a new clock (the window refilled).
         let resynced = (self.filled >= w || self.early_outputs) && std::mem::take(&mut self.resynced);
         let filled = self.marker_status | if resynced { status::RESYNCED } else { 0 };
@@ -312,6 +325,9 @@ impl Stream {
             let n = self.output.len();
             self.output.copy_from_slice(&self.incoming[..n]);
             self.status = filled | status::PER_FRAME | self.model.frame_status(&self.incoming, &self.output);
+            if let Some(sd) = &mut self.sd {
+                sd.set_output(&self.output, &self.incoming, true, true);
+            }
             return Ok(Some(&self.output));
         }
         // Unroll the ring oldest-first: rows head.. then ..head.
@@ -322,6 +338,9 @@ impl Stream {
         let corrected = self.model.net().run(&self.input, &mut self.scratch, &mut self.output, index)?;
         let per_frame = if corrected { 0 } else { status::PER_FRAME };
         self.status = filled | per_frame | self.model.frame_status(&self.incoming, &self.output);
+        if let Some(sd) = &mut self.sd {
+            sd.set_output(&self.output, &self.incoming, !corrected, self.model.adds_newest_features());
+        }
         Ok(Some(&self.output))
     }
 
@@ -522,5 +541,25 @@ impl Stream {
         self.head = 0;
         self.filled = 0;
         self.resynced = false;
+        if let Some(sd) = &mut self.sd {
+            sd.restart();
+        }
+    }
+
+    /// The standard deviation of each output of the last frame pushed (output units), or
+    /// `None`: the model's card says nothing of its uncertainty (no `uncertainty`), the last
+    /// push gave no output, or too few frames have come since the window (re)started to tell
+    /// the markers' noise ([`MIN_NOISE_FRAMES`](crate::model::uncertainty::MIN_NOISE_FRAMES)).
+    /// How it is computed, and how well it covers: [`crate::model::uncertainty`].
+    pub fn output_sd(&self) -> Option<&[f64]> {
+        self.sd.as_ref()?.sd()
+    }
+
+    /// The running means the last output's σ was computed from (the per-frame angles' noise
+    /// variances and the mean squared corrections), for studies that fit a card's
+    /// coefficients (kept for every model that reads per-frame angles, with or without the
+    /// card's `uncertainty`); `None` for another model or before enough frames.
+    pub fn sd_terms(&self) -> Option<([f64; 3], [f64; 3])> {
+        self.sd.as_ref()?.terms()
     }
 }

@@ -151,3 +151,31 @@ fn the_counter_sees_this_threads_allocations() {
     });
     assert_eq!(n, 1, "the counting allocator must see a Vec's allocation");
 }
+
+#[test]
+fn a_stream_giving_standard_deviations_never_allocates() {
+    let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let card = ikid::model::SdCard {
+        method: ikid::model::uncertainty::SD_METHOD.into(),
+        memory_frames: 5.0,
+        power: 0.8,
+        constant: vec![1e-6; 3],
+        angle_noise: vec![vec![0.5; 3]; 3],
+        correction: vec![0.0; 3],
+        provenance: Default::default(),
+    };
+    let model = random_model(FeatureSet::Angles, 5, &[64], 3, 7).with_uncertainty(Some(card)).expect("a valid card");
+    let frames = random_frames(FeatureSet::Angles, 200, 8);
+    let mut stream = model.stream();
+    let mut with_sd = 0;
+    let n = allocations_in(|| {
+        for frame in frames.chunks_exact(18) {
+            if stream.push(frame).expect("valid frame").is_some() {
+                with_sd += usize::from(stream.output_sd().is_some_and(|sd| sd.iter().all(|&v| v > 0.0)));
+            }
+        }
+    });
+    assert_eq!(n, 0, "{n} allocations in 200 pushes with σ");
+    // σ from the frame whose third difference is the MIN_NOISE_FRAMES-th.
+    assert_eq!(with_sd, 200 - (3 + ikid::model::uncertainty::MIN_NOISE_FRAMES - 1));
+}

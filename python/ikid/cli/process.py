@@ -68,15 +68,27 @@ def _process_one(job: tuple[str, dict]) -> dict:
         # Coordinates the markers do not determine (a one-marker hand's s_p): not written.
         undetermined = mapping.undetermined if mapping else {}
         writers = {"angles": (mot_writer, 0), "torques": (sto_writer, 1)}
+        with_sd = bool(opt.get("sd"))
+        #: Rows not written for want of a standard deviation (--sd), per kind.
+        no_sd = {"angles": 0, "torques": 0}
         with atomic_outputs() as written, ExitStack() as files:
             for kind, name in (("angles", opt["ik_model"]), ("torques", opt.get("torque_model"))):
                 if not name:
                     continue
                 make, k = writers[kind]
-                write = files.enter_context(make(opt["outputs"][k], undetermined=undetermined))
+                write = files.enter_context(
+                    make(opt["outputs"][k], undetermined=undetermined, with_sd=with_sd)
+                )
 
-                def to_file(_frames, t, values, status, write=write) -> None:
-                    write(t, values, status)
+                def to_file(_frames, t, values, status, sd, write=write, kind=kind) -> None:
+                    if not with_sd:
+                        write(t, values, status)
+                        return
+                    # A row whose σ is not known (the first frames after the window restarted)
+                    # is counted, not written with a made-up one.
+                    known = np.all(np.isfinite(sd), axis=1)
+                    no_sd[kind] += int(np.count_nonzero(~known))
+                    write(t[known], values[known], status[known], sd[known])
 
                 # A shipped family name (the default wrist-ik) runs its model for the file's rate
                 # (ikid.pipeline.pick_model); a file or a per-rate name is that model.
@@ -105,6 +117,12 @@ def _process_one(job: tuple[str, dict]) -> dict:
                 [first_run.summary()]
                 + [f"{kind}: {r.model_note()}" for kind, r in list(runs.items())[1:]]
                 + [f"{name} not written: {why}" for name, why in undetermined.items()]
+                + [
+                    f"{n} {kind} rows without a standard deviation (the first frames after the window "
+                    "(re)started), not written"
+                    for kind, n in no_sd.items()
+                    if n
+                ]
             ),
             written=list(map(str, written)),
         )
@@ -128,9 +146,15 @@ def process_files(args: argparse.Namespace) -> int:
     torque_model = getattr(args, "torque_model", None)
     # The models' cards against what the command writes, once, before any file is read.
     unchecked = args.allow_unchecked_model
-    _model_for(args.model, f"ikid {args.command} --model", ("ik",), allow_unchecked=unchecked)
+    ik_model = _model_for(args.model, f"ikid {args.command} --model", ("ik",), allow_unchecked=unchecked)
+    if args.sd:
+        _check_uncertainty(args.model, ik_model, f"ikid {args.command} --sd --model")
     if torque_model:
-        _model_for(torque_model, f"ikid {args.command} --torque-model", ("chain",), allow_unchecked=unchecked)
+        chain = _model_for(
+            torque_model, f"ikid {args.command} --torque-model", ("chain",), allow_unchecked=unchecked
+        )
+        if args.sd:
+            _check_uncertainty(torque_model, chain, f"ikid {args.command} --sd --torque-model")
     stems = [p.stem for p in inputs]
     clash = sorted({s for s in stems if stems.count(s) > 1})
     if many and clash:
@@ -155,6 +179,7 @@ def process_files(args: argparse.Namespace) -> int:
             "progress": not many,
             "calibration": args.calibration,
             "allow_unchecked": unchecked,
+            "sd": args.sd,
             "outputs": (mot, _named(stem, ".sto")),
         }
         jobs.append((str(path), opt))
@@ -231,6 +256,19 @@ def process_files(args: argparse.Namespace) -> int:
         )
         return 3
     return 0
+
+
+def _check_uncertainty(name: str, model: ikid.Model, use: str) -> None:
+    """Refuses ``--sd`` for a model (or a member of its family) whose card does not say how
+    to compute its outputs' standard deviations (no ``uncertainty``)."""
+    from ikid.pipeline import family_members
+
+    for m in family_members(name) or [model]:
+        if m.card.get("uncertainty") is None:
+            raise ikid.ArgumentError(
+                f"{use} {name}: model {m.name!r} has no uncertainty in its card, so it gives no standard "
+                "deviations; fit them with python -m studies.net_sigma, or leave out --sd"
+            )
 
 
 def _job_outputs(opt: dict) -> list[Path]:
@@ -314,4 +352,12 @@ def processing_options(p: argparse.ArgumentParser, model_help: str) -> None:
         "--strict",
         action="store_true",
         help="exit 3 if any frame was refused, or any output flagged (the ikid_status column)",
+    )
+    p.add_argument(
+        "--sd",
+        action="store_true",
+        help="follow each angle (torque) by its standard deviation, <name>_sd, listed in the header's "
+        "ikid_sd line: the model card's uncertainty (studies/net_sigma.py fits it and measures how well it "
+        "covers). Rows whose σ is not yet known (the first frames after the window restarts) are not "
+        "written; the summary counts them",
     )

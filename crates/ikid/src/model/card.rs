@@ -1,6 +1,7 @@
 //! The model card: the JSON under the file's metadata key [`CARD_KEY`] that says what a
 //! network reads and gives, and its checks.
 
+use super::uncertainty::SdCard;
 use crate::body::MARKER_FRAME_LEN;
 use crate::error::{Error, Result};
 use crate::features::FeatureSet;
@@ -114,6 +115,10 @@ pub struct ModelCard {
     /// written by the writer and verified by the loader. Absent in files written before it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tensor_sha256: Option<String>,
+    /// How the outputs' per-frame standard deviations are computed ([`SdCard`]); absent: the
+    /// model gives none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<SdCard>,
 }
 
 impl ModelCard {
@@ -146,6 +151,7 @@ impl ModelCard {
             metrics: Default::default(),
             envelope: None,
             tensor_sha256: None,
+            uncertainty: None,
         }
     }
 
@@ -288,6 +294,9 @@ impl ModelCard {
             && !(sum.len() == 64 && sum.bytes().all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b)))
         {
             return bad(format!("field \"tensor_sha256\" is {sum:?}, expected 64 lowercase hex digits"));
+        }
+        if let Some(sd) = &self.uncertainty {
+            sd.validate(self.outputs.len(), &self.feature_set, self.output_offset.is_some())?;
         }
         self.parsed_activations().map(|_| ())
     }

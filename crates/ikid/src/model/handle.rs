@@ -141,6 +141,14 @@ impl Model {
         Ok(Model { inner: Arc::new(Inner { card, feature_set, mlp, net, limits }) })
     }
 
+    /// This model with its card's `uncertainty` replaced by `uncertainty` (`None` removes it):
+    /// the per-frame standard deviations' coefficients ([`SdCard`](super::SdCard)), checked
+    /// as a loaded card is. The tensors, and so their checksum, are unchanged.
+    pub fn with_uncertainty(&self, uncertainty: Option<super::SdCard>) -> Result<Self> {
+        let card = ModelCard { uncertainty, ..self.inner.card.clone() };
+        Self::from_parts(card, self.inner.mlp.clone())
+    }
+
     /// The model as the bytes of a `.safetensors` file.
     pub fn to_bytes(&self) -> Vec<u8> {
         file::to_bytes(&self.inner.card, &self.inner.mlp).expect("a loaded model always serialises")

@@ -17,6 +17,7 @@ mod card;
 mod file;
 mod handle;
 mod predict;
+pub mod uncertainty;
 
 pub use card::{
     Bounds, CARD_KEY, Envelope, FORMAT, FORMAT_VERSION, MAX_WINDOW, ModelCard, NEWEST_FEATURES, OutputSpec, TASKS,
@@ -24,3 +25,4 @@ pub use card::{
 pub use file::{MAX_MODEL_FILE_BYTES, read_bounded, tensor_sha256, to_bytes};
 pub use handle::Model;
 pub use handle::{CHANGE_MARGIN, CORRECTION_MARGIN, ENVELOPE_MARGIN, IMPLAUSIBLE_MARGIN};
+pub use uncertainty::{SdCard, SdState};

@@ -51,6 +51,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "from the filter's covariance; see docs/live.md for how far to trust it)",
     )
     p.add_argument(
+        "--sd",
+        action="store_true",
+        help="each network output followed by its standard deviation (<name>_sd; the model card's "
+        "uncertainty, studies/net_sigma.py measures how well it covers), on stdout and the LSL sink; a frame "
+        "whose σ is not yet known (the first frames after the window restarts) is 'filling'",
+    )
+    p.add_argument(
         "--udp",
         type=PORT,
         default=None,
@@ -440,6 +447,24 @@ def _tracker_streams(args: argparse.Namespace, rate_hz: float | None):
     return [stream], stream.output_names, stream.output_units, stream.rate_hz, len(ikid.marker_names()) * 3
 
 
+class _WithSd:
+    """A network's stream behind the stream's interface, each output followed by its standard
+    deviation (``Stream.output_sd``); None (filling) until the σ is known."""
+
+    def __init__(self, stream: ikid.Stream) -> None:
+        self.stream = stream
+
+    def push(self, frame: np.ndarray, time: float | None = None) -> np.ndarray | None:
+        out = self.stream.push(frame, time=time)
+        sd = self.stream.output_sd
+        if out is None or sd is None:
+            return None
+        return np.column_stack([np.asarray(out, np.float64), sd]).ravel()
+
+    def __getattr__(self, name: str):  # status, filled_markers, time_reanchors, reset: the stream's
+        return getattr(self.stream, name)
+
+
 def _model_streams(args: argparse.Namespace, rate_hz: float | None):
     unchecked = args.allow_unchecked_model
     models = [_model_for(args.model, "ikid stream --model", ("ik", "chain"), rate_hz, unchecked)]
@@ -452,9 +477,18 @@ def _model_streams(args: argparse.Namespace, rate_hz: float | None):
         if m.frame_len != models[0].frame_len:
             raise ikid.InputError(f"models {models[0].name!r} and {m.name!r} read different frames")
     calibration = ikid.load_calibration(args.calibration) if args.calibration else None
-    streams = [m.stream(missing_markers=args.missing_markers, calibration=calibration) for m in models]
+    plain = [m.stream(missing_markers=args.missing_markers, calibration=calibration) for m in models]
+    streams: list[ikid.Stream | _WithSd] = list(plain)
     names = [n for m in models for n in m.output_names]
     units = [u for m in models for u in m.output_units]
+    if args.sd:
+        from ikid.cli.process import _check_uncertainty
+
+        for m in models:
+            _check_uncertainty(m.name, m, "ikid stream --sd")
+        streams = [_WithSd(s) for s in plain]
+        names = [x for n in names for x in (n, f"{n}_sd")]
+        units = [u for unit in units for u in (unit, unit)]
     return streams, names, units, rate, models[0].frame_len
 
 
