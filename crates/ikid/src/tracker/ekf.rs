@@ -320,13 +320,19 @@ impl Tracker {
         // the posture): a misfit the prediction cannot remove is no manoeuvre, and treating
         // it as one passed each frame's noise through to the angles and their derivatives
         // (issue #28: skin markers with 1 % noise gave torques of 11 N·m).
-        let misfit = self.template_misfit_variance(self.noise_variance.iter().sum::<f64>() / N_HAND as f64);
+        let mean_noise = self.noise_variance.iter().sum::<f64>() / N_HAND as f64;
+        let misfit = self.template_misfit_variance(mean_noise);
         // With the hand's three markers, the misfit is part of each marker's error in the fit
         // too: weighed by each lab coordinate's white noise alone, noise that differs between
         // the lab's axes turned the skin's misfit into a bias of the angles (issue #28's exam,
         // skin markers with 1 % noise: 0.0062 → 0.0072 rad² on the Gonzalez wrist, where the
-        // per-frame fit stays at 0.0063). With two markers and the wrist centre the centre's
-        // weight against the markers is kept as learned.
+        // per-frame fit stays at 0.0063). The misfit evens out the coordinates' weights only:
+        // scaled back to the white noise's mean, the markers weigh as much against the
+        // prediction as before (a misfit that slides slowly with the posture is no white noise
+        // to smooth away: counted as one, the filter lagged real movement, pyomeca 0.68° →
+        // 1.02°). With two markers and the wrist centre the centre's weight against the
+        // markers is kept as learned.
+        let evened = if centre.is_none() && misfit > 0.0 { mean_noise / (mean_noise + misfit) } else { 1.0 };
         let in_gain = if centre.is_none() { misfit } else { 0.0 };
         while iteration < MAX_ITERATIONS {
             let Some((predicted, jac)) = self.hand_prediction(forearm, &at, hand, centre.map(|c| c.ch)) else {
@@ -342,10 +348,14 @@ impl Tracker {
             for m in 0..4 {
                 for k in 0..3 {
                     // The fourth: the wrist centre (the forearm's point, where the hand's would be).
-                    let (z, variance) = match (m, world, centre) {
-                        (3, Some(world), Some(c)) => (world[k], c.variance),
+                    // `tested`: the variance the manoeuvre test allows (white noise and misfit).
+                    let (z, variance, tested) = match (m, world, centre) {
+                        (3, Some(world), Some(c)) => (world[k], c.variance, c.variance),
                         (3, _, _) => break,
-                        _ => (hand[3 * m + k], self.noise_variance[3 * m + k] + in_gain),
+                        _ => {
+                            let white = self.noise_variance[3 * m + k];
+                            (hand[3 * m + k], (white + in_gain) * evened, white + misfit)
+                        }
                     };
                     if z.is_nan() {
                         continue;
@@ -358,7 +368,7 @@ impl Tracker {
                     // ph = P hᵀ (h touches only the angles).
                     let ph: StateVector = pi.column(0) * h[0] + pi.column(1) * h[1] + pi.column(2) * h[2];
                     let s = h[0] * ph[0] + h[1] * ph[1] + h[2] * ph[2] + variance;
-                    nis += innovation * innovation / if m < 3 { s + misfit - in_gain } else { s };
+                    nis += innovation * innovation / (s - variance + tested);
                     used += 1.0;
                     let gain = ph / s;
                     xi += gain * innovation;
