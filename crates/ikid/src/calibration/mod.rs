@@ -1302,4 +1302,75 @@ mod tests {
         assert!(e.contains("frame 1") && e.contains("USP"), "{e}");
         assert!(cal.apply_rows(&mut [0.0; 5]).unwrap_err().to_string().contains("not a whole number"));
     }
+
+    /// Frames (f64, as the placement check takes them) of the default body at angles `q`,
+    /// each segment's markers spread by `spread[segment]` about its first marker (a uniform
+    /// scaling: every distance within the segment grows by that factor, its frame's
+    /// orientation does not change).
+    fn spread_frames(n: usize, spread: [f64; 2], q: [f64; 3]) -> Vec<f64> {
+        let mut body = body::BodyModel::default();
+        let o = body.marker_offsets;
+        for m in 0..6 {
+            let (first, s) = if m < 3 { (0, spread[0]) } else { (3, spread[1]) };
+            body.marker_offsets[m] = std::array::from_fn(|k| o[first][k] + s * (o[m][k] - o[first][k]));
+        }
+        let pose = body.forearm_pose(0.3);
+        (0..n).flat_map(|_| body.marker_frame(&q, &pose)).collect()
+    }
+
+    #[test]
+    fn the_default_placement_check_takes_the_models_own_markers_and_its_slack() {
+        let body = body::BodyModel::default();
+        // The body model's own markers, at a posture inside every range: nothing to refuse.
+        check_default_placement(&spread_frames(5, [1.0, 1.0], [0.4, -0.3, 0.2]), &body).unwrap();
+        // Every distance 25% longer: at PLACEMENT_DISTANCE_SHARE exactly, 1 cm inside the
+        // limit (share × model + slack); a limit of share × model − slack would refuse it.
+        let d =
+            |i: usize, j: usize| (Vector3::from(body.marker_offsets[i]) - Vector3::from(body.marker_offsets[j])).norm();
+        assert!((PLACEMENT_DISTANCE_SHARE - 0.25).abs() < 1e-12 && PLACEMENT_DISTANCE_SLACK_M == 0.01);
+        assert!([(0, 1), (0, 2), (1, 2), (3, 4), (3, 5), (4, 5)].iter().all(|&(i, j)| d(i, j) > 0.02));
+        check_default_placement(&spread_frames(5, [1.25, 1.25], [0.0; 3]), &body).unwrap();
+        // A recording with no complete frame has nothing to judge.
+        check_default_placement(&[f64::NAN; MARKER_FRAME_LEN * 3], &body).unwrap();
+    }
+
+    #[test]
+    fn markers_farther_apart_than_the_model_puts_them_name_the_pair() {
+        let body = body::BodyModel::default();
+        // Forearm markers 50% farther apart: RSP–USP, the first pair checked, is refused.
+        let e = check_default_placement(&spread_frames(5, [1.5, 1.0], [0.0; 3]), &body).unwrap_err().to_string();
+        assert!(e.contains("markers RSP and USP are") && e.contains("ikid calibrate"), "{e}");
+        // Hand markers 50% farther apart (the forearm's as the model has them): MC2–MC5.
+        let e = check_default_placement(&spread_frames(5, [1.0, 1.5], [0.0; 3]), &body).unwrap_err().to_string();
+        assert!(e.contains("markers MC2 and MC5 are"), "{e}");
+        // The same with the median over frames: three of five frames as the model has them
+        // pass, three of five spread do not.
+        let mut mixed = spread_frames(3, [1.0, 1.0], [0.0; 3]);
+        mixed.extend(spread_frames(2, [1.0, 1.5], [0.0; 3]));
+        check_default_placement(&mixed, &body).unwrap();
+        let mut mixed = spread_frames(2, [1.0, 1.0], [0.0; 3]);
+        mixed.extend(spread_frames(3, [1.0, 1.5], [0.0; 3]));
+        assert!(check_default_placement(&mixed, &body).is_err());
+    }
+
+    #[test]
+    fn a_median_posture_past_a_range_and_its_margin_is_refused() {
+        let body = body::BodyModel::default();
+        // Ulnar/radial deviation ranges over −20°..30°, with the 15° margin −35°..45°.
+        let (lo, hi) = COORDINATES[2].range;
+        assert!((lo.to_degrees() + 20.0).abs() < 1e-9 && (hi.to_degrees() - 30.0).abs() < 1e-9);
+        assert!((PLACEMENT_POSTURE_MARGIN_RAD.to_degrees() - 15.0).abs() < 0.01);
+        for (deg, ok) in [(-30.0, true), (-40.0, false), (40.0, true), (50.0, false)] {
+            let q = [0.0, 0.0, f64::to_radians(deg)];
+            let got = check_default_placement(&spread_frames(5, [1.0, 1.0], q), &body);
+            match got {
+                Ok(()) => assert!(ok, "{deg}° passed"),
+                Err(e) => {
+                    let e = e.to_string();
+                    assert!(!ok, "{deg}° refused: {e}");
+                    assert!(e.contains(&format!("ra_wr_ad_ab = {deg:.0}°")) && e.contains("-20° to 30°"), "{e}");
+                }
+            }
+        }
+    }
 }
