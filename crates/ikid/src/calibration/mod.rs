@@ -1260,6 +1260,11 @@ mod tests {
         let (cal, report) = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap();
         let hand = report.landmarks.as_ref().unwrap().hand.as_ref().unwrap();
         assert_eq!(hand.frames, n - 1);
+        // The metacarpal heads sit at (0, −70, 25) and (0, −65, −25) mm (×1.1) of the hand, the
+        // mid-styloids at the wrist's centre, which the hand turns about: so 1.1 × 67.5 mm from
+        // their midpoint and 1.1 × |(0, −5, 50)| mm apart, whatever the held posture.
+        assert!((hand.long_axis_mm - 1.1 * 67.5).abs() < 1e-2, "{hand:?}");
+        assert!((hand.metacarpal_span_mm - 1.1 * 5f64.hypot(50.0)).abs() < 1e-2, "{hand:?}");
         assert!((hand.neutral_offset_deg - angle_deg(&body::wrist_rotation(&held))).abs() < 1e-3, "{hand:?}");
         for q in [held, [0.0; 3], [-0.5, 0.6, -0.2]] {
             let out = angles_after(&cal, &at(q));
@@ -1372,5 +1377,31 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_functional_movement_is_held_to_the_ranges_between_its_2nd_and_98th_percentiles() {
+        // 294 frames circling well inside the ranges, and `k` frames at either end of radial-
+        // ulnar deviation past range + margin (−35° to 45°): −40° and +50°. With k = 3 (1% of
+        // 300, below the 2% cut: the 2nd percentile is the 7th frame from either end) they are
+        // outliers the check ignores; with k = 7 they are the 2nd and 98th percentiles.
+        let neutral = frames(&[[0.0; 3]; 12], &SHIFT, 1.0, 0.3);
+        let movement = |k: usize| {
+            let mut q = circles(300 - 2 * k, 0.0, 0.0);
+            for _ in 0..k {
+                q.push([0.0, 0.0, f64::to_radians(-40.0)]);
+                q.push([0.0, 0.0, f64::to_radians(50.0)]);
+            }
+            frames(&q, &SHIFT, 1.0, 0.3)
+        };
+        let (cal, report) = Calibration::functional(&neutral, &movement(3), Side::Right).unwrap();
+        assert_eq!(report.functional.as_ref().unwrap().frames, 300);
+        let q = [0.1, 0.3, -0.2];
+        let out = angles_after(&cal, &frames(&[q], &SHIFT, 1.0, 0.3));
+        for c in 0..3 {
+            assert!((out[c] as f64 - q[c]).abs() < 1e-4, "{out:?} vs {q:?}");
+        }
+        let e = Calibration::functional(&neutral, &movement(7), Side::Right).unwrap_err().to_string();
+        assert!(e.contains("takes ra_wr_ad_ab from -40° to 50° (2nd to 98th percentile)"), "{e}");
     }
 }

@@ -450,7 +450,9 @@ mod tests {
         let mut tracker = Tracker::new(body, settings).unwrap();
         let out: Vec<TrackerOutput> =
             f.chunks_exact(MARKER_FRAME_LEN).map(|frame| tracker.push(frame).unwrap().unwrap()).collect();
-        let lost = tracker.lost_frames();
+        // LOST_S at 70 Hz: ceil(0.03 s × 70 Hz = 2.1) = 3 frames.
+        let lost = 3;
+        assert_eq!(tracker.lost_frames(), lost);
         let last = out[149].state;
         for (k, o) in out[150..160].iter().enumerate() {
             assert!(o.status & status::HELD != 0);
@@ -466,6 +468,16 @@ mod tests {
         // Back on the clean run's estimate within 100 ms.
         let after = worst_deg(&good[167..], &out[167..].iter().map(|o| o.state.q).collect::<Vec<_>>());
         assert!(after < 0.1, "{after}° off the clean run");
+    }
+
+    #[test]
+    fn lost_s_is_counted_in_frames_at_the_trackers_rate_and_at_least_three() {
+        // LOST_S = 30 ms: 1.5 frames at 50 Hz (held to 3), 4.5 at 150 Hz (5), 30 at 1 kHz.
+        for (rate, frames) in [(50.0, 3), (150.0, 5), (1000.0, 30)] {
+            let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+            let tracker = Tracker::new(BodyModel::default(), settings).unwrap();
+            assert_eq!(tracker.lost_frames(), frames, "{rate} Hz");
+        }
     }
 
     #[test]
