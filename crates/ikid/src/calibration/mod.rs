@@ -838,6 +838,8 @@ mod tests {
         let lm = report.landmarks.as_ref().unwrap();
         assert_eq!(lm.frames, [11, 11, 6, 11], "frame 5 has no forearm frame; frames 0-5 no radial styloid");
         assert!((lm.styloid_span_mm - 66.0).abs() < 1e-3 && (lm.styloid_axis_deg - 90.0).abs() < 1e-3, "{lm:?}");
+        // The epicondyles at z = ±35 mm (×1.1).
+        assert!((lm.epicondyle_span_mm - 77.0).abs() < 1e-3, "{lm:?}");
         assert!(report.placement_deg[1] > MAX_PLACEMENT_DEG, "{report:?}");
         let q = [0.5, -0.6, 0.25];
         let (frame, _) = neutral_session(1, &SHIFT, 120.0, q);
