@@ -436,7 +436,7 @@ mod tests {
         let m = report.mirror.as_ref().unwrap();
         assert_eq!(m.landmarks.len(), 1, "{m:?}");
         let (k, distance, angle) = m.landmarks[0];
-        assert!(k == 0 && distance < 1e-3 && angle < 1e-3, "{m:?}"); // f32 lab coordinates: ~0.2 mm
+        assert!(k == 0 && distance < 1e-3 && angle < 1e-3, "{m:?}"); // mm and degrees
         let q = q_path(50);
         let mut f = moving.markers[..MARKER_FRAME_LEN].to_vec();
         cal.apply(&mut f, 0).unwrap();
