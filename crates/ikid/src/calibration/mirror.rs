@@ -460,6 +460,15 @@ mod tests {
         // The left plate turned 40° about its normal relative to the right's mirror image.
         let err = mirror(0.0, 40f64.to_radians(), [0, 1, 2]).unwrap_err().to_string();
         assert!(err.contains("the clusters are not mounted alike"), "{err}");
+        // Turned 25° the other way: the map's pairing is still the closest one (the others read
+        // farther off), so the refusal names no other pairing.
+        let err = mirror(0.0, -25f64.to_radians(), [0, 1, 2]).unwrap_err().to_string();
+        assert!(
+            err.contains(
+                "this arm's lateral_epicondyle 75 mm (25°) from where the other arm's calibration puts it, at most 20°"
+            ),
+            "{err}"
+        );
         // Turned 8°: accepted, the angle reported.
         let (_, report, _) = mirror(0.0, 8f64.to_radians(), [0, 1, 2]).unwrap();
         let deg = report.mirror.unwrap().landmarks[0].2;
