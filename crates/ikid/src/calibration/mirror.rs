@@ -461,7 +461,9 @@ mod tests {
         let err = mirror(0.0, 40f64.to_radians(), [0, 1, 2]).unwrap_err().to_string();
         assert!(err.contains("the clusters are not mounted alike"), "{err}");
         // Turned 25° the other way: the map's pairing is still the closest one (the others read
-        // farther off), so the refusal names no other pairing.
+        // farther off), so the refusal names no other pairing. The epicondyle, 173.6 mm from the
+        // plate's normal through its centre (and 30 mm along it), moves by a chord of
+        // 2 × 173.6 × sin 12.5° = 75 mm, seen 24.6° off from the plate's centre.
         let err = mirror(0.0, -25f64.to_radians(), [0, 1, 2]).unwrap_err().to_string();
         assert!(
             err.contains(
