@@ -331,14 +331,14 @@ mod tests {
         // per coordinate, the rigid fit of those places to them (Kabsch), and how far that fit
         // moves the centre, per coordinate, plus the learned centre's own variance. The formula
         // takes the turn's effect as isotropic (the fit's turn is stiffer about the markers'
-        // normal): 16% under the Monte Carlo here (NumPy: 0.84), within 25%.
+        // normal): 18% under the Monte Carlo here (NumPy: 0.82), within 25%.
         let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::default()).unwrap();
         let sigma = 1e-3;
         tracker.noise_variance = [sigma * sigma; N_HAND];
         let places =
             [Vector3::new(0.01, -0.06, 0.03), Vector3::new(0.0, -0.07, -0.02), Vector3::new(-0.03, -0.05, 0.0)];
         tracker.live[3..6].copy_from_slice(&places);
-        let centre = WristCentre { ch: Vector3::new(0.0, 0.0, 0.005), variance: 1e-6, ..WristCentre::origins() };
+        let centre = WristCentre { ch: Vector3::new(0.0, 0.01, 0.0), variance: 1e-6, ..WristCentre::origins() };
         let mut rng = crate::rng::SplitMix::new(3);
         let n = 4000;
         let mut sum = 0.0;
