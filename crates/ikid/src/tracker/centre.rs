@@ -394,4 +394,46 @@ mod tests {
             assert!(off < 2.5, "marker {marker}: {off}° off through its gaps");
         }
     }
+
+    #[test]
+    fn a_learned_centre_is_solved_from_its_min_frames_th_frame_on() {
+        // A hand turning about a centre 1 cm distal of the forearm's origin; each frame added
+        // counts once, and `solve(n)` answers from the n-th on.
+        let mut centre = JointCentre::new();
+        let forearm = Isometry3::translation(0.1, 1.0, 0.2);
+        for k in 0..12 {
+            let q = [0.3 * (k as f64).sin(), 0.5 * (0.7 * k as f64).cos(), 0.2 * (1.3 * k as f64).sin()];
+            let turn = UnitQuaternion::from_rotation_matrix(&body::wrist_rotation(&q));
+            let at = Vector3::new(0.0, -0.01, 0.0);
+            let hand = forearm * Isometry3::from_parts(Translation3::from(at - turn * at), turn);
+            centre.add(&forearm, &hand, 0.0);
+            let n = k + 1;
+            assert!(centre.solve(n).is_some() && centre.solve(n + 1).is_none(), "after {n} frames");
+        }
+        let solved = centre.solve(12).unwrap();
+        // (Its small ridge towards the first frame's midpoint leaves ~20 µm.)
+        assert!((solved.cf - Vector3::new(0.0, -0.01, 0.0)).norm() < 1e-4, "{solved:?}");
+    }
+
+    #[test]
+    fn two_hand_markers_that_miss_the_centre_do_not_restart_the_tracker() {
+        // Uncalibrated (the centre is the body model's, 1 mm uncertain): MC5 missing from frame
+        // 200 on, and MC2 3 cm off for two frames (a ghost, shorter than LOST_S). MC2 and MCB
+        // then put the centre ~3 cm from the forearm's, beyond its tolerance (5 mm + 3 × 1 mm):
+        // gated, no restart onto the ghost.
+        let body = BodyModel::default();
+        let rate = 100.0;
+        let q = trajectory(400, rate);
+        let mut f = frames(&body, &q, 0.2);
+        for i in 200..400 {
+            f[i * MARKER_FRAME_LEN + 12..i * MARKER_FRAME_LEN + 15].fill(f64::NAN);
+        }
+        for i in 300..302 {
+            f[i * MARKER_FRAME_LEN + 9] += 0.03;
+        }
+        let (est, status, tracker) = track(&f, rate);
+        assert_eq!(tracker.restarts(), 0, "restarted at {:?}", status.iter().position(|s| s & status::RESTARTED != 0));
+        let off = worst_turn_deg(&q[200..], &est[200..]);
+        assert!(off < 1.0, "{off}° off through the ghost");
+    }
 }
