@@ -493,7 +493,9 @@ mod tests {
         let (est, status, tracker) = track(&f, 1000.0);
         assert_eq!(tracker.restarts(), 1);
         let restart = status.iter().position(|s| s & status::RESTARTED != 0).unwrap();
-        assert!((400..400 + 3 * 30).contains(&restart), "{restart}");
+        // At once: the three markers fit the hand's shape, so the filter is what is wrong (not
+        // after LOST_S of gated frames, 30 here).
+        assert_eq!(restart, 400);
         assert!(worst_deg(&q[restart + 50..], &est[restart + 50..]) < 0.05);
     }
 
