@@ -276,6 +276,39 @@ mod tests {
             assert_eq!(tracker.check_rigid(Segment::Forearm, &off, 3), (0b100, false), "displaced frame {k}");
         }
         assert_eq!(tracker.check_rigid(Segment::Forearm, &off, 3), (0, true));
+        // The new shape is kept as the old was: right after it was taken, RSP turned 60° about
+        // FAP (one distance broken) is RSP's fault alone (it moved since the new shape's frame);
+        // then one more frame of the new shape (six in all), and the old shape back needs six
+        // frames to be taken again.
+        let p = |m: usize| Vector3::new(off[3 * m], off[3 * m + 1], off[3 * m + 2]);
+        let axis = nalgebra::Unit::new_normalize((p(1) - p(0)).cross(&(p(2) - p(0))));
+        let turned = p(2) + nalgebra::Rotation3::from_axis_angle(&axis, 1.0) * (p(0) - p(2));
+        let mut rsp_off = off.clone();
+        rsp_off[..3].copy_from_slice(turned.as_slice());
+        assert_eq!(tracker.check_rigid(Segment::Forearm, &rsp_off, 3), (0b001, false));
+        assert_eq!(tracker.check_rigid(Segment::Forearm, &off, 3), (0, false));
+        for k in 1..6 {
+            assert_eq!(tracker.check_rigid(Segment::Forearm, &rest, 3), (0b100, false), "old shape, frame {k}");
+        }
+        assert_eq!(tracker.check_rigid(Segment::Forearm, &rest, 3), (0, true));
+    }
+
+    #[test]
+    fn a_new_shape_must_hold_from_frame_to_frame_to_be_taken() {
+        // FAP jumping between two places 10 cm off either way: each frame another candidate
+        // shape, so none is ever taken, however long it lasts.
+        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::default()).unwrap();
+        let rest = moved(0, Vector3::zeros());
+        for _ in 0..5 {
+            tracker.check_rigid(Segment::Forearm, &rest, 3);
+        }
+        let point = |m: usize| Vector3::new(rest[3 * m], rest[3 * m + 1], rest[3 * m + 2]);
+        let out = (point(2) - (point(0) + point(1)) / 2.0).normalize();
+        let (far, near) = (moved(2, 0.1 * out), moved(2, -0.1 * out));
+        for k in 0..20 {
+            let f = if k % 2 == 0 { &far } else { &near };
+            assert_eq!(tracker.check_rigid(Segment::Forearm, f, 3), (0b100, false), "frame {k}");
+        }
     }
 
     #[test]
