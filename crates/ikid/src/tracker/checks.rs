@@ -343,7 +343,8 @@ mod tests {
             let (est, status, _) = track(&f, 1000.0);
             let flagged = status[1000..1100].iter().filter(|s| *s & status::REJECTED_MARKER != 0).count();
             if taken {
-                assert!(flagged < 100, "{shift} m: {flagged} of 100 rejected");
+                // Taken once the jump has lasted LOST_S (30 frames at 1 kHz): on its 30th frame.
+                assert_eq!(flagged, 29, "{shift} m: {flagged} of 100 rejected");
             } else {
                 assert_eq!(flagged, 100, "{shift} m");
                 let after = worst_deg(&good[1200..], &est[1200..]); // 100 ms after the burst
