@@ -471,6 +471,34 @@ mod tests {
     }
 
     #[test]
+    fn the_motion_model_is_white_jerk_integrated_over_one_step() {
+        // Per coordinate, a jerk impulse τ before the step's end leaves g(τ) = (τ²/2, τ, 1) in
+        // (q, q̇, q̈): Q = s ∫₀^dt g gᵀ dτ, here by the midpoint rule over 10⁴ slices; and the
+        // transition is exp(A dt) for A the chain q̈ → q̇ → q.
+        let (rate, s) = (50.0, 3.0);
+        let settings = TrackerSettings { rate_hz: rate, jerk_noise: s, ..Default::default() };
+        let (transition, process_noise) = motion_model(&settings);
+        let (dt, n) = (1.0 / rate, 10_000);
+        let mut expected = nalgebra::Matrix3::zeros();
+        for k in 0..n {
+            let t = (k as f64 + 0.5) * dt / n as f64;
+            let g = nalgebra::Vector3::new(t * t / 2.0, t, 1.0);
+            expected += g * g.transpose() * (s * dt / n as f64);
+        }
+        let a = nalgebra::Matrix3::new(0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0) * dt;
+        let exp = nalgebra::Matrix3::identity() + a + a * a / 2.0; // A³ = 0
+        for c in 0..N_COORDINATES {
+            for i in 0..3 {
+                for j in 0..3 {
+                    let (got, want) = (process_noise[(3 * i + c, 3 * j + c)], expected[(i, j)]);
+                    assert!((got - want).abs() <= 1e-6 * want.abs(), "Q[{i}][{j}] = {got:e}, expected {want:e}");
+                    assert_eq!(transition[(3 * i + c, 3 * j + c)], exp[(i, j)], "F[{i}][{j}]");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn lost_s_is_counted_in_frames_at_the_trackers_rate_and_at_least_three() {
         // LOST_S = 30 ms: 1.5 frames at 50 Hz (held to 3), 4.5 at 150 Hz (5), 30 at 1 kHz.
         for (rate, frames) in [(50.0, 3), (150.0, 5), (1000.0, 30)] {
