@@ -528,6 +528,25 @@ mod tests {
     }
 
     #[test]
+    fn a_lost_hand_whose_markers_miss_its_shape_restarts_after_lost_s() {
+        // The same jump, and MCB 2 cm off from it on: the three markers no longer fit the hand's
+        // shape (5 mm), so nothing says at once that the filter is wrong; it restarts once every
+        // hand marker has been gated for LOST_S (30 frames at 1 kHz): on frame 429.
+        let body = BodyModel::default();
+        let mut q = trajectory(1000, 1000.0);
+        for qi in &mut q[400..] {
+            qi[1] += 60f64.to_radians();
+        }
+        let mut f = frames(&body, &q, 0.0);
+        for i in 400..1000 {
+            f[i * MARKER_FRAME_LEN + 15] += 0.02;
+        }
+        let (_, status, tracker) = track(&f, 1000.0);
+        assert_eq!(tracker.restarts(), 1);
+        assert_eq!(status.iter().position(|s| s & status::RESTARTED != 0), Some(429));
+    }
+
+    #[test]
     fn angles_stay_within_one_turn() {
         for (a, wrapped) in [(3.5, 3.5 - TAU), (-3.5, TAU - 3.5), (PI, PI), (-PI, PI), (7.0 * PI, PI), (0.3, 0.3)] {
             assert!((wrap_angle(a) - wrapped).abs() < 1e-12, "{a}");
