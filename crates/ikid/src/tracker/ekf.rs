@@ -547,6 +547,20 @@ mod tests {
     }
 
     #[test]
+    fn the_initial_covariance_is_as_wide_as_documented_and_uncorrelated() {
+        // Standard deviations 0.1 rad, ~30 rad/s and ~300 rad/s² for every coordinate, nothing
+        // correlated (a velocity or acceleration known a priori would slow the start).
+        let tracker = Tracker::new(BodyModel::default(), TrackerSettings::default()).unwrap();
+        let p = tracker.initial_covariance();
+        for i in 0..N_STATE {
+            for j in 0..N_STATE {
+                let want = if i != j { 0.0 } else { [0.1f64, 1e3f64.sqrt(), 1e5f64.sqrt()][i / 3].powi(2) };
+                assert!((p[(i, j)] - want).abs() <= 1e-9 * want, "P[{i}][{j}] = {}", p[(i, j)]);
+            }
+        }
+    }
+
+    #[test]
     fn angles_stay_within_one_turn() {
         for (a, wrapped) in [(3.5, 3.5 - TAU), (-3.5, TAU - 3.5), (PI, PI), (-PI, PI), (7.0 * PI, PI), (0.3, 0.3)] {
             assert!((wrap_angle(a) - wrapped).abs() < 1e-12, "{a}");
