@@ -422,6 +422,32 @@ mod tests {
     }
 
     #[test]
+    fn a_landmark_is_averaged_over_the_frames_it_is_seen_in() {
+        // The left arm's lateral epicondyle unseen in 4 of its 10 frames: taken from the other
+        // six, where it sits exactly where the right arm's calibration puts it.
+        let (right, geometry) = right_calibration(0.0);
+        let (mut neutral, moving) = left(0.0, [0, 1, 2]);
+        for l in neutral.landmarks.chunks_exact_mut(LANDMARK_FRAME_LEN).take(4) {
+            l[..3].fill(f32::NAN);
+        }
+        let trial = LandmarkTrial { markers: &neutral.markers, landmarks: &neutral.landmarks, hand_landmarks: None };
+        let (cal, report) =
+            Calibration::mirrored(&right, &geometry, &neutral.markers, Some(trial), Side::Left).unwrap();
+        let m = report.mirror.as_ref().unwrap();
+        assert_eq!(m.landmarks.len(), 1, "{m:?}");
+        let (k, distance, angle) = m.landmarks[0];
+        assert!(k == 0 && distance < 1e-3 && angle < 1e-3, "{m:?}"); // mm and degrees
+        let q = q_path(50);
+        let mut f = moving.markers[..MARKER_FRAME_LEN].to_vec();
+        cal.apply(&mut f, 0).unwrap();
+        let mut out = [0f32; 3];
+        FeatureSet::Angles.compute(&f, &mut out, 0).unwrap();
+        for c in 0..3 {
+            assert!((out[c] as f64 - q[0][c]).abs() < 1e-4, "{out:?} vs {:?}", q[0]);
+        }
+    }
+
+    #[test]
     fn a_map_pairing_the_markers_otherwise_is_told_how_to_pair_them() {
         // The left plate's markers named in the other order: the third where the right's first is.
         let err = mirror(0.0, 0.0, [2, 1, 0]).unwrap_err().to_string();
@@ -434,6 +460,17 @@ mod tests {
         // The left plate turned 40° about its normal relative to the right's mirror image.
         let err = mirror(0.0, 40f64.to_radians(), [0, 1, 2]).unwrap_err().to_string();
         assert!(err.contains("the clusters are not mounted alike"), "{err}");
+        // Turned 25° the other way: the map's pairing is still the closest one (the others read
+        // farther off), so the refusal names no other pairing. The epicondyle, 173.6 mm from the
+        // plate's normal through its centre (and 30 mm along it), moves by a chord of
+        // 2 × 173.6 × sin 12.5° = 75 mm, seen 24.6° off from the plate's centre.
+        let err = mirror(0.0, -25f64.to_radians(), [0, 1, 2]).unwrap_err().to_string();
+        assert!(
+            err.contains(
+                "this arm's lateral_epicondyle 75 mm (25°) from where the other arm's calibration puts it, at most 20°"
+            ),
+            "{err}"
+        );
         // Turned 8°: accepted, the angle reported.
         let (_, report, _) = mirror(0.0, 8f64.to_radians(), [0, 1, 2]).unwrap();
         let deg = report.mirror.unwrap().landmarks[0].2;

@@ -1008,6 +1008,8 @@ mod tests {
         let lm = report.landmarks.as_ref().unwrap();
         assert_eq!(lm.frames, [11, 11, 6, 11], "frame 5 has no forearm frame; frames 0-5 no radial styloid");
         assert!((lm.styloid_span_mm - 66.0).abs() < 1e-3 && (lm.styloid_axis_deg - 90.0).abs() < 1e-3, "{lm:?}");
+        // The epicondyles at z = ±35 mm (×1.1).
+        assert!((lm.epicondyle_span_mm - 77.0).abs() < 1e-3, "{lm:?}");
         assert!(report.placement_deg[1] > MAX_PLACEMENT_DEG, "{report:?}");
         let q = [0.5, -0.6, 0.25];
         let (frame, _) = neutral_session(1, &SHIFT, 120.0, q);
@@ -1430,6 +1432,11 @@ mod tests {
         let (cal, report) = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap();
         let hand = report.landmarks.as_ref().unwrap().hand.as_ref().unwrap();
         assert_eq!(hand.frames, n - 1);
+        // The metacarpal heads sit at (0, −70, 25) and (0, −65, −25) mm (×1.1) of the hand, the
+        // mid-styloids at the wrist's centre, which the hand turns about: so 1.1 × 67.5 mm from
+        // their midpoint and 1.1 × |(0, −5, 50)| mm apart, whatever the held posture.
+        assert!((hand.long_axis_mm - 1.1 * 67.5).abs() < 1e-2, "{hand:?}");
+        assert!((hand.metacarpal_span_mm - 1.1 * 5f64.hypot(50.0)).abs() < 1e-2, "{hand:?}");
         assert!((hand.neutral_offset_deg - angle_deg(&body::wrist_rotation(&held))).abs() < 1e-3, "{hand:?}");
         for q in [held, [0.0; 3], [-0.5, 0.6, -0.2]] {
             let out = angles_after(&cal, &at(q));
@@ -1471,5 +1478,130 @@ mod tests {
         let e = cal.apply_rows(&mut gap).unwrap_err().to_string();
         assert!(e.contains("frame 1") && e.contains("USP"), "{e}");
         assert!(cal.apply_rows(&mut [0.0; 5]).unwrap_err().to_string().contains("not a whole number"));
+    }
+
+    /// Frames (f64, as the placement check takes them) of the default body at angles `q`,
+    /// each segment's markers spread by `spread[segment]` about its first marker (a uniform
+    /// scaling: every distance within the segment grows by that factor, its frame's
+    /// orientation does not change).
+    fn spread_frames(n: usize, spread: [f64; 2], q: [f64; 3]) -> Vec<f64> {
+        let mut body = body::BodyModel::default();
+        let o = body.marker_offsets;
+        for m in 0..6 {
+            let (first, s) = if m < 3 { (0, spread[0]) } else { (3, spread[1]) };
+            body.marker_offsets[m] = std::array::from_fn(|k| o[first][k] + s * (o[m][k] - o[first][k]));
+        }
+        let pose = body.forearm_pose(0.3);
+        (0..n).flat_map(|_| body.marker_frame(&q, &pose)).collect()
+    }
+
+    #[test]
+    fn the_default_placement_check_takes_the_models_own_markers_and_its_slack() {
+        let body = body::BodyModel::default();
+        // The body model's own markers, at a posture inside every range: nothing to refuse.
+        check_default_placement(&spread_frames(5, [1.0, 1.0], [0.4, -0.3, 0.2]), &body).unwrap();
+        // Every distance 25% longer: at PLACEMENT_DISTANCE_SHARE exactly, 1 cm inside the
+        // limit (share × model + slack); a limit of share × model − slack would refuse it.
+        let d =
+            |i: usize, j: usize| (Vector3::from(body.marker_offsets[i]) - Vector3::from(body.marker_offsets[j])).norm();
+        assert!((PLACEMENT_DISTANCE_SHARE - 0.25).abs() < 1e-12 && PLACEMENT_DISTANCE_SLACK_M == 0.01);
+        assert!([(0, 1), (0, 2), (1, 2), (3, 4), (3, 5), (4, 5)].iter().all(|&(i, j)| d(i, j) > 0.02));
+        check_default_placement(&spread_frames(5, [1.25, 1.25], [0.0; 3]), &body).unwrap();
+        // A recording with no complete frame has nothing to judge.
+        check_default_placement(&[f64::NAN; MARKER_FRAME_LEN * 3], &body).unwrap();
+    }
+
+    #[test]
+    fn markers_farther_apart_than_the_model_puts_them_name_the_pair() {
+        let body = body::BodyModel::default();
+        // Forearm markers 50% farther apart: RSP–USP, the first pair checked, is refused.
+        let e = check_default_placement(&spread_frames(5, [1.5, 1.0], [0.0; 3]), &body).unwrap_err().to_string();
+        assert!(e.contains("markers RSP and USP are") && e.contains("ikid calibrate"), "{e}");
+        // Hand markers 50% farther apart (the forearm's as the model has them): MC2–MC5.
+        let e = check_default_placement(&spread_frames(5, [1.0, 1.5], [0.0; 3]), &body).unwrap_err().to_string();
+        assert!(e.contains("markers MC2 and MC5 are"), "{e}");
+        // The same with the median over frames: three of five frames as the model has them
+        // pass, three of five spread do not.
+        let mut mixed = spread_frames(3, [1.0, 1.0], [0.0; 3]);
+        mixed.extend(spread_frames(2, [1.0, 1.5], [0.0; 3]));
+        check_default_placement(&mixed, &body).unwrap();
+        let mut mixed = spread_frames(2, [1.0, 1.0], [0.0; 3]);
+        mixed.extend(spread_frames(3, [1.0, 1.5], [0.0; 3]));
+        assert!(check_default_placement(&mixed, &body).is_err());
+    }
+
+    #[test]
+    fn a_median_posture_past_a_range_and_its_margin_is_refused() {
+        let body = body::BodyModel::default();
+        // Ulnar/radial deviation ranges over −20°..30°, with the 15° margin −35°..45°.
+        let (lo, hi) = COORDINATES[2].range;
+        assert!((lo.to_degrees() + 20.0).abs() < 1e-9 && (hi.to_degrees() - 30.0).abs() < 1e-9);
+        assert!((PLACEMENT_POSTURE_MARGIN_RAD.to_degrees() - 15.0).abs() < 0.01);
+        for (deg, ok) in [(-30.0, true), (-40.0, false), (40.0, true), (50.0, false)] {
+            let q = [0.0, 0.0, f64::to_radians(deg)];
+            let got = check_default_placement(&spread_frames(5, [1.0, 1.0], q), &body);
+            match got {
+                Ok(()) => assert!(ok, "{deg}° passed"),
+                Err(e) => {
+                    let e = e.to_string();
+                    assert!(!ok, "{deg}° refused: {e}");
+                    assert!(e.contains(&format!("ra_wr_ad_ab = {deg:.0}°")) && e.contains("-20° to 30°"), "{e}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_functional_movement_is_held_to_the_ranges_between_its_2nd_and_98th_percentiles() {
+        // 294 frames circling well inside the ranges, and `k` frames at either end of radial-
+        // ulnar deviation past range + margin (−35° to 45°): −40° and +50°. With k = 3 (1% of
+        // 300, below the 2% cut: the 2nd percentile is the 7th frame from either end) they are
+        // outliers the check ignores; with k = 7 they are the 2nd and 98th percentiles.
+        let neutral = frames(&[[0.0; 3]; 12], &SHIFT, 1.0, 0.3);
+        let movement = |k: usize| {
+            let mut q = circles(300 - 2 * k, 0.0, 0.0);
+            for _ in 0..k {
+                q.push([0.0, 0.0, f64::to_radians(-40.0)]);
+                q.push([0.0, 0.0, f64::to_radians(50.0)]);
+            }
+            frames(&q, &SHIFT, 1.0, 0.3)
+        };
+        let (cal, report) = Calibration::functional(&neutral, &movement(3), Side::Right).unwrap();
+        assert_eq!(report.functional.as_ref().unwrap().frames, 300);
+        let q = [0.1, 0.3, -0.2];
+        let out = angles_after(&cal, &frames(&[q], &SHIFT, 1.0, 0.3));
+        for c in 0..3 {
+            assert!((out[c] as f64 - q[c]).abs() < 1e-4, "{out:?} vs {q:?}");
+        }
+        let e = Calibration::functional(&neutral, &movement(7), Side::Right).unwrap_err().to_string();
+        assert!(e.contains("takes ra_wr_ad_ab from -40° to 50° (2nd to 98th percentile)"), "{e}");
+    }
+
+    #[test]
+    fn the_universal_joint_fit_takes_the_best_of_its_starts() {
+        // Exact universal joints (flexion about z fixed in the forearm, deviation about x fixed
+        // in the hand) seen through technical frames turned anyhow: M_k = Aᵀ Rz(e_k) Rx(a_k) B.
+        // Their axes are u = Aᵀz, v = Bᵀx, with no residual. Alternating least squares from one
+        // start can settle on a worse fixed point (for about one in ten such joints from the
+        // x start, in a NumPy replica); the best of the three starts must be exact for all.
+        let mut rng = crate::rng::SplitMix::new(17);
+        for case in 0..30 {
+            let mut turn = || Rotation3::from_scaled_axis(Vector3::from_fn(|_, _| rng.uniform(-3.0, 3.0)));
+            let (a, b) = (turn(), turn());
+            let (flexion, deviation) = (rng.uniform(0.2, 1.3), rng.uniform(0.1, 1.3));
+            let moves: Vec<Matrix3<f64>> = (0..40)
+                .map(|i| {
+                    let t = i as f64 / 40.0 * std::f64::consts::TAU;
+                    let e = flexion * (2.0 * t).sin() + 0.2 * t.cos();
+                    let r = Rotation3::from_axis_angle(&Vector3::z_axis(), e)
+                        * Rotation3::from_axis_angle(&Vector3::x_axis(), deviation * (3.0 * t).cos());
+                    (a.inverse() * r * b).into_inner()
+                })
+                .collect();
+            let (u, v, residual, _) = functional::fit_universal_axes(&moves);
+            let (true_u, true_v) = (a.inverse() * Vector3::z(), b.inverse() * Vector3::x());
+            assert!(residual < 1e-6, "case {case}: residual {residual} rad");
+            assert!(u.dot(&true_u).abs() > 1.0 - 1e-9 && v.dot(&true_v).abs() > 1.0 - 1e-9, "case {case}: {u} {v}");
+        }
     }
 }

@@ -118,4 +118,24 @@ mod tests {
             assert!(off < bound, "marker {marker}: {off}° off the gap-free run");
         }
     }
+
+    #[test]
+    fn a_template_is_averaged_over_the_first_template_s_of_frames() {
+        // TEMPLATE_S = 0.5 s: ceil(0.5 × 10 Hz) = 5 frames, ceil(0.5 × 100 Hz) = 50; every
+        // frame here is complete and rigid, so each segment's template takes the first ones.
+        for (rate, n) in [(10.0, 5usize), (100.0, 50)] {
+            let f = frames(&BodyModel::default(), &trajectory(n + 10, rate), 0.2);
+            let settings = super::super::TrackerSettings { rate_hz: rate, ..Default::default() };
+            let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
+            tracker.set_calibration(Some(crate::calibration::Calibration::body_model()));
+            for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+                tracker.push(frame).unwrap();
+                let taken = (i + 1).min(n);
+                assert_eq!(tracker.template_frames, [taken; 2], "{rate} Hz, frame {i}");
+                for segment in [Segment::Forearm, Segment::Hand] {
+                    assert_eq!(tracker.templating(segment), i + 1 < n, "{rate} Hz, frame {i}");
+                }
+            }
+        }
+    }
 }
