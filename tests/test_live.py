@@ -75,20 +75,18 @@ def _offline(frames_m: np.ndarray, times: np.ndarray, model: str = "wrist-ik") -
     return out
 
 
-def test_lsl_source_in_and_lsl_sink_out(lab):
-    """600 frames at 1 kHz in mm with the lab's labels and an extra marker; MC5 hidden for
-    20 frames. Outputs equal ikid.Stream's on the same frames and times; the sink's stream
-    has labels, units and the source's stamps."""
-    d, env = lab
-    n, name, sink = 600, f"qualisys-{os.getpid()}-a", f"ikid-{os.getpid()}-a"
+def _lsl_pipeline(d, env, n: int, name: str, sink: str, outlet_args: list[str], stream_args: list[str]):
+    """Runs an LSL outlet of ``n`` frames named ``name``, ``ikid stream`` from it to the sink
+    ``sink`` and an inlet reading the sink, all bounded in time; returns ``ikid stream``'s exit
+    code, stdout and stderr and the inlet's stdout and stderr."""
     ready = d / "sink-ready"
     outlet = subprocess.Popen(
-        [*PEERS, "lsl-outlet", name, "--frames", str(n), "--hide", "300:320:4", "--ready", str(ready)],
+        [*PEERS, "lsl-outlet", name, "--frames", str(n), *outlet_args, "--ready", str(ready)],
         env=env, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     stream = subprocess.Popen(
         [*IKID, "stream", "--source", f"lsl:{name}", "--map", str(d / "lab.toml"), "--sink", f"lsl:{sink}",
-         "--count", str(n), "--idle", "10"],
+         "--count", str(n), "--idle", "10", *stream_args],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     reader = subprocess.Popen(
@@ -102,8 +100,18 @@ def test_lsl_source_in_and_lsl_sink_out(lab):
     finally:
         for p in (outlet, stream, reader):
             p.kill()
+    return stream.returncode, out, err, got, reader_err
+
+
+def test_lsl_source_in_and_lsl_sink_out(lab):
+    """600 frames at 1 kHz in mm with the lab's labels and an extra marker; MC5 hidden for
+    20 frames. Outputs equal ikid.Stream's on the same frames and times; the sink's stream
+    has labels, units and the source's stamps."""
+    d, env = lab
+    n, name, sink = 600, f"qualisys-{os.getpid()}-a", f"ikid-{os.getpid()}-a"
+    code, out, err, got, reader_err = _lsl_pipeline(d, env, n, name, sink, ["--hide", "300:320:4"], [])
     # MC5 hidden: a gap, filled or refused by name as in files (refused frames: exit 3).
-    assert stream.returncode in (0, 3), err
+    assert code in (0, 3), err
     header, rows = _header_and_rows(out)
     assert header[:3] == ["frame", "time", "status"] and header[3:] == ikid.load("wrist-ik").output_names
     assert len(rows) == n
@@ -116,7 +124,7 @@ def test_lsl_source_in_and_lsl_sink_out(lab):
     filled = [k for k, r in enumerate(rows) if r[2].startswith("filled")]
     assert set(filled) <= set(range(300, 320))
     assert all(rows[k][2] == "filled:MC5" or "MC5" in rows[k][2] for k in range(300, 320)), rows[300]
-    assert (stream.returncode == 3) == any(r[2].startswith("refused") for r in rows)
+    assert (code == 3) == any(r[2].startswith("refused") for r in rows)
     for k, r in enumerate(rows):
         if expected[k] is None:
             assert r[3] == "", (k, r)
@@ -464,28 +472,8 @@ def test_the_lsl_sink_carries_the_networks_standard_deviations(lab):
 
     d, env = lab
     n, name, sink = 300, f"qualisys-{os.getpid()}-sd", f"ikid-{os.getpid()}-sd"
-    ready = d / "sink-ready"
-    outlet = subprocess.Popen(
-        [*PEERS, "lsl-outlet", name, "--frames", str(n), "--ready", str(ready)],
-        env=env, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    stream = subprocess.Popen(
-        [*IKID, "stream", "--source", f"lsl:{name}", "--map", str(d / "lab.toml"), "--sink", f"lsl:{sink}",
-         "--count", str(n), "--idle", "10", "--sd"],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    reader = subprocess.Popen(
-        [*PEERS, "lsl-inlet", sink, "--samples", str(n), "--ready", str(ready), "--timeout", "5"],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    try:
-        out, err = stream.communicate(timeout=60)
-        got, reader_err = reader.communicate(timeout=30)
-        outlet.wait(timeout=30)
-    finally:
-        for p in (outlet, stream, reader):
-            p.kill()
-    assert stream.returncode == 0, err
+    code, out, err, got, reader_err = _lsl_pipeline(d, env, n, name, sink, [], ["--sd"])
+    assert code == 0, err
     _, rows = _header_and_rows(out)
     times = np.array([float(r[1]) for r in rows])
     # The oracle: the same frames and times through ikid.Stream in this process.
