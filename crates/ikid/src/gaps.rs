@@ -166,6 +166,11 @@ pub struct GapFiller {
     /// deviations (Welford) of their distance, over complete frames.
     pair_mean: [f64; 6],
     pair_m2: [f64; 6],
+    /// Per pair: its distance lately (a running mean over accepted complete frames, time
+    /// constant [`RECENT_MOTION_S`]), and the sum of squared deviations of each such frame's
+    /// distance from it: how far a distance strays from one frame to the next.
+    pair_recent: [f64; 6],
+    pair_step_m2: [f64; 6],
     /// Running mean of the markers over consecutive complete frames, which the joint-centre
     /// sums read ([`CENTRE_SMOOTHING_S`]); `None` after a gap.
     smoothed: Option<[f64; MARKER_FRAME_LEN]>,
@@ -206,9 +211,9 @@ pub const REANCHOR_FRAMES: u32 = 3;
 /// Marker pairs within each segment (indices into [`MARKERS`]): their distances are fixed
 /// by the rigid body, so a marker that jumps or swaps labels changes them.
 pub const PAIRS: [(usize, usize); 6] = [(0, 1), (0, 2), (1, 2), (3, 4), (3, 5), (4, 5)];
-/// A pair distance this many standard deviations (of the complete frames seen) from its
-/// mean, or a marker moving this many times its segment's RMS frame-to-frame displacement,
-/// marks an outlier...
+/// A pair distance this many standard deviations (of the complete frames seen) both from its
+/// mean and from where it was lately, or a marker moving this many times its segment's RMS
+/// frame-to-frame displacement, marks an outlier...
 pub const OUTLIER_SIGMAS: f64 = 8.0;
 /// ...by at least this much (metres): noise-free recordings have σ ≈ 0.
 pub const OUTLIER_FLOOR: f64 = 0.005;
@@ -262,6 +267,8 @@ impl GapFiller {
             last_complete_origin: None,
             pair_mean: [0.0; 6],
             pair_m2: [0.0; 6],
+            pair_recent: [0.0; 6],
+            pair_step_m2: [0.0; 6],
             smoothed: None,
             candidate: None,
             candidate_frames: 0,
@@ -671,15 +678,22 @@ impl GapFiller {
         self.pair_outliers(frame) | (moved & !self.last_fitted)
     }
 
-    /// Markers whose distances to the other two of their segment break the rigid body.
+    /// Markers whose distances to the other two of their segment break the rigid body: a
+    /// distance off both its usual range and where it was lately. Skin slides: a distance
+    /// that left the range seen so far gradually, through frames accepted one after another,
+    /// is the skin's (the exam's Gonzalez wrist, an ulnar styloid marker 142-160 mm from the
+    /// forearm's as the wrist turns: taken for a jump from the first posture beyond those of
+    /// the trial's first five seconds, half the trial was refused, never learned from).
     fn pair_outliers(&self, frame: &[f32]) -> u8 {
         let mut mask = 0u8;
         for (s, pairs) in PAIRS.chunks_exact(3).enumerate() {
             let dev = |p: usize| {
                 let k = 3 * s + p;
                 let (a, b) = pairs[p];
-                let d = ((marker(frame, a) - marker(frame, b)).norm() - self.pair_mean[k]).abs();
-                (d, d > self.pair_threshold(k))
+                let distance = (marker(frame, a) - marker(frame, b)).norm();
+                let d = (distance - self.pair_mean[k]).abs();
+                let sudden = (distance - self.pair_recent[k]).abs() > self.pair_step_threshold(k);
+                (d, sudden && d > self.pair_threshold(k))
             };
             let devs = [dev(0), dev(1), dev(2)];
             let first = 3 * s;
@@ -761,6 +775,13 @@ impl GapFiller {
 
     fn pair_threshold(&self, k: usize) -> f64 {
         let sd = (self.pair_m2[k] / self.complete_frames as f64).sqrt();
+        (OUTLIER_SIGMAS * sd).max(OUTLIER_FLOOR)
+    }
+
+    /// How far pair `k`'s distance may be from where it was lately ([`OUTLIER_SIGMAS`] times
+    /// its RMS deviation from there, at least [`OUTLIER_FLOOR`]).
+    fn pair_step_threshold(&self, k: usize) -> f64 {
+        let sd = (self.pair_step_m2[k] / self.complete_frames as f64).sqrt();
         (OUTLIER_SIGMAS * sd).max(OUTLIER_FLOOR)
     }
 
@@ -938,6 +959,12 @@ impl GapFiller {
             let delta = d - self.pair_mean[k];
             self.pair_mean[k] += delta / n;
             self.pair_m2[k] += delta * (d - self.pair_mean[k]);
+            if self.complete_frames == 0 {
+                self.pair_recent[k] = d;
+            }
+            let step = d - self.pair_recent[k];
+            self.pair_step_m2[k] += step * step;
+            self.pair_recent[k] += (1.0 - self.recent_decay) * step;
         }
         let cross = -(sr_f.transpose() * sr_h);
         let mut mtm = Matrix6::identity();
@@ -1627,6 +1654,40 @@ mod tests {
                 assert_eq!(filler.outliers(&f), 1 << (first + far), "segment {segment}: marker {far} far, {near} near");
             }
         }
+    }
+
+    /// `frame` with USP moved `reach` metres along the forearm, away from FAP.
+    fn usp_slid(frame: &[f32; 18], reach: f64) -> [f32; 18] {
+        let along = (marker(frame, 1) - marker(frame, 2)).normalize() * reach;
+        let mut out = *frame;
+        for a in 0..3 {
+            out[3 + a] += along[a] as f32;
+        }
+        out
+    }
+
+    #[test]
+    fn skin_sliding_beyond_the_distances_seen_is_not_a_jump_and_the_same_offset_at_once_is() {
+        // After 20 s of the forearm's markers rigid, USP slides 2 cm along the forearm in
+        // 0.4 s, as skin does over a styloid: every frame is taken as measured (nothing
+        // filled), though USP–FAP ends beyond any spread the distances learned allow. The same
+        // 2 cm in one frame is a jump, named.
+        let body = BodyModel::default();
+        let (learn, slide) = (20_000, 400);
+        let frames = trial(&body, 0.1, learn + slide + 100);
+        let mut filler = GapFiller::new();
+        for (i, truth) in frames.iter().enumerate() {
+            let reach = 0.02 * (i.saturating_sub(learn) as f64 / slide as f64).min(1.0);
+            let mut f = usp_slid(truth, reach);
+            let measured = f;
+            assert_eq!(filler.fill(&mut f, i).unwrap(), 0, "frame {i}, USP {:.1} mm along", 1e3 * reach);
+            assert_eq!(filler.status(), 0, "frame {i}");
+            assert_eq!(f, measured, "frame {i} is passed on as measured");
+        }
+        let (mut filler, frames) = calibrated(&body, 0.1);
+        let mut f = usp_slid(&frames[300], 0.02);
+        assert_eq!(filler.fill(&mut f, 300).unwrap(), 1 << 1, "USP 2 cm off at once");
+        assert_eq!(filler.status(), status::REJECTED_MARKER);
     }
 
     #[test]
