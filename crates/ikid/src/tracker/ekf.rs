@@ -334,10 +334,19 @@ impl Tracker {
         // markers is kept as learned.
         let evened = if centre.is_none() && misfit > 0.0 { mean_noise / (mean_noise + misfit) } else { 1.0 };
         let in_gain = if centre.is_none() { misfit } else { 0.0 };
+        // The forearm's pose error moves every predicted hand marker: noise of the measurement
+        // the filter must average like the hand's own (a lab's markers are all noisy: 1 mm on
+        // the forearm's too passed the forearm's jitter straight to the angles, 12x the error
+        // of the same noise on the hand alone). Taken at the first linearisation.
+        let mut from_forearm: Option<[f64; N_HAND]> = None;
         while iteration < MAX_ITERATIONS {
             let Some((predicted, jac)) = self.hand_prediction(forearm, &at, hand, centre.map(|c| c.ch)) else {
                 return;
             };
+            let from_forearm = *from_forearm.get_or_insert_with(|| {
+                self.forearm_measurement_covariance(forearm, &predicted)
+                    .map_or([0.0; N_HAND], |c| std::array::from_fn(|i| c[(i, i)]))
+            });
             // The forearm's point where the hand's centre sits, at this posture.
             let world = centre.map(|c| {
                 let relative = body::wrist_rotation(&[at[0], at[1], at[2]]).into_inner();
@@ -354,7 +363,8 @@ impl Tracker {
                         (3, _, _) => break,
                         _ => {
                             let white = self.noise_variance[3 * m + k];
-                            (hand[3 * m + k], (white + in_gain) * evened, white + misfit)
+                            let f = from_forearm[3 * m + k];
+                            (hand[3 * m + k], (white + in_gain) * evened + f, white + misfit + f)
                         }
                     };
                     if z.is_nan() {

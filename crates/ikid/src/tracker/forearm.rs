@@ -2,13 +2,13 @@
 //! others, its roll about the line through them filtered ([`Roll`]) from how it was seen to
 //! turn while whole ([`ForearmTurn`]) and the wrist centre seen from the hand.
 
-use nalgebra::{Isometry3, Matrix2, Matrix3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix2, Matrix3, SMatrix, Translation3, UnitQuaternion, Vector3};
 
 use super::centre::{CENTRE_WEIGHT, WristCentre};
 use super::checks::FOREARM_MARKERS;
 use super::ekf::wrap_angle;
 use super::placement::fit_points;
-use super::variance::{NOISE_CLIP, PRIOR_FRAMES};
+use super::variance::{FIT_RESIDUAL_DOF, NOISE_CLIP, PRIOR_FRAMES, THIRD_DIFFERENCE_GAIN};
 use super::{HAND_START, N_HAND, Step, Tracker};
 use crate::body::{self, MARKER_FRAME_LEN, Segment};
 use crate::reference;
@@ -74,12 +74,55 @@ impl ForearmTurn {
     }
 }
 
-impl ForearmTurn {
-    /// Covariance of one whole pose's orientation error, rad² (lab frame): white noise of
-    /// variance σ² in each orientation has a second difference of variance (1 + 4 + 1)σ², and
-    /// at a lab's rate a forearm's own turn adds little to that.
-    pub(super) fn orientation_noise(&self) -> Matrix3<f64> {
-        self.variance / 6.0
+/// The forearm's markers' white noise, learned as the hand's is (`Tracker::learn_noise`): from
+/// the third differences of their residual to the forearm's rigid fit, over the degrees of
+/// freedom the fit leaves, one variance (m²) per coordinate. The filter takes the forearm's
+/// fitted pose as exact, yet predicts every hand marker through it: that pose's error is the
+/// hand measurement's noise too ([`Tracker::forearm_measurement_variance`]). Not the turn's
+/// second differences ([`ForearmTurn`]): at a lab's 70–100 Hz those are the forearm's motion.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ForearmNoise {
+    /// The last three residuals, newest first, and the frame index of the newest.
+    history: [[f64; FOREARM_COORDINATES]; 3],
+    len: usize,
+    last: usize,
+    variance: f64,
+    samples: f64,
+}
+
+const FOREARM_COORDINATES: usize = 9;
+
+impl ForearmNoise {
+    pub(super) fn new() -> Self {
+        ForearmNoise { history: [[0.0; FOREARM_COORDINATES]; 3], len: 0, last: usize::MAX, variance: 0.0, samples: 0.0 }
+    }
+
+    /// The noise variance per marker coordinate, m² (0 before any sample).
+    pub(super) fn variance(&self) -> f64 {
+        self.variance
+    }
+
+    /// Takes the forearm markers' residual to their rigid fit at frame `index`; frames must
+    /// follow each other for a third difference (a gap starts over). `memory` is the noise's
+    /// memory in frames.
+    fn learn(&mut self, residual: [f64; FOREARM_COORDINATES], index: usize, memory: f64) {
+        if self.last == usize::MAX || self.last + 1 != index {
+            self.len = 0;
+        }
+        if self.len == 3 {
+            let [a, b, c] = self.history;
+            let sum: f64 =
+                (0..FOREARM_COORDINATES).map(|i| (residual[i] - 3.0 * a[i] + 3.0 * b[i] - c[i]).powi(2)).sum();
+            let sample = sum / (THIRD_DIFFERENCE_GAIN * FIT_RESIDUAL_DOF);
+            // Clipped as a hand marker's sample is: one glitch teaches little.
+            let sample = if self.samples > 0.0 { sample.min(NOISE_CLIP * self.variance) } else { sample };
+            let w = (1.0 / (self.samples + 1.0)).max(1.0 / memory);
+            self.variance += w * (sample - self.variance);
+            self.samples += 1.0;
+        }
+        self.history = [residual, self.history[0], self.history[1]];
+        self.len = (self.len + 1).min(3);
+        self.last = index;
     }
 }
 
@@ -116,6 +159,9 @@ impl Tracker {
                     step.forearm_measured = true;
                     self.follow_placement(Segment::Forearm, &pose, frame);
                     self.learn_turn(&pose, index);
+                    let residual = self.forearm_residual(frame, &pose);
+                    let memory = self.settings.noise_memory_s * self.settings.rate_hz;
+                    self.forearm_noise.learn(residual, index, memory);
                 } else {
                     step.forearm_usable = 0; // the whole forearm jumped: nothing of it is used
                 }
@@ -243,6 +289,61 @@ impl Tracker {
         Some((Isometry3::from_parts(Translation3::from(translation), rotation), Roll { active: true, rate, p }))
     }
 
+    /// The forearm markers of `frame` minus where its fitted `pose` puts them, m.
+    fn forearm_residual(&self, frame: &[f64], pose: &Isometry3<f64>) -> [f64; FOREARM_COORDINATES] {
+        std::array::from_fn(|i| {
+            let fitted = pose * nalgebra::Point3::from(Vector3::from(self.body.marker_offsets[i / 3]));
+            frame[i] - fitted[i % 3]
+        })
+    }
+
+    /// What the forearm's pose error adds to the hand markers' measurement noise: its
+    /// covariance between the hand's coordinates, m² (`predicted`: the hand's markers where the
+    /// filter expects them); `None` for a forearm measured clean. Isotropic marker noise σ²
+    /// ([`ForearmNoise`]) gives a rigid fit's turn the covariance σ² (Σ sₘᵀ sₘ)⁻¹ (sₘ =
+    /// [markerₘ − centroid]ₓ, the forearm's frame) and its centroid σ²/3 per axis; a hand marker
+    /// moves by the turn times its lever from the centroid, and by the centroid's error, every
+    /// marker alike (measuring the hand by its orientation, from the hand's own centroid: the
+    /// forearm centroid's error then moves none of it).
+    pub(super) fn forearm_measurement_covariance(
+        &self,
+        forearm: &Isometry3<f64>,
+        predicted: &[Vector3<f64>; 4],
+    ) -> Option<SMatrix<f64, N_HAND, N_HAND>> {
+        let sigma2 = self.forearm_noise.variance();
+        if sigma2 <= 0.0 {
+            return None;
+        }
+        let offsets: [Vector3<f64>; 3] = std::array::from_fn(|m| Vector3::from(self.body.marker_offsets[m]));
+        let local = (offsets[0] + offsets[1] + offsets[2]) / 3.0;
+        let spread = offsets.iter().fold(Matrix3::zeros(), |acc, o| {
+            let s = (o - local).cross_matrix();
+            acc + s.transpose() * s
+        });
+        let rotation = forearm.rotation.to_rotation_matrix();
+        let turn = rotation * (spread.try_inverse()? * sigma2) * rotation.transpose();
+        let relative = self.relative_hand();
+        let about = if relative {
+            (predicted[0] + predicted[1] + predicted[2]) / 3.0
+        } else {
+            (forearm * nalgebra::Point3::from(local)).coords
+        };
+        let mut lever = SMatrix::<f64, N_HAND, 3>::zeros();
+        for (m, marker) in predicted[..3].iter().enumerate() {
+            let moved = -(marker - about).cross_matrix(); // δ × lever = −[lever]ₓ δ
+            lever.fixed_view_mut::<3, 3>(3 * m, 0).copy_from(&moved);
+        }
+        let mut covariance = lever * turn * lever.transpose();
+        if !relative {
+            for i in 0..N_HAND {
+                for j in (i % 3..N_HAND).step_by(3) {
+                    covariance[(i, j)] += sigma2 / 3.0;
+                }
+            }
+        }
+        covariance.iter().all(|v| v.is_finite()).then_some(covariance)
+    }
+
     /// Learns how the forearm turns ([`ForearmTurn`]) from its whole pose `pose` at frame `index`;
     /// its roll filter is idle again.
     fn learn_turn(&mut self, pose: &Isometry3<f64>, index: usize) {
@@ -292,5 +393,65 @@ mod tests {
         assert!(worst_deg(&q[300..], &est[300..]) < 0.5, "{}", worst_deg(&q[300..], &est[300..]));
         assert!(est.iter().flatten().all(|v| v.is_finite()));
         assert_eq!(tracker.restarts(), 0);
+    }
+
+    /// Mean squared angle error (rad², per coordinate) of `est` against `truth` from frame `from`.
+    fn mse(est: &[[f64; 3]], truth: &[[f64; 3]], from: usize) -> f64 {
+        let n = (est.len() - from) as f64 * 3.0;
+        est[from..]
+            .iter()
+            .zip(&truth[from..])
+            .flat_map(|(e, t)| (0..3).map(move |c| (e[c] - t[c]).powi(2)))
+            .sum::<f64>()
+            / n
+    }
+
+    /// The markers of `q` with Gaussian noise of `forearm_sd` and `hand_sd` (m) on each
+    /// forearm and hand marker coordinate.
+    fn noisy(q: &[[f64; 3]], forearm_sd: f64, hand_sd: f64, seed: u64) -> Vec<f64> {
+        let mut f = frames(&BodyModel::default(), q, 0.3);
+        let mut rng = crate::rng::SplitMix::new(seed);
+        for (i, v) in f.iter_mut().enumerate() {
+            *v += rng.normal() * if i % MARKER_FRAME_LEN < HAND_START { forearm_sd } else { hand_sd };
+        }
+        f
+    }
+
+    #[test]
+    fn a_noisy_forearm_is_averaged_as_a_noisy_hand_is_not_passed_to_the_angles() {
+        // Every camera marker is noisy, the forearm's too. Here only the forearm's (1 mm): its
+        // fitted pose jitters, and every hand marker predicted through it with it. The oracle is
+        // each frame's own solution (the segments' rigid fits, `reference`): a filter that took
+        // the forearm's pose as exact passed that jitter to the angles, and more (1.4× the
+        // per-frame error, measured: its manoeuvre test took the jitter for motion); one that
+        // counts it as the hand measurement's noise averages it as it does the hand's own.
+        let rate = 1000.0;
+        let q = trajectory(4000, rate);
+        let f = noisy(&q, 1e-3, 0.0, 11);
+        let mut per_frame = vec![[0.0; 3]; q.len()];
+        reference::inverse_kinematics(&BodyModel::default(), &f, per_frame.as_flattened_mut()).unwrap();
+        let (est, _, tracker) = track(&f, rate);
+        let (filtered, raw) = (mse(&est, &q, 1000), mse(&per_frame, &q, 1000));
+        assert!(filtered < 0.25 * raw, "tracker {filtered:.2e} rad² against per-frame {raw:.2e}");
+        // What it counted: the forearm markers' noise, learned to within 5 % of its SD.
+        let learned = tracker.forearm_noise.variance().sqrt();
+        assert!((learned / 1e-3 - 1.0).abs() < 0.05, "learned {:.3} mm", 1e3 * learned);
+        // The same noise on the hand alone costs no more: the forearm's is no longer the worse.
+        let (hand_est, _, _) = track(&noisy(&q, 0.0, 1e-3, 11), rate);
+        assert!(
+            filtered < 2.0 * mse(&hand_est, &q, 1000),
+            "forearm {filtered:.2e} hand {:.2e}",
+            mse(&hand_est, &q, 1000)
+        );
+    }
+
+    #[test]
+    fn a_clean_forearm_adds_no_noise_to_the_hands_measurement() {
+        // Noise-free forearm markers: nothing learned, nothing added (the filter follows the hand
+        // exactly, as before the forearm's noise was counted).
+        let q = trajectory(2000, 1000.0);
+        let (est, _, tracker) = track(&noisy(&q, 0.0, 0.0, 3), 1000.0);
+        assert!(tracker.forearm_noise.variance() < 1e-20, "{}", tracker.forearm_noise.variance());
+        assert!(worst_deg(&q[200..], &est[200..]) < 1e-3);
     }
 }

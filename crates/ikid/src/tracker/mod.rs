@@ -114,7 +114,7 @@ use crate::status;
 use crate::stream::Stream;
 use centre::{JointCentre, WristCentre};
 use checks::RigidShape;
-use forearm::{ForearmTurn, Roll};
+use forearm::{ForearmNoise, ForearmTurn, Roll};
 
 /// State size: angle, velocity and acceleration of each coordinate.
 const N_STATE: usize = 3 * N_COORDINATES;
@@ -198,6 +198,8 @@ pub struct Tracker {
     live: [Vector3<f64>; body::N_MARKERS],
     /// How the forearm turned while it was measured whole (see [`ForearmTurn`]) ...
     turn: ForearmTurn,
+    /// The forearm markers' noise (see [`ForearmNoise`]) ...
+    forearm_noise: ForearmNoise,
     /// ... and its roll about the line through two of its markers while one is missing.
     roll: Roll,
     /// [`status::torque_limit`] for this subject, N·m.
@@ -270,6 +272,7 @@ impl Tracker {
             model_offsets: [[0.0; 3]; body::N_MARKERS],
             live: [Vector3::zeros(); body::N_MARKERS],
             turn: ForearmTurn::new(),
+            forearm_noise: ForearmNoise::new(),
             roll: Roll::idle(),
             torque_limit: 0.0,
         };
@@ -307,6 +310,7 @@ impl Tracker {
         self.body.marker_offsets = self.model_offsets;
         self.live = self.model_offsets.map(Vector3::from);
         self.turn = ForearmTurn::new();
+        self.forearm_noise = ForearmNoise::new();
         self.roll = Roll::idle();
         if let Some(r) = self.refiner.as_mut() {
             r.reset();

@@ -1,7 +1,7 @@
 //! What the tracker gives per frame ([`TrackerOutput`]), and the step that makes it: torques
 //! from the state, and the frame's status.
 
-use nalgebra::{Isometry3, Matrix3, Point3, SMatrix, SVector, Vector3};
+use nalgebra::{Isometry3, SMatrix, SVector, Vector3};
 
 use super::{N_HAND, N_STATE, StateMatrix, StateVector, Step, Tracker};
 use crate::body::N_COORDINATES;
@@ -144,18 +144,15 @@ impl Tracker {
     }
 
     /// What the markers' noise adds to the estimate `x` (posterior covariance `p`): (the
-    /// forearm's, the forearm's and the hand's). The filter takes the forearm's fitted pose as
-    /// exact, yet predicts every hand marker through it: that pose's error is noise of the
-    /// hand's measurement, white from frame to frame, correlated between the hand's coordinates
-    /// and unknown to the filter. White measurement noise of covariance C passes through the
-    /// filter's own gain K = P Hᵀ R⁻¹ (the posterior's identity) and at a steady state adds
-    /// E = A E Aᵀ + K C Kᵀ, A = (I − K H) F. The forearm's C: each hand marker moved by the
-    /// forearm's turn δ about the forearm markers' centroid (δ × lever) and by that centroid's
-    /// own error; the turn's covariance is
-    /// [`ForearmTurn::orientation_noise`](super::forearm::ForearmTurn) (learned from the
-    /// forearm's whole poses), the centroid's the forearm markers' noise that turn implies,
-    /// over three. Measuring the hand's orientation alone, only the turn counts, about the
-    /// hand markers' centroid. The hand's C is its learned noise, R. `None` where a matrix is
+    /// forearm's beyond what the filter counts, the forearm's and the hand's). The filter
+    /// predicts every hand marker through the forearm's fitted pose, so that pose's error is
+    /// noise of the hand's measurement, white from frame to frame and correlated between the
+    /// hand's coordinates ([`Tracker::forearm_measurement_covariance`]); the filter counts its
+    /// diagonal only, as if each coordinate's were its own. White measurement noise of
+    /// covariance C passes through the filter's own gain K = P Hᵀ R⁻¹ (the posterior's identity;
+    /// R the variances the filter used) and at a steady state adds E = A E Aᵀ + K C Kᵀ,
+    /// A = (I − K H) F: for the first, C is the forearm's covariance less its diagonal (P holds
+    /// that); for the second, the hand's noise and the forearm's whole. `None` where a matrix is
     /// singular or the sum not finite.
     fn noise_covariances(
         &self,
@@ -164,50 +161,23 @@ impl Tracker {
         p: &StateMatrix,
     ) -> Option<(StateMatrix, StateMatrix)> {
         let (predicted, jac) = self.hand_prediction(pose, &Vector3::new(x[0], x[1], x[2]), &[0.0; N_HAND], None)?;
-        let turn = self.turn.orientation_noise();
-        let offsets: [Vector3<f64>; 3] = std::array::from_fn(|m| Vector3::from(self.body.marker_offsets[m]));
-        let local = (offsets[0] + offsets[1] + offsets[2]) / 3.0;
-        // Isotropic marker noise σ² gives a rigid fit's turn the covariance σ² (Σ sₘᵀ sₘ)⁻¹
-        // (sₘ = [markerₘ − centroid]ₓ).
-        let spread = offsets.iter().fold(Matrix3::zeros(), |acc, o| {
-            let s = (o - local).cross_matrix();
-            acc + s.transpose() * s
-        });
-        let marker_variance = turn.trace() / spread.try_inverse()?.trace();
-        let relative = self.relative_hand();
-        let about = if relative {
-            (predicted[0] + predicted[1] + predicted[2]) / 3.0
-        } else {
-            (pose * Point3::from(local)).coords
-        };
+        let forearm = self.forearm_measurement_covariance(pose, &predicted).unwrap_or_else(SMatrix::zeros);
         let mut h = SMatrix::<f64, N_HAND, N_STATE>::zeros();
-        let mut a = SMatrix::<f64, N_HAND, 3>::zeros();
         for m in 0..3 {
-            let moved = -(predicted[m] - about).cross_matrix(); // δ × lever = −[lever]ₓ δ
             for k in 0..3 {
                 for c in 0..N_COORDINATES {
                     h[(3 * m + k, c)] = jac[m][c][k];
                 }
-                for j in 0..3 {
-                    a[(3 * m + k, j)] = moved[(k, j)];
-                }
             }
         }
-        let mut forearm = a * turn * a.transpose();
-        if !relative {
-            // The centroid's error moves every hand marker alike, axis by axis.
-            for i in 0..N_HAND {
-                for j in (i % 3..N_HAND).step_by(3) {
-                    forearm[(i, j)] += marker_variance / 3.0;
-                }
-            }
-        }
-        let r = SVector::<f64, N_HAND>::from_fn(|i, _| self.noise_variance[i].max(MIN_REPORTED_NOISE.powi(2)));
-        let gain = p * h.transpose() * SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&r.map(|v| 1.0 / v));
+        let hand = SVector::<f64, N_HAND>::from_fn(|i, _| self.noise_variance[i].max(MIN_REPORTED_NOISE.powi(2)));
+        let used = hand + forearm.diagonal();
+        let gain = p * h.transpose() * SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&used.map(|v| 1.0 / v));
         let mut closed = (StateMatrix::identity() - gain * h) * self.transition;
         // E = Σₙ Aⁿ K C Kᵀ Aⁿᵀ, summed by doubling: after k steps, 2ᵏ frames.
-        let mut e_forearm = gain * forearm * gain.transpose();
-        let mut e_all = e_forearm + gain * SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&r) * gain.transpose();
+        let uncounted = forearm - SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&forearm.diagonal());
+        let mut e_forearm = gain * uncounted * gain.transpose();
+        let mut e_all = gain * (forearm + SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&hand)) * gain.transpose();
         for _ in 0..DOUBLINGS {
             e_forearm += closed * e_forearm * closed.transpose();
             e_all += closed * e_all * closed.transpose();

@@ -9,11 +9,11 @@ use crate::body::{MARKER_FRAME_LEN, Segment};
 use crate::reference;
 
 /// Variance of white noise's third difference over the noise's own variance: 1 + 9 + 9 + 1.
-const THIRD_DIFFERENCE_GAIN: f64 = 20.0;
+pub(super) const THIRD_DIFFERENCE_GAIN: f64 = 20.0;
 /// Degrees of freedom of the residual of three markers' nine coordinates to their rigid fit:
 /// the fit takes six (a translation and a turn), so white noise of variance σ² in every
 /// direction leaves a residual whose sum of squares is 3σ² on average.
-const FIT_RESIDUAL_DOF: f64 = 3.0;
+pub(super) const FIT_RESIDUAL_DOF: f64 = 3.0;
 /// Weight of the initial noise guess, in frames: the estimate is the guess for the first few
 /// frames and the data's soon after.
 pub(super) const PRIOR_FRAMES: f64 = 10.0;
