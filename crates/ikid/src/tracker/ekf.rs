@@ -337,7 +337,8 @@ impl Tracker {
         // The forearm's pose error moves every predicted hand marker: noise of the measurement
         // the filter must average like the hand's own (a lab's markers are all noisy: 1 mm on
         // the forearm's too passed the forearm's jitter straight to the angles, 12x the error
-        // of the same noise on the hand alone). Taken at the first linearisation.
+        // of the same noise on the hand alone). Taken at the first linearisation, as the hand's
+        // own noise is counted ([`Tracker::forearm_variance_counted`]).
         let mut from_forearm: Option<[f64; N_HAND]> = None;
         while iteration < MAX_ITERATIONS {
             let Some((predicted, jac)) = self.hand_prediction(forearm, &at, hand, centre.map(|c| c.ch)) else {
@@ -345,7 +346,7 @@ impl Tracker {
             };
             let from_forearm = *from_forearm.get_or_insert_with(|| {
                 self.forearm_measurement_covariance(forearm, &predicted)
-                    .map_or([0.0; N_HAND], |c| std::array::from_fn(|i| c[(i, i)]))
+                    .map_or([0.0; N_HAND], |c| self.forearm_variance_counted(&c))
             });
             // The forearm's point where the hand's centre sits, at this posture.
             let world = centre.map(|c| {

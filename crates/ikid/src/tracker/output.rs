@@ -89,7 +89,7 @@ const DOUBLINGS: usize = 20;
 /// (a density chosen for the smallest errors, not to describe the motion), which made the
 /// torques' σ 2.2× their errors. Tuned by `studies/sigma_coverage.py` on seeds TUNE (never the
 /// SCORE seeds it is measured on): the share of frames within ±σ is then 68.3 % there.
-pub const SD_SCALE_TAU: f64 = 1.11;
+pub const SD_SCALE_TAU: f64 = 1.10;
 
 /// Standard deviations of a frame's estimate, from the filter's covariance and the markers' noise.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -147,12 +147,12 @@ impl Tracker {
     /// forearm's beyond what the filter counts, the forearm's and the hand's). The filter
     /// predicts every hand marker through the forearm's fitted pose, so that pose's error is
     /// noise of the hand's measurement, white from frame to frame and correlated between the
-    /// hand's coordinates ([`Tracker::forearm_measurement_covariance`]); the filter counts its
-    /// diagonal only, as if each coordinate's were its own. White measurement noise of
+    /// hand's coordinates ([`Tracker::forearm_measurement_covariance`]); the filter counts part
+    /// of it, as if each coordinate's were its own ([`Tracker::forearm_variance_counted`]). White measurement noise of
     /// covariance C passes through the filter's own gain K = P Hᵀ R⁻¹ (the posterior's identity;
     /// R the variances the filter used) and at a steady state adds E = A E Aᵀ + K C Kᵀ,
-    /// A = (I − K H) F: for the first, C is the forearm's covariance less its diagonal (P holds
-    /// that); for the second, the hand's noise and the forearm's whole. `None` where a matrix is
+    /// A = (I − K H) F: for the first, C is the forearm's covariance less what the filter
+    /// counted (P holds that); for the second, the hand's noise and the forearm's whole. `None` where a matrix is
     /// singular or the sum not finite.
     fn noise_covariances(
         &self,
@@ -171,11 +171,12 @@ impl Tracker {
             }
         }
         let hand = SVector::<f64, N_HAND>::from_fn(|i, _| self.noise_variance[i].max(MIN_REPORTED_NOISE.powi(2)));
-        let used = hand + forearm.diagonal();
+        let counted = SVector::<f64, N_HAND>::from(self.forearm_variance_counted(&forearm));
+        let used = hand + counted;
         let gain = p * h.transpose() * SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&used.map(|v| 1.0 / v));
         let mut closed = (StateMatrix::identity() - gain * h) * self.transition;
         // E = Σₙ Aⁿ K C Kᵀ Aⁿᵀ, summed by doubling: after k steps, 2ᵏ frames.
-        let uncounted = forearm - SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&forearm.diagonal());
+        let uncounted = forearm - SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&counted);
         let mut e_forearm = gain * uncounted * gain.transpose();
         let mut e_all = gain * (forearm + SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&hand)) * gain.transpose();
         for _ in 0..DOUBLINGS {
