@@ -166,8 +166,8 @@ def session_job(job: dict) -> list[dict]:
         "hand_mass": model.link_of(model.hand).inertial.mass,
         "seeds": seeds,
     }
-    artefacts = [(a, 1) for a in MK.ARTEFACTS]
-    if job["layout"] == "anatomical":
+    artefacts = [(a, 1) for a in job.get("artefacts", MK.ARTEFACTS)]
+    if job["layout"] == "anatomical" and "noise1" in job.get("artefacts", MK.ARTEFACTS):
         artefacts.append(("noise1", LOW_RATE_DIV))  # one condition at a lab's rate
     results = [condition(ctx, artefact, div) for artefact, div in artefacts]
     return results
@@ -201,6 +201,10 @@ def condition(ctx: dict, artefact: str, div: int) -> dict:
         for k in data:
             amp_k = np.concatenate([amp, np.zeros(data[k].shape[1] - len(amp))])
             data[k] = MK.add_noise(data[k], amp_k, rng)
+    elif artefact == "gauss1mm":
+        for k in data:
+            sd = np.concatenate([np.full(18, MK.GAUSS_SD_M), np.zeros(data[k].shape[1] - 18)])
+            data[k] = MK.add_gaussian(data[k], sd, rng)
     elif artefact == "dropout":
         drng = np.random.default_rng(seeds["dropout"])
         marker = int(drng.integers(0, 6))
@@ -664,6 +668,11 @@ def main() -> None:
         help=f"marker layouts to run (default {','.join(MK.LAYOUTS)})",
     )
     parser.add_argument("--models", help=f"models to run (default: all of {','.join(MODELS)})")
+    parser.add_argument(
+        "--artefacts",
+        default=",".join(MK.ARTEFACTS),
+        help=f"artefacts to run (default {','.join(MK.ARTEFACTS)}; noise1 brings its 100 Hz condition)",
+    )
     parser.add_argument("--doc", default=str(ROOT / "docs" / "exam.md"), help="page to write")
     parser.add_argument("--json", default=str(ROOT / "target" / "exam.json"), help="numbers to write")
     parser.add_argument("--render", metavar="JSON", help="only rewrite the page from a run's numbers")
@@ -684,6 +693,9 @@ def main() -> None:
         poses = tuple(float(p) for p in args.poses.split(","))
         if unknown := [p for p in poses if p not in POSES_DEG]:
             parser.error(f"--poses: {unknown} not among the exam's poses {POSES_DEG}")
+    artefacts = args.artefacts.split(",")
+    if unknown_artefacts := [a for a in artefacts if a not in MK.ARTEFACTS]:
+        parser.error(f"--artefacts: {unknown_artefacts} not among the exam's artefacts {list(MK.ARTEFACTS)}")
     durations = QUICK if args.quick else {"task": TASK_S, "static": STATIC_S, "functional": FUNCTIONAL_S}
     work = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="ikid-exam-"))
     jobs = [
@@ -695,6 +707,7 @@ def main() -> None:
             "durations": durations,
             "work": str(work),
             "keep": bool(args.keep),
+            "artefacts": artefacts,
         }
         for m in models
         for p in poses

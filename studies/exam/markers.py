@@ -18,7 +18,10 @@ column's range over the task trial (ikid's definition, ``crates/ikid/src/noise.r
 forearm's columns have no range, so no noise), the same amplitudes on the calibration trials;
 ``dropout``: one marker (seeded) missing (NaN) in bursts of 50 ms – 1 s, about one per 3 s
 after the first 2 s, one always within the scored last 10 %, and one in each calibration
-trial's movement.
+trial's movement; ``gauss1mm``: Gaussian noise of 1 mm on every marker coordinate, the
+forearm's too (what a lab's cameras give: ikid's own noise leaves a fixed forearm clean, and
+the Tracker took the forearm's fitted pose as exact until this condition showed the cost), the
+same on the calibration trials.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ import numpy as np
 from studies.exam.models import WristModel, body_poses, forearm_frame
 
 LAYOUTS = ("anatomical", "cluster", "skin")
-ARTEFACTS = ("clean", "noise1", "noise5", "dropout")
+ARTEFACTS = ("clean", "noise1", "noise5", "dropout", "gauss1mm")
 IKID_ORDER = ("RSP", "USP", "FAP", "MC2", "MC5", "MCB")
 LANDMARKS = {  # ikid's landmark name -> the model point and the lab's label
     "lateral_epicondyle": "EPI_LAT",
@@ -142,6 +145,14 @@ def noise_amplitude(task: np.ndarray, fraction: float) -> np.ndarray:
 
 def add_noise(frames: np.ndarray, amplitude: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return frames + rng.uniform(-1.0, 1.0, frames.shape) * amplitude
+
+
+#: ``gauss1mm``'s standard deviation, m.
+GAUSS_SD_M = 1e-3
+
+
+def add_gaussian(frames: np.ndarray, sd: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    return frames + rng.normal(0.0, 1.0, frames.shape) * sd
 
 
 def dropouts(n: int, rate: float, rng: np.random.Generator, scored_from: int | None) -> list[tuple[int, int]]:
