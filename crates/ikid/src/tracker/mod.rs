@@ -19,8 +19,11 @@
 //!    constant-acceleration model whose jerk is white noise of spectral density
 //!    [`TrackerSettings::jerk_noise`];
 //! 3. each hand marker coordinate that is present corrects it, weighted by that coordinate's
-//!    own noise variance (the hand's markers rotate about the wrist centre, the forearm
-//!    frame's origin). The measurement is linearised at the hand's own solution when its three
+//!    own noise variance plus what the forearm's pose error adds to it (the forearm's markers'
+//!    noise, learned from their fit residual, through the lever of each hand marker: the filter
+//!    predicts the hand through the forearm's fitted pose; taken as exact, 1 mm on the forearm's
+//!    markers passed straight to the angles) (the hand's markers rotate about the wrist centre,
+//!    the forearm frame's origin). The measurement is linearised at the hand's own solution when its three
 //!    markers are there, or two and the wrist centre (else at the prediction), and again at the
 //!    corrected state while that
 //!    moves (an iterated EKF: a fast move at a low frame rate, or one near gimbal lock, is not
