@@ -21,6 +21,8 @@ import numpy as np
 import pytest
 
 import ikid
+from conftest import make_card
+from ikid import _native
 from ikid.cli import main as cli
 from ikid.io import MarkerMap, read_mot, read_sto, write_mot, write_trc
 
@@ -657,7 +659,7 @@ def test_track_writes_the_trackers_angles_and_torques(
     from ikid.io import read_markers
 
     expected = ikid.Tracker(length_scale=1.1, mass_scale=1.3, refiner=ikid.load("wrist-track")).run(
-        read_markers(tmp_path / "t.trc").frames(None)
+        read_markers(tmp_path / "t.trc").frames(None), sd=True
     )
     assert expected["start"] == 1
     np.testing.assert_allclose(time_mot, t.time[1:], atol=1e-9)
@@ -694,21 +696,45 @@ def test_track_writes_the_trackers_angles_and_torques(
         read_markers(tmp_path / "t.trc").frames(None), sd=True
     )
     np.testing.assert_allclose(read_mot(tmp_path / "bare.mot")[1], bare["q"][1:], atol=1e-8)
-    # The bare filter's values each followed by its σ (declared in the header; degrees in the
-    # .mot); the refined files have none (the filter's σ does not describe a refined estimate).
+    # Each value followed by its σ (declared in the header; degrees in the .mot): the bare
+    # filter's, and the refined estimate's (the filter's times the shipped refiner's shares,
+    # narrower where the refiner's gate is open: 1 % noise here).
     from ikid.io.storage import coordinate_names, moment_names, read_storage, sd_columns
 
-    for ext, names, sd, unit in [
-        (".mot", coordinate_names(), bare["q_sd"][1:], np.degrees),
-        (".sto", moment_names(), bare["tau_sd"][1:], lambda v: v),
-    ]:
-        table = read_storage(tmp_path / f"bare{ext}")
-        want = [c for n in names for c in (n, f"{n}_sd")] + ["ikid_status"]
-        assert list(table.columns) == want, table.columns
-        assert sd_columns(table) == [f"{n}_sd" for n in names]
-        np.testing.assert_allclose(table.select([f"{n}_sd" for n in names]), unit(sd), rtol=1e-8)
-        refined = read_storage(tmp_path / "out" / f"t{ext}")
-        assert sd_columns(refined) == [] and not any(c.endswith("_sd") for c in refined.columns)
+    for stem, run in (("bare", bare), ("out/t", expected)):
+        for ext, names, sd, unit in [
+            (".mot", coordinate_names(), run["q_sd"][1:], np.degrees),
+            (".sto", moment_names(), run["tau_sd"][1:], lambda v: v),
+        ]:
+            table = read_storage(tmp_path / f"{stem}{ext}")
+            want = [c for n in names for c in (n, f"{n}_sd")] + ["ikid_status"]
+            assert list(table.columns) == want, table.columns
+            assert sd_columns(table) == [f"{n}_sd" for n in names]
+            np.testing.assert_allclose(table.select([f"{n}_sd" for n in names]), unit(sd), rtol=1e-8)
+    refined = expected["refined"][300:]
+    assert refined.all()
+    ratio = expected["q_sd"][300:] / bare["q_sd"][300:]
+    assert np.all(ratio < 1.0) and np.all(ratio >= _native.REFINED_SD_SCALE_Q - 1e-12)
+    # Another refiner: nothing measured its σ, so none is written, and the summary says why.
+    other = tmp_path / "other.safetensors"
+    shipped = ikid.load("wrist-track").card
+    card = make_card("tracker_state", 5, ("relu", "identity"), task="refine", name="other-refiner")
+    card["outputs"] = shipped["outputs"]
+    n_in = 5 * ikid.feature_set_info("tracker_state")["feature_len"]
+    rng = np.random.default_rng(4)
+    _native.build_model(
+        json.dumps(card),
+        [rng.uniform(-0.1, 0.1, shape).astype(np.float32) for shape in ((8, n_in), (6, 8))],
+        [np.zeros(8, np.float32), np.zeros(6, np.float32)],
+        np.ones(n_in, np.float32),
+        np.zeros(n_in, np.float32),
+        np.full(6, 1e-4, np.float32),
+        np.zeros(6, np.float32),
+    ).save(other)
+    assert cli(["track", str(tmp_path / "t.trc"), "-o", str(tmp_path / "o2"), "--refiner", str(other)]) == 0
+    said = capsys.readouterr().out
+    assert "no _sd columns (σ is measured for the shipped refiner, not for other-refiner)" in said
+    assert sd_columns(read_storage(tmp_path / "o2.mot")) == []
 
 
 # --- outputs: -o FOLDER/, outputs that go together, errors as messages -------------------------

@@ -65,3 +65,40 @@ def test_sd_covers_about_68_percent_of_the_true_errors(noise):
 
 def test_the_shipped_torque_scale_is_the_one_the_study_tunes():
     assert study.tuned_torque_scale() == pytest.approx(_native.SD_SCALE_TAU, abs=0.01)
+
+
+def test_the_shipped_refined_shares_are_the_ones_the_study_tunes():
+    q, tau = study.tuned_refined_scales()
+    assert q == pytest.approx(_native.REFINED_SD_SCALE_Q, abs=0.01)
+    assert tau == pytest.approx(_native.REFINED_SD_SCALE_TAU, abs=0.01)
+
+
+#: Trials for the refined σ's check: held out from the study's seeds, and pooled (a refined
+#: estimate's coverage varies more from trial to trial than the filter's).
+REFINED_SEEDS = [9722, 9724, 9726]
+
+
+@pytest.mark.parametrize(
+    "noise",
+    [("gaussian", {"sigma": 1e-3}), ("uniform", {"fraction": 0.05})],
+    ids=["gaussian-1mm-every-marker", "uniform-5pct-hand"],
+)
+def test_a_refined_estimates_sd_covers_about_68_percent_too(noise):
+    # The shipped refiner (ikid track's default at 1 kHz) narrows the estimate's error; its σ is
+    # the filter's narrowed by the shares tuned on other seeds. Judged on the refined frames.
+    assert not set(REFINED_SEEDS + [s + 1 for s in REFINED_SEEDS]) & set(study.TUNE + study.SCORE + [SEED])
+    q_hits, tau_hits = [], []
+    for k, seed in enumerate(REFINED_SEEDS):
+        trial = ikid.simulate(seed=seed, duration=4.0, shoulder_flexion=[0.2, -0.3, 0.5][k])
+        noisy = trial.with_noise(noise[0], seed + 1, **noise[1])
+        out = ikid.Tracker(refiner=ikid.load("wrist-track")).run(np.asarray(noisy.markers), sd=True)
+        keep = (np.arange(len(trial.time)) >= max(out["start"], 500)) & out["refined"]
+        assert keep.mean() > 0.8
+        q_hits.append((np.abs(out["q"] - trial.q) <= out["q_sd"])[keep])
+        tau_hits.append((np.abs(out["tau"] - trial.tau) <= out["tau_sd"])[keep])
+    q_cover, tau_cover = np.mean(np.concatenate(q_hits)), np.mean(np.concatenate(tau_hits))
+    # Before the shares (the filter's σ on refined estimates): 0.86 / 0.92 covered with 1 mm on
+    # every marker. The torques' share is one for every noise level, and the refiner helps the
+    # torques more at 1 % than at 5 %: at 5 % they are covered less (0.58 on the study's seeds).
+    assert 0.62 < q_cover < 0.745, q_cover
+    assert 0.55 < tau_cover < 0.745, tau_cover

@@ -30,6 +30,8 @@ __all__ = [
     "DEFAULT_JERK_NOISE",
     "REFINER_OUTPUTS",
     "REFINER_GATE_NOISE",
+    "REFINED_SD_SCALE_Q",
+    "REFINED_SD_SCALE_TAU",
     "SD_SCALE_TAU",
     "build_model",
     "forward_markers",
@@ -221,6 +223,8 @@ DEFAULT_JERK_NOISE: float
 SD_SCALE_TAU: float
 REFINER_OUTPUTS: list[str]
 REFINER_GATE_NOISE: float
+REFINED_SD_SCALE_Q: float
+REFINED_SD_SCALE_TAU: float
 
 @final
 class Tracker:

@@ -105,7 +105,9 @@ pub use checks::{
 pub use ekf::{GATE_CHI2, GATE_FLOOR_M, MANOEUVRE_NIS, MAX_ITERATIONS, RELINEARISE_RAD};
 pub use output::{MIN_REPORTED_NOISE, SD_SCALE_TAU, TRACKER_VALUES, TrackerOutput, TrackerSd};
 pub use placement::{LIVE_PLACEMENT_S, TEMPLATE_S};
-pub use refiner::{REFINER_GATE_NOISE, REFINER_TRUST, refiner_gate, refiner_outputs};
+pub use refiner::{
+    REFINED_SD_SCALE_Q, REFINED_SD_SCALE_TAU, REFINER_GATE_NOISE, REFINER_TRUST, refiner_gate, refiner_outputs,
+};
 pub use settings::{DEFAULT_JERK_NOISE, TrackerSettings};
 
 use nalgebra::{Isometry3, SMatrix, SVector, Vector3};
@@ -207,6 +209,8 @@ pub struct Tracker {
     roll: Roll,
     /// [`status::torque_limit`] for this subject, N·m.
     torque_limit: f64,
+    /// Whether the refiner corrected the last estimate ([`Tracker::output_sd`]).
+    refined: bool,
 }
 
 /// What one frame's steps share ([`Tracker::push`]), on the stack: the frame as checked, its
@@ -278,6 +282,7 @@ impl Tracker {
             forearm_noise: ForearmNoise::new(),
             roll: Roll::idle(),
             torque_limit: 0.0,
+            refined: false,
         };
         // The subject's mass scale: its hand's mass over the default subject's.
         tracker.torque_limit = status::torque_limit(tracker.body.hand.mass / BodyModel::default().hand.mass);
@@ -315,6 +320,7 @@ impl Tracker {
         self.turn = ForearmTurn::new();
         self.forearm_noise = ForearmNoise::new();
         self.roll = Roll::idle();
+        self.refined = false;
         if let Some(r) = self.refiner.as_mut() {
             r.reset();
         }

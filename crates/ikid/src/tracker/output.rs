@@ -3,6 +3,7 @@
 
 use nalgebra::{Isometry3, SMatrix, SVector, Vector3};
 
+use super::refiner::{REFINED_SD_SCALE_Q, REFINED_SD_SCALE_TAU};
 use super::{N_HAND, N_STATE, StateMatrix, StateVector, Step, Tracker};
 use crate::body::N_COORDINATES;
 use crate::error::Result;
@@ -104,9 +105,10 @@ pub struct TrackerSd {
 }
 
 impl Tracker {
-    /// The standard deviations of the filter's last estimate ([`TrackerSd`]), or `None`
-    /// before it started (or after a reset). They describe the filter's own state: a refined
-    /// output (a refiner moved it) is not what they measure.
+    /// The standard deviations of the last estimate ([`TrackerSd`]), or `None` before it
+    /// started (or after a reset). A refined estimate's are the filter's times
+    /// [`REFINED_SD_SCALE_Q`](super::REFINED_SD_SCALE_Q) (and `_TAU`): measured for the shipped
+    /// refiner (it never feeds the filter back, so its error is the filter's, reduced).
     pub fn output_sd(&self) -> Option<TrackerSd> {
         let (x, p) = self.state.as_ref()?;
         let pose = self.forearm?;
@@ -137,9 +139,10 @@ impl Tracker {
             }
         }
         let tau_cov = jacobian * all_noise * jacobian.transpose();
+        let (share_q, share_tau) = if self.refined { (REFINED_SD_SCALE_Q, REFINED_SD_SCALE_TAU) } else { (1.0, 1.0) };
         Some(TrackerSd {
-            q: std::array::from_fn(|c| p_q[(c, c)].max(0.0).sqrt()),
-            tau: std::array::from_fn(|c| SD_SCALE_TAU * tau_cov[(c, c)].max(0.0).sqrt()),
+            q: std::array::from_fn(|c| share_q * p_q[(c, c)].max(0.0).sqrt()),
+            tau: std::array::from_fn(|c| share_tau * SD_SCALE_TAU * tau_cov[(c, c)].max(0.0).sqrt()),
         })
     }
 

@@ -23,6 +23,13 @@ from ikid.cli.options import SUBJECT_LENGTH, SUBJECT_MASS, _number, unchecked_op
 from ikid.io._atomic import atomic_outputs
 
 
+def _is_shipped_refiner(refiner: ikid.Model) -> bool:
+    """True if ``refiner`` is the shipped ``wrist-track`` (the same tensors, by their checksum):
+    the refined σ's shares were measured for it alone."""
+    shipped = ikid.load("wrist-track").card.get("tensor_sha256")
+    return shipped is not None and refiner.card.get("tensor_sha256") == shipped
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "track",
@@ -32,8 +39,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "wrist-track network.\n\n"
         "  ikid track trial.c3d -o out/trial --length-scale 1.1 --mass-scale 1.3"
         "   # out/trial.mot, out/trial.sto\n\n"
-        "With --refiner none each angle and torque is followed by its standard deviation "
-        "(<name>_sd, listed in the header's ikid_sd line; docs/live.md measures how well it covers).",
+        "Each angle and torque is followed by its standard deviation (<name>_sd, listed in the "
+        "header's ikid_sd line; docs/live.md measures how well it covers), unless a refiner other "
+        "than the shipped one is given.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("input", help="marker file (.c3d, .trc, .csv)")
@@ -149,9 +157,10 @@ def run(args: argparse.Namespace) -> int:
     undetermined = mapping.undetermined if mapping else {}
     # The pair replaces the old pair, or neither is replaced.
     with atomic_outputs(), ExitStack() as files:
-        # Each value followed by its standard deviation (the filter's: Tracker.output_sd), unless
-        # a refiner moves the estimate: the filter's σ does not describe a refined one (docs/live.md).
-        with_sd = refiner is None
+        # Each value followed by its standard deviation (Tracker.output_sd): the filter's, or for
+        # a refined estimate the filter's times the shares measured for the shipped refiner
+        # (studies/sigma_coverage.py) — for another refiner nothing measured says (docs/live.md).
+        with_sd = refiner is None or _is_shipped_refiner(refiner)
         write_q = files.enter_context(mot_writer(mot, undetermined=undetermined, with_sd=with_sd))
         write_tau = files.enter_context(sto_writer(sto, undetermined=undetermined, with_sd=with_sd))
         for block in data.blocks():
@@ -189,7 +198,8 @@ def run(args: argparse.Namespace) -> int:
                 "so the tracker never started"
             )
     noise_mm = ", ".join(f"{v * 1e3:.2f}" for v in tracker.marker_noise)
-    how = f"refined by {refiner.name}" if refiner else "not refined"
+    refiner_name = refiner.name if refiner else ""
+    how = f"refined by {refiner_name}" if refiner else "not refined"
     placed = "uncalibrated"
     if calibration is not None:
         from ikid.calibration import calibration_info
@@ -207,8 +217,8 @@ def run(args: argparse.Namespace) -> int:
         + "".join(f"; {name} not written: {why}" for name, why in undetermined.items())
         + (
             "; each value followed by its standard deviation (_sd)"
-            if refiner is None
-            else "; no _sd columns (the filter's σ does not describe a refined estimate)"
+            if with_sd
+            else f"; no _sd columns (σ is measured for the shipped refiner, not for {refiner_name})"
         )
         + f" -> {mot}, {sto}"
     )
