@@ -322,6 +322,31 @@ mod tests {
     }
 
     #[test]
+    fn the_templates_shape_is_taken_back_at_once_each_time_it_comes_back() {
+        // Calibrated at 10 Hz (a one-second memory: the learned shape follows within 9 mm of a
+        // marker sliding 1 mm a frame, inside the 15 mm tolerance): the template is taken at
+        // rest; FAP slides 10 cm out (two distances now off the template's), then snaps back,
+        // twice. Each time the template's shape is taken back on its first frame, the first time
+        // as the second: relearning the shape keeps which one the template was taken from.
+        let settings = TrackerSettings { rate_hz: 10.0, ..Default::default() };
+        let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
+        tracker.set_calibration(Some(crate::calibration::Calibration::body_model()));
+        let rest = moved(0, Vector3::zeros());
+        assert_eq!(tracker.check_rigid(Segment::Forearm, &rest, 3), (0, false));
+        tracker.take_template(Segment::Forearm, &rest);
+        assert!(tracker.shapes[Segment::Forearm as usize].template.is_some());
+        let point = |m: usize| Vector3::new(rest[3 * m], rest[3 * m + 1], rest[3 * m + 2]);
+        let out = (point(2) - (point(0) + point(1)) / 2.0).normalize();
+        for time in ["first", "second"] {
+            for k in 1..=160 {
+                let slid = moved(2, 1e-3 * k.min(100) as f64 * out);
+                assert_eq!(tracker.check_rigid(Segment::Forearm, &slid, 3), (0, false), "{time}: slid frame {k}");
+            }
+            assert_eq!(tracker.check_rigid(Segment::Forearm, &rest, 3), (0, false), "{time} time back");
+        }
+    }
+
+    #[test]
     fn one_broken_distance_right_after_the_first_frame_rejects_the_marker_that_moved() {
         // RSP turned 60° about FAP right after the shape was learned from one frame: RSP–FAP
         // keeps its length, RSP–USP breaks. RSP moved against FAP, USP did not: RSP alone.

@@ -564,6 +564,34 @@ mod tests {
     }
 
     #[test]
+    fn each_hand_marker_coordinate_is_gated_against_its_own_learned_noise() {
+        // The learned noise: σ 1 mm for every hand marker coordinate but MC5's x, 5 cm. With a
+        // certain state (P = 0) a marker's distance is Σ (ν_k / σ_k)² over its coordinates.
+        let body = BodyModel::default();
+        let forearm = body.forearm_pose(0.2);
+        let q = [0.3, -0.2, 0.1];
+        let frame = body.marker_frame(&q, &forearm);
+        let at_rest: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i]);
+        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        tracker.noise_variance = [1e-6; N_HAND];
+        tracker.noise_variance[3] = 0.05 * 0.05;
+        let mut x = StateVector::zeros();
+        x.fixed_rows_mut::<3>(0).copy_from(&Vector3::from(q));
+        let p = StateMatrix::zeros();
+        assert_eq!(tracker.gate(&forearm, &at_rest, &x, &p), 0);
+        // Every marker 3 cm off along one axis (beyond the 2 cm floor): along x, MC5's distance
+        // is (0.03 / 0.05)² = 0.36 and the others' (0.03 / 0.001)² = 900, against GATE_CHI2 = 30;
+        // along y, every one's is 900.
+        for (axis, expected) in [(0, 0b101), (1, 0b111)] {
+            let mut hand = at_rest;
+            for m in 0..3 {
+                hand[3 * m + axis] += 0.03;
+            }
+            assert_eq!(tracker.gate(&forearm, &hand, &x, &p), expected, "3 cm along axis {axis}");
+        }
+    }
+
+    #[test]
     fn the_initial_covariance_is_as_wide_as_documented_and_uncorrelated() {
         // Standard deviations 0.1 rad, ~30 rad/s and ~300 rad/s² for every coordinate, nothing
         // correlated (a velocity or acceleration known a priori would slow the start).
