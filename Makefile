@@ -229,18 +229,21 @@ fuzz: $(CARGO_FUZZ)
 # n-th mutant (round robin, so every file and kind is sampled): 0/6 is ~250 mutants, ~30 min on
 # 2 cores; run k = 0..5 for all of them. Mutants no test can tell from the original are listed,
 # each with its reason, in .cargo/mutants.toml. Fails below MUTANTS_MIN_SCORE; the last line
-# reads `mutants: viable=<n> caught=<n> missed=<n> score=<0.xx>`.
+# reads `mutants: viable=<n> caught=<n> missed=<n> score=<0.xx>`. MUTANTS_ARGS passes more
+# options, e.g. `--shuffle`: mutants in random order, so a run stopped early is a fair sample
+# of the shard (in source order it has seen only the first files).
 CARGO_MUTANTS := .tools/bin/cargo-mutants
 MUTANTS_FILES ?= features net/mlp gaps tracker/* calibration/* stream
 MUTANTS_SHARD ?= 0/6
 MUTANTS_MIN_SCORE ?= 0.95
+MUTANTS_ARGS ?=
 $(CARGO_MUTANTS):
 	$(CARGO) install cargo-mutants --version 27.1.0 --locked --root .tools
 
 mutants: $(CARGO_MUTANTS)
 	mkdir -p target
 	PATH="$(abspath .tools/bin):$$PATH" $(CARGO) mutants -p ikid $(foreach f,$(MUTANTS_FILES),-f 'crates/ikid/src/$(f).rs') \
-		--shard $(MUTANTS_SHARD) --sharding round-robin --profile quick -o target/mutants > target/mutants.log 2>&1 \
+		--shard $(MUTANTS_SHARD) --sharding round-robin --profile quick $(MUTANTS_ARGS) -o target/mutants > target/mutants.log 2>&1 \
 		|| test -f target/mutants/mutants.out/outcomes.json || (tail -30 target/mutants.log; exit 1)
 	$(PYTHON) tools/mutants_summary.py target/mutants/mutants.out --min-score $(MUTANTS_MIN_SCORE) \
 		--record "$(MUTANTS_FILES), shard $(MUTANTS_SHARD)"
