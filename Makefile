@@ -225,10 +225,11 @@ fuzz: $(CARGO_FUZZ)
 
 # Mutation testing of the core: the check to run on changes to crates/ikid (not part of
 # `make test`). cargo-mutants mutates MUTANTS_FILES and runs `cargo test -p ikid` on each
-# mutant in the `quick` profile (no LTO: ~7 s a mutant here). MUTANTS_SHARD=k/n takes every
-# n-th mutant (round robin, so every file and kind is sampled): 0/6 is ~250 mutants, ~30 min on
-# 2 cores; run k = 0..5 for all of them. Mutants no test can tell from the original are listed,
-# each with its reason, in .cargo/mutants.toml. Fails below MUTANTS_MIN_SCORE; the last line
+# mutant in the `quick` profile (no LTO: ~15-20 s a mutant on this shared 2-core machine,
+# build and tests). MUTANTS_SHARD=k/n takes every n-th mutant (round robin, so every file and
+# kind is sampled): 0/6 is 550 mutants (a third unviable), ~3 h; run k = 0..5 for all of
+# them. Mutants no test can tell from the original are listed, each with its reason, in
+# .cargo/mutants.toml. Fails below MUTANTS_MIN_SCORE; the last line
 # reads `mutants: viable=<n> caught=<n> missed=<n> score=<0.xx>`. MUTANTS_ARGS passes more
 # options, e.g. `--shuffle`: mutants in random order, so a run stopped early is a fair sample
 # of the shard (in source order it has seen only the first files).

@@ -1439,7 +1439,7 @@ mod tests {
         assert!(f[10] == frames[0][10] && f[9].is_nan(), "frame changed on error");
 
         let (mut filler, frames) = calibrated(&body, 0.0);
-        for (gone, names) in [(&[0usize, 3][..], "RSP, MC2"), (&[4, 5][..], "MC5, MCB")] {
+        for (gone, names) in [(&[0usize, 3][..], "RSP, MC2"), (&[4, 5][..], "MC5, MCB"), (&[0, 1][..], "RSP, USP")] {
             let mut f = frames[350];
             for &g in gone {
                 f[3 * g + 1] = f32::NAN;

@@ -606,6 +606,36 @@ mod tests {
     }
 
     #[test]
+    fn past_gimbal_lock_the_state_moves_to_the_other_triple_of_the_same_rotation() {
+        // e_f beyond ±90° (either side, and a whole turn off): the rotation stays, e_f comes
+        // within ±90°, e_f's velocity and acceleration change sign and the covariance's e_f
+        // rows and columns with them (P' = D P D, D = diag(±1)); within ±90° nothing moves.
+        let p: StateMatrix = StateMatrix::from_fn(|i, j| 1.0 + (i * N_STATE + j) as f64 + (i + j) as f64);
+        let p = p + p.transpose();
+        let flip = StateMatrix::from_diagonal(&StateVector::from_fn(|i, _| if i % 3 == 1 { -1.0 } else { 1.0 }));
+        for e_f in [2.0, -2.5, 2.0 + TAU, 0.5] {
+            let mut x = StateVector::from_fn(|i, _| 0.1 * (i + 1) as f64);
+            x[1] = e_f;
+            let (before, p_before) = (x, p);
+            let mut p = p;
+            principal_branch(&mut x, &mut p);
+            let turn = body::wrist_rotation(&[before[0], before[1], before[2]])
+                .angle_to(&body::wrist_rotation(&[x[0], x[1], x[2]]));
+            assert!(turn < 1e-12, "e_f {e_f}: the rotation turned by {turn} rad");
+            if wrap_angle(e_f).abs() <= PI / 2.0 {
+                assert_eq!((x, p), (before, p_before), "e_f {e_f}");
+                continue;
+            }
+            assert!(x[1].abs() <= PI / 2.0, "e_f {e_f} → {}", x[1]);
+            for i in 3..N_STATE {
+                let sign = if i % 3 == 1 { -1.0 } else { 1.0 };
+                assert_eq!(x[i], sign * before[i], "e_f {e_f}: state {i}");
+            }
+            assert_eq!(p, flip * p_before * flip, "e_f {e_f}");
+        }
+    }
+
+    #[test]
     fn angles_stay_within_one_turn() {
         for (a, wrapped) in [(3.5, 3.5 - TAU), (-3.5, TAU - 3.5), (PI, PI), (-PI, PI), (7.0 * PI, PI), (0.3, 0.3)] {
             assert!((wrap_angle(a) - wrapped).abs() < 1e-12, "{a}");

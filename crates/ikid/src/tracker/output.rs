@@ -289,6 +289,45 @@ mod tests {
     }
 
     #[test]
+    fn the_torques_sd_is_the_markers_noise_through_the_inverse_dynamics() {
+        // J E Jᵀ times SD_SCALE_TAU, E the markers' noise through the filter: here J by one-sided
+        // differences at steps of their own (output_sd takes central ones at a share of P).
+        use super::super::testkit::{frames, trajectory};
+        let q = trajectory(500, 1000.0);
+        let f = frames(&crate::body::BodyModel::default(), &q, 0.3);
+        let mut tracker = Tracker::new(crate::body::BodyModel::default(), Default::default()).unwrap();
+        tracker.run(&f, |_, _, _| {}).unwrap();
+        let sd = tracker.output_sd().unwrap();
+        let ((x, p), pose) = (tracker.state.unwrap(), tracker.forearm.unwrap());
+        let (_, e) = tracker.noise_covariances(&pose, &x, &p).unwrap();
+        let forearm = pose.rotation.to_rotation_matrix();
+        let tau = |x: &StateVector| {
+            let state = JointState { q: [x[0], x[1], x[2]], qd: [x[3], x[4], x[5]], qdd: [x[6], x[7], x[8]] };
+            crate::reference::inverse_dynamics_at(&tracker.body, &forearm, &state).unwrap()
+        };
+        let at = tau(&x);
+        let mut j = nalgebra::SMatrix::<f64, N_COORDINATES, N_STATE>::zeros();
+        for k in 0..N_STATE {
+            let h = 1e-6 * x[k].abs().max(1.0);
+            let mut moved = x;
+            moved[k] += h;
+            let up = tau(&moved);
+            for c in 0..N_COORDINATES {
+                j[(c, k)] = (up[c] - at[c]) / h;
+            }
+        }
+        let cov = j * e * j.transpose();
+        for c in 0..N_COORDINATES {
+            let expected = SD_SCALE_TAU * cov[(c, c)].sqrt();
+            assert!(
+                expected > 0.0 && (sd.tau[c] / expected - 1.0).abs() < 1e-3,
+                "torque {c}: {} vs {expected}",
+                sd.tau[c]
+            );
+        }
+    }
+
+    #[test]
     fn values_are_q_qd_qdd_tau_in_order() {
         let out = TrackerOutput {
             state: JointState { q: [1.0, 2.0, 3.0], qd: [4.0, 5.0, 6.0], qdd: [7.0, 8.0, 9.0] },
