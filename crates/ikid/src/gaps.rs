@@ -1796,6 +1796,25 @@ mod tests {
     }
 
     #[test]
+    fn a_refused_motion_says_how_far_from_where_the_marker_was_heading() {
+        // The forearm shifted rigidly by 2 cm: its distances hold, so the message gives how far
+        // RSP is from where the last two frames accepted had it heading (by hand: 2 last − before).
+        let body = BodyModel::default();
+        let (mut filler, frames) = calibrated(&body, 0.0);
+        let mut f = frames[300];
+        for m in 0..3 {
+            f[3 * m] += 0.02;
+        }
+        let err = filler.check(&f, 3).unwrap_err().to_string();
+        let heading = 2.0 * marker(&frames[299], 0) - marker(&frames[298], 0);
+        let moved = 1e3 * (marker(&f, 0) - heading).norm();
+        assert!(
+            err.contains(&format!("RSP is {moved:.1} mm from where the last frame accepted had it heading")),
+            "{err}"
+        );
+    }
+
+    #[test]
     fn a_marker_moving_too_far_between_frames_is_named_by_its_motion() {
         // A segment shifts rigidly by 2 cm in one 10-ms frame (as when labels jump to another
         // arm's markers): every distance holds, every marker of it moves too far; the other
