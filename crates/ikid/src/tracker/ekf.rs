@@ -592,6 +592,35 @@ mod tests {
     }
 
     #[test]
+    fn with_two_markers_and_the_centre_a_template_misfit_leaves_the_markers_weight_as_learned() {
+        // MC5 missing: MC2, MCB and the wrist centre correct the state. A skin template's misfit
+        // only widens what the manoeuvre test allows (no manoeuvre here either way): the state
+        // and covariance after the correction are those of a template that fits, to the bit.
+        let body = BodyModel::default();
+        let forearm = body.forearm_pose(0.2);
+        let q = [0.3, -0.2, 0.1];
+        let frame = body.marker_frame(&q, &forearm);
+        let mut hand: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i] + 1e-3 * (i as f64).sin());
+        hand[3..6].fill(f64::NAN);
+        let settings = TrackerSettings { relative_hand: true, ..Default::default() };
+        let mut tracker = Tracker::new(body, settings).unwrap();
+        tracker.noise_variance = [1e-6; N_HAND];
+        let mut x0 = StateVector::zeros();
+        x0.fixed_rows_mut::<3>(0).copy_from(&Vector3::new(q[0] + 0.01, q[1] - 0.02, q[2] + 0.01));
+        let p0 = tracker.initial_covariance();
+        let corrected = |tracker: &Tracker| {
+            let (mut x, mut p) = (x0, p0);
+            tracker.correct(&forearm, &hand, Some(WristCentre::origins()), None, &mut x, &mut p);
+            (x, p)
+        };
+        let fits = corrected(&tracker);
+        assert_ne!(fits.0, x0, "no correction");
+        (tracker.fit_residual_ms, tracker.fit_residual_samples) = (1e-4, 100.0);
+        assert!(tracker.template_misfit_variance(1e-6) > 1e-5);
+        assert_eq!(corrected(&tracker), fits);
+    }
+
+    #[test]
     fn the_initial_covariance_is_as_wide_as_documented_and_uncorrelated() {
         // Standard deviations 0.1 rad, ~30 rad/s and ~300 rad/s² for every coordinate, nothing
         // correlated (a velocity or acceleration known a priori would slow the start).
