@@ -297,6 +297,47 @@ mod tests {
     }
 
     #[test]
+    fn the_sd_does_not_depend_on_where_the_labs_origin_is() {
+        // The same noisy markers (MC2's noise 1 mm, the others' 0.2 mm: the hand's markers weigh
+        // unequally) 1 m further along each lab axis: the same σ, the hand measured by its
+        // orientation alone or not. (A turn of the forearm moves the hand markers about their
+        // centroid, or the forearm's, never about a point fixed in the lab.)
+        use super::super::testkit::{frames, trajectory};
+        use crate::body::{BodyModel, MARKER_FRAME_LEN};
+        let q = trajectory(1000, 1000.0);
+        let mut f = frames(&BodyModel::default(), &q, 0.3);
+        let mut state = 3u64;
+        let mut gauss = || {
+            // Box–Muller on a 64-bit LCG: independent of the crate's noise module.
+            let mut u = || {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+            };
+            (-2.0 * u().ln()).sqrt() * (std::f64::consts::TAU * u()).cos()
+        };
+        for frame in f.chunks_exact_mut(MARKER_FRAME_LEN) {
+            for (i, v) in frame.iter_mut().enumerate() {
+                *v += if (9..12).contains(&i) { 1e-3 } else { 2e-4 } * gauss();
+            }
+        }
+        let moved: Vec<f64> = f.iter().enumerate().map(|(i, v)| v + 1.0 + (i % 3) as f64).collect();
+        for relative in [false, true] {
+            let sd = |frames: &[f64]| {
+                let settings = crate::tracker::TrackerSettings { relative_hand: relative, ..Default::default() };
+                let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
+                tracker.run(frames, |_, _, _| {}).unwrap();
+                tracker.output_sd().unwrap()
+            };
+            let (here, there) = (sd(&f), sd(&moved));
+            for c in 0..N_COORDINATES {
+                for (a, b) in [(here.q[c], there.q[c]), (here.tau[c], there.tau[c])] {
+                    assert!((a / b - 1.0).abs() < 1e-6, "relative {relative}, coordinate {c}: {here:?} vs {there:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn the_torques_sd_is_the_markers_noise_through_the_inverse_dynamics() {
         // J E Jᵀ times SD_SCALE_TAU, E the markers' noise through the filter: here J by one-sided
         // differences at steps of their own (output_sd takes central ones at a share of P).
