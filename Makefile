@@ -227,7 +227,7 @@ fuzz: $(CARGO_FUZZ)
 # `make test`). cargo-mutants mutates MUTANTS_FILES and runs `cargo test -p ikid` on each
 # mutant in the `quick` profile (no LTO: ~15-20 s a mutant on this shared 2-core machine,
 # build and tests). MUTANTS_SHARD=k/n takes every n-th mutant (round robin, so every file and
-# kind is sampled): 0/6 is 550 mutants (a third unviable), ~3 h; run k = 0..5 for all of
+# kind is sampled): 0/6 is 550 mutants (a quarter unviable), ~3 h; run k = 0..5 for all of
 # them. Mutants no test can tell from the original are listed, each with its reason, in
 # .cargo/mutants.toml. Fails below MUTANTS_MIN_SCORE; the last line
 # reads `mutants: viable=<n> caught=<n> missed=<n> score=<0.xx>`. MUTANTS_ARGS passes more
