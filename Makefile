@@ -225,22 +225,26 @@ fuzz: $(CARGO_FUZZ)
 
 # Mutation testing of the core: the check to run on changes to crates/ikid (not part of
 # `make test`). cargo-mutants mutates MUTANTS_FILES and runs `cargo test -p ikid` on each
-# mutant in the `quick` profile (no LTO: ~7 s a mutant here). MUTANTS_SHARD=k/n takes every
-# n-th mutant (round robin, so every file and kind is sampled): 0/6 is ~250 mutants, ~30 min on
-# 2 cores; run k = 0..5 for all of them. Mutants no test can tell from the original are listed,
-# each with its reason, in .cargo/mutants.toml. Fails below MUTANTS_MIN_SCORE; the last line
-# reads `mutants: viable=<n> caught=<n> missed=<n> score=<0.xx>`.
+# mutant in the `quick` profile (no LTO: ~15-20 s a mutant on this shared 2-core machine,
+# build and tests). MUTANTS_SHARD=k/n takes every n-th mutant (round robin, so every file and
+# kind is sampled): 0/6 is 550 mutants (a quarter unviable), ~3 h; run k = 0..5 for all of
+# them. Mutants no test can tell from the original are listed, each with its reason, in
+# .cargo/mutants.toml. Fails below MUTANTS_MIN_SCORE; the last line
+# reads `mutants: viable=<n> caught=<n> missed=<n> score=<0.xx>`. MUTANTS_ARGS passes more
+# options, e.g. `--shuffle`: mutants in random order, so a run stopped early is a fair sample
+# of the shard (in source order it has seen only the first files).
 CARGO_MUTANTS := .tools/bin/cargo-mutants
 MUTANTS_FILES ?= features net/mlp gaps tracker/* calibration/* stream
 MUTANTS_SHARD ?= 0/6
 MUTANTS_MIN_SCORE ?= 0.95
+MUTANTS_ARGS ?=
 $(CARGO_MUTANTS):
 	$(CARGO) install cargo-mutants --version 27.1.0 --locked --root .tools
 
 mutants: $(CARGO_MUTANTS)
 	mkdir -p target
 	PATH="$(abspath .tools/bin):$$PATH" $(CARGO) mutants -p ikid $(foreach f,$(MUTANTS_FILES),-f 'crates/ikid/src/$(f).rs') \
-		--shard $(MUTANTS_SHARD) --sharding round-robin --profile quick -o target/mutants > target/mutants.log 2>&1 \
+		--shard $(MUTANTS_SHARD) --sharding round-robin --profile quick $(MUTANTS_ARGS) -o target/mutants > target/mutants.log 2>&1 \
 		|| test -f target/mutants/mutants.out/outcomes.json || (tail -30 target/mutants.log; exit 1)
 	$(PYTHON) tools/mutants_summary.py target/mutants/mutants.out --min-score $(MUTANTS_MIN_SCORE) \
 		--record "$(MUTANTS_FILES), shard $(MUTANTS_SHARD)"

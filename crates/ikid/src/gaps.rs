@@ -1466,7 +1466,7 @@ mod tests {
         assert!(f[10] == frames[0][10] && f[9].is_nan(), "frame changed on error");
 
         let (mut filler, frames) = calibrated(&body, 0.0);
-        for (gone, names) in [(&[0usize, 3][..], "RSP, MC2"), (&[4, 5][..], "MC5, MCB")] {
+        for (gone, names) in [(&[0usize, 3][..], "RSP, MC2"), (&[4, 5][..], "MC5, MCB"), (&[0, 1][..], "RSP, USP")] {
             let mut f = frames[350];
             for &g in gone {
                 f[3 * g + 1] = f32::NAN;
@@ -1854,6 +1854,25 @@ mod tests {
         let now = 1e3 * (marker(&f, 3) - marker(&f, 4)).norm();
         let usual = 1e3 * (marker(&truth, 3) - marker(&truth, 4)).norm();
         assert!(err.contains(&format!("MC2–MC5 is {now:.1} mm apart, {usual:.1} mm on average")), "{err}");
+    }
+
+    #[test]
+    fn a_refused_motion_says_how_far_from_where_the_marker_was_heading() {
+        // The forearm shifted rigidly by 2 cm: its distances hold, so the message gives how far
+        // RSP is from where the last two frames accepted had it heading (by hand: 2 last − before).
+        let body = BodyModel::default();
+        let (mut filler, frames) = calibrated(&body, 0.0);
+        let mut f = frames[300];
+        for m in 0..3 {
+            f[3 * m] += 0.02;
+        }
+        let err = filler.check(&f, 3).unwrap_err().to_string();
+        let heading = 2.0 * marker(&frames[299], 0) - marker(&frames[298], 0);
+        let moved = 1e3 * (marker(&f, 0) - heading).norm();
+        assert!(
+            err.contains(&format!("RSP is {moved:.1} mm from where the last frame accepted had it heading")),
+            "{err}"
+        );
     }
 
     #[test]

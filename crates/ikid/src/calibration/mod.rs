@@ -1075,6 +1075,21 @@ mod tests {
             "{err}"
         );
         assert!(err.contains("record it"), "{err}");
+        // Seen, but only in three frames missing RSP: how often it was seen, and why unused.
+        let (mut partial, mut seldom) = (markers.clone(), gone.clone());
+        for i in 0..3 {
+            partial[18 * i] = f32::NAN;
+            seldom[12 * i + 9..12 * i + 12].copy_from_slice(&landmarks[12 * i + 9..12 * i + 12]);
+        }
+        let trial = LandmarkTrial { markers: &partial, landmarks: &seldom, hand_landmarks: None };
+        let err = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap_err().to_string();
+        assert!(
+            err.contains(
+                "landmark ulnar_styloid (ulnar styloid process) is seen in 3 but never with the forearm's three \
+                 markers of the 10"
+            ),
+            "{err}"
+        );
         // The styloids on the long axis: collinear.
         let mut collinear = landmarks.clone();
         for f in collinear.chunks_exact_mut(12) {

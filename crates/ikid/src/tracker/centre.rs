@@ -396,6 +396,27 @@ mod tests {
     }
 
     #[test]
+    fn the_centre_learns_from_no_frame_whose_forearm_came_through_a_gap() {
+        // Calibrated at 100 Hz, RSP missing for 50 frames once the centre is learned: the
+        // forearm goes through the gap from its two other markers and the centre (not held),
+        // so those frames, whose forearm pose the centre itself made, teach it nothing: it has
+        // learned from exactly 50 frames fewer than through the same frames without the gap.
+        let body = BodyModel::default();
+        let rate = 100.0;
+        let q = trajectory(400, rate);
+        let clean = frames(&body, &q, 0.2);
+        let mut gapped = clean.clone();
+        for i in 200..250 {
+            gapped[i * MARKER_FRAME_LEN..i * MARKER_FRAME_LEN + 3].fill(f64::NAN);
+        }
+        let (_, _, whole) = track_calibrated(&clean, rate);
+        let (_, status, tracker) = track_calibrated(&gapped, rate);
+        assert!(status[200..250].iter().all(|s| s & status::HELD == 0), "the forearm was held");
+        assert!(whole.centre.frames > 300, "{} frames learned from", whole.centre.frames);
+        assert_eq!(whole.centre.frames - tracker.centre.frames, 50);
+    }
+
+    #[test]
     fn a_learned_centre_is_solved_from_its_min_frames_th_frame_on() {
         // A hand turning about a centre 1 cm distal of the forearm's origin; each frame added
         // counts once, and `solve(n)` answers from the n-th on.

@@ -304,6 +304,35 @@ mod tests {
     }
 
     #[test]
+    fn the_learned_shape_is_the_mean_of_its_frames_then_follows_over_one_second() {
+        // At 10 Hz FAP 1 mm farther out each frame (within the tolerance): the distances learned
+        // are the plain mean of the frames so far while there are fewer than ten (weight
+        // 1/(n+1)), then follow by a tenth of each new frame's difference (a one-second memory).
+        let settings = TrackerSettings { rate_hz: 10.0, ..Default::default() };
+        let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
+        let rest = moved(0, Vector3::zeros());
+        let point = |m: usize| Vector3::new(rest[3 * m], rest[3 * m + 1], rest[3 * m + 2]);
+        let out = (point(2) - (point(0) + point(1)) / 2.0).normalize();
+        let distances = |f: &[f64]| {
+            let p = |m: usize| Vector3::new(f[3 * m], f[3 * m + 1], f[3 * m + 2]);
+            SHAPE_PAIRS.map(|(a, b)| (p(a) - p(b)).norm())
+        };
+        let mut expected = [0.0; 3];
+        for n in 0..15 {
+            let f = moved(2, 1e-3 * n as f64 * out);
+            assert_eq!(tracker.check_rigid(Segment::Forearm, &f, 3), (0, false), "frame {n}");
+            let w = if n < 10 { 1.0 / (n as f64 + 1.0) } else { 0.1 };
+            for (e, d) in expected.iter_mut().zip(distances(&f)) {
+                *e += w * (d - *e);
+            }
+            let learned = tracker.shapes[Segment::Forearm as usize].learned.unwrap();
+            for i in 0..3 {
+                assert!((learned[i] - expected[i]).abs() < 1e-12, "frame {n}: {learned:?} vs {expected:?}");
+            }
+        }
+    }
+
+    #[test]
     fn a_new_shape_must_hold_from_frame_to_frame_to_be_taken() {
         // FAP jumping between two places 10 cm off either way: each frame another candidate
         // shape, so none is ever taken, however long it lasts.
@@ -318,6 +347,31 @@ mod tests {
         for k in 0..20 {
             let f = if k % 2 == 0 { &far } else { &near };
             assert_eq!(tracker.check_rigid(Segment::Forearm, f, 3), (0b100, false), "frame {k}");
+        }
+    }
+
+    #[test]
+    fn the_templates_shape_is_taken_back_at_once_each_time_it_comes_back() {
+        // Calibrated at 10 Hz (a one-second memory: the learned shape follows within 9 mm of a
+        // marker sliding 1 mm a frame, inside the 15 mm tolerance): the template is taken at
+        // rest; FAP slides 10 cm out (two distances now off the template's), then snaps back,
+        // twice. Each time the template's shape is taken back on its first frame, the first time
+        // as the second: relearning the shape keeps which one the template was taken from.
+        let settings = TrackerSettings { rate_hz: 10.0, ..Default::default() };
+        let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
+        tracker.set_calibration(Some(crate::calibration::Calibration::body_model()));
+        let rest = moved(0, Vector3::zeros());
+        assert_eq!(tracker.check_rigid(Segment::Forearm, &rest, 3), (0, false));
+        tracker.take_template(Segment::Forearm, &rest);
+        assert!(tracker.shapes[Segment::Forearm as usize].template.is_some());
+        let point = |m: usize| Vector3::new(rest[3 * m], rest[3 * m + 1], rest[3 * m + 2]);
+        let out = (point(2) - (point(0) + point(1)) / 2.0).normalize();
+        for time in ["first", "second"] {
+            for k in 1..=160 {
+                let slid = moved(2, 1e-3 * k.min(100) as f64 * out);
+                assert_eq!(tracker.check_rigid(Segment::Forearm, &slid, 3), (0, false), "{time}: slid frame {k}");
+            }
+            assert_eq!(tracker.check_rigid(Segment::Forearm, &rest, 3), (0, false), "{time} time back");
         }
     }
 

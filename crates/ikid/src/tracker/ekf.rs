@@ -575,6 +575,63 @@ mod tests {
     }
 
     #[test]
+    fn each_hand_marker_coordinate_is_gated_against_its_own_learned_noise() {
+        // The learned noise: σ 1 mm for every hand marker coordinate but MC5's x, 5 cm. With a
+        // certain state (P = 0) a marker's distance is Σ (ν_k / σ_k)² over its coordinates.
+        let body = BodyModel::default();
+        let forearm = body.forearm_pose(0.2);
+        let q = [0.3, -0.2, 0.1];
+        let frame = body.marker_frame(&q, &forearm);
+        let at_rest: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i]);
+        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        tracker.noise_variance = [1e-6; N_HAND];
+        tracker.noise_variance[3] = 0.05 * 0.05;
+        let mut x = StateVector::zeros();
+        x.fixed_rows_mut::<3>(0).copy_from(&Vector3::from(q));
+        let p = StateMatrix::zeros();
+        assert_eq!(tracker.gate(&forearm, &at_rest, &x, &p), 0);
+        // Every marker 3 cm off along one axis (beyond the 2 cm floor): along x, MC5's distance
+        // is (0.03 / 0.05)² = 0.36 and the others' (0.03 / 0.001)² = 900, against GATE_CHI2 = 30;
+        // along y, every one's is 900.
+        for (axis, expected) in [(0, 0b101), (1, 0b111)] {
+            let mut hand = at_rest;
+            for m in 0..3 {
+                hand[3 * m + axis] += 0.03;
+            }
+            assert_eq!(tracker.gate(&forearm, &hand, &x, &p), expected, "3 cm along axis {axis}");
+        }
+    }
+
+    #[test]
+    fn with_two_markers_and_the_centre_a_template_misfit_leaves_the_markers_weight_as_learned() {
+        // MC5 missing: MC2, MCB and the wrist centre correct the state. A skin template's misfit
+        // only widens what the manoeuvre test allows (no manoeuvre here either way): the state
+        // and covariance after the correction are those of a template that fits, to the bit.
+        let body = BodyModel::default();
+        let forearm = body.forearm_pose(0.2);
+        let q = [0.3, -0.2, 0.1];
+        let frame = body.marker_frame(&q, &forearm);
+        let mut hand: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i] + 1e-3 * (i as f64).sin());
+        hand[3..6].fill(f64::NAN);
+        let settings = TrackerSettings { relative_hand: true, ..Default::default() };
+        let mut tracker = Tracker::new(body, settings).unwrap();
+        tracker.noise_variance = [1e-6; N_HAND];
+        let mut x0 = StateVector::zeros();
+        x0.fixed_rows_mut::<3>(0).copy_from(&Vector3::new(q[0] + 0.01, q[1] - 0.02, q[2] + 0.01));
+        let p0 = tracker.initial_covariance();
+        let corrected = |tracker: &Tracker| {
+            let (mut x, mut p) = (x0, p0);
+            tracker.correct(&forearm, &hand, Some(WristCentre::origins()), None, &mut x, &mut p);
+            (x, p)
+        };
+        let fits = corrected(&tracker);
+        assert_ne!(fits.0, x0, "no correction");
+        (tracker.fit_residual_ms, tracker.fit_residual_samples) = (1e-4, 100.0);
+        assert!(tracker.template_misfit_variance(1e-6) > 1e-5);
+        assert_eq!(corrected(&tracker), fits);
+    }
+
+    #[test]
     fn the_initial_covariance_is_as_wide_as_documented_and_uncorrelated() {
         // Standard deviations 0.1 rad, ~30 rad/s and ~300 rad/s² for every coordinate, nothing
         // correlated (a velocity or acceleration known a priori would slow the start).
@@ -585,6 +642,36 @@ mod tests {
                 let want = if i != j { 0.0 } else { [0.1f64, 1e3f64.sqrt(), 1e5f64.sqrt()][i / 3].powi(2) };
                 assert!((p[(i, j)] - want).abs() <= 1e-9 * want, "P[{i}][{j}] = {}", p[(i, j)]);
             }
+        }
+    }
+
+    #[test]
+    fn past_gimbal_lock_the_state_moves_to_the_other_triple_of_the_same_rotation() {
+        // e_f beyond ±90° (either side, and a whole turn off): the rotation stays, e_f comes
+        // within ±90°, e_f's velocity and acceleration change sign and the covariance's e_f
+        // rows and columns with them (P' = D P D, D = diag(±1)); within ±90° nothing moves.
+        let p: StateMatrix = StateMatrix::from_fn(|i, j| 1.0 + (i * N_STATE + j) as f64 + (i + j) as f64);
+        let p = p + p.transpose();
+        let flip = StateMatrix::from_diagonal(&StateVector::from_fn(|i, _| if i % 3 == 1 { -1.0 } else { 1.0 }));
+        for e_f in [2.0, -2.5, 2.0 + TAU, 0.5] {
+            let mut x = StateVector::from_fn(|i, _| 0.1 * (i + 1) as f64);
+            x[1] = e_f;
+            let (before, p_before) = (x, p);
+            let mut p = p;
+            principal_branch(&mut x, &mut p);
+            let turn = body::wrist_rotation(&[before[0], before[1], before[2]])
+                .angle_to(&body::wrist_rotation(&[x[0], x[1], x[2]]));
+            assert!(turn < 1e-12, "e_f {e_f}: the rotation turned by {turn} rad");
+            if wrap_angle(e_f).abs() <= PI / 2.0 {
+                assert_eq!((x, p), (before, p_before), "e_f {e_f}");
+                continue;
+            }
+            assert!(x[1].abs() <= PI / 2.0, "e_f {e_f} → {}", x[1]);
+            for i in 3..N_STATE {
+                let sign = if i % 3 == 1 { -1.0 } else { 1.0 };
+                assert_eq!(x[i], sign * before[i], "e_f {e_f}: state {i}");
+            }
+            assert_eq!(p, flip * p_before * flip, "e_f {e_f}");
         }
     }
 

@@ -395,6 +395,41 @@ mod tests {
     use crate::body::BodyModel;
 
     #[test]
+    fn through_faps_gaps_the_roll_filter_smooths_the_centres_noise() {
+        // Calibrated at 100 Hz, 0.5 mm of noise on every marker, FAP gone 300 ms of every
+        // second: the forearm's roll about RSP–USP comes from the wrist centre seen from the
+        // noisy hand, filtered. Measured: the angles' frame-to-frame change 2.0° RMS off the
+        // truth's through the gaps; the centre's roll followed frame by frame (its filter's
+        // covariance not carried over the frame), 5.1°.
+        let body = BodyModel::default();
+        let rate = 100.0;
+        let q = trajectory(1000, rate);
+        let mut f = frames(&body, &q, 0.2);
+        let mut state = 5u64;
+        let mut gauss = || {
+            // Box–Muller on a 64-bit LCG: independent of the crate's noise module.
+            let mut u = || {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+            };
+            (-2.0 * u().ln()).sqrt() * (std::f64::consts::TAU * u()).cos()
+        };
+        f.iter_mut().for_each(|v| *v += 5e-4 * gauss());
+        let gap: Vec<usize> = (300..900).filter(|i| i % 100 < 30).collect();
+        for &i in &gap {
+            f[i * MARKER_FRAME_LEN + 6..i * MARKER_FRAME_LEN + 9].fill(f64::NAN);
+        }
+        let (est, _, _) = track_calibrated(&f, rate);
+        let steps = gap.iter().filter(|&&i| i % 100 > 0);
+        let square: f64 = steps
+            .clone()
+            .map(|&i| (0..3).map(|c| ((est[i][c] - est[i - 1][c]) - (q[i][c] - q[i - 1][c])).powi(2)).sum::<f64>())
+            .sum();
+        let jitter = (square / steps.count() as f64).sqrt().to_degrees();
+        assert!(jitter < 3.0, "{jitter}° RMS");
+    }
+
+    #[test]
     fn the_tracker_runs_at_100_hz_through_a_gap_of_a_forearm_marker() {
         let body = BodyModel::default();
         let q = trajectory(1000, 100.0);

@@ -214,8 +214,9 @@ mod tests {
     use crate::reference::JointState;
 
     /// Share of frames (every fourth after the first second) whose angle error is within ±1 σ, with Gaussian
-    /// noise of `sigma` m on the markers `markers` (frame order) only.
-    fn angle_coverage(markers: std::ops::Range<usize>, sigma: f64) -> f64 {
+    /// noise of `sigma` m on the markers `markers` (frame order) only; the hand measured by its
+    /// orientation alone when `relative` ([`TrackerSettings::relative_hand`](crate::tracker::TrackerSettings)).
+    fn angle_coverage(markers: std::ops::Range<usize>, sigma: f64, relative: bool) -> f64 {
         use super::super::testkit::{frames, trajectory};
         use crate::body::{BodyModel, MARKER_FRAME_LEN};
         let body = BodyModel::default();
@@ -235,7 +236,8 @@ mod tests {
                 *v += sigma * gauss();
             }
         }
-        let mut tracker = Tracker::new(body, crate::tracker::TrackerSettings::default()).unwrap();
+        let settings = crate::tracker::TrackerSettings { relative_hand: relative, ..Default::default() };
+        let mut tracker = Tracker::new(body, settings).unwrap();
         let (mut covered, mut counted) = (0.0, 0.0);
         for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
             let out = tracker.push(frame).unwrap().unwrap();
@@ -255,10 +257,96 @@ mod tests {
     fn the_angles_sd_counts_the_forearms_noise_as_well_as_the_hands() {
         // The filter's covariance alone covered 0.04-0.08 of frames with noise on the forearm's
         // markers only (its σ knew only the hand's); a calibrated σ covers 0.683.
-        // Measured: 0.675, 0.735, 0.674.
-        for (what, markers) in [("the forearm's markers", 0..9), ("the hand's", 9..18), ("every marker", 0..18)] {
-            let share = angle_coverage(markers, 1e-3);
-            assert!((0.6..0.78).contains(&share), "noise on {what}: {share} of frames within ±1 σ");
+        // Measured: 0.675, 0.735, 0.674; the hand measured by its orientation alone (the turn
+        // about the hand markers' centroid), 0.673, 0.741, 0.703.
+        for relative in [false, true] {
+            for (what, markers) in [("the forearm's markers", 0..9), ("the hand's", 9..18), ("every marker", 0..18)] {
+                let share = angle_coverage(markers, 1e-3, relative);
+                assert!(
+                    (0.6..0.78).contains(&share),
+                    "relative {relative}, noise on {what}: {share} of frames within ±1 σ"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_sd_does_not_depend_on_where_the_labs_origin_is() {
+        // The same noisy markers (MC2's noise 1 mm, the others' 0.2 mm: the hand's markers weigh
+        // unequally) 1 m further along each lab axis: the same σ, the hand measured by its
+        // orientation alone or not. (A turn of the forearm moves the hand markers about their
+        // centroid, or the forearm's, never about a point fixed in the lab.)
+        use super::super::testkit::{frames, trajectory};
+        use crate::body::{BodyModel, MARKER_FRAME_LEN};
+        let q = trajectory(1000, 1000.0);
+        let mut f = frames(&BodyModel::default(), &q, 0.3);
+        let mut state = 3u64;
+        let mut gauss = || {
+            // Box–Muller on a 64-bit LCG: independent of the crate's noise module.
+            let mut u = || {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+            };
+            (-2.0 * u().ln()).sqrt() * (std::f64::consts::TAU * u()).cos()
+        };
+        for frame in f.chunks_exact_mut(MARKER_FRAME_LEN) {
+            for (i, v) in frame.iter_mut().enumerate() {
+                *v += if (9..12).contains(&i) { 1e-3 } else { 2e-4 } * gauss();
+            }
+        }
+        let moved: Vec<f64> = f.iter().enumerate().map(|(i, v)| v + 1.0 + (i % 3) as f64).collect();
+        for relative in [false, true] {
+            let sd = |frames: &[f64]| {
+                let settings = crate::tracker::TrackerSettings { relative_hand: relative, ..Default::default() };
+                let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
+                tracker.run(frames, |_, _, _| {}).unwrap();
+                tracker.output_sd().unwrap()
+            };
+            let (here, there) = (sd(&f), sd(&moved));
+            for c in 0..N_COORDINATES {
+                for (a, b) in [(here.q[c], there.q[c]), (here.tau[c], there.tau[c])] {
+                    assert!((a / b - 1.0).abs() < 1e-6, "relative {relative}, coordinate {c}: {here:?} vs {there:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_torques_sd_is_the_markers_noise_through_the_inverse_dynamics() {
+        // J E Jᵀ times SD_SCALE_TAU, E the markers' noise through the filter: here J by one-sided
+        // differences at steps of their own (output_sd takes central ones at a share of P).
+        use super::super::testkit::{frames, trajectory};
+        let q = trajectory(500, 1000.0);
+        let f = frames(&crate::body::BodyModel::default(), &q, 0.3);
+        let mut tracker = Tracker::new(crate::body::BodyModel::default(), Default::default()).unwrap();
+        tracker.run(&f, |_, _, _| {}).unwrap();
+        let sd = tracker.output_sd().unwrap();
+        let ((x, p), pose) = (tracker.state.unwrap(), tracker.forearm.unwrap());
+        let (_, e) = tracker.noise_covariances(&pose, &x, &p).unwrap();
+        let forearm = pose.rotation.to_rotation_matrix();
+        let tau = |x: &StateVector| {
+            let state = JointState { q: [x[0], x[1], x[2]], qd: [x[3], x[4], x[5]], qdd: [x[6], x[7], x[8]] };
+            crate::reference::inverse_dynamics_at(&tracker.body, &forearm, &state).unwrap()
+        };
+        let at = tau(&x);
+        let mut j = nalgebra::SMatrix::<f64, N_COORDINATES, N_STATE>::zeros();
+        for k in 0..N_STATE {
+            let h = 1e-6 * x[k].abs().max(1.0);
+            let mut moved = x;
+            moved[k] += h;
+            let up = tau(&moved);
+            for c in 0..N_COORDINATES {
+                j[(c, k)] = (up[c] - at[c]) / h;
+            }
+        }
+        let cov = j * e * j.transpose();
+        for c in 0..N_COORDINATES {
+            let expected = SD_SCALE_TAU * cov[(c, c)].sqrt();
+            assert!(
+                expected > 0.0 && (sd.tau[c] / expected - 1.0).abs() < 1e-3,
+                "torque {c}: {} vs {expected}",
+                sd.tau[c]
+            );
         }
     }
 
