@@ -3,7 +3,8 @@ whose true angle (torque) lies within ±1 σ of the estimate, on simulated trial
 noise (the simulator's own angles and torques are the truth).
 
 A calibrated σ covers 68.3 % of frames. The angles' σ has no tuned factor: the filter's
-covariance plus the forearm's pose noise it does not count (`Tracker::output_sd`). The torques'
+covariance (which counts the forearm's pose noise per hand coordinate) plus what its correlations
+add (`Tracker::output_sd`). The torques'
 σ is the markers' noise through the filter times one factor, `SD_SCALE_TAU`: it is tuned here on
 one set of trials (seeds TUNE, pooled over the noisy conditions) — the factor that puts 68.3 %
 of their frames within ±factor·σ — and coverage is scored on another (seeds SCORE), never on the
