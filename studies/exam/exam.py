@@ -166,8 +166,9 @@ def session_job(job: dict) -> list[dict]:
         "hand_mass": model.link_of(model.hand).inertial.mass,
         "seeds": seeds,
     }
-    artefacts = [(a, 1) for a in job.get("artefacts", MK.ARTEFACTS)]
-    if job["layout"] == "anatomical" and "noise1" in job.get("artefacts", MK.ARTEFACTS):
+    chosen = job.get("artefacts", MK.ARTEFACTS)
+    artefacts = [(a, 1) for a in chosen]
+    if job["layout"] == "anatomical" and "noise1" in chosen:
         artefacts.append(("noise1", LOW_RATE_DIV))  # one condition at a lab's rate
     results = [condition(ctx, artefact, div) for artefact, div in artefacts]
     return results
@@ -203,7 +204,8 @@ def condition(ctx: dict, artefact: str, div: int) -> dict:
             data[k] = MK.add_noise(data[k], amp_k, rng)
     elif artefact == "gauss1mm":
         for k in data:
-            sd = np.concatenate([np.full(18, MK.GAUSS_SD_M), np.zeros(data[k].shape[1] - 18)])
+            n_markers = clean["task"].shape[1]  # the landmarks' columns beyond stay as probed
+            sd = np.concatenate([np.full(n_markers, MK.GAUSS_SD_M), np.zeros(data[k].shape[1] - n_markers)])
             data[k] = MK.add_gaussian(data[k], sd, rng)
     elif artefact == "dropout":
         drng = np.random.default_rng(seeds["dropout"])

@@ -405,15 +405,7 @@ mod tests {
         let rate = 100.0;
         let q = trajectory(1000, rate);
         let mut f = frames(&body, &q, 0.2);
-        let mut state = 5u64;
-        let mut gauss = || {
-            // Box–Muller on a 64-bit LCG: independent of the crate's noise module.
-            let mut u = || {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            (-2.0 * u().ln()).sqrt() * (std::f64::consts::TAU * u()).cos()
-        };
+        let mut gauss = super::super::testkit::lcg_gaussian(5);
         f.iter_mut().for_each(|v| *v += 5e-4 * gauss());
         let gap: Vec<usize> = (300..900).filter(|i| i % 100 < 30).collect();
         for &i in &gap {
@@ -467,6 +459,13 @@ mod tests {
         f
     }
 
+    /// [`mse`] of each frame's own solution (the segments' rigid fits, `reference`) of `f`.
+    fn per_frame_mse(f: &[f64], truth: &[[f64; 3]], from: usize) -> f64 {
+        let mut per_frame = vec![[0.0; 3]; truth.len()];
+        reference::inverse_kinematics(&BodyModel::default(), f, per_frame.as_flattened_mut()).unwrap();
+        mse(&per_frame, truth, from)
+    }
+
     #[test]
     fn a_noisy_forearm_is_averaged_as_a_noisy_hand_is_not_passed_to_the_angles() {
         // Every camera marker is noisy, the forearm's too. Here only the forearm's (1 mm): its
@@ -478,10 +477,8 @@ mod tests {
         let rate = 1000.0;
         let q = trajectory(4000, rate);
         let f = noisy(&q, 1e-3, 0.0, 11);
-        let mut per_frame = vec![[0.0; 3]; q.len()];
-        reference::inverse_kinematics(&BodyModel::default(), &f, per_frame.as_flattened_mut()).unwrap();
         let (est, _, tracker) = track(&f, rate);
-        let (filtered, raw) = (mse(&est, &q, 1000), mse(&per_frame, &q, 1000));
+        let (filtered, raw) = (mse(&est, &q, 1000), per_frame_mse(&f, &q, 1000));
         assert!(filtered < 0.25 * raw, "tracker {filtered:.2e} rad² against per-frame {raw:.2e}");
         // What it counted: the forearm markers' noise, learned to within 5 % of its SD.
         let learned = tracker.forearm_noise.variance().sqrt();
@@ -503,10 +500,8 @@ mod tests {
         let rate = 1000.0;
         let q = trajectory(4000, rate);
         let f = noisy(&q, 1e-3, 0.0, 12);
-        let mut per_frame = vec![[0.0; 3]; q.len()];
-        reference::inverse_kinematics(&BodyModel::default(), &f, per_frame.as_flattened_mut()).unwrap();
         let (est, _, tracker) = track_calibrated(&f, rate);
-        let (filtered, raw) = (mse(&est, &q, 1000), mse(&per_frame, &q, 1000));
+        let (filtered, raw) = (mse(&est, &q, 1000), per_frame_mse(&f, &q, 1000));
         assert!(filtered < 0.3 * raw, "tracker {filtered:.2e} rad² against per-frame {raw:.2e}");
         let pose = tracker.forearm.unwrap();
         let predicted: [Vector3<f64>; 4] =

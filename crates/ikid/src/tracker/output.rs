@@ -222,15 +222,7 @@ mod tests {
         let body = BodyModel::default();
         let q = trajectory(3000, 1000.0);
         let mut f = frames(&body, &q, 0.3);
-        let mut state = 11u64;
-        let mut gauss = || {
-            // Box–Muller on a 64-bit LCG: independent of the crate's noise module.
-            let mut u = || {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            (-2.0 * u().ln()).sqrt() * (std::f64::consts::TAU * u()).cos()
-        };
+        let mut gauss = super::super::testkit::lcg_gaussian(11);
         for frame in f.chunks_exact_mut(MARKER_FRAME_LEN) {
             for v in &mut frame[markers.clone()] {
                 *v += sigma * gauss();
@@ -280,15 +272,7 @@ mod tests {
         use crate::body::{BodyModel, MARKER_FRAME_LEN};
         let q = trajectory(1000, 1000.0);
         let mut f = frames(&BodyModel::default(), &q, 0.3);
-        let mut state = 3u64;
-        let mut gauss = || {
-            // Box–Muller on a 64-bit LCG: independent of the crate's noise module.
-            let mut u = || {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            (-2.0 * u().ln()).sqrt() * (std::f64::consts::TAU * u()).cos()
-        };
+        let mut gauss = super::super::testkit::lcg_gaussian(3);
         for frame in f.chunks_exact_mut(MARKER_FRAME_LEN) {
             for (i, v) in frame.iter_mut().enumerate() {
                 *v += if (9..12).contains(&i) { 1e-3 } else { 2e-4 } * gauss();

@@ -70,3 +70,16 @@ pub(super) fn fast_trajectory(n: usize, rate: f64) -> Vec<[f64; 3]> {
         })
         .collect()
 }
+
+/// Standard normal samples from `seed`: Box–Muller on a 64-bit LCG, independent of the crate's
+/// noise module (the noise the tests add is then no function the code under test shares).
+pub(super) fn lcg_gaussian(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
+        let mut u = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        (-2.0 * u().ln()).sqrt() * (std::f64::consts::TAU * u()).cos()
+    }
+}

@@ -295,15 +295,7 @@ mod tests {
         let q = vec![[0.2, -0.1, 0.05]; 6000];
         let mut f = frames(&body, &q, 0.0);
         let sigma = [0.0002, 0.0002, 0.001];
-        let mut state = 7u64;
-        let mut gauss = || {
-            // Box–Muller on a 64-bit LCG: independent of the crate's noise module.
-            let mut u = || {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            (-2.0 * u().ln()).sqrt() * (std::f64::consts::TAU * u()).cos()
-        };
+        let mut gauss = super::super::testkit::lcg_gaussian(7);
         for (i, v) in f.iter_mut().enumerate() {
             *v += sigma[i % 3] * gauss();
         }
