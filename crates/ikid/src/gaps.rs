@@ -1557,6 +1557,24 @@ mod tests {
     }
 
     #[test]
+    fn two_markers_at_one_missing_markers_place_are_not_both_given_its_label() {
+        // MCB missing, MC2 and MC5 both at its place (a millimetre apart): a label goes to one
+        // marker at most, and which one cannot be told, so nothing is relabelled.
+        let body = BodyModel::default();
+        let (filler, frames) = calibrated(&body, 0.2);
+        let mut f = frames[300];
+        for (m, off) in [(3, 0.0), (4, 1e-3)] {
+            for k in 0..3 {
+                f[3 * m + k] = frames[300][15 + k] + if k == 0 { off } else { 0.0 };
+            }
+        }
+        f[15..18].fill(f32::NAN);
+        let mut g = f;
+        assert_eq!(filler.relabel(&mut g).0, 0);
+        assert_eq!(g.map(f32::to_bits), f.map(f32::to_bits));
+    }
+
+    #[test]
     fn a_jump_of_any_marker_is_dropped_filled_and_flagged() {
         // Each marker in turn jumps 2 cm away from its segment for one frame (the third of each
         // segment, FAP and MCB, included): the filler names that marker alone and puts it back
@@ -1772,6 +1790,11 @@ mod tests {
         assert_eq!(GapFiller::at_rate(50.0).centre_smoothing, 1.0);
         assert!((GapFiller::at_rate(100.0).still_step - 3e-6).abs() < 1e-18);
         assert!((GapFiller::new().still_step - 3e-7).abs() < 1e-18);
+        // A rate that is no rate (0, negative, non-finite) gives the 1 kHz filler, not an
+        // infinite still-step.
+        for rate in [0.0, -100.0, f64::NAN, f64::INFINITY] {
+            assert!((GapFiller::at_rate(rate).still_step - 3e-7).abs() < 1e-18, "{rate}");
+        }
     }
 
     #[test]
