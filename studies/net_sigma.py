@@ -38,6 +38,7 @@ import numpy as np
 
 import ikid
 from ikid import _native
+from ikid.kinematics import joint_states
 from ikid.pipeline import run_model
 
 #: Model name -> (its rate, Hz; the truth it is scored on: "q" angles or "tau" torques).
@@ -46,7 +47,12 @@ MODELS = {
     "wrist-ik-250hz": (250.0, "q"),
     "wrist-ik-100hz": (100.0, "q"),
     "wrist-chain": (1000.0, "tau"),
+    "wrist-id": (1000.0, "tau"),
 }
+#: What a joint-state model (``ikid id``) reads: the angles ``ikid ik`` writes with its default
+#: model from the trial's markers, low-passed and differenced as ``ikid id`` does by default
+#: (``ikid.kinematics.joint_states``). Its σ is for the chain users run, not for exact angles.
+UPSTREAM = "wrist-ik"
 FIT = [9800, 9801, 9802, 9803, 9804, 9805]
 SCORE = [9810, 9811, 9812, 9813, 9814, 9815]
 #: Uniform noise levels (fraction of each coordinate's range; 0: clean) the fit pools.
@@ -57,9 +63,13 @@ SHOULDERS = [0.0, 0.4, -0.3]
 #: (torques: they scale with size, which it is not told) on 1.0 only.
 LENGTH_SCALES = {"q": [1.0, 0.95, 1.05], "tau": [1.0]}
 ONE_SIGMA = 0.6827
-MEMORY_WINDOWS = 1.0  # the running means remember one window of the model
-#: Powers of the running means tried (1: affine in the variances).
-POWERS = [0.5, 0.6, 0.7, 0.8, 0.9, 1.0]
+MEMORY_WINDOWS = 1.0  # the running means remember one window of the model ...
+#: ... and at least this many frames: a 5-frame window (wrist-id) would judge the angles' noise
+#: from its last few third differences alone.
+MIN_MEMORY_FRAMES = 50.0
+#: Powers of the running means tried (1: affine in the variances; wrist-id's errors on noisy
+#: angles hardly grow with the noise, so it takes 0.3-0.4).
+POWERS = [0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0]
 #: Constants tried, as multiples of the median squared error of the fit's frames (and 0).
 CONSTANTS = list(np.geomspace(1e-3, 3.0, 36))
 #: name -> (noise kind, its parameters); None: clean.
@@ -85,25 +95,39 @@ def trial(seed: int, k: int, rate_hz: float, truth: str, noise: tuple[str, dict]
     return t if noise is None else t.with_noise(noise[0], seed + 1, **noise[1])
 
 
+def model_input(model: _native.Model, t: ikid.Trial) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What ``model``'s stream reads of trial ``t``: (its input rows, their times, the trial's
+    frame of each row). The trial's markers, or for a joint-state model the joint states of the
+    angles ``UPSTREAM`` gives from them (the frames it gave an output for)."""
+    if model.feature_set != "joint_state":
+        return t.markers, t.time, np.arange(len(t.time))
+    rate, _ = MODELS[model.name]
+    angles = run_model(UPSTREAM, t.markers, t.time, rate_hz=rate)
+    states = joint_states(angles.values, angles.time)
+    whole = np.all(np.isfinite(states), axis=1)  # as `ikid id`: short stretches are left out
+    return states[whole], angles.time[whole], angles.frame[whole]
+
+
 def collect(model: _native.Model, seeds: list[int], level: float) -> dict[str, np.ndarray]:
     """Per output row of the stream ``ikid ik`` runs (early outputs for a correcting model): the
     error against the truth, the σ terms (``Stream.sd_terms``) and whether it is the per-frame
-    solution. Rows before the terms exist are left out."""
+    solution. Rows before the terms exist, and implausible rows (never written), are left out."""
     rate, truth = MODELS[model.name]
     offset = model.card.get("output_offset") is not None
     errors, noise, correction, per_frame = [], [], [], []
     for k, seed in enumerate(seeds):
         t = trial(seed, k, rate, truth, ("uniform", {"fraction": level}) if level > 0 else None)
         stream = model.stream(early_outputs=offset)
-        true = getattr(t, truth)
-        for i, (time, frame) in enumerate(zip(t.time, t.markers, strict=True)):
+        rows, times, index = model_input(model, t)
+        true = getattr(t, truth)[index]
+        for i, (time, frame) in enumerate(zip(times, rows, strict=True)):
             try:
                 out = stream.push(frame, time=float(time))
             except ikid.InputError:
                 continue
             terms = stream.sd_terms
-            if out is None or terms is None:
-                continue
+            if out is None or terms is None or stream.status & _native.FRAME_STATUS["implausible"]:
+                continue  # an implausible row is not written (ikid.pipeline), so needs no σ
             errors.append(np.asarray(out, np.float64) - true[i])
             noise.append(terms[0])
             correction.append(terms[1])
@@ -116,14 +140,37 @@ def collect(model: _native.Model, seeds: list[int], level: float) -> dict[str, n
     }
 
 
+def memory_frames(model: _native.Model) -> float:
+    """Frames the card's running means remember."""
+    return max(float(model.window * MEMORY_WINDOWS), MIN_MEMORY_FRAMES)
+
+
 @functools.cache
 def fit_rows(name: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """The FIT seeds' rows of shipped model ``name`` at every FIT level, pooled, and each
-    row's level (index into FIT_LEVELS)."""
+    row's level (index into FIT_LEVELS). The running means remember what the fitted card's will
+    (:func:`memory_frames`; a card of zeros carries that to the stream)."""
     model = ikid.load(name)
+    n = model.n_outputs
+    zeros = {
+        "method": "affine-variance-v1",
+        "memory_frames": memory_frames(model),
+        "power": 1.0,
+        "constant": [0.0] * n,
+        "angle_noise": [[0.0] * 3 for _ in range(n)],
+        "correction": [0.0] * n,
+    }
+    model = model.with_uncertainty(json.dumps(zeros))
     rows = [collect(model, FIT, level) for level in FIT_LEVELS]
     level_of = np.concatenate([np.full(len(r["error"]), j) for j, r in enumerate(rows)])
     return {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}, level_of
+
+
+def weighted_quantile(x: np.ndarray, weight: np.ndarray, q: float) -> float:
+    """The smallest value of ``x`` at or below which lies a share ``q`` of the total weight."""
+    order = np.argsort(x)
+    cumulative = np.cumsum(weight[order])
+    return float(x[order][np.searchsorted(cumulative, q * cumulative[-1])])
 
 
 def fit(name: str, powers: list[float]) -> dict:
@@ -132,14 +179,17 @@ def fit(name: str, powers: list[float]) -> dict:
     Per output ``c``: σ² = a + k · T^p, T the running mean a σ is to scale with — the squared
     correction D_c for a correcting model, else the mean of the three angles' noise N (the
     terms are near collinear; one is kept). For each power ``p`` in POWERS and constant ``a``
-    in CONSTANTS, ``k`` is the one that covers 68.27 % of the fit's frames (a quantile: frame
-    e is within ±σ iff (e² − a) / T^p ≤ k); the (p, a) kept is the one whose worst noise level
-    is nearest 68.27 %. Coverage is the target, so it is what is fitted."""
+    in CONSTANTS, ``k`` is the one that covers 68.27 % of the fit's frames, each noise level
+    weighing the same (a weighted quantile: frame e is within ±σ iff (e² − a) / T^p ≤ k; a
+    level's rows are those written, fewer where more are implausible); the (p, a) kept is the
+    one whose worst noise level is nearest 68.27 %. Coverage is the target, so it is what is
+    fitted."""
     model = ikid.load(name)
     offset = model.card.get("output_offset") is not None
     data, level_of = fit_rows(name)
     use = ~data["per_frame"]  # per-frame rows use that solution's own noise, unfitted
     levels = level_of[use]
+    weight = 1.0 / np.bincount(levels)[levels]
     constant, angle_noise, correction, worst_level, chosen = [], [], [], [], []
     for c in range(model.n_outputs):
         term = data["correction"][use, c] if offset else data["noise"][use].mean(axis=1)
@@ -150,7 +200,7 @@ def fit(name: str, powers: list[float]) -> dict:
             tp = np.maximum(term, 1e-300) ** p
             for a in [0.0, *(scale * f for f in CONSTANTS)]:
                 ratio = (e2 - a) / tp
-                k = float(np.quantile(ratio, ONE_SIGMA))
+                k = weighted_quantile(ratio, weight, ONE_SIGMA)
                 if k <= 0:
                     continue
                 within = ratio <= k
@@ -166,7 +216,7 @@ def fit(name: str, powers: list[float]) -> dict:
         correction.append(k if offset else 0.0)
     return {
         "method": "affine-variance-v1",
-        "memory_frames": float(model.window * MEMORY_WINDOWS),
+        "memory_frames": memory_frames(model),
         "powers": chosen,
         "constant": constant,
         "angle_noise": angle_noise,
@@ -211,8 +261,9 @@ def coverage(model: _native.Model, seeds: list[int] = SCORE) -> dict[str, dict[s
         hits, has, n = [], 0, 0
         for k, seed in enumerate(seeds):
             t = trial(seed, k, rate, truth, noise)
-            run = run_model(model, t.markers, t.time, rate_hz=rate)
-            error = np.abs(run.values - getattr(t, truth)[run.frame])
+            rows, times, index = model_input(model, t)
+            run = run_model(model, rows, times, rate_hz=rate)
+            error = np.abs(run.values - getattr(t, truth)[index][run.frame])
             known = np.all(np.isfinite(run.sd), axis=1)
             hits.append(error[known] <= run.sd[known])
             has += int(known.sum())

@@ -177,7 +177,12 @@ def test_stream_over_udp_stops_when_idle():
 
 def test_id_from_a_mot_file_equals_the_api(trial, tmp_path, capsys):
     write_mot(tmp_path / "t.mot", trial.time, trial.q)
-    assert cli(["id", str(tmp_path / "t.mot"), "-o", str(tmp_path / "ref.sto"), "--reference"]) == 0
+    # Unfiltered (--lowpass 0): plain central differences, the oracle below (the default
+    # low-pass is tested in test_id_torques.py).
+    unfiltered = ["--lowpass", "0"]
+    assert (
+        cli(["id", str(tmp_path / "t.mot"), "-o", str(tmp_path / "ref.sto"), "--reference", *unfiltered]) == 0
+    )
     t, tau = read_sto(tmp_path / "ref.sto")
     t_file, q = read_mot(tmp_path / "t.mot")  # the angles as the file holds them
     qd = np.gradient(q, t_file, axis=0)
@@ -189,7 +194,7 @@ def test_id_from_a_mot_file_equals_the_api(trial, tmp_path, capsys):
     inner = slice(2, -2)
     assert np.all(((tau[inner] - trial.tau[inner]) ** 2).mean(0) <= 1e-3 * trial.tau[inner].var(0))
 
-    assert cli(["id", str(tmp_path / "t.mot"), "-o", str(tmp_path / "net.sto")]) == 0
+    assert cli(["id", str(tmp_path / "t.mot"), "-o", str(tmp_path / "net.sto"), *unfiltered]) == 0
     t, tau = read_sto(tmp_path / "net.sto")
     model = ikid.load("wrist-id")
     assert len(t) == len(trial.time) - model.window + 1

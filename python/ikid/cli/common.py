@@ -138,6 +138,19 @@ def _model_for(
     return model
 
 
+def _check_uncertainty(name: str, model: ikid.Model, use: str) -> None:
+    """Refuses ``--sd`` for a model (or a member of its family) whose card does not say how
+    to compute its outputs' standard deviations (no ``uncertainty``)."""
+    from ikid.pipeline import family_members
+
+    for m in family_members(name) or [model]:
+        if m.card.get("uncertainty") is None:
+            raise ikid.ArgumentError(
+                f"{use} {name}: model {m.name!r} has no uncertainty in its card, so it gives no standard "
+                "deviations; fit them with python -m studies.net_sigma, or leave out --sd"
+            )
+
+
 def _inputs(paths: list[str]) -> list[Path]:
     """Marker files named, or found (by suffix) in named folders. An entry of a folder named
     like a marker file but not one (a folder ``x.trc/``, a pipe) is kept: it fails as that

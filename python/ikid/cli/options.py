@@ -77,6 +77,11 @@ SUBJECT_MASS = _number(
 SHOULDER_DEG = _number(ge=-180, le=180, unit=" degrees")
 
 
+#: `ikid id --lowpass`: a cut-off in Hz, or 0 for none (its upper bound is the file's rate's half,
+#: checked where the rate is known).
+LOWPASS_HZ = _number(ge=0, unit=" Hz", name="the low-pass cut-off")
+
+
 SEED = _number(int, ge=0, lt=2**32)
 
 

@@ -16,6 +16,7 @@ import ikid
 from ikid.cli import batch
 from ikid.cli.common import (
     _cause,
+    _check_uncertainty,
     _file_id,
     _inputs,
     _is_folder,
@@ -256,19 +257,6 @@ def process_files(args: argparse.Namespace) -> int:
         )
         return 3
     return 0
-
-
-def _check_uncertainty(name: str, model: ikid.Model, use: str) -> None:
-    """Refuses ``--sd`` for a model (or a member of its family) whose card does not say how
-    to compute its outputs' standard deviations (no ``uncertainty``)."""
-    from ikid.pipeline import family_members
-
-    for m in family_members(name) or [model]:
-        if m.card.get("uncertainty") is None:
-            raise ikid.ArgumentError(
-                f"{use} {name}: model {m.name!r} has no uncertainty in its card, so it gives no standard "
-                "deviations; fit them with python -m studies.net_sigma, or leave out --sd"
-            )
 
 
 def _job_outputs(opt: dict) -> list[Path]:
