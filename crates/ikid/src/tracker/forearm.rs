@@ -537,6 +537,35 @@ mod tests {
     }
 
     #[test]
+    fn one_glitch_of_the_forearms_turn_teaches_its_turn_little() {
+        // The forearm's markers turned 10° for one frame (a glitch, not motion): each of the two
+        // turn samples it makes is clipped to 25× the variance learned so far, so the learned
+        // turn variance rises ~1 + 2·25·w (w = 1/memory), not by the glitch's size.
+        let rate = 100.0;
+        let q = trajectory(600, rate);
+        let clean = noisy(&q, 2e-4, 2e-4, 14);
+        let mut glitched = clean.clone();
+        let at = 500 * MARKER_FRAME_LEN;
+        let centroid = (0..3)
+            .fold(Vector3::zeros(), |c, m| c + Vector3::from_column_slice(&clean[at + 3 * m..at + 3 * m + 3]))
+            / 3.0;
+        let turn = nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), 10f64.to_radians());
+        for m in 0..3 {
+            let p = centroid + turn * (Vector3::from_column_slice(&clean[at + 3 * m..at + 3 * m + 3]) - centroid);
+            glitched[at + 3 * m..at + 3 * m + 3].copy_from_slice(p.as_slice());
+        }
+        let upto = 503 * MARKER_FRAME_LEN;
+        let (_, _, a) = track(&clean[..upto], rate);
+        let (_, _, b) = track(&glitched[..upto], rate);
+        let (before, after) = (a.turn.variance.trace(), b.turn.variance.trace());
+        assert!(after < 1.5 * before, "turn variance {before:.3e} -> {after:.3e} rad²");
+        // And without the glitch, the noise's own: a fixed forearm's markers 0.2 mm noisy, a few
+        // centimetres apart, turn it ~(0.2/50)² rad² per frame, second-differenced ×6 (measured
+        // 1.9e-4). A sample over the clip grown instead of cut would feed on itself (27.9).
+        assert!(before < 1e-3, "turn variance {before:.3e} rad²");
+    }
+
+    #[test]
     fn a_clean_forearm_adds_no_noise_to_the_hands_measurement() {
         // Noise-free forearm markers: nothing learned, nothing added (the filter follows the hand
         // exactly, as before the forearm's noise was counted).
