@@ -1557,6 +1557,40 @@ mod tests {
     }
 
     #[test]
+    fn a_filled_segment_carries_no_velocity_on_the_other_segment_either() {
+        // MC5 missing at frame 300: the hand's markers are the fill's fit (MC5 and the two seen
+        // with it). For frame 301 their places in the forearm's frame are where the fill put
+        // them, held (a fill's own motion is no velocity); the forearm's markers, measured, move
+        // on at their velocity in the hand's frame. The hand turns ~0.5 mm per frame here.
+        let body = BodyModel::default();
+        let (mut filler, frames) = calibrated(&body, 0.2);
+        let mut filled = frames[300];
+        filled[12..15].fill(f32::NAN);
+        assert_eq!(filler.fill(&mut filled, 300).unwrap(), 1 << 4);
+        let (before, next) = (frames[299], frames[301]);
+        let predicted = filler.predicted_relative(&next).unwrap();
+        let local = |f: &[f32; 18], m: usize, on: Segment| {
+            let (o, r) = technical_frame(f, on, 0).unwrap();
+            r.transpose() * (marker(f, m) - o)
+        };
+        let lab = |v: Vector3<f64>, on: Segment| {
+            let (o, r) = technical_frame(&next, on, 0).unwrap();
+            r * v + o
+        };
+        for m in 3..6 {
+            let held = lab(local(&filled, m, Segment::Forearm), Segment::Forearm);
+            let on =
+                lab(2.0 * local(&filled, m, Segment::Forearm) - local(&before, m, Segment::Forearm), Segment::Forearm);
+            assert!((marker(&predicted, m) - held).norm() < 1e-6, "{}", MARKERS[m].name);
+            assert!((held - on).norm() > 1e-4, "{}", MARKERS[m].name);
+        }
+        for m in 0..3 {
+            let on = lab(2.0 * local(&filled, m, Segment::Hand) - local(&before, m, Segment::Hand), Segment::Hand);
+            assert!((marker(&predicted, m) - on).norm() < 1e-6, "{}", MARKERS[m].name);
+        }
+    }
+
+    #[test]
     fn two_markers_at_one_missing_markers_place_are_not_both_given_its_label() {
         // MCB missing, MC2 and MC5 both at its place (a millimetre apart): a label goes to one
         // marker at most, and which one cannot be told, so nothing is relabelled.
