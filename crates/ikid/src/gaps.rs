@@ -1577,16 +1577,16 @@ mod tests {
             let (o, r) = technical_frame(&next, on, 0).unwrap();
             r * v + o
         };
-        for m in 3..6 {
+        for (m, spec) in MARKERS.iter().enumerate().skip(3) {
             let held = lab(local(&filled, m, Segment::Forearm), Segment::Forearm);
             let on =
                 lab(2.0 * local(&filled, m, Segment::Forearm) - local(&before, m, Segment::Forearm), Segment::Forearm);
-            assert!((marker(&predicted, m) - held).norm() < 1e-6, "{}", MARKERS[m].name);
-            assert!((held - on).norm() > 1e-4, "{}", MARKERS[m].name);
+            assert!((marker(&predicted, m) - held).norm() < 1e-6, "{}", spec.name);
+            assert!((held - on).norm() > 1e-4, "{}", spec.name);
         }
-        for m in 0..3 {
+        for (m, spec) in MARKERS.iter().enumerate().take(3) {
             let on = lab(2.0 * local(&filled, m, Segment::Hand) - local(&before, m, Segment::Hand), Segment::Hand);
-            assert!((marker(&predicted, m) - on).norm() < 1e-6, "{}", MARKERS[m].name);
+            assert!((marker(&predicted, m) - on).norm() < 1e-6, "{}", spec.name);
         }
     }
 
