@@ -461,6 +461,23 @@ mod tests {
     use std::f64::consts::{PI, TAU};
 
     #[test]
+    fn of_a_rotations_two_euler_triples_the_one_near_the_state_is_taken() {
+        // Each rotation has two triples (s_p, e_f, ad_ab) and (s_p + π, π − e_f, ad_ab + π): the
+        // oracle is the body's own rotation of each (`body::wrist_rotation`), the same matrix.
+        for x in [[0.1, 0.2, 0.3], [-1.2, 0.7, -0.4], [2.9, -1.3, 1.0]] {
+            let other = [x[0] + PI, PI - x[1], x[2] + PI];
+            let (r, r_other) = (body::wrist_rotation(&x), body::wrist_rotation(&other));
+            assert!((r.matrix() - r_other.matrix()).norm() < 1e-12, "the premise: one rotation");
+            let state = |q: [f64; 3]| StateVector::from_fn(|i, _| if i < 3 { q[i] } else { 0.0 });
+            // Given the other triple, the state's own comes back, and given the state's, itself.
+            for solution in [other, x] {
+                let got = nearest_triple(&state(solution), &state(x));
+                assert!((got - Vector3::from(x)).norm() < 1e-12, "{solution:?} -> {got:?} near {x:?}");
+            }
+        }
+    }
+
+    #[test]
     fn without_a_correction_the_angles_go_on_at_their_last_velocity_then_hold() {
         // Ten frames a kilometre off (all rejected): the first LOST_S of them carry the angles
         // forward at the last velocity, no acceleration extrapolated (at 70 Hz a racing wrist's

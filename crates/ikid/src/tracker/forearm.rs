@@ -566,6 +566,27 @@ mod tests {
     }
 
     #[test]
+    fn one_glitch_of_a_forearm_residual_teaches_its_noise_little() {
+        // Residuals 1 mm noisy learned over 2000 frames, then one residual 5 cm off: its third
+        // differences make four samples, each capped at 25× the variance, so the variance rises
+        // by at most 4·25·w of itself (w = 1/memory = 1e-3): 10 %, not the glitch's 2500×.
+        let mut noise = ForearmNoise::new();
+        let mut gauss = super::super::testkit::lcg_gaussian(21);
+        let memory = 1000.0;
+        for index in 0..2000 {
+            noise.learn(std::array::from_fn(|_| 1e-3 * gauss()), index, memory);
+        }
+        let before = noise.variance();
+        let mut glitch: [f64; FOREARM_COORDINATES] = std::array::from_fn(|_| 1e-3 * gauss());
+        glitch[4] += 0.05;
+        noise.learn(glitch, 2000, memory);
+        for index in 2001..2004 {
+            noise.learn(std::array::from_fn(|_| 1e-3 * gauss()), index, memory);
+        }
+        assert!(noise.variance() < 1.11 * before, "{:.3e} -> {:.3e} m²", before, noise.variance());
+    }
+
+    #[test]
     fn a_clean_forearm_adds_no_noise_to_the_hands_measurement() {
         // Noise-free forearm markers: nothing learned, nothing added (the filter follows the hand
         // exactly, as before the forearm's noise was counted).
