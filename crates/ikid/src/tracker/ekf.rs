@@ -513,6 +513,15 @@ mod tests {
         // Back on the clean run's estimate within 100 ms.
         let after = worst_deg(&good[167..], &out[167..].iter().map(|o| o.state.q).collect::<Vec<_>>());
         assert!(after < 0.1, "{after}° off the clean run");
+        // The hand's markers alone gone (the forearm seen): held and flagged all the same, and
+        // only those frames.
+        let mut f = clean.clone();
+        for frame in 150..160 {
+            f[frame * MARKER_FRAME_LEN + HAND_START..(frame + 1) * MARKER_FRAME_LEN].fill(f64::NAN);
+        }
+        let (_, status, _) = track(&f, rate);
+        assert!(status[150..160].iter().all(|s| s & status::HELD != 0), "{:?}", &status[150..160]);
+        assert!(status[140..150].iter().chain(&status[170..]).all(|s| s & status::HELD == 0));
     }
 
     #[test]
