@@ -47,6 +47,50 @@ fn a_calibrated_stream_equals_an_uncalibrated_one_on_calibrated_frames() {
 }
 
 #[test]
+fn a_calibrated_stream_learns_its_marker_shapes_from_the_frames_as_measured() {
+    // Markers that are not rigid (up to 0.5 mm off, each): a segment fitted to the shapes learned
+    // from the frames differs from its technical frame, so the stream equals the calibrated
+    // frames only if it learns the shapes from its own frames (none of which is filled). With
+    // the gap filler on: it passes on which frames are as measured.
+    let model = random_model(FeatureSet::Angles, 5, &[24], 3, 9);
+    let cal = a_subjects_calibration();
+    // A smooth movement, as the gap filler (which the shapes' learning follows) expects.
+    let body = ikid::body::BodyModel::default();
+    let mut frames: Vec<f32> = (0..60)
+        .flat_map(|i| {
+            let t = f64::from(i) / model.card().frame_rate_hz;
+            let q = [0.6 * (3.0 * t).sin(), 0.5 * (2.0 * t).cos(), 0.2 * (4.0 * t).sin()];
+            body.marker_frame(&q, &body.forearm_pose(0.2)).map(|v| v as f32)
+        })
+        .collect();
+    let mut state = 0x9E37_79B9_7F4A_7C15_u64;
+    for v in &mut frames {
+        state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        *v += 5e-4 * ((state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0);
+    }
+    let mut calibrated = model.stream();
+    calibrated.set_missing_markers(ikid::MissingMarkers::Fill).unwrap();
+    calibrated.set_calibration(Some(cal)).unwrap();
+    let (mut learned, mut unlearned) = (model.stream(), model.stream());
+    let (mut shapes, mut never) =
+        (MarkerShapes::new(model.card().frame_rate_hz), MarkerShapes::new(model.card().frame_rate_hz));
+    let mut differs = 0;
+    for (i, frame) in frames.chunks_exact(18).enumerate() {
+        let (mut fitted, mut built) = (frame.to_vec(), frame.to_vec());
+        cal.apply_fitted(&mut fitted, i, &mut shapes, true).unwrap();
+        cal.apply_fitted(&mut built, i, &mut never, false).unwrap();
+        let got = calibrated.push(frame).unwrap().map(<[f32]>::to_vec);
+        assert_eq!(got, learned.push(&fitted).unwrap().map(<[f32]>::to_vec), "frame {i}");
+        let other = unlearned.push(&built).unwrap().map(<[f32]>::to_vec);
+        if let (Some(g), Some(o)) = (&got, &other) {
+            differs += usize::from(g.iter().zip(o).any(|(a, b)| (a - b).abs() > 1e-6));
+        }
+    }
+    assert_eq!(never.frames(), [0, 0]);
+    assert!(differs > 40, "the shapes' fit must matter here: {differs} of 56 outputs differ");
+}
+
+#[test]
 fn a_joint_state_stream_refuses_a_calibration() {
     let mut stream = random_model(FeatureSet::JointState, 5, &[8], 3, 1).stream();
     let err = stream.set_calibration(Some(a_subjects_calibration())).unwrap_err().to_string();
