@@ -354,6 +354,16 @@ fn push_many_equals_pushing_one_by_one() {
         got.extend(out);
     }
     assert_eq!(got, want);
+    // An output buffer with room to spare is fine; one row short is refused before anything is
+    // pushed, naming what it needed.
+    let (mut roomy, mut short) = (m.stream(), m.stream());
+    let rows = roomy.rows_for(23);
+    let mut out = vec![0f32; (rows + 1) * 3];
+    assert_eq!(roomy.push_many(&frames, &mut out).unwrap(), rows);
+    assert_eq!(&out[..rows * 3], &want[..]);
+    let err = short.push_many(&frames, &mut vec![0f32; (rows - 1) * 3]).unwrap_err().to_string();
+    assert!(err.contains("output buffer") && err.contains(&format!("{rows} rows")), "{err}");
+    assert_eq!(short.rows_for(23), rows, "nothing was pushed");
     let mut bad = frames[..4 * 18].to_vec();
     bad[2 * 18 + 5] = f32::NAN;
     let err = m.stream().push_many(&bad, &mut [0.0; 12]).unwrap_err();

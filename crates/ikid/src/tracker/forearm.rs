@@ -588,6 +588,18 @@ mod tests {
     }
 
     #[test]
+    fn a_residual_that_changes_smoothly_is_no_noise() {
+        // A forearm marker's residual that is constant, drifts, or bends (skin over bone: a
+        // quadratic in time) has third differences of 0: nothing is learned as noise.
+        let mut noise = ForearmNoise::new();
+        for index in 0..200 {
+            let t = index as f64 * 1e-2;
+            noise.learn(std::array::from_fn(|i| 1e-3 * (i as f64 + 1.0) * (1.0 + t + 0.5 * t * t)), index, 100.0);
+        }
+        assert!(noise.variance() < 1e-20, "{:.3e} m²", noise.variance());
+    }
+
+    #[test]
     fn a_clean_forearm_adds_no_noise_to_the_hands_measurement() {
         // Noise-free forearm markers: nothing learned, nothing added (the filter follows the hand
         // exactly, as before the forearm's noise was counted).
