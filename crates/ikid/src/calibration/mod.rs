@@ -1228,6 +1228,13 @@ mod tests {
             let ok = frames(&[[0.0; 3]; 10], &SHIFT, scale, 0.0);
             assert!(Calibration::from_neutral(&ok, None, Side::Right).is_ok(), "scale {scale}");
         }
+        // The placement is judged by each distance's median over the frames: a few frames off
+        // (2 of 11 with the plate's) do not decide it, most frames off do.
+        let ok = frames(&[[0.0; 3]; 9], &SHIFT, 1.0, 0.0);
+        let mostly = [ok.clone(), plate[..2 * MARKER_FRAME_LEN].to_vec()].concat();
+        assert!(neutral::check_forearm_placement(&mostly).is_ok());
+        let mostly_off = [ok[..2 * MARKER_FRAME_LEN].to_vec(), plate[..9 * MARKER_FRAME_LEN].to_vec()].concat();
+        assert!(neutral::check_forearm_placement(&mostly_off).is_err());
     }
 
     #[test]

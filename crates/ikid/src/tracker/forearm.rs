@@ -588,6 +588,26 @@ mod tests {
     }
 
     #[test]
+    fn the_first_samples_teach_the_noise_at_once() {
+        // The first sample is taken whole (nothing learned yet to cap it against), the next
+        // ones as a running mean: after 20 samples the noise is already near what 2000 give.
+        // Capped from the start, it would creep up from the floor (1e-18 m²) instead.
+        let learn = |n: usize| {
+            let mut noise = ForearmNoise::new();
+            let mut gauss = super::super::testkit::lcg_gaussian(31);
+            for index in 0..n {
+                noise.learn(std::array::from_fn(|_| 1e-3 * gauss()), index, 1000.0);
+            }
+            noise.variance()
+        };
+        let (early, settled) = (learn(23), learn(2000));
+        assert!(
+            early > 0.3 * settled && early < 3.0 * settled,
+            "{early:.3e} after 20 samples, {settled:.3e} after 1997"
+        );
+    }
+
+    #[test]
     fn a_residual_that_changes_smoothly_is_no_noise() {
         // A forearm marker's residual that is constant, drifts, or bends (skin over bone: a
         // quadratic in time) has third differences of 0: nothing is learned as noise.
