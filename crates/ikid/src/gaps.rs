@@ -1362,6 +1362,26 @@ mod tests {
     }
 
     #[test]
+    fn the_centres_misfit_is_zero_for_one_point_and_millimetres_for_two_rows() {
+        // How far the wrist is from turning about one point, over the frames learned: 0 for a
+        // ball joint (rows 0 mm apart), millimetres for the two-row wrist 20 mm apart (measured
+        // 1.3e-5 m²: 3.6 mm RMS).
+        let tau = std::f64::consts::TAU;
+        for (apart, low, high) in [(0.0, 0.0, 1e-12), (0.02, 1e-6, 1e-4)] {
+            let mut filler = GapFiller::new();
+            for i in 0..3000 {
+                let t = i as f64 * 0.001;
+                let mut f =
+                    two_row_wrist(0.3 + 0.5 * (tau * 0.5 * t).sin(), 0.2 + 0.3 * (tau * 2.0 / 3.0 * t).sin(), apart);
+                filler.fill(&mut f, i).unwrap();
+            }
+            let (c_f, c_h) = filler.joint_centre().expect("3 s of movement locate a centre");
+            let misfit = filler.centre_misfit(c_f, c_h);
+            assert!(low <= misfit && misfit <= high, "rows {apart} m apart: misfit {misfit:.3e} m²");
+        }
+    }
+
+    #[test]
     fn a_two_row_wrist_at_rest_keeps_a_missing_marker_and_takes_it_back() {
         // 3 s of movement to learn from, then the hand rests at (0.3, 0.2) rad with a
         // 0.1-mm/s drift while MC5 is gone for 0.7 s, then it comes back. The joint centre
