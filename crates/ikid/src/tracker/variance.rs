@@ -159,6 +159,20 @@ mod tests {
     use crate::reference::{self};
 
     #[test]
+    fn the_templates_misfit_is_its_residuals_mean_square_per_coordinate_beyond_the_noise() {
+        // Documented: the residual's mean square × 9 / FIT_RESIDUAL_DOF, less the white noise,
+        // never below 0; nothing before a first residual; from the first one on.
+        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::default()).unwrap();
+        assert_eq!(tracker.template_misfit_variance(0.0), 0.0);
+        for samples in [1.0, 50.0] {
+            (tracker.fit_residual_ms, tracker.fit_residual_samples) = (1e-4, samples);
+            let want = 1e-4 * 9.0 / FIT_RESIDUAL_DOF - 1e-6;
+            assert!((tracker.template_misfit_variance(1e-6) - want).abs() < 1e-15, "{samples} samples");
+            assert_eq!(tracker.template_misfit_variance(1.0), 0.0);
+        }
+    }
+
+    #[test]
     fn noise_is_learned_per_coordinate_and_filtered() {
         let body = BodyModel::default();
         let q = trajectory(6000, 1000.0);
