@@ -1382,6 +1382,32 @@ mod tests {
     }
 
     #[test]
+    fn a_segments_noise_is_the_variance_of_its_pair_distances() {
+        // 0.5 mm of Gaussian noise on the forearm's markers, none on the hand's: the forearm's
+        // noise variance is its three pair distances' variance over the frames (each computed
+        // here), the hand's 0.
+        let body = BodyModel::default();
+        let mut frames = trial(&body, 0.1, 2000);
+        let mut rng = crate::rng::SplitMix::new(41);
+        for f in &mut frames {
+            f[..9].iter_mut().for_each(|v| *v += (5e-4 * rng.normal()) as f32);
+        }
+        let mut filler = GapFiller::new();
+        for (i, f) in frames.iter().enumerate() {
+            filler.fill(&mut f.clone(), i).unwrap();
+        }
+        let variance = |a: usize, b: usize| {
+            let d: Vec<f64> = frames.iter().map(|f| (marker(f, a) - marker(f, b)).norm()).collect();
+            let mean = d.iter().sum::<f64>() / d.len() as f64;
+            d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / d.len() as f64
+        };
+        let want = (variance(0, 1) + variance(0, 2) + variance(1, 2)) / 3.0;
+        let got = filler.noise_variance(0);
+        assert!((got / want - 1.0).abs() < 1e-3, "{got:.4e} against {want:.4e} m²");
+        assert!(filler.noise_variance(1) < 1e-12);
+    }
+
+    #[test]
     fn a_two_row_wrist_at_rest_keeps_a_missing_marker_and_takes_it_back() {
         // 3 s of movement to learn from, then the hand rests at (0.3, 0.2) rad with a
         // 0.1-mm/s drift while MC5 is gone for 0.7 s, then it comes back. The joint centre

@@ -243,7 +243,9 @@ fn early_outputs_give_the_per_frame_solution_while_the_window_fills() {
     let frames: Vec<f32> = body.marker_frames(&q, 0.0).unwrap().iter().map(|&v| v as f32).collect();
     let mut late = model.stream();
     let mut early = model.stream();
+    assert!(!early.early_outputs(), "off unless asked for");
     early.set_early_outputs(true).unwrap();
+    assert!(early.early_outputs());
     for (i, f) in frames.chunks_exact(18).enumerate() {
         let waited = late.push(f).unwrap().map(<[f32]>::to_vec);
         let got = early.push(f).unwrap().map(<[f32]>::to_vec).expect("an output for every frame");

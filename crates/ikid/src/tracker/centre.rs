@@ -437,6 +437,24 @@ mod tests {
     }
 
     #[test]
+    fn a_centre_that_moved_is_followed_as_the_old_frames_are_forgotten() {
+        // 2000 frames about a centre 1 cm distal, then 2000 about one 2 cm distal (a marker
+        // plate that slipped), forgetting 1/200 per frame: the second centre is what is solved.
+        let mut centre = JointCentre::new();
+        let forearm = Isometry3::translation(0.1, 1.0, 0.2);
+        for k in 0..4000 {
+            let t = k as f64 * 0.01;
+            let q = [0.3 * t.sin(), 0.5 * (0.7 * t).cos(), 0.2 * (1.3 * t).sin()];
+            let turn = UnitQuaternion::from_rotation_matrix(&body::wrist_rotation(&q));
+            let at = Vector3::new(0.0, if k < 2000 { -0.01 } else { -0.02 }, 0.0);
+            let hand = forearm * Isometry3::from_parts(Translation3::from(at - turn * at), turn);
+            centre.add(&forearm, &hand, 1.0 / 200.0);
+        }
+        let solved = centre.solve(12).unwrap();
+        assert!((solved.cf - Vector3::new(0.0, -0.02, 0.0)).norm() < 1e-4, "{solved:?}");
+    }
+
+    #[test]
     fn two_hand_markers_that_miss_the_centre_do_not_restart_the_tracker() {
         // Uncalibrated (the centre is the body model's, 1 mm uncertain): MC5 missing from frame
         // 200 on, and MC2 3 cm off for two frames (a ghost, shorter than LOST_S). MC2 and MCB

@@ -564,6 +564,10 @@ mod tests {
         // 1.9e-4). A sample over the clip grown instead of cut would feed on itself (27.9); no
         // sample taken would leave the floor (3e-14).
         assert!(1e-5 < before && before < 1e-3, "turn variance {before:.3e} rad²");
+        // An average over the frames (≥ the noise memory's): six frames earlier it was the same.
+        let (_, _, earlier) = track(&clean[..497 * MARKER_FRAME_LEN], rate);
+        let ratio = earlier.turn.variance.trace() / before;
+        assert!((ratio - 1.0).abs() < 0.05, "turn variance 6 frames apart: ratio {ratio:.3}");
     }
 
     #[test]
