@@ -559,6 +559,8 @@ mod tests {
         let (_, _, b) = track(&glitched[..upto], rate);
         let (before, after) = (a.turn.variance.trace(), b.turn.variance.trace());
         assert!(after < 1.5 * before, "turn variance {before:.3e} -> {after:.3e} rad²");
+        // ... and teaches it what the cap allows: three samples of 25× (measured +15 %).
+        assert!(after > 1.1 * before, "turn variance {before:.3e} -> {after:.3e} rad²");
         // And without the glitch, the noise's own: a fixed forearm's markers 0.2 mm noisy, a few
         // centimetres apart, turn it ~(0.2/50)² rad² per frame, second-differenced ×6 (measured
         // 1.9e-4). A sample over the clip grown instead of cut would feed on itself (27.9); no
