@@ -392,6 +392,27 @@ mod tests {
     }
 
     #[test]
+    fn one_broken_distance_whose_markers_both_moved_rejects_both() {
+        // USP turned 70° and FAP 25° about RSP, opposite ways in the plate's plane: their
+        // distances to RSP are kept, USP–FAP breaks (172 -> 122 mm), and both moved about as
+        // much against RSP (64 and 76 mm), so which one is off cannot be told: both are rejected.
+        let body = BodyModel::default();
+        let rest = body.marker_frame(&[0.0; 3], &body.forearm_pose(0.2));
+        let point = |m: usize| Vector3::new(rest[3 * m], rest[3 * m + 1], rest[3 * m + 2]);
+        let axis = nalgebra::Unit::new_normalize((point(1) - point(0)).cross(&(point(2) - point(0))));
+        let turn = |m: usize, deg: f64| {
+            point(0) + nalgebra::Rotation3::from_axis_angle(&axis, deg.to_radians()) * (point(m) - point(0))
+        };
+        let mut f = rest;
+        for (m, deg) in [(1, 70.0), (2, -25.0)] {
+            f[3 * m..3 * m + 3].copy_from_slice(turn(m, deg).as_slice());
+        }
+        let mut tracker = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        assert_eq!(tracker.check_rigid(Segment::Forearm, &rest, 3), (0, false));
+        assert_eq!(tracker.check_rigid(Segment::Forearm, &f, 3), (0b110, false));
+    }
+
+    #[test]
     fn a_burst_a_kilometre_off_stays_rejected_and_a_real_relocation_is_taken() {
         let body = BodyModel::default();
         let q = trajectory(2000, 1000.0);
