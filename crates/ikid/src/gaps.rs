@@ -2084,6 +2084,10 @@ mod tests {
         }
         let err = fill_gaps(&frames[..17], true, 1000.0).unwrap_err().to_string();
         assert!(err.contains("17 values"), "{err}");
+        for rate in [0.0, -1.0, f64::NAN] {
+            let err = fill_gaps(&frames, true, rate).unwrap_err().to_string();
+            assert!(err.contains("rate_hz") && err.contains("positive rate"), "{rate}: {err}");
+        }
         assert_eq!(filled[1502 * 18..1503 * 18], truth[1502 * 18..1503 * 18], "the swap put right");
         // Without keep_unfillable a label swap alone does not stop the run: it is put right.
         let mut swapped = truth.clone();

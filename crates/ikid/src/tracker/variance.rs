@@ -173,6 +173,24 @@ mod tests {
     }
 
     #[test]
+    fn one_glitch_teaches_a_coordinates_noise_little() {
+        // 1e-6 m² learned over 2000 samples, then one sample 1 km² (a frame a kilometre off):
+        // capped at 25× the variance, it raises it by 24·w at most (w, the sample's weight, here
+        // 1/2010), not to metres.
+        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::default()).unwrap();
+        for _ in 0..2000 {
+            tracker.add_noise_sample(0, 1e-6);
+        }
+        let before = tracker.noise_variance[0];
+        tracker.add_noise_sample(0, 1e6);
+        let memory = tracker.settings.noise_memory_s * tracker.settings.rate_hz;
+        let w = (1.0 / (2000.0 + PRIOR_FRAMES)).max(1.0 / memory);
+        let after = tracker.noise_variance[0];
+        assert!(after <= before * (1.0 + 24.0 * w) * (1.0 + 1e-9), "{before:.3e} -> {after:.3e} m²");
+        assert!(after > before, "still taken, capped");
+    }
+
+    #[test]
     fn noise_is_learned_per_coordinate_and_filtered() {
         let body = BodyModel::default();
         let q = trajectory(6000, 1000.0);
