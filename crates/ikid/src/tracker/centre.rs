@@ -455,6 +455,18 @@ mod tests {
     }
 
     #[test]
+    fn the_calibrated_wrist_centre_waits_for_its_half_second_of_frames() {
+        // At 100 Hz the centre is solved once it has learned from CENTRE_MIN_S of frames (50;
+        // at least 10 at any rate): not from the 45th frame, from the 50th.
+        let rate = 100.0;
+        let q = trajectory(60, rate);
+        let f = frames(&BodyModel::default(), &q, 0.2);
+        let solved_after = |n: usize| track_calibrated(&f[..n * MARKER_FRAME_LEN], rate).2.wrist_centre().is_some();
+        assert!(!solved_after(45));
+        assert!(solved_after(50));
+    }
+
+    #[test]
     fn two_hand_markers_that_miss_the_centre_do_not_restart_the_tracker() {
         // Uncalibrated (the centre is the body model's, 1 mm uncertain): MC5 missing from frame
         // 200 on, and MC2 3 cm off for two frames (a ghost, shorter than LOST_S). MC2 and MCB
