@@ -1,9 +1,12 @@
 """Files of any length in bounded memory (issue #31, item 4): a TRC read in blocks is the file
 read whole, a run fed in blocks gives the rows a run over the whole arrays gives, `ikid ik`
-writes them a block at a time, and its memory does not grow with the trial's length.
+writes them a block at a time, and its memory does not grow with the trial's length; the same
+for `ikid id`: its .mot read in blocks is the table written, its angles filtered and
+differenced in blocks are SciPy's over each whole stretch, its torques those of the whole file.
 
-Expected rows come from the whole-file path (read_trc, run_model over the arrays), which
-these tests compare the block path against, never from the block path itself.
+Expected rows come from the whole-file path (read_trc, run_model over the arrays) or from SciPy
+and the arrays written, which these tests compare the block path against, never from the block
+path itself.
 """
 
 from __future__ import annotations
@@ -12,11 +15,25 @@ import tracemalloc
 
 import numpy as np
 import pytest
+from scipy.signal import butter, filtfilt
 
 import ikid
 from ikid import pipeline
+from ikid.cli import main as cli
 from ikid.cli import process
-from ikid.io import open_trc, read_storage, read_trc, trc, write_trc
+from ikid.io import (
+    mot_blocks,
+    open_storage,
+    open_trc,
+    read_sto,
+    read_storage,
+    read_trc,
+    storage,
+    trc,
+    write_mot,
+    write_trc,
+)
+from ikid.kinematics import joint_state_blocks, min_stretch_rows
 
 #: Held-out trajectory (studies/rates.py's test seeds start at 9500).
 SEED = 9506
@@ -145,3 +162,123 @@ def test_a_70hz_recording_runs_one_stream_over_the_model_grid(monkeypatch):
     assert run.model_name == "wrist-ik" and run.at_recording_frames
     assert pushes <= 1000 * (time[-1] - time[0]) + 2, pushes
     assert "its family has no model at 70 Hz, only at 100, 250, 1000 Hz" in run.summary()
+
+
+def _angles(time: np.ndarray) -> np.ndarray:
+    """Wrist-like angles (rad): slow sines within the range of motion, plus a little noise."""
+    w = 2 * np.pi * np.array([0.7, 1.1, 0.4])
+    noise = np.random.default_rng(SEED).normal(scale=2e-4, size=(len(time), 3))
+    return np.array([0.4, 0.3, 0.15]) * np.sin(w * time[:, None] + np.array([0.0, 1.0, 2.0])) + noise
+
+
+def test_a_mot_read_in_blocks_is_the_table_written(tmp_path):
+    time = np.arange(1000) / 1000.0
+    q = _angles(time)
+    status = (np.arange(1000) % 7 == 0).astype(np.uint16)
+    write_mot(tmp_path / "t.mot", time, q, status)
+    for block_rows in (7, 1000, 5000):
+        file = open_storage(tmp_path / "t.mot", block_rows=block_rows)
+        blocks = list(file.blocks())
+        assert max(len(b.time) for b in blocks) <= block_rows
+        np.testing.assert_allclose(np.concatenate([b.time for b in blocks]), time, atol=1e-6)
+        values = np.concatenate([b.values for b in blocks])
+        np.testing.assert_allclose(values[:, :3], np.degrees(q), rtol=1e-9)  # written as %.10g
+        np.testing.assert_array_equal(values[:, 3], status)
+        got = list(mot_blocks(tmp_path / "t.mot", block_rows=block_rows))
+        np.testing.assert_allclose(np.concatenate([a for _, a in got]), q, rtol=1e-9)
+    # A bad row late in the file: the blocks before it are read, its own names its line.
+    lines = (tmp_path / "t.mot").read_text().splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("0.900000"))
+    lines[at] = lines[at].replace("\t", "\tx", 1)
+    (tmp_path / "t.mot").write_text("\n".join(lines) + "\n")
+    blocks = open_storage(tmp_path / "t.mot", block_rows=100).blocks()
+    assert len(next(blocks).time) == 100
+    with pytest.raises(ikid.InputError, match=rf"t\.mot:{at + 1}: not all numbers"):
+        for _ in blocks:
+            pass
+    # A file cut short of its header's nRows is named when its blocks end.
+    (tmp_path / "cut.mot").write_text("\n".join(lines[: at - 10]) + "\n")
+    with pytest.raises(ikid.InputError, match=r"nRows=1000, the file has \d+ rows \(truncated\?\)"):
+        list(open_storage(tmp_path / "cut.mot", block_rows=64).blocks())
+
+
+def _scipy_states(time: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The oracle: SciPy's zero-lag 6 Hz Butterworth over the whole stretch, then differences."""
+    b, a = butter(4, 6.0 / 500.0)
+    angles = filtfilt(b, a, q, axis=0)
+    rates = np.gradient(angles, time, axis=0)
+    return np.concatenate([angles, rates, np.gradient(rates, time, axis=0)], axis=1)
+
+
+@pytest.mark.parametrize("size", [1, 97, 2000, 65536])
+def test_angles_filtered_in_blocks_are_scipys_over_each_whole_stretch(size):
+    # 12 s at 1 kHz with two gaps (rows left out): a 10-row stretch, too short to filter, and
+    # stretches longer than the filter's context (2.6 s), so they are given in pieces.
+    time = np.arange(12000) / 1000.0
+    keep = np.r_[0:5000, 5100:5110, 5200:12000]
+    time, q = time[keep], _angles(time)[keep]
+    blocks = [(time[k : k + size], q[k : k + size]) for k in range(0, len(time), size)]
+    out = list(joint_state_blocks(blocks, 1000.0, 6.0))
+    np.testing.assert_array_equal(np.concatenate([t for t, _ in out]), time)
+    got = np.concatenate([s for _, s in out])
+    assert np.isnan(got[5000:5010]).all() and 10 < min_stretch_rows(6.0)
+    for part in (slice(0, 5000), slice(5010, None)):
+        want = _scipy_states(time[part], q[part])
+        # Within the rounding of the filter (a piece's edge effect, unchecked, is ~1e-3 of it),
+        # amplified a thousandfold by each difference at 1 kHz.
+        scale = np.abs(want).max(axis=0)
+        off = np.abs(got[part] - want).max(axis=0) / scale
+        assert np.all(off < 1e-8), off
+    # Unfiltered: plain central differences, the same in any blocks.
+    raw = np.concatenate([s for _, s in joint_state_blocks(blocks, 1000.0, None)])
+    np.testing.assert_allclose(raw[5010:, 3:6], np.gradient(q[5010:], time[5010:], axis=0), rtol=1e-12)
+
+
+def test_id_in_blocks_writes_the_torques_of_the_whole_file(tmp_path, monkeypatch):
+    monkeypatch.setattr(storage, "BLOCK_ROWS", 500)
+    time = np.arange(6000) / 1000.0
+    q = _angles(time)
+    keep = np.r_[0:2500, 2600:6000]  # a gap: two stretches, each filtered alone
+    write_mot(tmp_path / "t.mot", time[keep], q[keep])
+    qw = read_storage(tmp_path / "t.mot").values[:, :3]  # the angles as written (degrees, 10 digits)
+    qw = np.radians(qw)
+    parts = [slice(0, 2500), slice(2500, None)]
+    state = np.concatenate([_scipy_states(time[keep][p], qw[p]) for p in parts])
+    # The exact reference: Newton-Euler on SciPy's joint states, row for row.
+    assert cli(["id", str(tmp_path / "t.mot"), "-o", str(tmp_path / "ref.sto"), "--reference"]) == 0
+    t, tau = read_sto(tmp_path / "ref.sto")
+    np.testing.assert_allclose(t, time[keep], atol=1e-6)
+    want = ikid.reference_id(state[:, :3], state[:, 3:6], state[:, 6:])
+    np.testing.assert_allclose(tau, want, rtol=1e-6, atol=1e-6 * np.abs(want).max())
+    # The network over its window, restarted at the gap.
+    model = ikid.load("wrist-id")
+    assert cli(["id", str(tmp_path / "t.mot"), "-o", str(tmp_path / "net.sto")]) == 0
+    t, tau = read_sto(tmp_path / "net.sto")
+    want = np.concatenate([model.predict(state[p]) for p in parts])
+    assert len(t) == len(keep) - 2 * (model.window - 1)
+    np.testing.assert_allclose(tau, want, rtol=1e-5, atol=1e-7)
+
+
+def _id_peak(tmp_path, seconds: float) -> int:
+    """`ikid id`'s tracemalloc peak on a 1 kHz .mot of ``seconds``, the output checked whole."""
+    time = np.arange(int(seconds * 1000)) / 1000.0
+    path = write_mot(tmp_path / f"a{seconds:g}.mot", time, _angles(time))
+    out = tmp_path / f"a{seconds:g}.sto"
+    ikid.load("wrist-id")  # loaded once before measuring (its tensors are not the file's)
+    tracemalloc.start()
+    try:
+        assert cli(["id", str(path), "-o", str(out)]) == 0
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert len(read_sto(out)[0]) == len(time) - ikid.load("wrist-id").window + 1
+    return peak
+
+
+def test_id_memory_does_not_grow_with_the_trials_length(tmp_path, monkeypatch):
+    # Blocks of 500 rows and the filter's 2.6-s context: 10 s and 40 s are ~20 and ~80 blocks.
+    # Read whole, 4x the rows was ~4x the memory; in blocks it is a block's and the context's.
+    monkeypatch.setattr(storage, "BLOCK_ROWS", 500)
+    short = _id_peak(tmp_path, 10.0)
+    long = _id_peak(tmp_path, 40.0)
+    assert long < 1.25 * short, (short, long)

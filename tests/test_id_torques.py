@@ -12,7 +12,7 @@ from scipy.signal import butter, filtfilt
 
 import ikid
 from ikid.cli import main as cli
-from ikid.io import read_mot, read_sto, write_trc
+from ikid.io import read_mot, read_sto, write_mot, write_trc
 from ikid.io.storage import moment_names, read_storage, sd_columns
 from ikid.kinematics import joint_states, min_stretch_rows
 from ikid.pipeline import run_model
@@ -143,3 +143,15 @@ def test_the_id_sd_is_calibrated_on_trials_the_study_never_used():
         hits.append(np.abs(run.values - t.tau[index][run.frame])[known] <= run.sd[known])
     share = float(np.concatenate(hits).mean())
     assert 0.62 < share < 0.75, share
+
+
+def test_angles_the_markers_did_not_determine_are_named_not_called_a_short_stretch(tmp_path, capsys):
+    # A one-marker hand's .mot has no ra_wr_s_p column (header ikid_not_determined): `id`
+    # cannot run on two angles, and says which is missing and where the torques come from.
+    time = np.arange(2000) / 1000.0
+    q = np.column_stack([np.zeros_like(time), 0.3 * np.sin(time), 0.1 * np.cos(time)])
+    mot = write_mot(tmp_path / "one.mot", time, q, undetermined=["ra_wr_s_p"])
+    assert cli(["id", str(mot), "-o", str(tmp_path / "x.sto")]) == 2
+    err = capsys.readouterr().err
+    assert "ra_wr_s_p not determined" in err and "needs all three angles" in err and "ikid track" in err
+    assert not (tmp_path / "x.sto").exists()

@@ -15,6 +15,8 @@ gives NaN rows, for the caller to count and leave out.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
+
 import numpy as np
 
 from ikid import _native
@@ -49,24 +51,99 @@ def joint_states(q, time, lowpass_hz: float | None = DEFAULT_LOWPASS_HZ) -> np.n
     time derivatives. Rows of a stretch shorter than :func:`min_stretch_rows` are NaN."""
     q = np.asarray(q, np.float64)
     time = np.asarray(time, np.float64)
+    _check_block(q, time)
+    if len(q) < 2:
+        return np.full((len(q), 9), np.nan)
+    rate = 1.0 / float(np.median(np.diff(time)))
+    parts = [s for _, s in joint_state_blocks([(time, q)], rate, lowpass_hz)]
+    return np.concatenate(parts) if parts else np.full((len(q), 9), np.nan)
+
+
+def _check_block(q: np.ndarray, time: np.ndarray) -> None:
     if q.ndim != 2 or q.shape[1] != 3 or time.shape != (len(q),):
         raise _native.InputError(f"angles: expected (n, 3) and time (n,), got {q.shape} and {time.shape}")
-    out = np.full((len(q), 9), np.nan)
-    if len(q) < 2:
-        return out
-    rate = 1.0 / float(np.median(np.diff(time)))
-    if lowpass_hz:
-        if not (0.0 < lowpass_hz < rate / 2.0):
-            raise _native.InputError(
-                f"low-pass at {lowpass_hz:g} Hz: must lie below half the angles' rate ({rate / 2.0:g} Hz)"
-            )
-        from scipy.signal import butter, filtfilt
 
-        b, a = butter(LOWPASS_ORDER, lowpass_hz / (rate / 2.0))
-    for part in stretches(time):
-        if part.stop - part.start < min_stretch_rows(lowpass_hz):
+
+def overlap_rows(rate_hz: float, lowpass_hz: float | None) -> int:
+    """Rows of context on each side of a block that make it low-pass and difference as the
+    whole stretch would: two for the second difference, and the rows over which the filter's
+    slowest pole decays to 1e-16 (from its poles, so a cut-off near Nyquist is right too)."""
+    if not lowpass_hz:
+        return 2
+    _, a = _butter(rate_hz, lowpass_hz)
+    slowest = float(np.max(np.abs(np.roots(a))))
+    return 2 + int(np.ceil(np.log(1e-16) / np.log(slowest)))
+
+
+def _butter(rate_hz: float, lowpass_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    if not (0.0 < lowpass_hz < rate_hz / 2.0):
+        raise _native.InputError(
+            f"low-pass at {lowpass_hz:g} Hz: must lie below half the angles' rate ({rate_hz / 2.0:g} Hz)"
+        )
+    from scipy.signal import butter
+
+    return butter(LOWPASS_ORDER, lowpass_hz / (rate_hz / 2.0))
+
+
+def joint_state_blocks(
+    blocks: Iterable[tuple[np.ndarray, np.ndarray]], rate_hz: float, lowpass_hz: float | None
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """:func:`joint_states` over angles given as ``(time, q)`` blocks in order (a file read in
+    blocks), at ``rate_hz`` (a step over :data:`GAP_STEPS` of ``1 / rate_hz`` is a gap): the
+    ``(time, states)`` blocks, every input row once, in order. A long stretch is filtered a
+    piece at a time with :func:`overlap_rows` of context each side, as it would be whole
+    (within rounding): memory is a block's and two overlaps', whatever the length."""
+    if lowpass_hz:
+        from scipy.signal import filtfilt
+
+        b, a = _butter(rate_hz, lowpass_hz)
+    context = overlap_rows(rate_hz, lowpass_hz)
+    gap = GAP_STEPS / rate_hz
+    least = min_stretch_rows(lowpass_hz)
+
+    def states(time: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """A whole stretch (or a piece with its context) -> its states."""
+        angles = filtfilt(b, a, q, axis=0) if lowpass_hz else q
+        rates = np.gradient(angles, time, axis=0)
+        return np.concatenate([angles, rates, np.gradient(rates, time, axis=0)], axis=1)
+
+    # The current stretch's rows not yet given (after ``done`` rows of context already given),
+    # and how many rows of it were given before (a stretch given in pieces is long).
+    time, q = np.empty(0), np.empty((0, 3))
+    done = given = 0
+    last = -np.inf
+    for block_time, block_q in blocks:
+        block_time = np.asarray(block_time, np.float64)
+        block_q = np.asarray(block_q, np.float64)
+        _check_block(block_q, block_time)
+        if len(block_time) == 0:
             continue
-        angles = filtfilt(b, a, q[part], axis=0) if lowpass_hz else q[part]
-        rates = np.gradient(angles, time[part], axis=0)
-        out[part] = np.concatenate([angles, rates, np.gradient(rates, time[part], axis=0)], axis=1)
-    return out
+        cuts = np.flatnonzero(np.diff(np.concatenate([[last], block_time])) > gap)
+        last = float(block_time[-1])
+        time, q = np.concatenate([time, block_time]), np.concatenate([q, block_q])
+        # Stretches that ended in this block: each given whole (with its first rows' context).
+        start = len(time) - len(block_time)
+        for cut in cuts:
+            end = start + int(cut)
+            if end > 0 and end > done:
+                yield time[done:end], _stretch(states, time[:end], q[:end], done, given, least)
+            time, q = time[end:], q[end:]
+            start -= end
+            done = given = 0
+        # A stretch going on: give all but the context its last rows need.
+        if len(time) - done > 2 * context:
+            upto = len(time) - context
+            yield time[done:upto], states(time, q)[done:upto]
+            given += upto - done
+            time, q = time[upto - context :], q[upto - context :]
+            done = context
+    if len(time) > done:
+        yield time[done:], _stretch(states, time, q, done, given, least)
+
+
+def _stretch(states, time: np.ndarray, q: np.ndarray, done: int, given: int, least: int) -> np.ndarray:
+    """The last rows (from ``done``) of a stretch that has ended; NaN if the whole stretch (its
+    ``given`` rows before these, and these) is too short to filter and difference."""
+    if given + len(time) - done < least:
+        return np.full((len(time) - done, 9), np.nan)
+    return states(time, q)[done:]

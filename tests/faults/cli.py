@@ -1387,6 +1387,65 @@ def long_files(b: Builder) -> None:
             )
 
 
+def long_angles(b: Builder) -> None:
+    """A 70 s `.mot` at 1 kHz (two blocks of the storage reader, the low-pass given in pieces):
+    whole, `id` writes a torque for every frame past its window; with a bad cell or a time step
+    backwards near its end (read after earlier blocks were filtered and written), or rows
+    missing (nRows says more), `id` fails naming the file (and the line) and leaves the old
+    output as it was."""
+    import ikid
+    from ikid.io import write_mot
+
+    c = b.c
+    time_s = np.arange(LONG_FRAMES) / 1000.0
+    w = 2 * np.pi * np.array([0.7, 1.1, 0.4])
+    q = np.array([0.4, 0.3, 0.15]) * np.sin(w * time_s[:, None] + np.array([0.0, 1.0, 2.0]))
+    src_dir = b.dir("long-angles")
+    clean = write_mot(src_dir / "long.mot", time_s, q)
+    lines = clean.read_text().splitlines()
+    head = lines.index("endheader") + 2  # the first row's index in lines
+    bad = list(lines)
+    bad[head + 66_000] = bad[head + 66_000].replace("\t", "\t1.2.3", 1)
+    (src_dir / "bad-cell-late.mot").write_text("\n".join(bad) + "\n")
+    back = list(lines)
+    back[head + 67_000] = "66.5" + back[head + 67_000][back[head + 67_000].index("\t") :]
+    (src_dir / "time-backwards-late.mot").write_text("\n".join(back) + "\n")
+    (src_dir / "truncated.mot").write_text("\n".join(lines[:-1000]) + "\n")
+    for p in src_dir.iterdir():
+        p.chmod(0o644)
+
+    d = b.dir("long-id-clean")
+    rows = LONG_FRAMES - ikid.load("wrist-id").window + 1
+
+    def complete(r: Run, v: Verdict, d=d) -> None:
+        from ikid.io import read_storage
+
+        t = read_storage(d / "out.sto")
+        if len(t.time) != rows:
+            v.silent(f"exit 0 but out.sto has {len(t.time)} of {rows} rows")
+        if not np.isfinite(t.values).all():
+            v.silent("out.sto holds non-finite values")
+
+    b.add(
+        "long/id/clean", ["id", clean, "-o", d / "out.sto"], d, expect="either", check=complete, timeout=180.0
+    )
+    for name, needle in (
+        ("bad-cell-late", f"bad-cell-late.mot:{head + 66_001}"),
+        ("time-backwards-late", f"time-backwards-late.mot:{head + 67_001}"),
+        ("truncated", "truncated.mot"),
+    ):
+        d = b.dir(f"long-id-{name}")
+        b.seed(d, {"out.sto": c.ref / "id.sto"})
+        b.add(
+            f"long/id/{name}",
+            ["id", src_dir / f"{name}.mot", "-o", d / "out.sto"],
+            d,
+            expect="error",
+            names=[needle],
+            timeout=180.0,
+        )
+
+
 def probes(corpus: Corpus) -> list[Cli]:
     b = Builder(corpus)
     for part in (
@@ -1401,6 +1460,7 @@ def probes(corpus: Corpus) -> list[Cli]:
         stopped_batches,
         swapped_labels,
         long_files,
+        long_angles,
     ):
         part(b)
     return b.out

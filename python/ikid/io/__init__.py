@@ -17,7 +17,10 @@ from ikid.io.markers import FileFormatError, MarkerData, MarkerFile
 from ikid.io.resample import resample
 from ikid.io.storage import (
     Storage,
+    StorageFile,
+    mot_blocks,
     mot_writer,
+    open_storage,
     read_mot,
     read_sto,
     read_storage,
@@ -60,6 +63,7 @@ __all__ = [
     "MarkerFile",
     "MarkerMap",
     "Storage",
+    "StorageFile",
     "WriteError",
     "atomic_outputs",
     "read_c3d",
@@ -69,6 +73,8 @@ __all__ = [
     "read_markers",
     "open_markers",
     "open_trc",
+    "open_storage",
+    "mot_blocks",
     "read_mot",
     "read_storage",
     "read_sto",

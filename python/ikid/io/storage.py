@@ -6,9 +6,11 @@ with ``time``, then one row per frame. Column names come from the body model
 
 from __future__ import annotations
 
+import io
 import os
 import shutil
 import tempfile
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -18,7 +20,7 @@ import numpy as np
 
 from ikid import _native
 from ikid.io._atomic import atomic_output, check_size
-from ikid.io.markers import FileFormatError, read_text_lines
+from ikid.io.markers import MAX_FILE_BYTES, FileFormatError, check_readable
 
 
 def coordinate_names() -> list[str]:
@@ -58,61 +60,188 @@ class Storage:
         return np.column_stack([self.column(n) for n in names]) if names else np.empty((len(self.time), 0))
 
 
-def read_storage(path: str | os.PathLike[str]) -> Storage:
-    """Read any ``.mot``/``.sto`` file (OpenSim 3 and 4 headers)."""
+#: Rows per block when a storage file is read in blocks (:func:`open_storage`).
+BLOCK_ROWS = 65536
+#: Longest line a storage file may have, bytes (a file of NUL bytes is one endless "line").
+MAX_LINE_BYTES = 1 << 20
+
+
+@dataclass(frozen=True)
+class StorageFile:
+    """A ``.mot``/``.sto`` file opened for reading in blocks: its header and column names,
+    checked, and its rows as :class:`Storage` blocks in order (:meth:`blocks`, each checked as
+    it is read: a bad row raises when its block is reached, naming its line)."""
+
+    columns: tuple[str, ...]
+    in_degrees: bool
+    source: str
+    header: dict[str, str]
+    _blocks: Callable[[], Iterator[Storage]]
+
+    def blocks(self) -> Iterator[Storage]:
+        """The file's rows, a block at a time (a new pass over the file on each call)."""
+        return self._blocks()
+
+
+def _line(raw: bytes, src: str, lineno: int) -> str:
+    if len(raw) > MAX_LINE_BYTES:
+        raise FileFormatError(
+            f"{src}:{lineno}: a line longer than {MAX_LINE_BYTES} bytes: not an OpenSim storage file "
+            "(text, one row per line)"
+        )
+    try:
+        return raw.decode("utf-8").rstrip("\r\n")
+    except UnicodeDecodeError:
+        raise FileFormatError(f"{src}: not a text file (.mot/.sto are text)") from None
+
+
+def open_storage(
+    path: str | os.PathLike[str], block_rows: int | None = None, max_bytes: int | None = None
+) -> StorageFile:
+    """A ``.mot``/``.sto`` file's header, checked, and its rows in blocks of ``block_rows``
+    (default :data:`BLOCK_ROWS`): memory independent of the file's length (OpenSim 3 and 4
+    headers). ``max_bytes`` refuses a larger file (:func:`read_storage`'s whole-file limit)."""
+    block_rows = block_rows or BLOCK_ROWS
     path = Path(path)
     src = str(path)
-    lines = read_text_lines(path, ".mot/.sto are text")
-    try:
-        end = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader")
-    except StopIteration:
-        raise FileFormatError(f"{src}: no 'endheader' line: not an OpenSim storage file") from None
-    header = {}
-    for line in lines[:end]:
-        key, sep, value = line.partition("=")
-        if sep:
-            header[key.strip()] = value.strip()
-    in_degrees = header.get("inDegrees", "no").lower() == "yes"
-    body = [(i + 1, line) for i, line in enumerate(lines[end + 1 :], start=end + 1) if line.strip()]
-    if not body:
-        raise FileFormatError(f"{src}: no column names after 'endheader'")
-    col_lineno, col_line = body[0]
+    check_readable(path, ".mot/.sto are text", limit=1 << 62 if max_bytes is None else max_bytes)
+    header: dict[str, str] = {}
+    with open(path, "rb") as f:
+        lineno = 0
+        while True:
+            raw = f.readline(MAX_LINE_BYTES + 1)
+            if not raw:
+                raise FileFormatError(f"{src}: no 'endheader' line: not an OpenSim storage file")
+            lineno += 1
+            line = _line(raw, src, lineno)
+            if line.strip().lower() == "endheader":
+                break
+            key, sep, value = line.partition("=")
+            if sep:
+                header[key.strip()] = value.strip()
+        while True:
+            raw = f.readline(MAX_LINE_BYTES + 1)
+            if not raw:
+                raise FileFormatError(f"{src}: no column names after 'endheader'")
+            lineno += 1
+            col_line = _line(raw, src, lineno)
+            if col_line.strip():
+                break
+        rows_from = f.tell()
     columns = tuple(c.strip() for c in (col_line.split("\t") if "\t" in col_line else col_line.split()))
     if not columns or columns[0].lower() != "time":
-        raise FileFormatError(f"{src}:{col_lineno}: the first column must be 'time', got {columns[:1]}")
+        raise FileFormatError(f"{src}:{lineno}: the first column must be 'time', got {columns[:1]}")
     if len(set(columns)) != len(columns):
-        raise FileFormatError(f"{src}:{col_lineno}: repeated column names")
-    rows = np.empty((len(body) - 1, len(columns)))
-    for k, (lineno, line) in enumerate(body[1:]):
-        parts = line.split()
-        if len(parts) != len(columns):
-            raise FileFormatError(
-                f"{src}:{lineno}: {len(parts)} values, expected {len(columns)} (one per column)"
-            )
-        try:
-            rows[k] = [float(p) for p in parts]
-        except ValueError:
-            raise FileFormatError(f"{src}:{lineno}: not all numbers: {line.strip()[:60]!r}") from None
+        raise FileFormatError(f"{src}:{lineno}: repeated column names")
+    expected = None
     if "nRows" in header:
         try:
             expected = int(header["nRows"])
         except ValueError:
             raise FileFormatError(f"{src}: nRows={header['nRows']!r} is not a number") from None
-        if expected != len(rows):
-            raise FileFormatError(
-                f"{src}: header says nRows={expected}, the file has {len(rows)} rows (truncated?)"
+    in_degrees = header.get("inDegrees", "no").lower() == "yes"
+
+    def blocks() -> Iterator[Storage]:
+        yield from _storage_blocks(path, rows_from, lineno, columns, in_degrees, header, expected, block_rows)
+
+    return StorageFile(columns[1:], in_degrees, src, header, blocks)
+
+
+def _storage_blocks(
+    path: Path,
+    rows_from: int,
+    lineno: int,
+    columns: tuple[str, ...],
+    in_degrees: bool,
+    header: dict[str, str],
+    expected: int | None,
+    block_rows: int,
+) -> Iterator[Storage]:
+    """The rows after a storage file's column names, ``block_rows`` at a time, checked as they
+    are read: one number per column, finite, time increasing, as many rows as ``nRows``."""
+    src = str(path)
+    seen = 0
+    last_time = -np.inf
+    with open(path, "rb") as f:
+        f.seek(rows_from)
+        done = False
+        while not done:
+            numbered: list[tuple[int, str]] = []
+            while len(numbered) < block_rows:
+                raw = f.readline(MAX_LINE_BYTES + 1)
+                if not raw:
+                    done = True
+                    break
+                lineno += 1
+                line = _line(raw, src, lineno)
+                if line.strip():
+                    numbered.append((lineno, line))
+            if not numbered:
+                break
+            rows = _parse_storage_rows(numbered, len(columns), src)
+            if not np.all(np.isfinite(rows)):
+                k = int(np.argwhere(~np.isfinite(rows))[0][0])
+                raise FileFormatError(f"{src}:{numbered[k][0]}: non-finite value")
+            time = rows[:, 0]
+            steps = np.diff(np.concatenate([[last_time], time]))
+            if np.any(steps <= 0):
+                k = int(np.argmax(steps <= 0))
+                before = last_time if k == 0 else time[k - 1]
+                raise FileFormatError(
+                    f"{src}:{numbered[k][0]}: time {time[k]:g} s does not come after the row before's "
+                    f"({before:g} s): time must increase from row to row"
+                )
+            last_time = float(time[-1])
+            seen += len(rows)
+            if expected is not None and seen > expected:
+                raise FileFormatError(
+                    f"{src}:{numbered[len(rows) - (seen - expected)][0]}: more rows than the header's "
+                    f"nRows={expected}"
+                )
+            yield Storage(time, columns[1:], rows[:, 1:], in_degrees, src, header)
+    if expected is not None and seen != expected:
+        raise FileFormatError(f"{src}: header says nRows={expected}, the file has {seen} rows (truncated?)")
+
+
+def _parse_storage_rows(numbered: list[tuple[int, str]], width: int, src: str) -> np.ndarray:
+    """Rows ``(n, width)`` of numbered non-blank lines: numpy's parser when every row is whole,
+    else line by line, naming the first bad one."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            rows = np.loadtxt(
+                io.StringIO("\n".join(line for _, line in numbered)), ndmin=2, comments=None, dtype=np.float64
             )
-    if not np.all(np.isfinite(rows)):
-        k = int(np.argwhere(~np.isfinite(rows))[0][0])
-        raise FileFormatError(f"{src}:{body[k + 1][0]}: non-finite value")
-    time = rows[:, 0]
-    if np.any(np.diff(time) <= 0):
-        k = int(np.argwhere(np.diff(time) <= 0)[0][0]) + 1
-        raise FileFormatError(
-            f"{src}:{body[k + 1][0]}: time {time[k]:g} s does not come after the row before's "
-            f"({time[k - 1]:g} s): time must increase from row to row"
-        )
-    return Storage(time, columns[1:], rows[:, 1:], in_degrees, src, header)
+        if rows.shape == (len(numbered), width):
+            return rows
+    except ValueError:
+        pass
+    rows = np.empty((len(numbered), width))
+    for k, (lineno, line) in enumerate(numbered):
+        parts = line.split()
+        if len(parts) != width:
+            raise FileFormatError(f"{src}:{lineno}: {len(parts)} values, expected {width} (one per column)")
+        try:
+            rows[k] = [float(p) for p in parts]
+        except ValueError:
+            raise FileFormatError(f"{src}:{lineno}: not all numbers: {line.strip()[:60]!r}") from None
+    return rows
+
+
+def read_storage(path: str | os.PathLike[str]) -> Storage:
+    """Read any ``.mot``/``.sto`` file (OpenSim 3 and 4 headers) whole: :func:`open_storage`
+    reads one of any length in blocks."""
+    file = open_storage(path, max_bytes=MAX_FILE_BYTES)
+    blocks = list(file.blocks())
+    width = len(file.columns)
+    return Storage(
+        np.concatenate([b.time for b in blocks]) if blocks else np.empty(0),
+        file.columns,
+        np.concatenate([b.values for b in blocks]) if blocks else np.empty((0, width)),
+        file.in_degrees,
+        file.source,
+        file.header,
+    )
 
 
 #: The header key naming the columns a file does not have because the markers did not
@@ -120,32 +249,59 @@ def read_storage(path: str | os.PathLike[str]) -> Storage:
 NOT_DETERMINED_KEY = "ikid_not_determined"
 
 
-def not_determined(table: Storage) -> list[str]:
+def not_determined(table: Storage | StorageFile) -> list[str]:
     """The coordinates (or moments) ``table``'s header declares not determined (not written)."""
     value = table.header.get(NOT_DETERMINED_KEY, "")
     return [n.strip() for n in value.split(",") if n.strip()]
+
+
+def _named_columns(
+    table: Storage | StorageFile, names: list[str], angles: bool
+) -> Callable[[Storage], np.ndarray]:
+    """For a file whose columns include ``names`` (or whose header declares them not
+    determined: ``ikid_not_determined``): a block -> its ``(n, len(names))`` values of them, in
+    SI (``angles`` in a file in degrees: radians), NaN in a column not determined, and only there. An
+    absent column is named when the file is opened, not when its first block is read."""
+    absent = set(not_determined(table)) - set(table.columns)
+    present = [n for n in names if n not in absent]
+    lacking = [n for n in present if n not in table.columns]
+    if lacking:
+        raise _native.InputError(
+            f"{table.source}: no column(s) {', '.join(lacking)}; it has {', '.join(table.columns)}"
+        )
+    where = [names.index(n) for n in present]
+
+    def values(block: Storage) -> np.ndarray:
+        out = np.full((len(block.time), len(names)), np.nan)
+        out[:, where] = block.select(present)
+        return np.radians(out) if angles and block.in_degrees else out
+
+    return values
 
 
 def read_mot(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
     """``(time, q)``: the wrist angles ``(n, 3)`` in radians, columns found by name; NaN in a
     column the header declares not determined (``ikid_not_determined``), and only there."""
     table = read_storage(path)
-    absent = set(not_determined(table)) - set(table.columns)
-    present = [c for c in coordinate_names() if c not in absent]
-    q = np.full((len(table.time), len(coordinate_names())), np.nan)
-    q[:, [coordinate_names().index(c) for c in present]] = table.select(present)
-    return table.time, np.radians(q) if table.in_degrees else q
+    return table.time, _named_columns(table, coordinate_names(), angles=True)(table)
+
+
+def mot_blocks(
+    path: str | os.PathLike[str], block_rows: int | None = None
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """:func:`read_mot` a block of ``block_rows`` rows at a time (see :func:`open_storage`):
+    ``(time, q)`` blocks in order, in memory independent of the file's length. The header and
+    columns are checked at once; each block's rows as it is read."""
+    file = open_storage(path, block_rows)
+    angles = _named_columns(file, coordinate_names(), angles=True)
+    return ((block.time, angles(block)) for block in file.blocks())
 
 
 def read_sto(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
     """``(time, tau)``: the wrist torques ``(n, 3)`` in N·m (``<coordinate>_moment`` columns; NaN
     in one the header declares not determined, as :func:`read_mot`)."""
     table = read_storage(path)
-    absent = set(not_determined(table)) - set(table.columns)
-    present = [c for c in moment_names() if c not in absent]
-    tau = np.full((len(table.time), len(moment_names())), np.nan)
-    tau[:, [moment_names().index(c) for c in present]] = table.select(present)
-    return table.time, tau
+    return table.time, _named_columns(table, moment_names(), angles=False)(table)
 
 
 def _check_rows(name: str, time, values, cols: int) -> tuple[np.ndarray, np.ndarray]:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -81,10 +83,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Angles (.mot) -> torques (.sto): the wrist-id network over (q, q̇, q̈), or the exact
     Newton-Euler reference for a subject (``--reference``). The angles are low-passed and
-    differenced (:func:`ikid.kinematics.joint_states`: central differences, a file is offline)."""
-    from ikid.io import read_mot, resample, sto_writer
-    from ikid.kinematics import joint_states, min_stretch_rows
-    from ikid.pipeline import check_rate, run_model
+    differenced (:func:`ikid.kinematics.joint_state_blocks`: central differences, a file is
+    offline). The file is read, filtered and written a block at a time: memory does not grow
+    with its length (but for ``--resample``, which resamples the recording whole)."""
+    from ikid.io import mot_blocks, resample, sto_writer
+    from ikid.kinematics import joint_state_blocks, min_stretch_rows
+    from ikid.pipeline import check_rate, run_blocks
 
     if args.sd and args.reference:
         raise ikid.ArgumentError(
@@ -99,73 +103,117 @@ def run(args: argparse.Namespace) -> int:
     _refuse_over_inputs(
         [output], [args.input, None if args.reference else _model_file(args.model)], given=args.output
     )
-    time_s, q = read_mot(args.input)
     lowpass = args.lowpass or None
-    if len(time_s) < min_stretch_rows(lowpass):
-        raise ikid.InputError(
-            f"{args.input}: {len(time_s)} rows; at least {min_stretch_rows(lowpass)} are needed for "
-            + (
-                "velocities and accelerations"
-                if lowpass is None
-                else f"the {lowpass:g} Hz low-pass (--lowpass)"
-            )
+    least = min_stretch_rows(lowpass)
+
+    def too_few(rows: int) -> ikid.InputError:
+        need = (
+            "velocities and accelerations" if lowpass is None else f"the {lowpass:g} Hz low-pass (--lowpass)"
         )
-    rate = 1.0 / float(np.median(np.diff(time_s)))
+        return ikid.InputError(f"{args.input}: {rows} rows; at least {least} are needed for {need}")
+
+    blocks = mot_blocks(args.input)
+    first = next(blocks, None)
+    if first is None or len(first[0]) < 2:
+        raise too_few(0 if first is None else len(first[0]))
+    # NaN only in a column the header declares not determined (a one-marker hand's s_p).
+    undetermined = [
+        c for c, nan in zip(ikid.coordinate_names(), np.isnan(first[1]).any(axis=0), strict=True) if nan
+    ]
+    if undetermined:
+        raise ikid.InputError(
+            f"{args.input}: {', '.join(undetermined)} not determined (its header's ikid_not_determined: "
+            "the markers did not determine it); `ikid id` needs all three angles. `ikid track` on the "
+            "markers gives the torques they determine (docs/markersets.md)"
+        )
+    # The rate of the first block (a file's first 65,536 rows): time gaps are steps over 1.5 of it.
+    rate = 1.0 / float(np.median(np.diff(first[0])))
+    angles: Iterator[tuple[np.ndarray, np.ndarray]] = itertools.chain([first], blocks)
     model = None
     if not args.reference:
         model = _model_for(args.model, "ikid id --model", ("id",), allow_unchecked=args.allow_unchecked_model)
         if args.sd:
             _check_uncertainty(args.model, model, "ikid id --sd --model")
         if check_rate(model, rate, args.input, args.resample):
-            time_s, q = resample(time_s, q, model.frame_rate_hz)
-    state = joint_states(q, time_s, lowpass)
-    # Stretches between time gaps too short to filter and difference: counted, not written.
-    short = ~np.all(np.isfinite(state), axis=1)
+            parts = list(angles)
+            angles = iter(
+                [
+                    resample(
+                        np.concatenate([t for t, _ in parts]),
+                        np.concatenate([q for _, q in parts]),
+                        model.frame_rate_hz,
+                    )
+                ]
+            )
+            rate = model.frame_rate_hz
+    rows = short = 0
+
+    def states() -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """The joint states of the rows in stretches long enough to filter and difference."""
+        nonlocal rows, short
+        for time_s, state in joint_state_blocks(angles, rate, lowpass):
+            known = np.all(np.isfinite(state), axis=1)
+            rows += len(time_s)
+            short += int((~known).sum())
+            if known.any():
+                yield time_s[known], state[known]
+
     notes = [f"angles low-passed at {lowpass:g} Hz" if lowpass else "angles not low-passed"]
-    if short.any():
-        notes.append(
-            f"{int(short.sum())} rows in stretches between time gaps shorter than "
-            f"{min_stretch_rows(lowpass)} rows (too short to low-pass and difference), not written"
-        )
-    if short.all():
-        raise ikid.InputError(f"{args.input}: no frame gave torques: {', '.join(notes)}")
-    time_s, state = time_s[~short], state[~short]
-    status = sd = None
-    if model is None:
-        tau = ikid.reference_id(
-            state[:, :3],
-            state[:, 3:6],
-            state[:, 6:],
-            shoulder_flexion=math.radians(args.shoulder_deg),
-            length_scale=args.length_scale,
-            mass_scale=args.mass_scale,
-        )
-        out_time = time_s
-        summary = (
-            f"{len(time_s)} frames, exact Newton-Euler (subject ×{args.length_scale:g} length, "
-            f"×{args.mass_scale:g} mass)"
-        )
-        clean = True
-    else:
-        run = run_model(model, state, time_s, rate_hz=model.frame_rate_hz, source=args.input)
-        out_time, tau, summary, status, clean = run.time, run.values, run.summary(), run.status, run.clean
-        if args.sd:
-            # Only rows with a σ: the first frames' (too few to tell the angles' noise) are counted.
-            known = np.all(np.isfinite(run.sd), axis=1)
-            out_time, tau, status, sd = out_time[known], tau[known], status[known], run.sd[known]
-            if not known.all():
-                lacking = int((~known).sum())
-                notes.append(
-                    f"{lacking} torque rows without a standard deviation (the first frames), not written"
-                )
-    summary = ", ".join([summary, *notes])
-    if len(out_time) == 0:
-        raise ikid.InputError(f"{args.input}: no frame gave torques: {summary}")
+    lacking = written = 0
     output.parent.mkdir(parents=True, exist_ok=True)
+    # The file becomes whole when the block ends, or is not written (an error part-way).
     with sto_writer(output, with_status=model is not None, with_sd=args.sd) as write:
-        write(out_time, tau, status, sd)
+        if model is None:
+            for time_s, state in states():
+                write(time_s, _reference(args, state))
+                written += len(time_s)
+            summary = (
+                f"{rows - short} frames, exact Newton-Euler (subject ×{args.length_scale:g} length, "
+                f"×{args.mass_scale:g} mass)"
+            )
+            clean = True
+        else:
+
+            def sink(_frame, time_s, tau, status, sd) -> None:
+                nonlocal lacking, written
+                if args.sd:
+                    # Only rows with a σ: the first frames' (too few to tell the noise) are counted.
+                    known = np.all(np.isfinite(sd), axis=1)
+                    lacking += int((~known).sum())
+                    time_s, tau, status, sd = time_s[known], tau[known], status[known], sd[known]
+                write(time_s, tau, status, sd if args.sd else None)
+                written += len(time_s)
+
+            run = run_blocks(model, states(), rate_hz=model.frame_rate_hz, source=args.input, on_rows=sink)
+            summary, clean = run.summary(), run.clean
+        if rows < least:
+            raise too_few(rows)
+        if short:
+            notes.append(
+                f"{short} rows in stretches between time gaps shorter than {least} rows "
+                "(too short to low-pass and difference), not written"
+            )
+        if lacking:
+            notes.append(
+                f"{lacking} torque rows without a standard deviation (the first frames), not written"
+            )
+        summary = ", ".join([summary, *notes])
+        if written == 0:
+            raise ikid.InputError(f"{args.input}: no frame gave torques: {summary}")
     print(f"{args.input}: {summary} -> {output}")
-    if args.strict and not (clean and not short.any()):
+    if args.strict and not (clean and not short):
         print(f"ikid: --strict: {args.input} has refused, implausible or flagged frames", file=sys.stderr)
         return 3
     return 0
+
+
+def _reference(args: argparse.Namespace, state: np.ndarray) -> np.ndarray:
+    """The exact Newton-Euler torques of joint states ``(n, 9)`` for ``args``' subject."""
+    return ikid.reference_id(
+        state[:, :3],
+        state[:, 3:6],
+        state[:, 6:],
+        shoulder_flexion=math.radians(args.shoulder_deg),
+        length_scale=args.length_scale,
+        mass_scale=args.mass_scale,
+    )
