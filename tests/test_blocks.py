@@ -186,6 +186,12 @@ def test_a_mot_read_in_blocks_is_the_table_written(tmp_path):
         np.testing.assert_array_equal(values[:, 3], status)
         got = list(mot_blocks(tmp_path / "t.mot", block_rows=block_rows))
         np.testing.assert_allclose(np.concatenate([a for _, a in got]), q, rtol=1e-9)
+    # Windows' and classic Mac's line ends read as the whole-file reader always took them.
+    text = (tmp_path / "t.mot").read_text()
+    for name, end in (("crlf.mot", "\r\n"), ("cr.mot", "\r")):
+        (tmp_path / name).write_bytes(text.replace("\n", end).encode())
+        other = read_storage(tmp_path / name)
+        np.testing.assert_array_equal(other.values, read_storage(tmp_path / "t.mot").values)
     # A bad row late in the file: the blocks before it are read, its own names its line.
     lines = (tmp_path / "t.mot").read_text().splitlines()
     at = next(i for i, line in enumerate(lines) if line.startswith("0.900000"))

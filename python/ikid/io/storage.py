@@ -11,7 +11,7 @@ import os
 import shutil
 import tempfile
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -62,7 +62,7 @@ class Storage:
 
 #: Rows per block when a storage file is read in blocks (:func:`open_storage`).
 BLOCK_ROWS = 65536
-#: Longest line a storage file may have, bytes (a file of NUL bytes is one endless "line").
+#: Longest line a storage file may have, characters (a file of NUL bytes is one endless "line").
 MAX_LINE_BYTES = 1 << 20
 
 
@@ -83,14 +83,23 @@ class StorageFile:
         return self._blocks()
 
 
-def _line(raw: bytes, src: str, lineno: int) -> str:
-    if len(raw) > MAX_LINE_BYTES:
-        raise FileFormatError(
-            f"{src}:{lineno}: a line longer than {MAX_LINE_BYTES} bytes: not an OpenSim storage file "
-            "(text, one row per line)"
-        )
+def _lines(path: Path, after: int = 0) -> Generator[tuple[int, str], None, None]:
+    """A text file's numbered lines from line ``after + 1`` on, without their ends (``\n``,
+    ``\r\n`` or ``\r``, as the whole-file reader took them), each of at most
+    :data:`MAX_LINE_BYTES` characters: a file of NUL bytes is refused, not read as one line."""
+    src = str(path)
+    lineno = 0
     try:
-        return raw.decode("utf-8").rstrip("\r\n")
+        with open(path, encoding="utf-8", newline=None) as f:
+            while line := f.readline(MAX_LINE_BYTES + 1):
+                lineno += 1
+                if len(line) > MAX_LINE_BYTES:
+                    raise FileFormatError(
+                        f"{src}:{lineno}: a line longer than {MAX_LINE_BYTES} characters: not an OpenSim "
+                        "storage file (text, one row per line)"
+                    )
+                if lineno > after:
+                    yield lineno, line.rstrip("\n")
     except UnicodeDecodeError:
         raise FileFormatError(f"{src}: not a text file (.mot/.sto are text)") from None
 
@@ -106,28 +115,23 @@ def open_storage(
     src = str(path)
     check_readable(path, ".mot/.sto are text", limit=1 << 62 if max_bytes is None else max_bytes)
     header: dict[str, str] = {}
-    with open(path, "rb") as f:
-        lineno = 0
-        while True:
-            raw = f.readline(MAX_LINE_BYTES + 1)
-            if not raw:
-                raise FileFormatError(f"{src}: no 'endheader' line: not an OpenSim storage file")
-            lineno += 1
-            line = _line(raw, src, lineno)
-            if line.strip().lower() == "endheader":
-                break
+    lines = _lines(path)
+    try:
+        lineno, line = next(lines, (0, None))
+        while line is not None and line.strip().lower() != "endheader":
             key, sep, value = line.partition("=")
             if sep:
                 header[key.strip()] = value.strip()
-        while True:
-            raw = f.readline(MAX_LINE_BYTES + 1)
-            if not raw:
-                raise FileFormatError(f"{src}: no column names after 'endheader'")
-            lineno += 1
-            col_line = _line(raw, src, lineno)
-            if col_line.strip():
-                break
-        rows_from = f.tell()
+            lineno, line = next(lines, (lineno, None))
+        if line is None:
+            raise FileFormatError(f"{src}: no 'endheader' line: not an OpenSim storage file")
+        lineno, col_line = next(lines, (lineno, None))
+        while col_line is not None and not col_line.strip():
+            lineno, col_line = next(lines, (lineno, None))
+        if col_line is None:
+            raise FileFormatError(f"{src}: no column names after 'endheader'")
+    finally:
+        lines.close()
     columns = tuple(c.strip() for c in (col_line.split("\t") if "\t" in col_line else col_line.split()))
     if not columns or columns[0].lower() != "time":
         raise FileFormatError(f"{src}:{lineno}: the first column must be 'time', got {columns[:1]}")
@@ -142,14 +146,13 @@ def open_storage(
     in_degrees = header.get("inDegrees", "no").lower() == "yes"
 
     def blocks() -> Iterator[Storage]:
-        yield from _storage_blocks(path, rows_from, lineno, columns, in_degrees, header, expected, block_rows)
+        yield from _storage_blocks(path, lineno, columns, in_degrees, header, expected, block_rows)
 
     return StorageFile(columns[1:], in_degrees, src, header, blocks)
 
 
 def _storage_blocks(
     path: Path,
-    rows_from: int,
     lineno: int,
     columns: tuple[str, ...],
     in_degrees: bool,
@@ -162,20 +165,18 @@ def _storage_blocks(
     src = str(path)
     seen = 0
     last_time = -np.inf
-    with open(path, "rb") as f:
-        f.seek(rows_from)
+    lines = _lines(path, after=lineno)
+    try:
         done = False
         while not done:
             numbered: list[tuple[int, str]] = []
             while len(numbered) < block_rows:
-                raw = f.readline(MAX_LINE_BYTES + 1)
-                if not raw:
+                got = next(lines, None)
+                if got is None:
                     done = True
                     break
-                lineno += 1
-                line = _line(raw, src, lineno)
-                if line.strip():
-                    numbered.append((lineno, line))
+                if got[1].strip():
+                    numbered.append(got)
             if not numbered:
                 break
             rows = _parse_storage_rows(numbered, len(columns), src)
@@ -199,6 +200,8 @@ def _storage_blocks(
                     f"nRows={expected}"
                 )
             yield Storage(time, columns[1:], rows[:, 1:], in_degrees, src, header)
+    finally:
+        lines.close()
     if expected is not None and seen != expected:
         raise FileFormatError(f"{src}: header says nRows={expected}, the file has {seen} rows (truncated?)")
 
