@@ -207,6 +207,7 @@ def test_id_refuses_a_file_at_another_rate(trial, tmp_path, capsys):
     assert cli(["id", str(tmp_path / "slow.mot"), "-o", str(tmp_path / "x.sto")]) == 2
     assert "250 Hz" in capsys.readouterr().err and not (tmp_path / "x.sto").exists()
     assert cli(["id", str(tmp_path / "slow.mot"), "-o", str(tmp_path / "x.sto"), "--resample"]) == 0
+    assert "angles resampled 250 -> 1000 Hz" in capsys.readouterr().out
 
 
 # --- a lab's own trials: train and report --------------------------------------------------------

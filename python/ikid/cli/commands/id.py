@@ -129,6 +129,7 @@ def run(args: argparse.Namespace) -> int:
     # The rate of the first block (a file's first 65,536 rows): time gaps are steps over 1.5 of it.
     rate = 1.0 / float(np.median(np.diff(first[0])))
     angles: Iterator[tuple[np.ndarray, np.ndarray]] = itertools.chain([first], blocks)
+    notes = [f"angles low-passed at {lowpass:g} Hz" if lowpass else "angles not low-passed"]
     model = None
     if not args.reference:
         model = _model_for(args.model, "ikid id --model", ("id",), allow_unchecked=args.allow_unchecked_model)
@@ -145,6 +146,9 @@ def run(args: argparse.Namespace) -> int:
                     )
                 ]
             )
+            notes.insert(
+                0, f"angles resampled {rate:g} -> {model.frame_rate_hz:g} Hz (cubic Hermite, --resample)"
+            )
             rate = model.frame_rate_hz
     rows = short = 0
 
@@ -158,7 +162,6 @@ def run(args: argparse.Namespace) -> int:
             if known.any():
                 yield time_s[known], state[known]
 
-    notes = [f"angles low-passed at {lowpass:g} Hz" if lowpass else "angles not low-passed"]
     lacking = written = 0
     output.parent.mkdir(parents=True, exist_ok=True)
     # The file becomes whole when the block ends, or is not written (an error part-way).
