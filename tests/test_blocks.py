@@ -33,6 +33,7 @@ from ikid.io import (
     write_mot,
     write_trc,
 )
+from ikid.io.resample import resample_stretches
 from ikid.kinematics import joint_state_blocks, min_stretch_rows
 
 #: Held-out trajectory (studies/rates.py's test seeds start at 9500).
@@ -288,3 +289,46 @@ def test_id_memory_does_not_grow_with_the_trials_length(tmp_path, monkeypatch):
     short = _id_peak(tmp_path, 10.0)
     long = _id_peak(tmp_path, 40.0)
     assert long < 1.25 * short, (short, long)
+
+
+def test_resampled_in_blocks_each_stretch_alone_nothing_inside_a_gap():
+    # 100 Hz angles, quadratic in time, with gaps: stretches 0-1.49 s, 2.01-2.47 s, 2.50-2.51 s
+    # (two rows: too short to resample) and 2.54-3.99 s. Cubic Hermite with second-order slopes
+    # is exact for a quadratic away from a stretch's end intervals.
+    rows = np.arange(400)
+    keep = ((rows < 150) | (rows > 200)) & ~np.isin(rows, [248, 249, 252, 253])
+    time = rows[keep] / 100.0
+    coef = np.array([[0.1, -0.3, 0.2], [0.4, 0.1, -0.2], [-0.05, 0.02, 0.03]])
+    q = coef[0] + time[:, None] * coef[1] + time[:, None] ** 2 * coef[2]
+    stretches = ((0.0, 1.49), (2.01, 2.47), (2.54, 3.99))
+    for size in (1, 3, 64, 1000):
+        blocks = [(time[k : k + size], q[k : k + size]) for k in range(0, len(time), size)]
+        out = list(resample_stretches(blocks, 100.0, 1000.0))
+        t = np.concatenate([a for a, _ in out])
+        v = np.concatenate([b for _, b in out])
+        assert np.all(np.diff(t) > 0)
+        short = np.isnan(v).any(axis=1)
+        np.testing.assert_allclose(t[short], [2.5, 2.51])  # the 2-row stretch, at its own times
+        inside = np.zeros(len(t), bool)
+        for lo, hi in stretches:  # each stretch on its own 1 kHz grid, and nothing between them
+            mine = (t >= lo - 1e-9) & (t <= hi + 1e-9)
+            np.testing.assert_allclose(t[mine], lo + np.arange(mine.sum()) / 1000.0, atol=1e-9)
+            assert mine.sum() == round((hi - lo) * 1000) + 1
+            inside |= mine
+        assert np.all(inside | short)
+        inner = np.zeros(len(t), bool)
+        for lo, hi in stretches:
+            inner |= (t > lo + 0.01 + 1e-9) & (t < hi - 0.01 - 1e-9)
+        want = coef[0] + t[inner, None] * coef[1] + t[inner, None] ** 2 * coef[2]
+        np.testing.assert_allclose(v[inner], want, atol=1e-12)
+
+
+def test_id_resample_writes_no_torque_inside_a_time_gap(tmp_path, capsys):
+    time = np.arange(0.0, 4.0, 0.01)
+    keep = (time < 1.5) | (time > 2.0)
+    write_mot(tmp_path / "gap.mot", time[keep], _angles(time)[keep])
+    assert cli(["id", str(tmp_path / "gap.mot"), "-o", str(tmp_path / "gap.sto"), "--resample"]) == 0
+    assert "angles resampled 100 -> 1000 Hz" in capsys.readouterr().out
+    t, tau = read_sto(tmp_path / "gap.sto")
+    assert not np.any((t > 1.49 + 1e-9) & (t < 2.01 - 1e-9))  # was 499 rows made up in the gap
+    assert np.isfinite(tau).all() and t[-1] > 3.98

@@ -53,7 +53,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--shoulder-deg", type=SHOULDER_DEG, default=0.0, help="shoulder flexion, degrees (--reference)"
     )
-    p.add_argument("--resample", action="store_true", help="resample the angles to the model's rate")
+    p.add_argument(
+        "--resample",
+        action="store_true",
+        help="resample the angles to the model's rate (cubic Hermite; each stretch between time gaps alone: "
+        "nothing is made inside a gap)",
+    )
     p.add_argument(
         "--lowpass",
         type=LOWPASS_HZ,
@@ -84,9 +89,10 @@ def run(args: argparse.Namespace) -> int:
     """Angles (.mot) -> torques (.sto): the wrist-id network over (q, q̇, q̈), or the exact
     Newton-Euler reference for a subject (``--reference``). The angles are low-passed and
     differenced (:func:`ikid.kinematics.joint_state_blocks`: central differences, a file is
-    offline). The file is read, filtered and written a block at a time: memory does not grow
-    with its length (but for ``--resample``, which resamples the recording whole)."""
-    from ikid.io import mot_blocks, resample, sto_writer
+    offline). The file is read, resampled (``--resample``), filtered and written a block at a
+    time: memory does not grow with its length."""
+    from ikid.io import mot_blocks, sto_writer
+    from ikid.io.resample import resample_stretches
     from ikid.kinematics import joint_state_blocks, min_stretch_rows
     from ikid.pipeline import check_rate, run_blocks
 
@@ -136,16 +142,8 @@ def run(args: argparse.Namespace) -> int:
         if args.sd:
             _check_uncertainty(args.model, model, "ikid id --sd --model")
         if check_rate(model, rate, args.input, args.resample):
-            parts = list(angles)
-            angles = iter(
-                [
-                    resample(
-                        np.concatenate([t for t, _ in parts]),
-                        np.concatenate([q for _, q in parts]),
-                        model.frame_rate_hz,
-                    )
-                ]
-            )
+            # Each stretch between time gaps alone: no angle is made inside a gap.
+            angles = resample_stretches(angles, rate, model.frame_rate_hz)
             notes.insert(
                 0, f"angles resampled {rate:g} -> {model.frame_rate_hz:g} Hz (cubic Hermite, --resample)"
             )
