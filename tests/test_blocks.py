@@ -332,3 +332,22 @@ def test_id_resample_writes_no_torque_inside_a_time_gap(tmp_path, capsys):
     t, tau = read_sto(tmp_path / "gap.sto")
     assert not np.any((t > 1.49 + 1e-9) & (t < 2.01 - 1e-9))  # was 499 rows made up in the gap
     assert np.isfinite(tau).all() and t[-1] > 3.98
+
+
+def test_a_run_resampled_to_the_model_makes_no_frame_inside_a_time_gap():
+    # 100 Hz markers with 0.4 s of rows left out, run on the 1 kHz member with --resample
+    # (resample_to_model): each stretch resampled alone (before, the whole recording was, and
+    # the gap was filled with interpolated frames, each given an output).
+    time, markers = _markers(3.0, every=10)
+    keep = (time < 1.0) | (time > 1.4)
+    time, markers = time[keep], markers[keep]
+    model = ikid.load("wrist-ik")  # the 1 kHz model itself, not its family (which has a 100 Hz member)
+    whole = pipeline.run_model(model, markers, time, rate_hz=100.0, resample_to_model=True)
+    assert whole.resampled_from_hz == 100.0 and whole.rate_hz == 1000.0
+    assert not np.any((whole.time > time[time < 1.0][-1] + 1e-9) & (whole.time < time[time > 1.4][0] - 1e-9))
+    assert whole.n_outputs > 0.9 * 1000 * (time[-1] - time[0] - 0.4)
+    for size in (7, 128):
+        blocks = ((time[k : k + size], markers[k : k + size]) for k in range(0, len(time), size))
+        got = pipeline.run_blocks(model, blocks, rate_hz=100.0, resample_to_model=True)
+        np.testing.assert_array_equal(got.time, whole.time)
+        np.testing.assert_allclose(got.values, whole.values, atol=1e-9)

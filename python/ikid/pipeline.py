@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ikid import _native
-from ikid.io.resample import resample
+from ikid.io.resample import resample_stretches
 
 #: Relative difference between a file's frame rate and the model's that still counts as equal.
 RATE_TOLERANCE = 1e-3
@@ -395,8 +395,8 @@ def run_blocks(
     """:func:`run_model` over a recording given as blocks of ``(time, frames)`` in order (a file
     read in blocks, :func:`ikid.io.open_markers`), at ``rate_hz`` (the file's; ``None`` for a
     single frame). With ``on_rows`` each block's output rows go to it as they are made and the
-    :class:`Run` keeps only their counts: memory independent of the recording's length. (A
-    run with ``resample_to_model`` holds the whole recording: it resamples it at once.)"""
+    :class:`Run` keeps only their counts: memory independent of the recording's length, with
+    ``resample_to_model`` too (:func:`ikid.io.resample.resample_stretches`)."""
     model_arg = model
     model, how = pick_model(
         model, rate_hz, resample_to_model=resample_to_model, source=source, allow_unchecked=allow_unchecked
@@ -413,12 +413,9 @@ def run_blocks(
     resampled_from = None
     try:
         if how == "resample":
-            parts = list(blocks)
-            time = np.concatenate([t for t, _ in parts]) if parts else np.empty(0)
-            frames = np.concatenate([f for _, f in parts]) if parts else np.empty((0, model.frame_len))
-            time, frames = resample(time, frames, model.frame_rate_hz)
+            # A block at a time, each stretch between time gaps alone: no frame is made in a gap.
+            blocks = resample_stretches(blocks, rate_hz, model.frame_rate_hz)
             resampled_from, rate_hz = rate_hz, model.frame_rate_hz
-            blocks = [(time, frames)]
         if how == "at_frames":
             grid = _ModelGrid(model, stream, rate_hz, tally)
             for time, frames in blocks:
