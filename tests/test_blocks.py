@@ -22,7 +22,9 @@ from ikid import pipeline
 from ikid.cli import main as cli
 from ikid.cli import process
 from ikid.io import (
+    csv,
     mot_blocks,
+    open_csv_markers,
     open_storage,
     open_trc,
     read_sto,
@@ -30,6 +32,7 @@ from ikid.io import (
     read_trc,
     storage,
     trc,
+    write_csv_markers,
     write_mot,
     write_trc,
 )
@@ -104,12 +107,15 @@ def test_a_run_in_blocks_gives_the_rows_of_a_run_over_the_whole_arrays(rate, sec
         assert got.summary() == whole.summary()
 
 
-def _ik_peak(tmp_path, seconds: float) -> tuple[int, int]:
-    """`ikid ik`'s work on a 1 kHz TRC of ``seconds`` in this process: (tracemalloc peak bytes,
-    frames)."""
+def _ik_peak(tmp_path, seconds: float, suffix: str = ".trc") -> tuple[int, int]:
+    """`ikid ik`'s work on a 1 kHz TRC (or marker CSV) of ``seconds`` in this process:
+    (tracemalloc peak bytes, frames)."""
     time, markers = _markers(seconds)
-    path = tmp_path / f"t{seconds:g}.trc"
-    write_trc(path, time, markers, 1000.0)
+    path = tmp_path / f"t{seconds:g}{suffix}"
+    if suffix == ".trc":
+        write_trc(path, time, markers, 1000.0)
+    else:
+        write_csv_markers(path, time, markers, units="mm")
     out = tmp_path / f"t{seconds:g}.mot"
     opt = {
         "map": None,
@@ -134,12 +140,14 @@ def _ik_peak(tmp_path, seconds: float) -> tuple[int, int]:
     return peak, len(time)
 
 
-def test_ik_memory_does_not_grow_with_the_trials_length(tmp_path, monkeypatch):
+@pytest.mark.parametrize("suffix", [".trc", ".csv"])
+def test_ik_memory_does_not_grow_with_the_trials_length(tmp_path, monkeypatch, suffix):
     # Blocks of 500 frames: 2 s and 8 s are ~5 and ~17 blocks. Read whole, 4x the frames was
     # ~4x the memory (the frames, the rows and the text); in blocks it is one block's.
     monkeypatch.setattr(trc, "BLOCK_FRAMES", 500)
-    short, n_short = _ik_peak(tmp_path, 2.0)
-    long, n_long = _ik_peak(tmp_path, 8.0)
+    monkeypatch.setattr(csv, "BLOCK_FRAMES", 500)
+    short, n_short = _ik_peak(tmp_path, 2.0, suffix)
+    long, n_long = _ik_peak(tmp_path, 8.0, suffix)
     assert n_long > 3 * n_short
     assert long < 1.25 * short, (short, long)
 
@@ -351,3 +359,31 @@ def test_a_run_resampled_to_the_model_makes_no_frame_inside_a_time_gap():
         got = pipeline.run_blocks(model, blocks, rate_hz=100.0, resample_to_model=True)
         np.testing.assert_array_equal(got.time, whole.time)
         np.testing.assert_allclose(got.values, whole.values, atol=1e-9)
+
+
+def test_a_marker_csv_read_in_blocks_is_the_table_written(tmp_path):
+    time, markers = _markers(1.0)
+    markers = _with_gaps(markers)
+    write_csv_markers(tmp_path / "t.csv", time, markers, units="mm")
+    for block_frames in (2, 7, 1000, 5000):
+        file = open_csv_markers(tmp_path / "t.csv", block_frames=block_frames)
+        assert file.n_frames == len(time) and file.rate_hz == pytest.approx(1000.0, rel=1e-6)
+        blocks = list(file.blocks())
+        assert max(len(b) for b in blocks) <= block_frames
+        np.testing.assert_allclose(np.concatenate([b.time for b in blocks]), time, atol=1e-6)
+        got = np.concatenate([b.positions for b in blocks]).reshape(len(time), -1)
+        np.testing.assert_allclose(got, markers, rtol=1e-9, atol=1e-12)  # NaN where missing, too
+    # Late faults are named when their block is read: a bad cell, then a step off the rate.
+    lines = (tmp_path / "t.csv").read_text().splitlines()
+    bad = list(lines)
+    bad[902] = bad[902].replace(",", ",x", 1)
+    (tmp_path / "bad.csv").write_text("\n".join(bad) + "\n")
+    blocks = open_csv_markers(tmp_path / "bad.csv", block_frames=100).blocks()
+    assert len(next(blocks).time) == 100
+    with pytest.raises(ikid.InputError, match=r"bad\.csv:903: 'x.*' is not a number"):
+        for _ in blocks:
+            pass
+    del lines[700]  # one frame gone: a 2 ms step in a 1 ms recording
+    (tmp_path / "step.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(ikid.InputError, match=r"step\.csv: frames are not evenly spaced"):
+        list(open_csv_markers(tmp_path / "step.csv", block_frames=100).blocks())

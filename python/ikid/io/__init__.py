@@ -11,7 +11,7 @@ import os
 
 from ikid.io._atomic import WriteError, atomic_outputs
 from ikid.io.c3d import read_c3d, write_c3d
-from ikid.io.csv import read_csv_markers, write_csv, write_csv_markers
+from ikid.io.csv import open_csv_markers, read_csv_markers, write_csv, write_csv_markers
 from ikid.io.mapping import MarkerMap
 from ikid.io.markers import FileFormatError, MarkerData, MarkerFile
 from ikid.io.resample import resample
@@ -46,14 +46,13 @@ def read_markers(path: str | os.PathLike[str]) -> MarkerData:
 
 
 def open_markers(path: str | os.PathLike[str]) -> MarkerFile:
-    """A marker file to read in blocks (:class:`MarkerFile`): a ``.trc`` a block at a time, in
-    memory independent of its length; a ``.c3d`` or ``.csv`` read whole (their parsers read
-    whole files), as one block."""
+    """A marker file to read in blocks (:class:`MarkerFile`): a ``.trc`` or ``.csv`` a block at
+    a time, in memory independent of its length; a ``.c3d`` read whole (ezc3d reads whole
+    files), as one block."""
     from pathlib import Path
 
-    if Path(path).suffix.lower() == ".trc":
-        return open_trc(path)
-    return MarkerFile.whole(read_markers(path))
+    opener = {".trc": open_trc, ".csv": open_csv_markers}.get(Path(path).suffix.lower())
+    return opener(path) if opener else MarkerFile.whole(read_markers(path))
 
 
 __all__ = [
@@ -68,6 +67,7 @@ __all__ = [
     "atomic_outputs",
     "read_c3d",
     "read_csv_markers",
+    "open_csv_markers",
     "write_csv",
     "write_csv_markers",
     "read_markers",

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import stat
+from collections.abc import Generator
 from pathlib import Path
 
 from ikid import _native
@@ -71,6 +72,33 @@ def read_text(path: Path, what: str) -> str:
 def read_text_lines(path: Path, what: str) -> list[str]:
     """The lines of a UTF-8 text file (see :func:`read_text`)."""
     return read_text(path, what).splitlines()
+
+
+#: Longest line a text reader takes, characters (a file of NUL bytes is one endless "line").
+MAX_LINE_CHARS = 1 << 20
+
+
+def numbered_lines(path: Path, what: str, after: int = 0) -> Generator[tuple[int, str], None, None]:
+    """A UTF-8 text file's numbered lines from line ``after + 1`` on, without their ends
+    (``\n``, ``\r\n`` or ``\r``, as :func:`read_text_lines` splits them), read one at a time
+    (a reader in blocks). A line over :data:`MAX_LINE_CHARS` is refused (a file of NUL bytes is
+    not read whole as one line), and so is a file that is not UTF-8; ``what`` says what the file
+    should be (``".mot/.sto are text"``).
+    Close it (``.close()``) when stopping early."""
+    src = str(path)
+    lineno = 0
+    try:
+        with open(path, encoding="utf-8", newline=None) as f:
+            while line := f.readline(MAX_LINE_CHARS + 1):
+                lineno += 1
+                if len(line) > MAX_LINE_CHARS:
+                    raise FileFormatError(
+                        f"{src}:{lineno}: a line longer than {MAX_LINE_CHARS} characters ({what})"
+                    )
+                if lineno > after:
+                    yield lineno, line.rstrip("\n")
+    except UnicodeDecodeError:
+        raise FileFormatError(f"{src}: not a text file ({what})") from None
 
 
 def unit_scale(units: str, source: str) -> float:

@@ -16,96 +16,164 @@ The frame rate is read from the time column (it must be uniform to 1 %).
 from __future__ import annotations
 
 import io
+import itertools
 import os
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from ikid.io._atomic import write_text_atomic
+from ikid.io._common import numbered_lines
 from ikid.io.markers import (
+    MAX_FILE_BYTES,
     FileFormatError,
     MarkerData,
+    MarkerFile,
+    check_readable,
+    concatenate_blocks,
     ikid_marker_names,
     is_float,
-    read_text_lines,
     unit_scale,
 )
 
 _AXIS = re.compile(r"^(?P<label>.+?)[._](?P<axis>[xyzXYZ])$")
 
 
+#: Frames per block when a marker CSV is read in blocks (:func:`open_csv_markers`).
+BLOCK_FRAMES = 65536
+_WHAT = "CSV is comma-separated text"
+
+
 def read_csv_markers(path: str | os.PathLike[str]) -> MarkerData:
-    """Read a marker ``.csv`` (layout in the module doc); positions in metres."""
+    """Read a marker ``.csv`` (layout in the module doc); positions in metres. The whole file in
+    memory: :func:`open_csv_markers` reads one of any length in blocks."""
+    csv = open_csv_markers(path, max_bytes=MAX_FILE_BYTES)
+    return concatenate_blocks(csv, list(csv.blocks()))
+
+
+def open_csv_markers(
+    path: str | os.PathLike[str], block_frames: int | None = None, max_bytes: int | None = None
+) -> MarkerFile:
+    """A marker ``.csv``'s header, checked, its rate (the median step of its first block of
+    ``block_frames`` rows, default :data:`BLOCK_FRAMES`) and its frames in blocks
+    (:meth:`MarkerFile.blocks`, each checked as it is read: numbers, increasing time, every step
+    within 1 % of the rate's): memory independent of the file's length. ``max_bytes`` refuses a
+    larger file (:func:`read_csv_markers`' whole-file limit)."""
+    block_frames = max(2, block_frames or BLOCK_FRAMES)
     path = Path(path)
     src = str(path)
-    lines = read_text_lines(path, "CSV is comma-separated text")
-    units, start = "m", 0
-    if lines and lines[0].startswith("#"):
-        m = re.search(r"units\s*=\s*(\S+)", lines[0])
-        if m:
-            units = m.group(1)
-        start = 1
+    check_readable(path, _WHAT, limit=1 << 62 if max_bytes is None else max_bytes)
+    lines = numbered_lines(path, _WHAT)
+    try:
+        first = next(lines, None)
+        units, header_at = "m", first
+        if first is not None and first[1].startswith("#"):
+            m = re.search(r"units\s*=\s*(\S+)", first[1])
+            if m:
+                units = m.group(1)
+            header_at = next(lines, None)
+    finally:
+        lines.close()
     scale = unit_scale(units, src)
-    if len(lines) <= start:
+    if header_at is None:
         raise FileFormatError(f"{src}: no header row (expected 'time,<label>.x,<label>.y,<label>.z,...')")
-    header = [c.strip() for c in lines[start].split(",")]
+    start, header_line = header_at
+    header = [c.strip() for c in header_line.split(",")]
     if header[0].lower() != "time":
         raise FileFormatError(
-            f"{src}:{start + 1}: the first column must be 'time' (seconds), found {header[0]!r}"
+            f"{src}:{start}: the first column must be 'time' (seconds), found {header[0]!r}"
         )
     labels: list[str] = []
     columns: dict[tuple[str, str], int] = {}
     for j, name in enumerate(header[1:], start=1):
         m = _AXIS.match(name)
         if not m:
-            raise FileFormatError(f"{src}:{start + 1}: column {name!r} is not '<label>.x', '.y' or '.z'")
+            raise FileFormatError(f"{src}:{start}: column {name!r} is not '<label>.x', '.y' or '.z'")
         key = (m.group("label"), m.group("axis").lower())
         if key in columns:
-            raise FileFormatError(f"{src}:{start + 1}: column {name!r} appears more than once")
+            raise FileFormatError(f"{src}:{start}: column {name!r} appears more than once")
         columns[key] = j
         if key[0] not in labels:
             labels.append(key[0])
     incomplete = [lab for lab in labels if any((lab, a) not in columns for a in "xyz")]
     if incomplete:
-        raise FileFormatError(
-            f"{src}:{start + 1}: marker(s) {', '.join(incomplete)} lack an x, y or z column"
-        )
-    rows: list[list[float]] = []
-    linenos: list[int] = []
-    for lineno, line in enumerate(lines[start + 1 :], start=start + 2):
-        if not line.strip():
-            continue
-        linenos.append(lineno)
-        cells = line.split(",")
-        if len(cells) != len(header):
-            raise FileFormatError(f"{src}:{lineno}: {len(cells)} values, the header names {len(header)}")
+        raise FileFormatError(f"{src}:{start}: marker(s) {', '.join(incomplete)} lack an x, y or z column")
+    order = [columns[(lab, a)] for lab in labels for a in "xyz"]
+
+    def tables() -> Iterator[tuple[np.ndarray, list[int]]]:
+        """The rows after the header, ``block_frames`` at a time, with their line numbers."""
+        rows = numbered_lines(path, _WHAT, after=start)
         try:
-            rows.append([float(c) if c.strip() else np.nan for c in cells])
+            data = (r for r in rows if r[1].strip())
+            while block := list(itertools.islice(data, block_frames)):
+                yield _csv_rows(block, len(header), src), [n for n, _ in block]
+        finally:
+            rows.close()
+
+    # The rate: the median step of the first block; the frames: the data rows, counted.
+    first_block = next(tables(), None)
+    n_frames = _count_rows(path, start)
+    if first_block is None or n_frames < 2:
+        raise FileFormatError(f"{src}: {n_frames} data row(s); at least 2 are needed")
+    head_time, head_lines = first_block[0][:, 0], first_block[1]
+    _check_time(head_time, head_lines, -np.inf, src)
+    step = float(np.median(np.diff(head_time)))
+
+    def blocks() -> Iterator[MarkerData]:
+        last = -np.inf
+        for table, linenos in tables():
+            time = table[:, 0]
+            _check_time(time, linenos, last, src)
+            steps = np.diff(np.concatenate([[last], time]))[0 if np.isfinite(last) else 1 :]
+            if np.any(np.abs(steps - step) > 0.01 * step):
+                raise FileFormatError(
+                    f"{src}: frames are not evenly spaced in time (steps {steps.min():.6g}-"
+                    f"{steps.max():.6g} s by line {linenos[-1]}, the first rows' {step:.6g} s)"
+                )
+            last = float(time[-1])
+            positions = (table[:, order] * scale).reshape(len(time), len(labels), 3)
+            yield MarkerData(tuple(labels), time, positions, 1.0 / step, src, file_units=units)
+
+    return MarkerFile(tuple(labels), 1.0 / step, src, units, {}, n_frames, blocks)
+
+
+def _csv_rows(block: list[tuple[int, str]], width: int, src: str) -> np.ndarray:
+    """Rows ``(n, width)`` of numbered non-blank CSV lines (an empty cell is NaN), naming the
+    first bad line."""
+    rows = np.empty((len(block), width))
+    for k, (lineno, line) in enumerate(block):
+        cells = line.split(",")
+        if len(cells) != width:
+            raise FileFormatError(f"{src}:{lineno}: {len(cells)} values, the header names {width}")
+        try:
+            rows[k] = [float(c) if c.strip() else np.nan for c in cells]
         except ValueError:
             bad = next(c for c in cells if c.strip() and not is_float(c))
             raise FileFormatError(f"{src}:{lineno}: {bad.strip()!r} is not a number") from None
-    if len(rows) < 2:
-        raise FileFormatError(f"{src}: {len(rows)} data row(s); at least 2 are needed")
-    table = np.array(rows, np.float64)
-    time = table[:, 0]
+    return rows
+
+
+def _check_time(time: np.ndarray, linenos: list[int], last: float, src: str) -> None:
+    """Every time a number and after the one before (``last``, the block before's last)."""
     if not np.all(np.isfinite(time)):
         k = int(np.argwhere(~np.isfinite(time))[0][0])
         raise FileFormatError(f"{src}:{linenos[k]}: time {time[k]} is not a number")
-    if np.any(np.diff(time) <= 0):
-        k = int(np.argwhere(np.diff(time) <= 0)[0][0]) + 1
+    steps = np.diff(np.concatenate([[last], time]))
+    if np.any(steps <= 0):
+        k = int(np.argmax(steps <= 0))
+        before = last if k == 0 else time[k - 1]
         raise FileFormatError(
             f"{src}:{linenos[k]}: time {time[k]:g} s does not come after the row before's "
-            f"({time[k - 1]:g} s): time must increase from row to row"
+            f"({before:g} s): time must increase from row to row"
         )
-    dt = np.diff(time)
-    if np.max(np.abs(dt - np.median(dt))) > 0.01 * np.median(dt):
-        raise FileFormatError(
-            f"{src}: frames are not evenly spaced in time (steps {dt.min():.6g}-{dt.max():.6g} s)"
-        )
-    order = [columns[(lab, a)] for lab in labels for a in "xyz"]
-    positions = (table[:, order] * scale).reshape(len(time), len(labels), 3)
-    return MarkerData(tuple(labels), time, positions, 1.0 / float(np.median(dt)), src, file_units=units)
+
+
+def _count_rows(path: Path, after: int) -> int:
+    """The non-blank lines after line ``after`` (a pass over the bytes, to say how many frames)."""
+    with open(path, "rb") as f:
+        return sum(1 for k, line in enumerate(f, start=1) if k > after and line.strip())
 
 
 def write_csv(path: str | os.PathLike[str], time, values, columns: list[str] | tuple[str, ...]) -> Path:

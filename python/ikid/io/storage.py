@@ -11,7 +11,7 @@ import os
 import shutil
 import tempfile
 import warnings
-from collections.abc import Callable, Generator, Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +20,7 @@ import numpy as np
 
 from ikid import _native
 from ikid.io._atomic import atomic_output, check_size
+from ikid.io._common import numbered_lines
 from ikid.io.markers import MAX_FILE_BYTES, FileFormatError, check_readable
 
 
@@ -62,8 +63,6 @@ class Storage:
 
 #: Rows per block when a storage file is read in blocks (:func:`open_storage`).
 BLOCK_ROWS = 65536
-#: Longest line a storage file may have, characters (a file of NUL bytes is one endless "line").
-MAX_LINE_BYTES = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -83,27 +82,6 @@ class StorageFile:
         return self._blocks()
 
 
-def _lines(path: Path, after: int = 0) -> Generator[tuple[int, str], None, None]:
-    """A text file's numbered lines from line ``after + 1`` on, without their ends (``\n``,
-    ``\r\n`` or ``\r``, as the whole-file reader took them), each of at most
-    :data:`MAX_LINE_BYTES` characters: a file of NUL bytes is refused, not read as one line."""
-    src = str(path)
-    lineno = 0
-    try:
-        with open(path, encoding="utf-8", newline=None) as f:
-            while line := f.readline(MAX_LINE_BYTES + 1):
-                lineno += 1
-                if len(line) > MAX_LINE_BYTES:
-                    raise FileFormatError(
-                        f"{src}:{lineno}: a line longer than {MAX_LINE_BYTES} characters: not an OpenSim "
-                        "storage file (text, one row per line)"
-                    )
-                if lineno > after:
-                    yield lineno, line.rstrip("\n")
-    except UnicodeDecodeError:
-        raise FileFormatError(f"{src}: not a text file (.mot/.sto are text)") from None
-
-
 def open_storage(
     path: str | os.PathLike[str], block_rows: int | None = None, max_bytes: int | None = None
 ) -> StorageFile:
@@ -115,7 +93,7 @@ def open_storage(
     src = str(path)
     check_readable(path, ".mot/.sto are text", limit=1 << 62 if max_bytes is None else max_bytes)
     header: dict[str, str] = {}
-    lines = _lines(path)
+    lines = numbered_lines(path, ".mot/.sto are text, one row per line")
     try:
         lineno, line = next(lines, (0, None))
         while line is not None and line.strip().lower() != "endheader":
@@ -165,7 +143,7 @@ def _storage_blocks(
     src = str(path)
     seen = 0
     last_time = -np.inf
-    lines = _lines(path, after=lineno)
+    lines = numbered_lines(path, ".mot/.sto are text, one row per line", after=lineno)
     try:
         done = False
         while not done:
