@@ -1341,6 +1341,10 @@ mod tests {
             for k in 0..3 {
                 assert!((out[k] as f64 - q[k]).abs() < 1e-4, "seed {seed}: {out:?} vs {q:?}");
             }
+            // A short movement (under 50 frames: its percentiles are its extremes) is fitted too.
+            let short = frames(&circles(30, s_p, 0.0), &shift, 1.1, 0.3);
+            let (_, report) = Calibration::functional(&neutral, &short, Side::Right).unwrap();
+            assert_eq!(report.functional.as_ref().unwrap().frames, 30);
         }
     }
 
