@@ -15,7 +15,7 @@ import tracemalloc
 
 import numpy as np
 import pytest
-from scipy.signal import butter, filtfilt
+from scipy.signal import butter, filtfilt, sosfiltfilt
 
 import ikid
 from ikid import pipeline
@@ -387,3 +387,52 @@ def test_a_marker_csv_read_in_blocks_is_the_table_written(tmp_path):
     (tmp_path / "step.csv").write_text("\n".join(lines) + "\n")
     with pytest.raises(ikid.InputError, match=r"step\.csv: frames are not evenly spaced"):
         list(open_csv_markers(tmp_path / "step.csv", block_frames=100).blocks())
+
+
+@pytest.mark.parametrize("cut_off", [0.5, 490.0, 499.9])
+def test_cut_offs_near_0_and_half_the_rate_filter_in_blocks_as_whole(cut_off):
+    # Second-order sections (a transfer function's coefficients lose their digits there, and
+    # the context computed from their roots came out negative: a traceback at 499.99 Hz).
+    time = np.arange(150_000) / 1000.0
+    q = _angles(time)
+    sos = butter(4, cut_off / 500.0, output="sos")
+    angles = sosfiltfilt(sos, q, axis=0, padlen=15)
+    rates = np.gradient(angles, time, axis=0)
+    want = np.concatenate([angles, rates, np.gradient(rates, time, axis=0)], axis=1)
+    blocks = [(time[k : k + 65536], q[k : k + 65536]) for k in range(0, len(time), 65536)]
+    got = np.concatenate([s for _, s in joint_state_blocks(blocks, 1000.0, cut_off)])
+    off = np.abs(got - want).max(axis=0) / np.abs(want).max(axis=0)
+    assert np.all(off < 1e-8), off
+
+
+def test_id_refuses_what_it_cannot_read_whole_and_names_where(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(storage, "BLOCK_ROWS", 500)
+    # A file that changes rate part-way: refused (it was read as 1,500 one-row stretches).
+    time = np.concatenate([np.arange(2000) / 1000.0, 2.0 + np.arange(1, 1501) / 500.0])
+    write_mot(tmp_path / "two-rates.mot", time, _angles(time))
+    assert cli(["id", str(tmp_path / "two-rates.mot"), "-o", str(tmp_path / "x.sto"), "--reference"]) == 2
+    assert "at 500 Hz, the first rows at 1000 Hz" in capsys.readouterr().err
+    # A byte that is not UTF-8 late in the file: named with its line.
+    time = np.arange(3000) / 1000.0
+    path = write_mot(tmp_path / "bad-byte.mot", time, _angles(time))
+    lines = path.read_bytes().split(b"\n")
+    lines[2800] += b" \xff"
+    path.write_bytes(b"\n".join(lines))
+    assert cli(["id", str(path), "-o", str(tmp_path / "x.sto")]) == 2
+    assert "bad-byte.mot:2801: not a text file" in capsys.readouterr().err
+    # --resample means the network's rate: with --reference it is refused, not ignored.
+    assert (
+        cli(
+            [
+                "id",
+                str(tmp_path / "two-rates.mot"),
+                "-o",
+                str(tmp_path / "x.sto"),
+                "--reference",
+                "--resample",
+            ]
+        )
+        == 2
+    )
+    assert "leave out --resample" in capsys.readouterr().err
+    assert not (tmp_path / "x.sto").exists()

@@ -2,7 +2,8 @@
 
 A file is offline, so the rates are central differences (no lag), taken after a zero-lag
 low-pass of the angles: a 4th-order Butterworth run forwards and backwards (SciPy's
-``filtfilt``), at 6 Hz by default — the cut-off OpenSim's users give its inverse dynamics tool.
+``sosfiltfilt``, padded as ``filtfilt`` pads), at 6 Hz by default — the cut-off OpenSim's users
+give its inverse dynamics tool.
 Differencing twice at 1 kHz multiplies an angle's frame-to-frame noise by ~10⁶: on ``ikid ik``'s
 angles from markers with 1 % noise, unfiltered, 78 % of the frames gave implausible torques and
 the rest were off by 0.4-0.8 N·m (torques of ±0.3 N·m); low-passed at 6 Hz every frame had one,
@@ -25,14 +26,17 @@ from ikid import _native
 DEFAULT_LOWPASS_HZ = 6.0
 #: The Butterworth filter's order (as OpenSim's IIR low-pass of coordinates).
 LOWPASS_ORDER = 4
+#: Rows ``filtfilt`` pads each end with (SciPy's default for this order's transfer function,
+#: kept for the second-order sections so the ends are filtered as they always were).
+PAD_ROWS = 3 * (LOWPASS_ORDER + 1)
 #: A step longer than this many median steps is a gap between stretches.
 GAP_STEPS = 1.5
 
 
 def min_stretch_rows(lowpass_hz: float | None) -> int:
     """The fewest rows a stretch needs: three for a second difference; more to filter it
-    (``filtfilt`` pads each end by three times the filter's length)."""
-    return 3 * (LOWPASS_ORDER + 1) + 1 if lowpass_hz else 3
+    (each end is padded with :data:`PAD_ROWS` rows reflected from it)."""
+    return PAD_ROWS + 1 if lowpass_hz else 3
 
 
 def stretches(time: np.ndarray) -> list[slice]:
@@ -67,22 +71,25 @@ def _check_block(q: np.ndarray, time: np.ndarray) -> None:
 def overlap_rows(rate_hz: float, lowpass_hz: float | None) -> int:
     """Rows of context on each side of a block that make it low-pass and difference as the
     whole stretch would: two for the second difference, and the rows over which the filter's
-    slowest pole decays to 1e-16 (from its poles, so a cut-off near Nyquist is right too)."""
+    slowest pole decays to 1e-16 (the design's own poles, not roots of its polynomial, which
+    lose their digits near a cut-off of 0 or half the rate)."""
     if not lowpass_hz:
         return 2
-    _, a = _butter(rate_hz, lowpass_hz)
-    slowest = float(np.max(np.abs(np.roots(a))))
+    _, poles, _ = _butter(rate_hz, lowpass_hz, "zpk")
+    slowest = float(np.max(np.abs(poles)))
     return 2 + int(np.ceil(np.log(1e-16) / np.log(slowest)))
 
 
-def _butter(rate_hz: float, lowpass_hz: float) -> tuple[np.ndarray, np.ndarray]:
+def _butter(rate_hz: float, lowpass_hz: float, output: str = "sos"):
+    """The low-pass Butterworth as second-order sections (well conditioned at any cut-off, where
+    a transfer function's coefficients are not near 0 or half the rate), or ``"zpk"``."""
     if not (0.0 < lowpass_hz < rate_hz / 2.0):
         raise _native.InputError(
             f"low-pass at {lowpass_hz:g} Hz: must lie below half the angles' rate ({rate_hz / 2.0:g} Hz)"
         )
     from scipy.signal import butter
 
-    return butter(LOWPASS_ORDER, lowpass_hz / (rate_hz / 2.0))
+    return butter(LOWPASS_ORDER, lowpass_hz / (rate_hz / 2.0), output=output)
 
 
 def joint_state_blocks(
@@ -94,16 +101,16 @@ def joint_state_blocks(
     piece at a time with :func:`overlap_rows` of context each side, as it would be whole
     (within rounding): memory is a block's and two overlaps', whatever the length."""
     if lowpass_hz:
-        from scipy.signal import filtfilt
+        from scipy.signal import sosfiltfilt
 
-        b, a = _butter(rate_hz, lowpass_hz)
+        sos = _butter(rate_hz, lowpass_hz)
     context = overlap_rows(rate_hz, lowpass_hz)
     gap = GAP_STEPS / rate_hz
     least = min_stretch_rows(lowpass_hz)
 
     def states(time: np.ndarray, q: np.ndarray) -> np.ndarray:
         """A whole stretch (or a piece with its context) -> its states."""
-        angles = filtfilt(b, a, q, axis=0) if lowpass_hz else q
+        angles = sosfiltfilt(sos, q, axis=0, padlen=PAD_ROWS) if lowpass_hz else q
         rates = np.gradient(angles, time, axis=0)
         return np.concatenate([angles, rates, np.gradient(rates, time, axis=0)], axis=1)
 

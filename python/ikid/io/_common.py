@@ -87,18 +87,24 @@ def numbered_lines(path: Path, what: str, after: int = 0) -> Generator[tuple[int
     Close it (``.close()``) when stopping early."""
     src = str(path)
     lineno = 0
-    try:
-        with open(path, encoding="utf-8", newline=None) as f:
-            while line := f.readline(MAX_LINE_CHARS + 1):
-                lineno += 1
-                if len(line) > MAX_LINE_CHARS:
+    # Undecodable bytes are kept as surrogates and named with their line (a strict decoder
+    # fails on the whole 8 KB chunk it decodes, lines before the bad one).
+    with open(path, encoding="utf-8", errors="surrogateescape", newline=None) as f:
+        while line := f.readline(MAX_LINE_CHARS + 1):
+            lineno += 1
+            if len(line) > MAX_LINE_CHARS:
+                raise FileFormatError(
+                    f"{src}:{lineno}: a line longer than {MAX_LINE_CHARS} characters ({what})"
+                )
+            if not line.isascii():
+                try:
+                    line.encode("utf-8")
+                except UnicodeEncodeError:
                     raise FileFormatError(
-                        f"{src}:{lineno}: a line longer than {MAX_LINE_CHARS} characters ({what})"
-                    )
-                if lineno > after:
-                    yield lineno, line.rstrip("\n")
-    except UnicodeDecodeError:
-        raise FileFormatError(f"{src}: not a text file ({what})") from None
+                        f"{src}:{lineno}: not a text file: bytes that are not UTF-8 ({what})"
+                    ) from None
+            if lineno > after:
+                yield lineno, line.rstrip("\n")
 
 
 def unit_scale(units: str, source: str) -> float:

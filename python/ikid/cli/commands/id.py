@@ -101,6 +101,11 @@ def run(args: argparse.Namespace) -> int:
             "ikid id --sd: the exact Newton-Euler reference (--reference) has no standard deviation to "
             "give; leave out one of them"
         )
+    if args.resample and args.reference:
+        raise ikid.ArgumentError(
+            "ikid id --resample: resamples the angles to the network's rate; the exact Newton-Euler "
+            "reference (--reference) runs at the file's own rate: leave out --resample"
+        )
     output = (
         _named(_stem(args.output, Path(args.input).stem, create=False), ".sto")
         if _is_folder(args.output)
@@ -116,7 +121,8 @@ def run(args: argparse.Namespace) -> int:
         need = (
             "velocities and accelerations" if lowpass is None else f"the {lowpass:g} Hz low-pass (--lowpass)"
         )
-        return ikid.InputError(f"{args.input}: {rows} rows; at least {least} are needed for {need}")
+        counted = f"{rows} row" + ("" if rows == 1 else "s")
+        return ikid.InputError(f"{args.input}: {counted}; at least {least} are needed for {need}")
 
     blocks = mot_blocks(args.input)
     first = next(blocks, None)
@@ -134,7 +140,9 @@ def run(args: argparse.Namespace) -> int:
         )
     # The rate of the first block (a file's first 65,536 rows): time gaps are steps over 1.5 of it.
     rate = 1.0 / float(np.median(np.diff(first[0])))
-    angles: Iterator[tuple[np.ndarray, np.ndarray]] = itertools.chain([first], blocks)
+    angles: Iterator[tuple[np.ndarray, np.ndarray]] = _at_one_rate(
+        itertools.chain([first], blocks), rate, args.input
+    )
     notes = [f"angles low-passed at {lowpass:g} Hz" if lowpass else "angles not low-passed"]
     model = None
     if not args.reference:
@@ -218,3 +226,17 @@ def _reference(args: argparse.Namespace, state: np.ndarray) -> np.ndarray:
         length_scale=args.length_scale,
         mass_scale=args.mass_scale,
     )
+
+
+def _at_one_rate(blocks, rate_hz: float, source: str) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """The blocks, each checked to be at the first block's rate (its median step): a file that
+    changes rate is refused, not read as stretches too short to use."""
+    from ikid.pipeline import same_rate
+
+    for time_s, q in blocks:
+        if len(time_s) > 10 and not same_rate(rate := 1.0 / float(np.median(np.diff(time_s))), rate_hz):
+            raise ikid.InputError(
+                f"{source}: the rows from {time_s[0]:g} s are at {rate:g} Hz, the first rows at "
+                f"{rate_hz:g} Hz: `ikid id` takes a file at one rate (write one file per rate)"
+            )
+        yield time_s, q
