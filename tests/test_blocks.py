@@ -81,6 +81,12 @@ def test_a_bad_row_late_in_a_file_is_named_when_its_block_is_read(tmp_path):
     with pytest.raises(ikid.InputError, match=r"t\.trc:901: 'x1' is not a number"):
         for _ in blocks:
             pass
+    # A byte that is not UTF-8: named with its line too.
+    raw = (tmp_path / "t.trc").read_bytes().split(b"\n")
+    raw[900] = raw[900].replace(b"x1", b"1\xff")
+    (tmp_path / "t.trc").write_bytes(b"\n".join(raw))
+    with pytest.raises(ikid.InputError, match=r"t\.trc:901: not a text file"):
+        list(open_trc(tmp_path / "t.trc", block_frames=100).blocks())
 
 
 def _rows(run: pipeline.Run) -> tuple[np.ndarray, ...]:

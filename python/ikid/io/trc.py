@@ -60,7 +60,7 @@ def open_trc(
         raw = [f.readline(MAX_LINE_BYTES + 1) for _ in range(_HEADER_LINES)]
     for k, r in enumerate(raw):
         _check_line_length(r, src, k + 1)
-    lines = [_decoded(r, src).rstrip("\r\n") for r in raw]
+    lines = [_decoded(r, src, k).rstrip("\r\n") for k, r in enumerate(raw, start=1)]
     if not all(raw) or not lines[0].startswith("PathFileType"):
         raise FileFormatError(f"{src}:1: not a TRC file (expected a 'PathFileType' line and a 5-line header)")
     keys = lines[1].split("\t")
@@ -115,11 +115,13 @@ def _open_text(path: Path):
     return open(path, "rb")
 
 
-def _decoded(raw: bytes, src: str) -> str:
+def _decoded(raw: bytes, src: str, lineno: int) -> str:
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError:
-        raise FileFormatError(f"{src}: not a text file (TRC is tab-separated text)") from None
+        raise FileFormatError(
+            f"{src}:{lineno}: not a text file: bytes that are not UTF-8 (TRC is tab-separated text)"
+        ) from None
 
 
 #: An empty cell (a missing marker) between tabs, or before the end of a line.
@@ -160,7 +162,10 @@ def _trc_blocks(
                 break
             # Up to block_frames rows per block (a chunk of ~4 MB of text, split as needed).
             for at in range(0, len(raw_lines), block_frames):
-                chunk = [_decoded(r, src).rstrip("\r\n") for r in raw_lines[at : at + block_frames]]
+                chunk = [
+                    _decoded(r, src, lineno + k).rstrip("\r\n")
+                    for k, r in enumerate(raw_lines[at : at + block_frames], start=1)
+                ]
                 rows = _parse_rows(chunk, lineno, width, src)
                 lineno += len(chunk)
                 if len(rows) == 0:
