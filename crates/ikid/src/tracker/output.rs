@@ -177,16 +177,13 @@ impl Tracker {
         let counted = SVector::<f64, N_HAND>::from(self.forearm_variance_counted(&forearm));
         let used = hand + counted;
         let gain = p * h.transpose() * SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&used.map(|v| 1.0 / v));
-        let mut closed = (StateMatrix::identity() - gain * h) * self.transition;
-        // E = Σₙ Aⁿ K C Kᵀ Aⁿᵀ, summed by doubling: after k steps, 2ᵏ frames.
+        let closed = (StateMatrix::identity() - gain * h) * self.transition;
         let uncounted = forearm - SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&counted);
-        let mut e_forearm = gain * uncounted * gain.transpose();
-        let mut e_all = gain * (forearm + SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&hand)) * gain.transpose();
-        for _ in 0..DOUBLINGS {
-            e_forearm += closed * e_forearm * closed.transpose();
-            e_all += closed * e_all * closed.transpose();
-            closed = closed * closed;
-        }
+        let e_forearm = steady_sum(&closed, gain * uncounted * gain.transpose());
+        let e_all = steady_sum(
+            &closed,
+            gain * (forearm + SMatrix::<f64, N_HAND, N_HAND>::from_diagonal(&hand)) * gain.transpose(),
+        );
         (e_forearm.iter().chain(e_all.iter()).all(|v| v.is_finite())).then_some((e_forearm, e_all))
     }
 
@@ -203,6 +200,17 @@ impl Tracker {
             each(i, out, if estimated && sd { tracker.output_sd() } else { None }, estimated)
         })
     }
+}
+
+/// E = Σₙ Aⁿ Q Aⁿᵀ (n ≥ 0), the steady state of E = A E Aᵀ + Q for a stable A, summed by
+/// doubling: after k steps, 2ᵏ terms ([`DOUBLINGS`]).
+fn steady_sum(a: &StateMatrix, q: StateMatrix) -> StateMatrix {
+    let (mut power, mut sum) = (*a, q);
+    for _ in 0..DOUBLINGS {
+        sum += power * sum * power.transpose();
+        power = power * power;
+    }
+    sum
 }
 
 #[cfg(test)]
@@ -332,6 +340,24 @@ mod tests {
                 sd.tau[c]
             );
         }
+    }
+
+    #[test]
+    fn the_steady_sum_is_the_series_summed_term_by_term() {
+        // A stable A (spectral radius below 1) and a positive Q: the doubling's 2^20 terms
+        // against the series summed one term at a time until its terms vanish.
+        let mut next = super::super::testkit::lcg_gaussian(5);
+        let a = StateMatrix::from_fn(|_, _| 0.08 * next()) + StateMatrix::identity() * 0.5;
+        let m = StateMatrix::from_fn(|_, _| next());
+        let q = m * m.transpose();
+        let (mut term, mut want) = (q, StateMatrix::zeros());
+        for _ in 0..2000 {
+            want += term;
+            term = a * term * a.transpose();
+        }
+        assert!(term.norm() < 1e-12 * want.norm(), "the series has not converged");
+        let got = steady_sum(&a, q);
+        assert!((got - want).norm() < 1e-9 * want.norm(), "{got} vs {want}");
     }
 
     #[test]
