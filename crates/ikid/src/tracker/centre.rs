@@ -339,19 +339,23 @@ mod tests {
         let places =
             [Vector3::new(0.01, -0.06, 0.03), Vector3::new(0.0, -0.07, -0.02), Vector3::new(-0.03, -0.05, 0.0)];
         tracker.live[3..6].copy_from_slice(&places);
-        let centre = WristCentre { ch: Vector3::new(0.0, 0.01, 0.0), variance: 1e-6, ..WristCentre::origins() };
-        let mut rng = crate::rng::SplitMix::new(3);
-        let n = 4000;
-        let mut sum = 0.0;
-        for _ in 0..n {
-            let measured = places.map(|p| p + Vector3::from_fn(|_, _| sigma * rng.normal()));
-            let fit = fit_points(&places, &measured, [1.0; 3]).unwrap();
-            let moved = fit * nalgebra::Point3::from(centre.ch);
-            sum += (moved.coords - centre.ch).norm_squared() / 3.0;
+        // Away from the markers (the turn's share), and at their mean (the mean's alone: σ²/3).
+        let mean = (places[0] + places[1] + places[2]) / 3.0;
+        for (ch, variance) in [(Vector3::new(0.0, 0.01, 0.0), 1e-6), (mean, 0.0)] {
+            let centre = WristCentre { ch, variance, ..WristCentre::origins() };
+            let mut rng = crate::rng::SplitMix::new(3);
+            let n = 4000;
+            let mut sum = 0.0;
+            for _ in 0..n {
+                let measured = places.map(|p| p + Vector3::from_fn(|_, _| sigma * rng.normal()));
+                let fit = fit_points(&places, &measured, [1.0; 3]).unwrap();
+                let moved = fit * nalgebra::Point3::from(centre.ch);
+                sum += (moved.coords - centre.ch).norm_squared() / 3.0;
+            }
+            let monte_carlo = sum / n as f64 + centre.variance;
+            let ratio = tracker.centre_noise_variance(&centre) / monte_carlo;
+            assert!((ratio - 1.0).abs() < 0.25, "centre {ch:?}: formula / Monte Carlo = {ratio}");
         }
-        let monte_carlo = sum / n as f64 + centre.variance;
-        let ratio = tracker.centre_noise_variance(&centre) / monte_carlo;
-        assert!((ratio - 1.0).abs() < 0.25, "formula / Monte Carlo = {ratio}");
     }
 
     #[test]
