@@ -464,7 +464,8 @@ mod tests {
     fn of_a_rotations_two_euler_triples_the_one_near_the_state_is_taken() {
         // Each rotation has two triples (s_p, e_f, ad_ab) and (s_p + π, π − e_f, ad_ab + π): the
         // oracle is the body's own rotation of each (`body::wrist_rotation`), the same matrix.
-        for x in [[0.1, 0.2, 0.3], [-1.2, 0.7, -0.4], [2.9, -1.3, 1.0]] {
+        // The neutral posture too: the distance is a difference of angles, never a ratio.
+        for x in [[0.1, 0.2, 0.3], [-1.2, 0.7, -0.4], [2.9, -1.3, 1.0], [0.0, 0.0, 0.0]] {
             let other = [x[0] + PI, PI - x[1], x[2] + PI];
             let (r, r_other) = (body::wrist_rotation(&x), body::wrist_rotation(&other));
             assert!((r.matrix() - r_other.matrix()).norm() < 1e-12, "the premise: one rotation");
