@@ -659,6 +659,26 @@ mod tests {
     }
 
     #[test]
+    fn a_large_correction_is_relinearised_until_it_lands_on_the_markers() {
+        // A prior 0.2-0.4 rad off and exact hand markers far more certain than it: one
+        // linearisation at the prior lands where its tangent says, off by the curvature; the
+        // iterated correction goes on from there until a step is under RELINEARISE_RAD.
+        let body = BodyModel::default();
+        let forearm = body.forearm_pose(0.2);
+        let q = [0.3, -0.2, 0.1];
+        let frame = body.marker_frame(&q, &forearm);
+        let hand: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i]);
+        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        tracker.noise_variance = [1e-12; N_HAND];
+        let mut x = StateVector::zeros();
+        x.fixed_rows_mut::<3>(0).copy_from(&Vector3::new(q[0] - 0.3, q[1] + 0.4, q[2] - 0.2));
+        let mut p = tracker.initial_covariance() * 100.0;
+        tracker.correct(&forearm, &hand, None, None, &mut x, &mut p);
+        let off = (0..3).map(|c| (x[c] - q[c]).abs()).fold(0.0, f64::max);
+        assert!(off < 2e-3, "{off} rad from the markers' angles after the correction");
+    }
+
+    #[test]
     fn the_initial_covariance_is_as_wide_as_documented_and_uncorrelated() {
         // Standard deviations 0.1 rad, ~30 rad/s and ~300 rad/s² for every coordinate, nothing
         // correlated (a velocity or acceleration known a priori would slow the start).
