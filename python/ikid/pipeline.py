@@ -396,7 +396,7 @@ def run_blocks(
     read in blocks, :func:`ikid.io.open_markers`), at ``rate_hz`` (the file's; ``None`` for a
     single frame). With ``on_rows`` each block's output rows go to it as they are made and the
     :class:`Run` keeps only their counts: memory independent of the recording's length, with
-    ``resample_to_model`` too (:func:`ikid.io.resample.resample_stretches`)."""
+    ``resample_to_model`` too (:func:`ikid.io.resample_stretches`)."""
     model_arg = model
     model, how = pick_model(
         model, rate_hz, resample_to_model=resample_to_model, source=source, allow_unchecked=allow_unchecked

@@ -14,7 +14,7 @@ from ikid.io.c3d import read_c3d, write_c3d
 from ikid.io.csv import open_csv_markers, read_csv_markers, write_csv, write_csv_markers
 from ikid.io.mapping import MarkerMap
 from ikid.io.markers import FileFormatError, MarkerData, MarkerFile
-from ikid.io.resample import resample
+from ikid.io.resample import resample, resample_stretches
 from ikid.io.storage import (
     Storage,
     StorageFile,
@@ -80,6 +80,7 @@ __all__ = [
     "read_sto",
     "read_trc",
     "resample",
+    "resample_stretches",
     "write_c3d",
     "write_mot",
     "mot_writer",
