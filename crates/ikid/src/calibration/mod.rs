@@ -1475,6 +1475,13 @@ mod tests {
         let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: Some(&on_axis) };
         let e = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap_err().to_string();
         assert!(e.contains("do not span the hand") && e.contains("metacarpal heads (knuckles)"), "{e}");
+        // Apart (41 mm) but their line 14° from the hand's long axis: nearly collinear.
+        let along: Vec<f32> = (0..n)
+            .flat_map(|_| [lab(&hand_pose, [0.0, -0.05, 0.005]), lab(&hand_pose, [0.0, -0.09, -0.005])].concat())
+            .collect();
+        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: Some(&along) };
+        let e = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap_err().to_string();
+        assert!(e.contains("the hand's landmarks are nearly collinear: the metacarpal heads' line is 14°"), "{e}");
         let unseen = vec![f32::NAN; n * HAND_LANDMARK_FRAME_LEN];
         let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: Some(&unseen) };
         let e = Calibration::from_neutral(&markers, Some(trial), Side::Right).unwrap_err().to_string();
