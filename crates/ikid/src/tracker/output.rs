@@ -343,6 +343,25 @@ mod tests {
     }
 
     #[test]
+    fn a_torque_beyond_the_subjects_limit_flags_its_frame_implausible() {
+        // The same clean frames: under the subject's limit nothing is implausible; with a limit
+        // below every torque (1 µN·m), every frame with an estimate is, whatever else it carries.
+        use super::super::testkit::{frames, trajectory};
+        use crate::body::{BodyModel, MARKER_FRAME_LEN};
+        let f = frames(&BodyModel::default(), &trajectory(500, 1000.0), 0.3);
+        for (limit, flagged) in [(None, false), (Some(1e-6), true)] {
+            let mut tracker = Tracker::new(BodyModel::default(), Default::default()).unwrap();
+            if let Some(limit) = limit {
+                tracker.torque_limit = limit;
+            }
+            for frame in f.chunks_exact(MARKER_FRAME_LEN) {
+                let out = tracker.push(frame).unwrap().unwrap();
+                assert_eq!(out.status & status::IMPLAUSIBLE != 0, flagged, "limit {limit:?}: {out:?}");
+            }
+        }
+    }
+
+    #[test]
     fn the_steady_sum_is_the_series_summed_term_by_term() {
         // A stable A (spectral radius below 1) and a positive Q: the doubling's 2^20 terms
         // against the series summed one term at a time until its terms vanish.
