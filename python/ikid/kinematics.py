@@ -21,6 +21,7 @@ from collections.abc import Iterable, Iterator
 import numpy as np
 
 from ikid import _native
+from ikid.io.resample import GAP_STEPS
 
 #: The default cut-off of the angles' low-pass, Hz (OpenSim's inverse dynamics practice).
 DEFAULT_LOWPASS_HZ = 6.0
@@ -29,24 +30,12 @@ LOWPASS_ORDER = 4
 #: Rows ``filtfilt`` pads each end with (SciPy's default for this order's transfer function,
 #: kept for the second-order sections so the ends are filtered as they always were).
 PAD_ROWS = 3 * (LOWPASS_ORDER + 1)
-#: A step longer than this many median steps is a gap between stretches.
-GAP_STEPS = 1.5
 
 
 def min_stretch_rows(lowpass_hz: float | None) -> int:
     """The fewest rows a stretch needs: three for a second difference; more to filter it
     (each end is padded with :data:`PAD_ROWS` rows reflected from it)."""
     return PAD_ROWS + 1 if lowpass_hz else 3
-
-
-def stretches(time: np.ndarray) -> list[slice]:
-    """The runs of rows between time gaps (steps over :data:`GAP_STEPS` median steps)."""
-    if len(time) < 2:
-        return [slice(0, len(time))]
-    step = np.diff(time)
-    cuts = np.flatnonzero(step > GAP_STEPS * float(np.median(step))) + 1
-    bounds = [0, *cuts.tolist(), len(time)]
-    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
 
 def joint_states(q, time, lowpass_hz: float | None = DEFAULT_LOWPASS_HZ) -> np.ndarray:

@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import os
 import stat
-from collections.abc import Generator
+from collections.abc import Generator, Sequence
 from pathlib import Path
+
+import numpy as np
 
 from ikid import _native
 
@@ -105,6 +107,19 @@ def numbered_lines(path: Path, what: str, after: int = 0) -> Generator[tuple[int
                     ) from None
             if lineno > after:
                 yield lineno, line.rstrip("\n")
+
+
+def check_time_increases(time: np.ndarray, linenos: Sequence[int], last: float, src: str) -> None:
+    """A text reader's block of row times, each after the one before (``last``: the block
+    before's last, ``-inf`` for the first); an error naming the first row's line that is not."""
+    steps = np.diff(np.concatenate([[last], time]))
+    if np.any(steps <= 0):
+        k = int(np.argmax(steps <= 0))
+        before = last if k == 0 else time[k - 1]
+        raise FileFormatError(
+            f"{src}:{linenos[k]}: time {time[k]:g} s does not come after the row before's "
+            f"({before:g} s): time must increase from row to row"
+        )
 
 
 def unit_scale(units: str, source: str) -> float:

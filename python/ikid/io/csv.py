@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ikid.io._atomic import write_text_atomic
-from ikid.io._common import numbered_lines
+from ikid.io._common import check_time_increases, numbered_lines
 from ikid.io.markers import (
     MAX_FILE_BYTES,
     FileFormatError,
@@ -160,14 +160,7 @@ def _check_time(time: np.ndarray, linenos: list[int], last: float, src: str) -> 
     if not np.all(np.isfinite(time)):
         k = int(np.argwhere(~np.isfinite(time))[0][0])
         raise FileFormatError(f"{src}:{linenos[k]}: time {time[k]} is not a number")
-    steps = np.diff(np.concatenate([[last], time]))
-    if np.any(steps <= 0):
-        k = int(np.argmax(steps <= 0))
-        before = last if k == 0 else time[k - 1]
-        raise FileFormatError(
-            f"{src}:{linenos[k]}: time {time[k]:g} s does not come after the row before's "
-            f"({before:g} s): time must increase from row to row"
-        )
+    check_time_increases(time, linenos, last, src)
 
 
 def _count_rows(path: Path, after: int) -> int:

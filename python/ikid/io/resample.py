@@ -57,7 +57,8 @@ def _hermite(time: np.ndarray, values: np.ndarray, slopes: np.ndarray, new_time:
     return new_values
 
 
-#: A step longer than this many of the input's frame steps is a time gap between stretches.
+#: A step longer than this many frame steps is a time gap between stretches (here and in
+#: :mod:`ikid.kinematics`, whose low-pass treats each stretch alone).
 GAP_STEPS = 1.5
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from ikid import _native
 from ikid.io._atomic import atomic_output, check_size
-from ikid.io._common import numbered_lines
+from ikid.io._common import check_time_increases, numbered_lines
 from ikid.io.markers import MAX_FILE_BYTES, FileFormatError, check_readable
 
 
@@ -162,14 +162,7 @@ def _storage_blocks(
                 k = int(np.argwhere(~np.isfinite(rows))[0][0])
                 raise FileFormatError(f"{src}:{numbered[k][0]}: non-finite value")
             time = rows[:, 0]
-            steps = np.diff(np.concatenate([[last_time], time]))
-            if np.any(steps <= 0):
-                k = int(np.argmax(steps <= 0))
-                before = last_time if k == 0 else time[k - 1]
-                raise FileFormatError(
-                    f"{src}:{numbered[k][0]}: time {time[k]:g} s does not come after the row before's "
-                    f"({before:g} s): time must increase from row to row"
-                )
+            check_time_increases(time, [n for n, _ in numbered], last_time, src)
             last_time = float(time[-1])
             seen += len(rows)
             if expected is not None and seen > expected:
