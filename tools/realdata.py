@@ -64,6 +64,7 @@ class Recording:
     calibration_file: str  # the file holding the landmarks and the neutral frames
     side: str = "right"
     notes: list[str] = field(default_factory=list)
+    clusters: dict[str, list[str]] = field(default_factory=dict)  # segment -> its markers beyond three
 
 
 RECORDINGS = [
@@ -129,6 +130,8 @@ def map_toml(rec: Recording) -> str:
     lines = [f'side = "{rec.side}"', "[markers]"]
     lines += [f'{k} = "{v}"' for k, v in rec.markers.items()]
     lines += ["[landmarks]"] + [f'{k} = "{v}"' for k, v in rec.landmarks.items()]
+    if rec.clusters:
+        lines += ["[cluster]"] + [f"{k} = {json.dumps(v)}" for k, v in rec.clusters.items()]
     return "\n".join(lines) + "\n"
 
 
@@ -863,6 +866,51 @@ def pyomeca_styloids(folder: Path, work: Path, log: list[str]) -> dict:
     return out
 
 
+# pyomeca with more than three markers on a segment ([cluster], docs/markersets.md): the forearm's
+# radius markers with the radial styloid, the hand's with LASTC. The reference is the three-marker
+# clusters' kinematics, so a fourth skin marker (which slides otherwise) can only move the result
+# within the reference's own spread (1.96°); what it gives is a frame from any three markers.
+PYOMECA_CLUSTERS = {
+    "forearm of four (+STYLr)": {"forearm": ["Daphnee:STYLr"]},
+    "hand of four (+LASTC)": {"hand": ["Daphnee:LASTC"]},
+    "both": {"forearm": ["Daphnee:STYLr"], "hand": ["Daphnee:LASTC"]},
+}
+
+
+def pyomeca_clusters(folder: Path, work: Path, log: list[str]) -> dict:
+    """pyomeca with a segment of four markers (``[cluster]``), calibrated and scored as `process`
+    does, per map; with the rows `ik` wrote."""
+    base = next(r for r in RECORDINGS if r.name == "pyomeca")
+    out = {}
+    for k, (name, clusters) in enumerate(PYOMECA_CLUSTERS.items()):
+        rec = Recording(
+            f"pyomeca_clusters{k}",
+            base.trial,
+            base.reference,
+            base.markers,
+            base.landmarks,
+            base.trial,
+            clusters=clusters,
+        )
+        r = process(rec, folder, work, log)
+        out[name] = {
+            key: r.get(key) for key in ("calibrated", "calibrate_out", "ik", "track", "ik_per_frame")
+        }
+    return out
+
+
+def cluster_line(clusters: dict) -> str:
+    parts = []
+    for name, c in clusters.items():
+        ik, tr = c["ik"], c["track"]
+        rows = c["ik_per_frame"][1] if c["ik_per_frame"] else 0
+        parts.append(
+            f"{name}: ik {fmt(ik.rms_valid if ik else np.nan)}° ({rows} rows), track "
+            f"{fmt(tr.rms_valid if tr else np.nan)}°"
+        )
+    return "pyomeca, four-marker segments ([cluster]; geodesic RMS, valid frames): " + "; ".join(parts)
+
+
 def styloid_line(styloids: dict) -> str:
     parts = []
     for name, st in styloids.items():
@@ -1134,6 +1182,7 @@ def write_report(
     seconds: float,
     plug_in_gait: dict,
     styloids: dict,
+    clusters: dict,
 ) -> None:
     lines = [
         "# ikid on real recordings",
@@ -1202,7 +1251,7 @@ def write_report(
                 f"| {side} | {key} | {sc['rms'][0]:.2f} | {sc['rms'][1]:.2f} | {sc['r'][0]:.3f} / "
                 f"{sc['r'][1]:.3f} | {sc['rows']}/{sc['frames']} | {', '.join(sc['not_determined'])} |"
             )
-    lines += ["", f"- {styloid_line(styloids)}", ""]
+    lines += ["", f"- {styloid_line(styloids)}", f"- {cluster_line(clusters)}", ""]
     lines += [
         "## Notes",
         "",
@@ -1260,11 +1309,12 @@ def main(argv: list[str] | None = None) -> int:
         left = left_arm(folder, work, next(r for r in results if r["rec"].name == "racing"), log)
         plug_in_gait = pig(folder, work, log)
         styloids = pyomeca_styloids(folder, work, log)
+        clusters = pyomeca_clusters(folder, work, log)
         log = [entry.replace(str(work), "$WORK").replace(str(folder), "$REALDATA") for entry in log]
         for r in results:
             u = r["probes"]["uncalibrated"]
             u.message = u.message.replace(str(work), "$WORK").replace(str(folder), "$REALDATA")
-        for st in styloids.values():
+        for st in [*styloids.values(), *clusters.values()]:
             st["calibrate_out"] = (
                 st["calibrate_out"].replace(str(work), "$WORK").replace(str(folder), "$REALDATA")
             )
@@ -1286,6 +1336,7 @@ def main(argv: list[str] | None = None) -> int:
     for line in pig_summary(plug_in_gait):
         print(line)
     print(styloid_line(styloids))
+    print(cluster_line(clusters))
     if args.doc:
         doc = Path(args.doc)
         for r in results:
@@ -1296,7 +1347,7 @@ def main(argv: list[str] | None = None) -> int:
                 next(r for r in results if r["rec"].name == "racing"),
                 doc.parent / "realdata" / "racing_left.png",
             )
-        write_report(results, left, log, doc, time.perf_counter() - t0, plug_in_gait, styloids)
+        write_report(results, left, log, doc, time.perf_counter() - t0, plug_in_gait, styloids, clusters)
     by = {r["rec"].name: r for r in results}
     n_div = count_diverged(results, left)
     last = " ".join(

@@ -52,6 +52,9 @@ __all__ = [
     "check_default_placement",
     "hand_from_one_marker",
     "one_marker_hand_landmarks",
+    "learn_cluster_shape",
+    "fit_cluster",
+    "MAX_CLUSTER_FIT_RESIDUAL_M",
     "HAND_POINT",
     "ONE_HAND_MARKER_UNDETERMINED",
 ]
@@ -284,6 +287,10 @@ def check_marker_units(frames: _Floats) -> None: ...
 def check_default_placement(frames: _Floats, length_scale: float = 1.0) -> None: ...
 def hand_from_one_marker(frames: _Floats, left: bool = False) -> npt.NDArray[np.float64]: ...
 def one_marker_hand_landmarks(frames: _Floats) -> npt.NDArray[np.float64]: ...
+def learn_cluster_shape(frames: _Floats, n_markers: int) -> npt.NDArray[np.float64]: ...
+def fit_cluster(frames: _Floats, shape: _Floats) -> tuple[npt.NDArray[np.float64], list[int], int]: ...
+
+MAX_CLUSTER_FIT_RESIDUAL_M: float
 
 HAND_POINT: tuple[str, str, str]
 ONE_HAND_MARKER_UNDETERMINED: str

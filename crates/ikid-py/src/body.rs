@@ -18,6 +18,9 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(check_marker_units, m)?)?;
     m.add_function(wrap_pyfunction!(hand_from_one_marker, m)?)?;
     m.add_function(wrap_pyfunction!(one_marker_hand_landmarks, m)?)?;
+    m.add_function(wrap_pyfunction!(learn_cluster_shape, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_cluster, m)?)?;
+    m.add("MAX_CLUSTER_FIT_RESIDUAL_M", ikid::cluster::MAX_FIT_RESIDUAL_M)?;
     let hp = ikid::body::HAND_POINT;
     m.add("HAND_POINT", (hp.name, hp.segment.name(), hp.description))?;
     m.add("ONE_HAND_MARKER_UNDETERMINED", COORDINATES[ikid::body::ONE_HAND_MARKER_UNDETERMINED].name)?;
@@ -59,6 +62,38 @@ fn one_marker_hand_landmarks<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>) -
     with_f64_rows(frames, "frames", ikid::body::ONE_HAND_MARKER_FRAME_LEN, |v, n| {
         let points = ikid::body::one_marker_hand_landmarks(v).py_err()?;
         points.into_pyarray(py).reshape([n, 6])
+    })
+}
+
+/// The rigid shape `(k, 3)` of a cluster of `n_markers` (three or more) from frames
+/// `(n, 3·n_markers)` (metres, NaN = missing): the core's `cluster::ClusterShape::learn`.
+#[pyfunction]
+fn learn_cluster_shape<'py>(
+    py: Python<'py>,
+    frames: &Bound<'py, PyAny>,
+    n_markers: usize,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    with_f64_rows(frames, "frames", 3 * n_markers, |v, _| {
+        let shape = ikid::cluster::ClusterShape::learn(v, n_markers).py_err()?;
+        shape.points().into_pyarray(py).reshape([n_markers, 3])
+    })
+}
+
+/// A cluster's shape `(k, 3)` fitted to each frame `(n, 3k)`: `(placed (n, 3k), left_out (k,)
+/// frames each marker was seen but left out of the fit, undetermined frames)` (the core's
+/// `cluster::ClusterShape::fit`).
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn fit_cluster<'py>(
+    py: Python<'py>,
+    frames: &Bound<'py, PyAny>,
+    shape: &Bound<'py, PyAny>,
+) -> PyResult<(Bound<'py, PyArray2<f64>>, Vec<usize>, usize)> {
+    let shape = with_f64_rows(shape, "shape", 3, |v, _| ikid::cluster::ClusterShape::from_points(v).py_err())?;
+    let k = shape.len();
+    with_f64_rows(frames, "frames", 3 * k, |v, n| {
+        let fit = shape.fit(v).py_err()?;
+        Ok((fit.placed.into_pyarray(py).reshape([n, 3 * k])?, fit.left_out, fit.undetermined))
     })
 }
 

@@ -119,6 +119,7 @@
 
 pub mod body;
 pub mod calibration;
+pub mod cluster;
 pub mod error;
 pub mod features;
 pub mod gaps;

@@ -29,12 +29,23 @@ neither: with them the hand's frame is its own)::
     medial_epicondyle = "EPICm"
     radial_styloid = "STYLr"
     ulnar_styloid = "STYLu"
+
+A segment marked by more than three markers (a four-marker plate, a cluster of skin markers)
+names three of them in ``[markers]`` and the rest in ``[cluster]``, per segment: each frame the
+cluster's rigid shape (learned from the recording) is fitted to every one of its markers seen,
+and the three take the places the fit gives them (core ``cluster``)::
+
+    [cluster]
+    forearm = ["R_FA4"]
+    hand = ["R_H4", "R_H5"]
 """
 
 from __future__ import annotations
 
+import json
 import os
 import sys
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -75,6 +86,11 @@ class MarkerMap:
     source: str = "identity"
     landmarks: dict[str, str] = field(default_factory=dict)
     side: str = "right"
+    #: Segment -> the labels of further markers rigid with its three (``[cluster]``).
+    clusters: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    #: (file, segment) -> the cluster's shape learned from that file's first block: every
+    #: block of a file is fitted with one shape.
+    _shapes: dict[tuple[str, str], np.ndarray] = field(default_factory=dict, compare=False, repr=False)
 
     @staticmethod
     def identity() -> MarkerMap:
@@ -144,9 +160,14 @@ class MarkerMap:
             raise FileFormatError(
                 f"{source}: the label for landmark {', '.join(bad)} must be a non-empty string"
             )
+        clusters = _clusters(table.get("cluster", {}), source, seen, hand_point in markers)
         # A marker may also be a landmark (RSP on the radial styloid named radial_styloid too), on
         # its own segment only: a forearm landmark on a hand marker moves with the hand.
         segment_of = {m: _segment(m) for m in names}
+        for segment, extra in clusters.items():
+            for label in extra:
+                seen[label] = f"in the {segment}'s [cluster]"
+                segment_of[seen[label]] = segment
         forearm_landmarks = set(landmark_names())
         for k, v in landmarks.items():
             marker = seen.get(v.strip())
@@ -182,6 +203,7 @@ class MarkerMap:
             source,
             {k: landmarks[k].strip() for k in known if k in landmarks},
             side,
+            clusters,
         )
 
     @staticmethod
@@ -309,6 +331,72 @@ class MarkerMap:
             return columns
         return _native.hand_from_one_marker(columns, left=self.side == "left")
 
+    def fit_clusters(self, data: MarkerData, columns: np.ndarray) -> np.ndarray:
+        """``columns`` (``labels_in_ikid_order``'s, ``(n, 3m)``) with each segment that has a
+        ``[cluster]`` given its three markers where the cluster's rigid shape, fitted to every
+        marker of it seen, puts them (core ``cluster``); a frame with fewer than three of its
+        markers seen (or whose markers break the shape) keeps the three as they are. The shape
+        is learned from the first block of ``data``'s file that is fitted and kept for the
+        rest. A marker of the cluster
+        often left out of the fit (it leaves its place), or frames whose markers break the
+        shape, are said as a :class:`MarkerMapWarning`."""
+        if not self.clusters:
+            return columns
+        source = data.source or "markers"
+        columns = np.array(columns, np.float64)
+        for segment, extra in self.clusters.items():
+            first = {"forearm": 0, "hand": 9}[segment]  # the columns' order: forearm's three, hand's three
+            names = self.marker_names()[first // 3 : first // 3 + 3]
+            labels = [self.labels[m] for m in names] + list(extra)
+            absent = [lab for lab in extra if lab not in data.labels]
+            if absent:
+                raise _native.InputError(
+                    f"{source}: the {segment}'s cluster label(s) {', '.join(absent)} not found; the file has "
+                    f"{', '.join(data.labels)}"
+                )
+            cluster = np.concatenate(
+                [columns[:, first : first + 9]] + [data.marker(lab) for lab in extra], axis=1
+            )
+            key = (source, segment)
+            named = (
+                ", ".join(f"{n} {lab!r}" for n, lab in zip(names, labels, strict=False))
+                + ", "
+                + ", ".join(repr(lab) for lab in extra)
+            )
+            if key not in self._shapes:
+                try:
+                    self._shapes[key] = _native.learn_cluster_shape(cluster, len(labels))
+                except _native.IkidError as e:
+                    raise _native.InputError(
+                        f"{source}: the {segment}'s cluster ({named}): {e.reason or e}"
+                    ) from None
+            placed, left_out, undetermined = _native.fit_cluster(cluster, self._shapes[key])
+            # A frame the cluster does not determine keeps its three markers as seen (ikid's gap
+            # filling and marker checks take it from there, as for a three-marker segment).
+            fitted = np.isfinite(placed[:, :9]).all(axis=1)
+            columns[fitted, first : first + 9] = placed[fitted, :9]
+            seen = np.isfinite(cluster.reshape(len(cluster), -1, 3)).all(axis=2).sum(axis=0)
+            margin = 1e3 * _native.MAX_CLUSTER_FIT_RESIDUAL_M
+            for label, out, n_seen in zip(labels, left_out, seen, strict=True):
+                if out > max(1, 0.01 * n_seen):
+                    warnings.warn(
+                        f"{source}: marker {label!r} of the {segment}'s cluster is more than {margin:.0f} mm "
+                        f"from where the cluster's other markers put it in {out} of the {n_seen} frames it "
+                        "is seen in, and is left out of those frames' fit: it does not keep its place on the "
+                        "cluster; check its label, or that it is on the same rigid cluster",
+                        MarkerMapWarning,
+                        stacklevel=3,
+                    )
+            if undetermined:
+                warnings.warn(
+                    f"{source}: in {undetermined} frame(s) the {segment}'s cluster markers seen do not keep "
+                    f"its shape (within {margin:.0f} mm) or lie on a line: those frames read its three "
+                    "markers as they are",
+                    MarkerMapWarning,
+                    stacklevel=3,
+                )
+        return columns
+
     def labels_in_ikid_order(self, data: MarkerData) -> list[str]:
         """The file's labels for ikid's markers, in ikid's order; an error lists what the file
         has if any is absent."""
@@ -385,6 +473,23 @@ class MarkerMap:
                 "observed); "
                 "RSP/USP must be on the styloids and FAP on the elbow (docs/markersets.md)"
             )
+        if self.clusters:
+            lines += [
+                "",
+                "# further markers on a segment's rigid cluster, fitted with its three",
+                "[cluster]",
+            ]
+            lines += [
+                f"{segment} = [{', '.join(json.dumps(lab) for lab in labels)}]"
+                for segment, labels in self.clusters.items()
+            ]
+        elif not self.one_hand_marker:
+            lines += [
+                "",
+                "# more than three markers on a segment? three above, the rest here (docs/markersets.md)",
+                "# [cluster]",
+                '# forearm = ["LABEL"]',
+            ]
         lm_descr = dict(_native.Calibration.LANDMARKS) | dict(_native.Calibration.HAND_LANDMARKS)
         lines += [
             "",
@@ -397,6 +502,51 @@ class MarkerMap:
             else:
                 lines.append(f'# {k} = "LABEL"  # {lm_descr[k]}')
         return "\n".join(lines) + "\n"
+
+
+def _clusters(
+    table: object, source: str, seen: dict[str, str], one_hand_marker: bool
+) -> dict[str, tuple[str, ...]]:
+    """The ``[cluster]`` table checked: segment -> its further markers' labels, each a label no
+    other marker has."""
+    if not isinstance(table, dict):
+        raise FileFormatError(f"{source}: [cluster] must be a table of segment = [labels]")
+    segments = ("forearm", "hand")
+    unknown = sorted(set(table) - set(segments))
+    if unknown:
+        raise FileFormatError(
+            f"{source}: [cluster] names {', '.join(unknown)}; its keys are the segments: "
+            f"{', '.join(segments)}"
+        )
+    clusters: dict[str, tuple[str, ...]] = {}
+    taken = dict(seen)
+    for segment in segments:
+        labels = table.get(segment)
+        if labels is None:
+            continue
+        if (
+            not isinstance(labels, list)
+            or not labels
+            or not all(isinstance(v, str) and v.strip() for v in labels)
+        ):
+            raise FileFormatError(
+                f"{source}: [cluster] {segment} must be a list of one or more labels (the markers beyond "
+                f"the {segment}'s three, on the same rigid cluster)"
+            )
+        if one_hand_marker:
+            raise FileFormatError(
+                f"{source}: [cluster] {segment} with a one-marker hand ({_native.HAND_POINT[0]}): that set "
+                "builds each segment anew each frame from the styloids, the epicondyle and the hand marker, "
+                "not from a rigid cluster; name three hand markers (MC2, MC5, MCB) to use clusters"
+            )
+        for label in (v.strip() for v in labels):
+            if label in taken:
+                raise FileFormatError(
+                    f"{source}: label {label!r} is given to both {taken[label]} and the {segment}'s cluster"
+                )
+            taken[label] = f"the {segment}'s cluster"
+        clusters[segment] = tuple(v.strip() for v in labels)
+    return clusters
 
 
 def _segment(marker: str) -> str:

@@ -98,9 +98,10 @@ class MarkerData:
         mapping = mapping or MarkerMap.identity()
         columns = np.concatenate([self.marker(label) for label in mapping.labels_in_ikid_order(self)], axis=1)
         source = self.source or "markers"
-        frames = mapping.ikid_frames(columns)
         if whole:
             check_markers_seen(seen_markers(columns), mapping, source)
+        frames = mapping.ikid_frames(mapping.fit_clusters(self, columns))
+        if whole:
             if mapping.one_hand_marker and not np.isfinite(frames[:, 9:]).all(axis=1).any():
                 raise _native.InputError(
                     f"{source}: no frame gives the hand's direction from its one marker "

@@ -12,6 +12,7 @@ import re
 import socket
 import struct
 import time
+import warnings
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from typing import Any, BinaryIO, NamedTuple
@@ -20,7 +21,7 @@ import numpy as np
 
 from ikid import _native
 from ikid.io._common import ikid_marker_names
-from ikid.io.mapping import MarkerMap
+from ikid.io.mapping import MarkerMap, MarkerMapWarning
 
 #: Longest text line read from stdin or a datagram, bytes: a frame of 18 numbers with a frame
 #: number and a time is under 1 KiB; a longer line is refused (its bytes read and dropped in
@@ -65,6 +66,16 @@ def marker_columns(
     each), from the source's marker label -> its three channels and the marker map."""
     columns: list[int] = []
     absent: list[str] = []
+    if marker_map.clusters:
+        # A cluster's shape is learned from a recording's frames; a live source is read a frame
+        # at a time, so each segment is its three markers here (a calibration holds for both).
+        extra = ", ".join(lab for labels in marker_map.clusters.values() for lab in labels)
+        warnings.warn(
+            f"{source}: the marker map's [cluster] markers ({extra}) are not used on a live source: each "
+            "segment is read from its three [markers]",
+            MarkerMapWarning,
+            stacklevel=2,
+        )
     for m in ikid_marker_names():
         label = marker_map.label_of(m)
         if label not in positions:

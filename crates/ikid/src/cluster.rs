@@ -1,0 +1,432 @@
+//! Segments marked by more than three markers: a four-marker plate, a cluster of skin markers.
+//!
+//! ikid's frames hold three markers per segment ([`crate::body::MARKERS`]). A lab that puts
+//! more on a segment names three of them as that segment's markers and the rest as the same
+//! rigid cluster; each frame, the cluster's shape (learned from the recording) is fitted to
+//! every marker of it that is seen, and the three take the places the fit gives them. So a
+//! frame missing one of the three still has them (from any three markers of the cluster), the
+//! noise is averaged over every marker, and a marker that leaves its place in a frame (a
+//! swapped label, a marker knocked off) is left out of that frame's fit rather than bending it.
+//!
+//! The three keep their physical meaning (the fit puts the markers themselves, not new points),
+//! so a calibration measured with the cluster holds for the three alone and the reverse.
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+
+/// Fewest frames with every marker of the cluster seen that its shape is learned from.
+pub const MIN_WHOLE_FRAMES: usize = 10;
+/// Farthest a marker may lie from where the frame's fit of the rest puts it, m: beyond it the
+/// marker is left out of that frame's fit (and, when no more than three are left, the frame
+/// has no cluster). The same margin as a segment's markers may stretch over a recording
+/// (skin markers move up to 12 mm on the real recordings; a marker on another segment 18 mm
+/// and more).
+pub const MAX_FIT_RESIDUAL_M: f64 = 0.015;
+/// Narrowest spread of the markers a frame is fitted to, m (the RMS distance from their best
+/// line): below it their roll about that line is the markers' noise.
+pub const MIN_CLUSTER_WIDTH_M: f64 = 0.003;
+/// Most frames the shape is learned from (evenly spaced over the whole ones): more average
+/// nothing further and cost time.
+const MAX_SHAPE_FRAMES: usize = 2000;
+/// Rounds of Procrustes averaging (each aligns every frame to the last round's mean).
+const SHAPE_ROUNDS: usize = 4;
+
+/// A cluster's rigid shape: each marker's place in the cluster's own frame (centroid at the
+/// origin), metres.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClusterShape {
+    points: Vec<Vector3<f64>>,
+}
+
+/// One frame of [`ClusterShape::fit`]: every marker where the fitted shape puts it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClusterFit {
+    /// `(n, 3k)`: each frame's markers as the fitted shape places them, metres; NaN in a frame
+    /// the cluster is not determined in (under three usable markers, or too narrow).
+    pub placed: Vec<f64>,
+    /// Per marker: frames it was seen in but left out of the fit (beyond
+    /// [`MAX_FIT_RESIDUAL_M`] from where the others put it).
+    pub left_out: Vec<usize>,
+    /// Frames with three or more markers seen whose cluster is still not determined (the seen
+    /// markers too narrow, or three that do not keep the shape).
+    pub undetermined: usize,
+}
+
+impl ClusterShape {
+    /// The shape of a cluster of `n_markers` from frames `(n, 3·n_markers)` (metres, NaN =
+    /// missing): generalised Procrustes over the frames with every marker seen (each rotated
+    /// and moved onto the running shape, then averaged), a marker off its place in a frame
+    /// (beyond [`MAX_FIT_RESIDUAL_M`]) left out of that frame's share.
+    pub fn learn(frames: &[f64], n_markers: usize) -> crate::Result<Self> {
+        let width = 3 * n_markers;
+        if n_markers < 3 || !frames.len().is_multiple_of(width) {
+            return Err(bad(format!(
+                "{} values is not whole frames of {n_markers} markers (a cluster has three or more)",
+                frames.len()
+            )));
+        }
+        let whole: Vec<&[f64]> = frames.chunks_exact(width).filter(|f| f.iter().all(|v| v.is_finite())).collect();
+        if whole.len() < MIN_WHOLE_FRAMES {
+            return Err(bad(format!(
+                "the cluster's {n_markers} markers are all seen in {} of {} frames; its shape is learned from at \
+                 least {MIN_WHOLE_FRAMES} frames with every one of them",
+                whole.len(),
+                frames.len() / width
+            )));
+        }
+        let step = whole.len().div_ceil(MAX_SHAPE_FRAMES);
+        let samples: Vec<Vec<Vector3<f64>>> = whole.iter().step_by(step).map(|f| centred(&points(f))).collect();
+        let all = vec![true; n_markers];
+        // A first shape robust to frames where a marker is off its place (a swapped label, a
+        // marker knocked): each marker's median over the frames rotated onto the first.
+        let aligned: Vec<Vec<Vector3<f64>>> = samples
+            .iter()
+            .map(|sample| {
+                let (rot, _) = kabsch(sample, &samples[0], &all);
+                sample.iter().map(|p| rot * p).collect()
+            })
+            .collect();
+        let mut shape = Self {
+            points: centred(&(0..n_markers).map(|m| median_point(aligned.iter().map(|a| a[m]))).collect::<Vec<_>>()),
+        };
+        // Then the mean over the frames, each fitted as `fit` fits it (a marker off its place
+        // left out of that frame), brought into the shape's frame.
+        for _ in 0..SHAPE_ROUNDS {
+            let mut sum = vec![Vector3::zeros(); n_markers];
+            let mut count = vec![0usize; n_markers];
+            for sample in &samples {
+                if let Some((used, rot, shift)) = shape.fit_frame(sample, all.clone()) {
+                    for m in (0..n_markers).filter(|&m| used[m]) {
+                        sum[m] += rot.transpose() * (sample[m] - shift);
+                        count[m] += 1;
+                    }
+                }
+            }
+            if count.contains(&0) {
+                break;
+            }
+            shape.points = centred(&sum.iter().zip(&count).map(|(s, &c)| s / c as f64).collect::<Vec<_>>());
+        }
+        let mean = shape.points;
+        if width_of(&mean, &vec![true; n_markers]) < MIN_CLUSTER_WIDTH_M {
+            return Err(bad(format!(
+                "the cluster's markers lie on a line (within {:.1} mm): they do not give its orientation",
+                1e3 * MIN_CLUSTER_WIDTH_M
+            )));
+        }
+        Ok(Self { points: mean })
+    }
+
+    /// A shape from its markers' places `(k, 3)` (as [`Self::points`] gives them).
+    pub fn from_points(flat: &[f64]) -> crate::Result<Self> {
+        if flat.len() < 9 || !flat.len().is_multiple_of(3) || !flat.iter().all(|v| v.is_finite()) {
+            return Err(bad(format!("{} values are not three or more finite points", flat.len())));
+        }
+        Ok(Self { points: centred(&points(flat)) })
+    }
+
+    /// Number of markers in the cluster.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Always false: a cluster has three or more markers.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// Each marker's place in the cluster's frame, `(k, 3)` flattened, metres.
+    pub fn points(&self) -> Vec<f64> {
+        self.points.iter().flat_map(|p| [p.x, p.y, p.z]).collect()
+    }
+
+    /// Fits the shape to each frame `(n, 3k)` (metres, NaN = missing): a least-squares rigid
+    /// fit (Kabsch) to the markers seen, the one farthest from the fit left out while more
+    /// than [`MAX_FIT_RESIDUAL_M`] off and more than three remain.
+    pub fn fit(&self, frames: &[f64]) -> crate::Result<ClusterFit> {
+        let k = self.points.len();
+        if !frames.len().is_multiple_of(3 * k) {
+            return Err(bad(format!("{} values is not whole frames of the cluster's {k} markers", frames.len())));
+        }
+        let mut placed = Vec::with_capacity(frames.len());
+        let mut left_out = vec![0; k];
+        let mut undetermined = 0;
+        for f in frames.chunks_exact(3 * k) {
+            let lab = points(f);
+            let seen: Vec<bool> = lab.iter().map(|p| p.iter().all(|v| v.is_finite())).collect();
+            match self.fit_frame(&lab, seen.clone()) {
+                Some((used, rot, shift)) => {
+                    for (i, p) in self.points.iter().enumerate() {
+                        let q = rot * p + shift;
+                        placed.extend_from_slice(&[q.x, q.y, q.z]);
+                        left_out[i] += usize::from(seen[i] && !used[i]);
+                    }
+                }
+                None => {
+                    undetermined += usize::from(seen.iter().filter(|&&s| s).count() >= 3);
+                    placed.extend(std::iter::repeat_n(f64::NAN, 3 * k));
+                }
+            }
+        }
+        Ok(ClusterFit { placed, left_out, undetermined })
+    }
+
+    /// The frame's fit: the markers used, the rotation and translation from the shape's frame
+    /// to the lab. None when fewer than three usable markers are left or they are too narrow.
+    fn fit_frame(&self, lab: &[Vector3<f64>], mut used: Vec<bool>) -> Option<(Vec<bool>, Matrix3<f64>, Vector3<f64>)> {
+        loop {
+            let count = used.iter().filter(|&&u| u).count();
+            if count < 3 || width_of(&self.points, &used) < MIN_CLUSTER_WIDTH_M {
+                return None;
+            }
+            let (rot, shift) = kabsch(&self.points, lab, &used);
+            let (worst, residual) = (0..lab.len())
+                .filter(|&i| used[i])
+                .map(|i| (i, (rot * self.points[i] + shift - lab[i]).norm()))
+                .max_by(|a, b| a.1.total_cmp(&b.1))?;
+            if residual <= MAX_FIT_RESIDUAL_M {
+                return Some((used, rot, shift));
+            }
+            if count == 3 {
+                return None;
+            }
+            used[worst] = false;
+        }
+    }
+}
+
+fn bad(detail: String) -> crate::Error {
+    crate::Error::BadArgument { what: "cluster", detail }
+}
+
+fn points(f: &[f64]) -> Vec<Vector3<f64>> {
+    f.chunks_exact(3).map(|p| Vector3::new(p[0], p[1], p[2])).collect()
+}
+
+/// Each coordinate's median of `points`.
+fn median_point(points: impl Iterator<Item = Vector3<f64>>) -> Vector3<f64> {
+    let points: Vec<Vector3<f64>> = points.collect();
+    Vector3::from_fn(|axis, _| {
+        let mut values: Vec<f64> = points.iter().map(|p| p[axis]).collect();
+        values.sort_by(f64::total_cmp);
+        let half = values.len() / 2;
+        if values.len() % 2 == 1 { values[half] } else { (values[half - 1] + values[half]) / 2.0 }
+    })
+}
+
+fn centred(points: &[Vector3<f64>]) -> Vec<Vector3<f64>> {
+    let c = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
+    points.iter().map(|p| p - c).collect()
+}
+
+/// RMS distance of the `used` points from their best line: the second principal spread.
+fn width_of(points: &[Vector3<f64>], used: &[bool]) -> f64 {
+    let chosen: Vec<Vector3<f64>> = points.iter().zip(used).filter(|&(_, &u)| u).map(|(p, _)| *p).collect();
+    let centred = centred(&chosen);
+    let scatter: Matrix3<f64> = centred.iter().map(|p| p * p.transpose()).sum::<Matrix3<f64>>() / chosen.len() as f64;
+    let mut eigen = SymmetricEigen::new(scatter).eigenvalues;
+    eigen.as_mut_slice().sort_by(|a, b| b.total_cmp(a));
+    eigen[1].max(0.0).sqrt()
+}
+
+/// Rotation and translation taking the `used` `local` points onto the `lab` ones, least
+/// squares (Kabsch, a reflection excluded).
+fn kabsch(local: &[Vector3<f64>], lab: &[Vector3<f64>], used: &[bool]) -> (Matrix3<f64>, Vector3<f64>) {
+    let pairs: Vec<(Vector3<f64>, Vector3<f64>)> =
+        local.iter().zip(lab).zip(used).filter(|&(_, &u)| u).map(|((a, b), _)| (*a, *b)).collect();
+    let n = pairs.len() as f64;
+    let lc = pairs.iter().map(|p| p.0).sum::<Vector3<f64>>() / n;
+    let gc = pairs.iter().map(|p| p.1).sum::<Vector3<f64>>() / n;
+    let h: Matrix3<f64> = pairs.iter().map(|(a, b)| (a - lc) * (b - gc).transpose()).sum();
+    let svd = h.svd(true, true);
+    let (u, v_t) = (svd.u.expect("requested"), svd.v_t.expect("requested"));
+    let mut fix = Matrix3::identity();
+    fix[(2, 2)] = (v_t.transpose() * u.transpose()).determinant().signum();
+    let rot = v_t.transpose() * fix * u.transpose();
+    (rot, gc - rot * lc)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix as Rng;
+    use nalgebra::{Rotation3, Vector3};
+
+    /// A four-marker plate (not symmetric), in its own frame, m.
+    const PLATE: [[f64; 3]; 4] = [[0.0, 0.0, 0.0], [0.045, 0.0, 0.0], [0.01, 0.04, 0.0], [0.03, 0.025, 0.02]];
+
+    /// Frames of the plate turning and moving: each frame's pose, and its markers (`noise`:
+    /// Gaussian per coordinate, m).
+    /// The plate's pose in a frame: rotation, then translation.
+    type Pose = (Rotation3<f64>, Vector3<f64>);
+
+    fn moving(n: usize, noise: f64, rng: &mut Rng) -> (Vec<Pose>, Vec<f64>) {
+        let mut poses = Vec::new();
+        let mut frames = Vec::new();
+        for i in 0..n {
+            let t = i as f64 * 0.01;
+            let rot = Rotation3::from_euler_angles(0.9 * (1.1 * t).sin(), 0.5 * (0.7 * t).cos(), 1.3 * t);
+            let shift = Vector3::new(0.3 + 0.1 * t.sin(), 1.1, -0.2 * t.cos());
+            for p in PLATE {
+                let q = rot * Vector3::from(p) + shift;
+                frames.extend(q.iter().map(|v| v + noise * rng.normal()));
+            }
+            poses.push((rot, shift));
+        }
+        (poses, frames)
+    }
+
+    /// Where a pose puts the plate's marker `m` (the oracle: the plate's own geometry).
+    fn truth(pose: &Pose, m: usize) -> Vector3<f64> {
+        pose.0 * Vector3::from(PLATE[m]) + pose.1
+    }
+
+    fn placed(fit: &ClusterFit, frame: usize, m: usize) -> Vector3<f64> {
+        let i = 12 * frame + 3 * m;
+        Vector3::new(fit.placed[i], fit.placed[i + 1], fit.placed[i + 2])
+    }
+
+    #[test]
+    fn learns_the_plates_shape_from_noisy_frames() {
+        let mut rng = Rng::new(1);
+        let (n, noise) = (2000, 0.001);
+        let (_, frames) = moving(n, noise, &mut rng);
+        let shape = ClusterShape::learn(&frames, 4).unwrap();
+        // Every distance between two markers as the plate has it (distances do not depend on
+        // the shape's frame), within five standard errors of the difference of two means.
+        let tolerance = 5.0 * noise * (2.0 / n as f64).sqrt();
+        let learned = shape.points();
+        for a in 0..4 {
+            for b in a + 1..4 {
+                let d = (Vector3::from(PLATE[a]) - Vector3::from(PLATE[b])).norm();
+                let e = (Vector3::from_row_slice(&learned[3 * a..3 * a + 3])
+                    - Vector3::from_row_slice(&learned[3 * b..3 * b + 3]))
+                .norm();
+                assert!((d - e).abs() < tolerance, "{a}-{b}: {d} learned {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn places_a_missing_marker_where_the_plate_holds_it() {
+        let mut rng = Rng::new(2);
+        let (poses, mut frames) = moving(300, 0.0, &mut rng);
+        let shape = ClusterShape::learn(&frames, 4).unwrap();
+        // Frames 100-199 lose marker 0, frames 200-249 marker 3.
+        for f in 100..200 {
+            frames[12 * f..12 * f + 3].fill(f64::NAN);
+        }
+        for f in 200..250 {
+            frames[12 * f + 9..12 * f + 12].fill(f64::NAN);
+        }
+        let fit = shape.fit(&frames).unwrap();
+        for f in [0, 150, 220, 299] {
+            for m in 0..4 {
+                let err = (placed(&fit, f, m) - truth(&poses[f], m)).norm();
+                assert!(err < 1e-9, "frame {f} marker {m}: {err} m");
+            }
+        }
+        assert_eq!(fit.left_out, vec![0; 4]);
+        assert_eq!(fit.undetermined, 0);
+    }
+
+    #[test]
+    fn averages_the_noise_of_every_marker() {
+        // Four markers' fit places each marker nearer its true place than its own noisy reading.
+        let mut rng = Rng::new(3);
+        let (poses, frames) = moving(2000, 0.002, &mut rng);
+        let shape = ClusterShape::learn(&frames, 4).unwrap();
+        let fit = shape.fit(&frames).unwrap();
+        let (mut raw, mut fitted) = (0.0, 0.0);
+        for (f, pose) in poses.iter().enumerate() {
+            for m in 0..3 {
+                let i = 12 * f + 3 * m;
+                raw += (Vector3::new(frames[i], frames[i + 1], frames[i + 2]) - truth(pose, m)).norm_squared();
+                fitted += (placed(&fit, f, m) - truth(pose, m)).norm_squared();
+            }
+        }
+        // Least squares over 4 markers leaves 3·4 - 6 = 6 of 12 noise dimensions in the 4
+        // markers: each marker's error variance falls to about half.
+        let ratio = fitted / raw;
+        assert!((0.35..0.65).contains(&ratio), "fitted/raw error variance {ratio}");
+    }
+
+    #[test]
+    fn leaves_out_a_marker_that_jumps_off_the_plate() {
+        let mut rng = Rng::new(4);
+        let (poses, mut frames) = moving(200, 0.0, &mut rng);
+        let shape = ClusterShape::learn(&frames, 4).unwrap();
+        // In frame 50 marker 1 is read 40 mm away (a swapped label for one frame).
+        frames[12 * 50 + 3 + 1] += 0.04;
+        let fit = shape.fit(&frames).unwrap();
+        assert_eq!(fit.left_out, vec![0, 1, 0, 0]);
+        for m in 0..4 {
+            assert!((placed(&fit, 50, m) - truth(&poses[50], m)).norm() < 1e-9, "marker {m}");
+        }
+    }
+
+    #[test]
+    fn learns_the_shape_past_frames_with_a_marker_off_its_place() {
+        // A fifth of the frames read marker 3 40 mm off (its label swapped with a neighbour's):
+        // the shape is the plate's, and those frames are fitted to the other three.
+        let mut rng = Rng::new(8);
+        let (poses, mut frames) = moving(500, 0.0, &mut rng);
+        for f in 100..200 {
+            frames[12 * f + 10] += 0.04;
+        }
+        let shape = ClusterShape::learn(&frames, 4).unwrap();
+        let fit = shape.fit(&frames).unwrap();
+        assert_eq!(fit.left_out, vec![0, 0, 0, 100]);
+        for f in [0, 150, 499] {
+            for m in 0..4 {
+                assert!((placed(&fit, f, m) - truth(&poses[f], m)).norm() < 1e-9, "frame {f} marker {m}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_frame_whose_three_markers_break_the_shape_has_no_cluster() {
+        let mut rng = Rng::new(5);
+        let (_, mut frames) = moving(100, 0.0, &mut rng);
+        let shape = ClusterShape::learn(&frames, 4).unwrap();
+        frames[12 * 10..12 * 10 + 3].fill(f64::NAN);
+        frames[12 * 10 + 3] += 0.05;
+        // Two markers only in frame 20.
+        frames[12 * 20..12 * 20 + 6].fill(f64::NAN);
+        let fit = shape.fit(&frames).unwrap();
+        assert!(fit.placed[12 * 10..12 * 11].iter().all(|v| v.is_nan()));
+        assert!(fit.placed[12 * 20..12 * 21].iter().all(|v| v.is_nan()));
+        assert!(fit.placed[12 * 11..12 * 12].iter().all(|v| v.is_finite()));
+        assert_eq!(fit.undetermined, 1, "frame 10 had three markers seen, frame 20 two");
+    }
+
+    #[test]
+    fn refuses_what_gives_no_shape() {
+        let mut rng = Rng::new(6);
+        let (_, mut frames) = moving(30, 0.0, &mut rng);
+        // Marker 2 seen in 9 frames only.
+        for f in 9..30 {
+            frames[12 * f + 6..12 * f + 9].fill(f64::NAN);
+        }
+        let err = ClusterShape::learn(&frames, 4).unwrap_err().to_string();
+        assert!(err.contains("all seen in 9 of 30 frames"), "{err}");
+        // Four markers on a line.
+        let line: Vec<f64> = (0..20).flat_map(|_| (0..4).flat_map(|m| [0.01 * m as f64, 0.0, 0.0])).collect();
+        assert!(ClusterShape::learn(&line, 4).unwrap_err().to_string().contains("on a line"));
+        assert!(ClusterShape::learn(&frames[..11], 4).is_err());
+        assert!(ClusterShape::learn(&frames, 2).is_err());
+        assert!(ClusterShape::from_points(&[0.0; 6]).is_err());
+        assert!(ClusterShape::from_points(&[f64::NAN; 9]).is_err());
+    }
+
+    #[test]
+    fn a_shape_round_trips_through_its_points() {
+        let mut rng = Rng::new(7);
+        let (_, frames) = moving(50, 0.0, &mut rng);
+        let shape = ClusterShape::learn(&frames, 4).unwrap();
+        let again = ClusterShape::from_points(&shape.points()).unwrap();
+        assert_eq!(again.len(), 4);
+        for (a, b) in shape.points().iter().zip(again.points()) {
+            assert!((a - b).abs() < 1e-15);
+        }
+    }
+}

@@ -1,0 +1,175 @@
+"""Segments with more than three markers (docs/markersets.md, "Clusters"): three named in
+``[markers]``, the rest in ``[cluster]``, the cluster's rigid shape fitted to every marker seen.
+The oracle is the body model's own markers: each extra marker is a fixed point of its segment
+(an affine combination of the segment's three plus an offset along their plane's normal), so
+where it is, and where a missing marker is, follows from the simulated pose alone."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import tomllib
+
+import ikid
+from ikid import io
+from ikid.cli import main as cli
+from ikid.io import MarkerMap, read_mot
+from ikid.io.mapping import MarkerMapWarning
+from ikid.io.markers import FileFormatError, MarkerData
+
+SIX = {"RSP": "RSP", "USP": "USP", "FAP": "FAP", "MC2": "MC2", "MC5": "MC5", "MCB": "MCB"}
+CLUSTERED = {"markers": SIX, "cluster": {"forearm": ["FA4"], "hand": ["H4", "H5"]}}
+
+
+def fixed_point(three: np.ndarray, a: float, b: float, c: float) -> np.ndarray:
+    """``(n, 3)``: the point ``a``, ``b`` of the way along a segment's first-to-second and
+    first-to-third marker, ``c`` metres off their plane: rigid with the three."""
+    p0, p1, p2 = three[:, 0:3], three[:, 3:6], three[:, 6:9]
+    normal = np.cross(p1 - p0, p2 - p0)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    return p0 + a * (p1 - p0) + b * (p2 - p0) + c * normal
+
+
+def arm(n: int, rate: float = 1000.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The body model's wrist moving on every coordinate: truth angles ``(n, 3)``, its six
+    markers ``(n, 18)`` and three further markers ``(n, 9)`` (one on the forearm, two on the
+    hand), metres."""
+    t = np.arange(n) / rate
+    q = np.stack([0.4 * np.sin(1.3 * t), 0.6 * np.sin(2.1 * t + 0.5), 0.25 * np.cos(1.7 * t)], axis=1)
+    six = ikid.forward_markers(q)
+    extra = np.concatenate(
+        [
+            fixed_point(six[:, 0:9], 0.3, 0.4, 0.02),
+            fixed_point(six[:, 9:18], 0.5, 0.2, -0.015),
+            fixed_point(six[:, 9:18], -0.2, 0.6, 0.01),
+        ],
+        axis=1,
+    )
+    return q, six, extra
+
+
+def data(six: np.ndarray, extra: np.ndarray, source: str = "trial.trc", rate: float = 1000.0) -> MarkerData:
+    labels = (*SIX.values(), "FA4", "H4", "H5")
+    positions = np.concatenate([six, extra], axis=1).reshape(len(six), 9, 3)
+    return MarkerData(labels, np.arange(len(six)) / rate, positions, rate, source)
+
+
+def test_a_cluster_map_is_read_checked_and_written():
+    mapping = MarkerMap.from_dict(CLUSTERED)
+    assert mapping.clusters == {"forearm": ("FA4",), "hand": ("H4", "H5")}
+    assert MarkerMap.from_dict(tomllib.loads(mapping.to_toml())).clusters == mapping.clusters
+    refused = {
+        "its keys are the segments": {"elbow": ["X"]},
+        "must be a list of one or more labels": {"forearm": "FA4"},
+        "label 'MC2' is given to both MC2 and the forearm's cluster": {"forearm": ["MC2"]},
+        "label 'X' is given to both the forearm's cluster and the hand's cluster": {
+            "forearm": ["X"],
+            "hand": ["X"],
+        },
+    }
+    for message, cluster in refused.items():
+        with pytest.raises(FileFormatError, match=message):
+            MarkerMap.from_dict({"markers": SIX, "cluster": cluster})
+    # A cluster marker may be a landmark of its own segment, not of the other one.
+    both = MarkerMap.from_dict({**CLUSTERED, "landmarks": {"radial_styloid": "FA4"}})
+    assert both.landmarks["radial_styloid"] == "FA4"
+    with pytest.raises(FileFormatError, match=r"label 'H4' is given to marker in the hand's \[cluster\]"):
+        MarkerMap.from_dict({**CLUSTERED, "landmarks": {"radial_styloid": "H4"}})
+    # The ulnar styloid on a forearm cluster turns with neither bone, as on one of its three.
+    with pytest.raises(FileFormatError, match="landmark ulnar_styloid: a marker on the ulna"):
+        MarkerMap.from_dict({**CLUSTERED, "landmarks": {"ulnar_styloid": "FA4"}})
+    # A one-marker hand's segments are built anew each frame from anatomical points.
+    pig = {"RSP": "A", "USP": "B", "FAP": "C", "HND": "D"}
+    with pytest.raises(FileFormatError, match="with a one-marker hand"):
+        MarkerMap.from_dict({"markers": pig, "cluster": {"forearm": ["E"]}})
+
+
+def test_a_missing_marker_is_put_where_its_cluster_holds_it():
+    _, six, extra = arm(600)
+    holed = six.copy()
+    holed[100:200, 0:3] = np.nan  # RSP, for 0.1 s
+    holed[300:350, 9:15] = np.nan  # MC2 and MC5 together: the hand keeps MCB, H4, H5
+    frames = data(holed, extra).frames(MarkerMap.from_dict(CLUSTERED))
+    assert np.isfinite(frames).all()
+    np.testing.assert_allclose(frames, six, atol=1e-6)
+    # Without the cluster, the hand with two of its three markers gone has no frame there.
+    plain = data(holed, extra).frames(MarkerMap.from_dict({"markers": SIX}))
+    assert np.isnan(plain[300:350, 9:15]).all()
+
+
+def test_a_frame_with_too_few_cluster_markers_keeps_its_three_as_they_are():
+    _, six, extra = arm(300)
+    holed, extra = six.copy(), extra.copy()
+    holed[50:60, 9:12] = np.nan  # MC2 ...
+    extra[50:60, 3:9] = np.nan  # ... and both of the hand's extra markers: two of five seen
+    frames = data(holed, extra).frames(MarkerMap.from_dict(CLUSTERED))
+    assert np.isnan(frames[50:60, 9:12]).all()
+    np.testing.assert_allclose(frames[50:60, 12:18], six[50:60, 12:18], atol=1e-6)
+
+
+def test_a_marker_that_leaves_its_place_is_left_out_and_named():
+    _, six, extra = arm(500)
+    knocked = extra.copy()
+    knocked[200:300, 3:6] += [0.0, 0.04, 0.0]  # H4 read 40 mm off in a fifth of the frames
+    with pytest.warns(
+        MarkerMapWarning, match=r"marker 'H4' of the hand's cluster is more than 15 mm .* in 100 "
+    ):
+        frames = data(six, knocked).frames(MarkerMap.from_dict(CLUSTERED))
+    np.testing.assert_allclose(frames, six, atol=1e-6)
+    # A clean recording says nothing.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        data(six, extra).frames(MarkerMap.from_dict(CLUSTERED))
+
+
+def test_every_block_of_a_file_is_fitted_with_the_shape_of_its_first():
+    _, six, extra = arm(400)
+    mapping = MarkerMap.from_dict(CLUSTERED)
+    first = data(six[:200], extra[:200], "long.trc").frames(mapping, whole=False)
+    np.testing.assert_allclose(first, six[:200], atol=1e-6)
+    # The next block never has RSP: its cluster is not learnt again, it is fitted as learnt.
+    later = six[200:].copy()
+    later[:, 0:3] = np.nan
+    again = data(later, extra[200:], "long.trc").frames(mapping, whole=False)
+    np.testing.assert_allclose(again, six[200:], atol=1e-6)
+    # A file whose first block never shows the cluster whole is refused, naming it.
+    with pytest.raises(
+        ikid.InputError,
+        match=r"other.trc: the forearm's cluster \(RSP 'RSP'.*'FA4'\): .*all seen in 0 of 200",
+    ):
+        data(later, extra[200:], "other.trc").frames(mapping, whole=False)
+
+
+def test_ik_through_a_four_marker_cluster_reads_noisy_markers_closer_to_the_truth(tmp_path):
+    # 1 mm of Gaussian noise on every marker: fitting each segment to four or five markers
+    # averages it, so the angles ik writes are nearer the simulated ones than from three.
+    q, six, extra = arm(3000)
+    rng = np.random.default_rng(0)
+    noisy = np.concatenate([six, extra], axis=1) + rng.normal(0.0, 0.001, (3000, 27))
+    trc = io.write_trc(
+        tmp_path / "t.trc", np.arange(3000) / 1000.0, noisy, 1000.0, [*SIX.values(), "FA4", "H4", "H5"]
+    )
+    errors = {}
+    for name, table in (("three", {"markers": SIX}), ("cluster", CLUSTERED)):
+        path = tmp_path / f"{name}.toml"
+        path.write_text(MarkerMap.from_dict(table).to_toml())
+        assert cli(["ik", str(trc), "--map", str(path), "-o", str(tmp_path / f"{name}.mot")]) == 0
+        t, angles = read_mot(tmp_path / f"{name}.mot")
+        rows = np.rint(t * 1000.0).astype(int)
+        errors[name] = float(np.sqrt(np.mean((angles - q[rows]) ** 2)))
+    assert errors["cluster"] < 0.85 * errors["three"], errors
+
+
+def test_a_live_source_reads_each_segment_from_its_three_and_says_so():
+    from ikid.live.sources import marker_columns
+
+    positions = {
+        lab: (3 * i, 3 * i + 1, 3 * i + 2) for i, lab in enumerate(["FA4", *SIX.values(), "H4", "H5"])
+    }
+    with pytest.warns(
+        MarkerMapWarning, match=r"\[cluster\] markers \(FA4, H4, H5\) are not used on a live source"
+    ):
+        columns = marker_columns(positions, MarkerMap.from_dict(CLUSTERED), "lsl")
+    assert list(columns) == list(range(3, 21))
