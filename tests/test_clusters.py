@@ -6,6 +6,7 @@ where it is, and where a missing marker is, follows from the simulated pose alon
 
 from __future__ import annotations
 
+import json
 import warnings
 
 import numpy as np
@@ -173,3 +174,133 @@ def test_a_live_source_reads_each_segment_from_its_three_and_says_so():
     ):
         columns = marker_columns(positions, MarkerMap.from_dict(CLUSTERED), "lsl")
     assert list(columns) == list(range(3, 21))
+
+
+# --- one hand marker with a forearm cluster ---------------------------------------------------
+
+#: Four markers of a forearm plate, in the forearm's anatomical frame (x volar, y proximal,
+#: z radial; origin mid-styloids), metres: on its back, a third of the way up, turned askew.
+PLATE = np.array([[-0.03, 0.07, 0.01], [-0.035, 0.11, -0.02], [-0.03, 0.12, 0.025], [-0.04, 0.095, 0.0]])
+
+
+def plate_arm(n: int, rate: float, seed: int, moving: bool = True):
+    """``one_marker_arm``'s arm (wrist bar, elbow, one hand marker; truth flexion and
+    deviation) with a four-marker plate on the forearm: ``(n, 12)`` plate, ``(n, 12)`` the
+    anatomical markers, truth e, a."""
+    from test_markersets import one_marker_arm
+
+    anatomical, e, a = one_marker_arm(n, rate, seed, moving)
+    wra, wrb, elb = anatomical[:, 0:3], anatomical[:, 3:6], anatomical[:, 6:9]
+    wrist = (wra + wrb) / 2
+    y = elb - wrist
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    x = np.cross(y, wra - wrb)
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    z = np.cross(x, y)
+    plate = np.concatenate([wrist + p[0] * x + p[1] * y + p[2] * z for p in PLATE], axis=1)
+    return plate, anatomical, e, a
+
+
+def write_plate_arm(path, plate, anatomical, rate, landmarks: bool):
+    """A TRC of the plate, the hand marker and (``landmarks``) the wrist bar and the elbow."""
+    labels = ["FA1", "FA2", "FA3", "FA4", "RFIN"] + (["RWRA", "RWRB", "RELB"] if landmarks else [])
+    columns = [plate, anatomical[:, 9:12]] + ([anatomical[:, 0:9]] if landmarks else [])
+    return io.write_trc(path, np.arange(len(plate)) / rate, np.concatenate(columns, axis=1), rate, labels)
+
+
+PLATE_MAP = {
+    "markers": {"RSP": "FA1", "USP": "FA2", "FAP": "FA3", "HND": "RFIN"},
+    "cluster": {"forearm": ["FA4"]},
+    "landmarks": {
+        "lateral_epicondyle": "RELB",
+        "medial_epicondyle": "RELB",
+        "radial_styloid": "RWRA",
+        "ulnar_styloid": "RWRB",
+    },
+}
+
+
+@pytest.mark.parametrize("command", ["ik", "track"])
+def test_one_hand_marker_with_a_forearm_cluster_measures_the_hand_in_its_anatomical_frame(
+    command, tmp_path, capsys
+):
+    # The static trial has the styloids and the elbow; the task has the plate and the hand
+    # marker only: the plate carries the anatomical points the static trial measured.
+    rate = 100.0
+    plate, anatomical, _, _ = plate_arm(100, rate, 1, moving=False)
+    write_plate_arm(tmp_path / "static.trc", plate, anatomical, rate, landmarks=True)
+    plate, anatomical, e, a = plate_arm(600, rate, 2)
+    write_plate_arm(tmp_path / "trial.trc", plate, anatomical, rate, landmarks=False)
+    (tmp_path / "map.toml").write_text(MarkerMap.from_dict(PLATE_MAP).to_toml())
+    cal = tmp_path / "cal.json"
+    common = ["--map", str(tmp_path / "map.toml")]
+    assert cli(["calibrate", "--static", str(tmp_path / "static.trc"), "-o", str(cal), *common]) == 0
+    said = capsys.readouterr().out
+    assert "forearm 0.0°, hand 0.0° from the body model's placement" in said, said
+    assert "forearm cluster's anatomical points from the landmarks in 100 frames" in said, said
+    out = tmp_path / "out.mot"
+    target = str(out) if command == "ik" else str(tmp_path / "out")
+    assert cli([command, str(tmp_path / "trial.trc"), "-o", target, "--calibration", str(cal), *common]) == 0
+    assert "ra_wr_s_p not written: the hand is one marker" in capsys.readouterr().out
+    t, q = read_mot(out)
+    rows = np.rint(t * rate).astype(int)
+    settled = rows >= 50
+    err = np.degrees(q[settled, 1:] - np.stack([e, a], axis=1)[rows[settled]])
+    rms = np.sqrt(np.mean(err**2, axis=0))
+    assert (rms < 1.5).all(), rms
+    assert np.isnan(q[:, 0]).all()
+
+
+def test_one_hand_marker_with_a_forearm_cluster_is_refused_without_its_landmarks(tmp_path, capsys):
+    rate = 100.0
+    plate, anatomical, _, _ = plate_arm(200, rate, 3)
+    trial = write_plate_arm(tmp_path / "trial.trc", plate, anatomical, rate, landmarks=True)
+    (tmp_path / "map.toml").write_text(MarkerMap.from_dict(PLATE_MAP).to_toml())
+    common = ["--map", str(tmp_path / "map.toml")]
+    # No calibration: what to record and run is said, nothing is written.
+    assert cli(["ik", str(trial), "-o", str(tmp_path / "o.mot"), *common]) == 2
+    err = capsys.readouterr().err
+    assert "are a cluster and the hand one marker" in err and "ikid calibrate --static" in err, err
+    assert not (tmp_path / "o.mot").exists()
+    # A calibration without them (written before ikid measured them, or edited).
+    cal = tmp_path / "cal.json"
+    static, lm, _, _ = plate_arm(100, rate, 4, moving=False)
+    write_plate_arm(tmp_path / "static.trc", static, lm, rate, landmarks=True)
+    assert cli(["calibrate", "--static", str(tmp_path / "static.trc"), "-o", str(cal), *common]) == 0
+    doc = json.loads(cal.read_text())
+    del doc["forearm_landmarks"]
+    cal.write_text(json.dumps(doc))
+    capsys.readouterr()
+    assert cli(["ik", str(trial), "-o", str(tmp_path / "o.mot"), "--calibration", str(cal), *common]) == 2
+    assert "has no forearm landmarks in the frame of the forearm's markers" in capsys.readouterr().err
+    # A map naming the cluster without every landmark is refused when it is read.
+    lacking = {**PLATE_MAP, "landmarks": {"radial_styloid": "RWRA", "ulnar_styloid": "RWRB"}}
+    with pytest.raises(FileFormatError, match="does not name lateral_epicondyle, medial_epicondyle"):
+        MarkerMap.from_dict(lacking)
+    with pytest.raises(FileFormatError, match="the hand is that one marker"):
+        MarkerMap.from_dict({**PLATE_MAP, "cluster": {"hand": ["X"]}})
+    # A static trial with the landmarks in too few frames.
+    data = io.read_markers(tmp_path / "static.trc")
+    positions = data.positions.copy()
+    positions[3:, data.labels.index("RWRA")] = np.nan
+    io.write_trc(
+        tmp_path / "few.trc", data.time, positions.reshape(len(positions), -1), rate, list(data.labels)
+    )
+    cmd = ["calibrate", "--static", str(tmp_path / "few.trc"), "-o", str(tmp_path / "few.json"), *common]
+    assert cli(cmd) == 2
+    assert "seen together in 3 of the frames given" in capsys.readouterr().err
+
+
+def test_a_plate_named_as_a_wrist_bar_and_elbow_is_refused(tmp_path):
+    # The plate's markers as RSP, USP, FAP of a one-marker hand, no landmarks: read as the
+    # styloids and the elbow they would give a made-up forearm frame.
+    plate, anatomical, _, _ = plate_arm(50, 100.0, 5)
+    data = io.read_markers(write_plate_arm(tmp_path / "t.trc", plate, anatomical, 100.0, landmarks=True))
+    as_bar = MarkerMap.from_dict({"markers": {"RSP": "FA1", "USP": "FA2", "FAP": "FA3", "HND": "RFIN"}})
+    with pytest.raises(
+        ikid.InputError, match=r"RSP 'FA1' and USP 'FA2' are 50 mm apart.*FAP 'FA3' 43 mm from"
+    ):
+        data.frames(as_bar)
+    # The wrist bar and the elbow themselves are read.
+    bar = MarkerMap.from_dict({"markers": {"RSP": "RWRA", "USP": "RWRB", "FAP": "RELB", "HND": "RFIN"}})
+    assert np.isfinite(data.frames(bar)).all()

@@ -911,6 +911,95 @@ def cluster_line(clusters: dict) -> str:
     return "pyomeca, four-marker segments ([cluster]; geodesic RMS, valid frames): " + "; ".join(parts)
 
 
+def racing_one_hand(folder: Path, work: Path, log: list[str]) -> dict:
+    """The racing right arm as a lab with a forearm plate and one marker on the hand would mark
+    it: `ForearmR1-3` as the forearm's cluster, `GloveR2` alone on the hand, calibrated from the
+    probed landmarks at the reference's neutral frames. Scored against the hand marker's
+    direction from the mid-styloids in the forearm's ISB frame built anew each frame from the
+    four landmarks (`_full`'s, as the reference builds it): flexion/extension and deviation RMS,
+    degrees, per path."""
+    from ikid.io import read_markers, read_mot
+
+    base = next(r for r in RECORDINGS if r.name == "racing")
+    ref = read_reference(folder, base.reference)
+    markers = {"RSP": "ForearmR1", "USP": "ForearmR2", "FAP": "ForearmR3", "HND": "GloveR2"}
+    mapping = work / "racing_one_hand.toml"
+    mapping.write_text(
+        map_toml(Recording("racing_one_hand", base.trial, base.reference, markers, base.landmarks, ""))
+    )
+    cal = work / "racing_one_hand.json"
+    frames = ",".join(str(i) for i in ref["meta"]["neutral_frames"])
+    done = run(
+        [
+            "calibrate",
+            "--static",
+            str(folder / base.calibration_file),
+            "--frames",
+            frames,
+            "--map",
+            str(mapping),
+            "-o",
+            str(cal),
+        ],
+        log,
+    )
+    out: dict = {"calibrated": done.returncode == 0, "calibrate_out": (done.stdout + done.stderr).strip()}
+    full = read_markers(folder / base.calibration_file)
+    lm = {k: full.marker(v) for k, v in base.landmarks.items()}
+    wrist = (lm["radial_styloid"] + lm["ulnar_styloid"]) / 2
+    y = (lm["lateral_epicondyle"] + lm["medial_epicondyle"]) / 2 - wrist
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    x = np.cross(y, lm["radial_styloid"] - lm["ulnar_styloid"])
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    z = np.cross(x, y)
+    d = full.marker("GloveR2") - wrist
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    dx, dy, dz = (np.sum(d * axis, axis=1) for axis in (x, y, z))
+    truth = np.degrees(np.stack([np.arctan2(dx, -dy), -np.arcsin(np.clip(dz, -1, 1))], axis=1))
+    for path in ("ik", "track"):
+        stem = work / f"racing_one_hand_{path}"
+        target = str(stem.with_suffix(".mot")) if path == "ik" else str(stem)
+        args = [
+            path,
+            str(folder / base.trial),
+            "-o",
+            target,
+            "--map",
+            str(mapping),
+            "--calibration",
+            str(cal),
+        ]
+        done = run(args, log) if out["calibrated"] else None
+        if done is None or done.returncode != 0:
+            out[path] = None
+            continue
+        t, q = read_mot(stem.with_suffix(".mot"))
+        rows = np.rint(t * full.rate_hz).astype(int)
+        err = np.degrees(q[:, 1:]) - truth[rows]
+        ok = np.isfinite(err).all(axis=1)
+        out[path] = {
+            "rows": int(len(t)),
+            "rms": np.sqrt(np.mean(err[ok] ** 2, axis=0)).tolist(),
+            "said": done.stdout,
+        }
+    return out
+
+
+def one_hand_line(r: dict) -> str:
+    parts = []
+    for path in ("ik", "track"):
+        s = r.get(path)
+        parts.append(
+            f"{path} flexion {fmt(s['rms'][0])}°, deviation {fmt(s['rms'][1])}° ({s['rows']} rows)"
+            if s
+            else f"{path} failed"
+        )
+    return (
+        "racing right arm, forearm plate + one glove marker (GloveR2; RMS against its direction in the "
+        "landmarks' forearm frame): " + "; ".join(parts)
+    )
+
+
 def styloid_line(styloids: dict) -> str:
     parts = []
     for name, st in styloids.items():
@@ -1183,6 +1272,7 @@ def write_report(
     plug_in_gait: dict,
     styloids: dict,
     clusters: dict,
+    one_hand: dict,
 ) -> None:
     lines = [
         "# ikid on real recordings",
@@ -1251,7 +1341,13 @@ def write_report(
                 f"| {side} | {key} | {sc['rms'][0]:.2f} | {sc['rms'][1]:.2f} | {sc['r'][0]:.3f} / "
                 f"{sc['r'][1]:.3f} | {sc['rows']}/{sc['frames']} | {', '.join(sc['not_determined'])} |"
             )
-    lines += ["", f"- {styloid_line(styloids)}", f"- {cluster_line(clusters)}", ""]
+    lines += [
+        "",
+        f"- {styloid_line(styloids)}",
+        f"- {cluster_line(clusters)}",
+        f"- {one_hand_line(one_hand)}",
+        "",
+    ]
     lines += [
         "## Notes",
         "",
@@ -1310,6 +1406,7 @@ def main(argv: list[str] | None = None) -> int:
         plug_in_gait = pig(folder, work, log)
         styloids = pyomeca_styloids(folder, work, log)
         clusters = pyomeca_clusters(folder, work, log)
+        one_hand = racing_one_hand(folder, work, log)
         log = [entry.replace(str(work), "$WORK").replace(str(folder), "$REALDATA") for entry in log]
         for r in results:
             u = r["probes"]["uncalibrated"]
@@ -1337,6 +1434,7 @@ def main(argv: list[str] | None = None) -> int:
         print(line)
     print(styloid_line(styloids))
     print(cluster_line(clusters))
+    print(one_hand_line(one_hand))
     if args.doc:
         doc = Path(args.doc)
         for r in results:
@@ -1347,7 +1445,9 @@ def main(argv: list[str] | None = None) -> int:
                 next(r for r in results if r["rec"].name == "racing"),
                 doc.parent / "realdata" / "racing_left.png",
             )
-        write_report(results, left, log, doc, time.perf_counter() - t0, plug_in_gait, styloids, clusters)
+        write_report(
+            results, left, log, doc, time.perf_counter() - t0, plug_in_gait, styloids, clusters, one_hand
+        )
     by = {r["rec"].name: r for r in results}
     n_div = count_diverged(results, left)
     last = " ".join(

@@ -54,7 +54,10 @@ __all__ = [
     "one_marker_hand_landmarks",
     "learn_cluster_shape",
     "fit_cluster",
+    "points_in_technical_frame",
+    "points_from_technical_frame",
     "MAX_CLUSTER_FIT_RESIDUAL_M",
+    "MIN_NEUTRAL_FRAMES",
     "HAND_POINT",
     "ONE_HAND_MARKER_UNDETERMINED",
 ]
@@ -289,8 +292,13 @@ def hand_from_one_marker(frames: _Floats, left: bool = False) -> npt.NDArray[np.
 def one_marker_hand_landmarks(frames: _Floats) -> npt.NDArray[np.float64]: ...
 def learn_cluster_shape(frames: _Floats, n_markers: int) -> npt.NDArray[np.float64]: ...
 def fit_cluster(frames: _Floats, shape: _Floats) -> tuple[npt.NDArray[np.float64], list[int], int]: ...
+def points_in_technical_frame(
+    markers: _Floats, points: _Floats, n_points: int
+) -> npt.NDArray[np.float64]: ...
+def points_from_technical_frame(markers: _Floats, local: _Floats) -> npt.NDArray[np.float64]: ...
 
 MAX_CLUSTER_FIT_RESIDUAL_M: float
+MIN_NEUTRAL_FRAMES: int
 
 HAND_POINT: tuple[str, str, str]
 ONE_HAND_MARKER_UNDETERMINED: str

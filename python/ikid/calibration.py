@@ -147,10 +147,14 @@ def save_calibration(
     path: str | os.PathLike[str],
     *,
     marker_map: MarkerMap | None = None,
+    forearm_landmarks: dict | None = None,
     **provenance,
 ) -> Path:
     """Write ``calibration`` (its method, side and report, the marker map it was measured
-    with — the identity map when None — and any ``provenance`` given) as JSON, atomically."""
+    with — the identity map when None —, a forearm cluster's anatomical points for a
+    one-marker hand (``forearm_landmarks``: ``in_frame_of``, ``points_m``; see
+    :meth:`ikid.io.MarkerMap.with_calibration`) and any ``provenance`` given) as JSON,
+    atomically."""
     from ikid.io.mapping import MarkerMap
 
     marker_map = marker_map or MarkerMap.identity()
@@ -164,12 +168,15 @@ def save_calibration(
             "side": marker_map.side,
             "markers": dict(marker_map.labels),
             "landmarks": dict(marker_map.landmarks),
+            "cluster": {k: list(v) for k, v in marker_map.clusters.items()},
         },
         "forearm": np.asarray(calibration.forearm).tolist(),
         "hand": np.asarray(calibration.hand).tolist(),
         "report": calibration.report,
         "provenance": provenance,
     }
+    if forearm_landmarks is not None:
+        doc["forearm_landmarks"] = forearm_landmarks
     return write_text_atomic(path, json.dumps(doc, indent=1) + "\n")
 
 

@@ -20,7 +20,10 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(one_marker_hand_landmarks, m)?)?;
     m.add_function(wrap_pyfunction!(learn_cluster_shape, m)?)?;
     m.add_function(wrap_pyfunction!(fit_cluster, m)?)?;
+    m.add_function(wrap_pyfunction!(points_in_technical_frame, m)?)?;
+    m.add_function(wrap_pyfunction!(points_from_technical_frame, m)?)?;
     m.add("MAX_CLUSTER_FIT_RESIDUAL_M", ikid::cluster::MAX_FIT_RESIDUAL_M)?;
+    m.add("MIN_NEUTRAL_FRAMES", ikid::calibration::MIN_NEUTRAL_FRAMES)?;
     let hp = ikid::body::HAND_POINT;
     m.add("HAND_POINT", (hp.name, hp.segment.name(), hp.description))?;
     m.add("ONE_HAND_MARKER_UNDETERMINED", COORDINATES[ikid::body::ONE_HAND_MARKER_UNDETERMINED].name)?;
@@ -94,6 +97,39 @@ fn fit_cluster<'py>(
     with_f64_rows(frames, "frames", 3 * k, |v, n| {
         let fit = shape.fit(v).py_err()?;
         Ok((fit.placed.into_pyarray(py).reshape([n, 3 * k])?, fit.left_out, fit.undetermined))
+    })
+}
+
+/// Points `(n, 3k)` expressed in the technical frame of three markers `(n, 9)` of the same
+/// frames (the core's `cluster::points_in_technical_frame`): `(n, 3k)`, NaN where undefined.
+#[pyfunction]
+fn points_in_technical_frame<'py>(
+    py: Python<'py>,
+    markers: &Bound<'py, PyAny>,
+    points: &Bound<'py, PyAny>,
+    n_points: usize,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    with_f64_rows(markers, "markers", 9, |m, n| {
+        with_f64_rows(points, "points", 3 * n_points, |p, _| {
+            let local = ikid::cluster::points_in_technical_frame(m, p).py_err()?;
+            local.into_pyarray(py).reshape([n, 3 * n_points])
+        })
+    })
+}
+
+/// Points fixed in the technical frame of three markers (`local`, `(k, 3)`) in the lab for
+/// each frame of the markers `(n, 9)` (the core's `cluster::points_from_technical_frame`).
+#[pyfunction]
+fn points_from_technical_frame<'py>(
+    py: Python<'py>,
+    markers: &Bound<'py, PyAny>,
+    local: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    with_f64_rows(markers, "markers", 9, |m, n| {
+        with_f64_rows(local, "local", 3, |l, k| {
+            let lab = ikid::cluster::points_from_technical_frame(m, l).py_err()?;
+            lab.into_pyarray(py).reshape([n, 3 * k])
+        })
     })
 }
 

@@ -194,6 +194,72 @@ impl ClusterShape {
     }
 }
 
+/// Narrowest the triangle of three markers may be for their technical frame, m (the distance of
+/// the third from the line of the first two): below it the frame's roll is their noise.
+pub const MIN_FRAME_WIDTH_M: f64 = 0.005;
+
+/// A segment's technical frame from three of its markers: origin the first, `x` towards the
+/// second, `z` normal to the three (`x × (third − first)`), `y = z × x`; the axes are the
+/// rotation's columns. None when a marker is missing or the three are nearly collinear
+/// ([`MIN_FRAME_WIDTH_M`]).
+pub fn technical_frame(markers: &[f64]) -> Option<(Matrix3<f64>, Vector3<f64>)> {
+    let [a, b, c] = [0, 1, 2].map(|m| Vector3::new(markers[3 * m], markers[3 * m + 1], markers[3 * m + 2]));
+    let x = (b - a).try_normalize(1e-9)?;
+    let across = c - a - x * x.dot(&(c - a));
+    if !across.iter().all(|v| v.is_finite()) || across.norm() < MIN_FRAME_WIDTH_M {
+        return None;
+    }
+    let z = x.cross(&across).normalize();
+    Some((Matrix3::from_columns(&[x, z.cross(&x), z]), a))
+}
+
+/// Points `(n, 3k)` (metres, lab) expressed in each frame's [`technical_frame`] of three
+/// markers `(n, 9)`: NaN where the point or the frame is missing.
+pub fn points_in_technical_frame(markers: &[f64], points: &[f64]) -> crate::Result<Vec<f64>> {
+    let n = markers.len() / 9;
+    if !markers.len().is_multiple_of(9) || n == 0 || !points.len().is_multiple_of(3 * n) {
+        return Err(bad(format!(
+            "{} marker values and {} point values are not the same frames of three markers and of points",
+            markers.len(),
+            points.len()
+        )));
+    }
+    let width = points.len() / n;
+    let mut out = Vec::with_capacity(points.len());
+    for (m, p) in markers.chunks_exact(9).zip(points.chunks_exact(width)) {
+        let frame = technical_frame(m);
+        for q in p.chunks_exact(3) {
+            let local = frame.map_or(Vector3::repeat(f64::NAN), |(rot, origin)| {
+                rot.transpose() * (Vector3::new(q[0], q[1], q[2]) - origin)
+            });
+            out.extend_from_slice(local.as_slice());
+        }
+    }
+    Ok(out)
+}
+
+/// Points fixed in the [`technical_frame`] of three markers (`local`, `(k, 3)`), placed in the
+/// lab for each frame of the markers `(n, 9)`: `(n, 3k)`, NaN where the frame is missing.
+pub fn points_from_technical_frame(markers: &[f64], local: &[f64]) -> crate::Result<Vec<f64>> {
+    if !markers.len().is_multiple_of(9) || !local.len().is_multiple_of(3) || !local.iter().all(|v| v.is_finite()) {
+        return Err(bad(format!(
+            "{} marker values are not frames of three markers, or {} point values not finite points",
+            markers.len(),
+            local.len()
+        )));
+    }
+    let mut out = Vec::with_capacity(markers.len() / 9 * local.len());
+    for m in markers.chunks_exact(9) {
+        let frame = technical_frame(m);
+        for q in local.chunks_exact(3) {
+            let lab =
+                frame.map_or(Vector3::repeat(f64::NAN), |(rot, origin)| rot * Vector3::new(q[0], q[1], q[2]) + origin);
+            out.extend_from_slice(lab.as_slice());
+        }
+    }
+    Ok(out)
+}
+
 fn bad(detail: String) -> crate::Error {
     crate::Error::BadArgument { what: "cluster", detail }
 }
@@ -416,6 +482,35 @@ mod tests {
         assert!(ClusterShape::learn(&frames, 2).is_err());
         assert!(ClusterShape::from_points(&[0.0; 6]).is_err());
         assert!(ClusterShape::from_points(&[f64::NAN; 9]).is_err());
+    }
+
+    #[test]
+    fn points_ride_with_the_technical_frame_of_three_markers() {
+        // A point fixed to the plate: expressed in the frame of its first three markers at one
+        // pose, put back at every other pose it is where the plate's geometry puts it.
+        let mut rng = Rng::new(9);
+        let (poses, frames) = moving(100, 0.0, &mut rng);
+        let three: Vec<f64> = frames.chunks_exact(12).flat_map(|f| f[..9].to_vec()).collect();
+        let fixed = Vector3::new(-0.02, 0.11, 0.03);
+        let points: Vec<f64> = poses.iter().flat_map(|(r, t)| (r * fixed + t).as_slice().to_vec()).collect();
+        let local = points_in_technical_frame(&three, &points).unwrap();
+        for f in 1..100 {
+            for i in 0..3 {
+                assert!((local[3 * f + i] - local[i]).abs() < 1e-12, "frame {f}");
+            }
+        }
+        let back = points_from_technical_frame(&three, &local[..3]).unwrap();
+        for (f, pose) in poses.iter().enumerate() {
+            let want = pose.0 * fixed + pose.1;
+            assert!((Vector3::from_row_slice(&back[3 * f..3 * f + 3]) - want).norm() < 1e-12, "frame {f}");
+        }
+        // A frame of three markers on a line has no technical frame.
+        let line = [0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 0.1, 0.001, 0.0];
+        assert!(technical_frame(&line).is_none());
+        assert!(points_from_technical_frame(&line, &[0.0; 3]).unwrap().iter().all(|v| v.is_nan()));
+        assert!(points_in_technical_frame(&line, &[0.0; 6]).unwrap().iter().all(|v| v.is_nan()));
+        assert!(points_from_technical_frame(&line, &[f64::NAN; 3]).is_err());
+        assert!(points_in_technical_frame(&line, &[0.0; 4]).is_err());
     }
 
     #[test]

@@ -48,7 +48,7 @@ def _process_one(job: tuple[str, dict]) -> dict:
     row: dict = {"file": path}
     try:
         data = open_markers(path)
-        mapping = MarkerMap.load(opt["map"]) if opt["map"] else None
+        mapping = MarkerMap.load(opt["map"]).with_calibration(opt["calibration"]) if opt["map"] else None
         first = next(data.blocks(), None)
         if first is None:
             raise ikid.InputError(f"{path}: no frames")

@@ -46,7 +46,7 @@ import json
 import os
 import sys
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -73,6 +73,13 @@ MAX_SEGMENT_STRETCH_M = 0.015
 _P10_P90_SIGMAS = 2.563
 
 
+#: What a one-marker hand's forearm markers span when they are the styloids and the lateral
+#: epicondyle, metres: the wrist bar (Plug-in Gait's real recordings 62-68 mm) and the forearm
+#: from the mid-styloids to the elbow (236-246 mm); wide enough for children and large adults.
+WRIST_BAR_M = (0.030, 0.120)
+FOREARM_LENGTH_M = (0.120, 0.400)
+
+
 class MarkerMapWarning(UserWarning):
     """A marker map that the recording's markers contradict (:meth:`MarkerMap.stretched_segments`)."""
 
@@ -91,6 +98,12 @@ class MarkerMap:
     #: (file, segment) -> the cluster's shape learned from that file's first block: every
     #: block of a file is fitted with one shape.
     _shapes: dict[tuple[str, str], np.ndarray] = field(default_factory=dict, compare=False, repr=False)
+    #: A one-marker hand whose forearm markers are a cluster, not its anatomical points.
+    forearm_cluster: bool = False
+    #: For such a map: the radial styloid, the ulnar styloid and the mid-epicondyles ``(3, 3)``,
+    #: metres, in the technical frame of RSP, USP, FAP (core ``cluster::technical_frame``), as a
+    #: calibration measured them (:meth:`with_calibration`).
+    forearm_landmarks: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @staticmethod
     def identity() -> MarkerMap:
@@ -160,7 +173,26 @@ class MarkerMap:
             raise FileFormatError(
                 f"{source}: the label for landmark {', '.join(bad)} must be a non-empty string"
             )
-        clusters = _clusters(table.get("cluster", {}), source, seen, hand_point in markers)
+        one_hand = hand_point in markers
+        # With one hand marker, the forearm's three are its anatomical points themselves (Plug-in
+        # Gait's wrist bar and elbow: the styloid landmarks are RSP's and USP's labels), or a
+        # cluster whose anatomical points a static trial's landmarks give.
+        forearm_cluster = one_hand and any(
+            k in landmarks and str(landmarks[k]).strip() != markers[m]
+            for k, m in (("radial_styloid", "RSP"), ("ulnar_styloid", "USP"))
+        )
+        if forearm_cluster:
+            lacking = [k for k in landmark_names() if k not in landmarks]
+            if lacking:
+                raise FileFormatError(
+                    f"{source}: [markers] names {hand_point} and forearm markers that are not the styloids "
+                    f"(RSP {markers['RSP']!r}, USP {markers['USP']!r}): a forearm cluster. With one hand "
+                    "marker the hand's direction is measured in the forearm's anatomical frame, which a "
+                    f"static trial's landmarks give; [landmarks] does not name {', '.join(lacking)} (all "
+                    f"of {', '.join(landmark_names())} are needed; the medial epicondyle may be the "
+                    "lateral's label when there is none)"
+                )
+        clusters = _clusters(table.get("cluster", {}), source, seen, one_hand, forearm_cluster)
         # A marker may also be a landmark (RSP on the radial styloid named radial_styloid too), on
         # its own segment only: a forearm landmark on a hand marker moves with the hand.
         segment_of = {m: _segment(m) for m in names}
@@ -185,9 +217,10 @@ class MarkerMap:
         # markers one of which is on the ulna (which stays while the radius turns about it in
         # pronation) are no body the hand turns against: they read a share of the pronation as
         # wrist rotation, which they cannot tell apart (pyomeca: 8-14 deg off the radius-fixed
-        # reference). A one-marker hand builds its forearm anew each frame and is not concerned.
+        # reference). A one-marker hand on a wrist bar builds its forearm anew each frame and is
+        # not concerned.
         ulnar = str(landmarks.get("ulnar_styloid", "")).strip()
-        if hand_point not in markers and segment_of.get(seen.get(ulnar, ""), "") == "forearm":
+        if (not one_hand or forearm_cluster) and segment_of.get(seen.get(ulnar, ""), "") == "forearm":
             raise FileFormatError(
                 f"{source}: label {ulnar!r} is forearm marker {seen[ulnar]} and landmark ulnar_styloid: "
                 "a marker on the ulna, which stays while the radius turns about it in pronation. The "
@@ -204,6 +237,7 @@ class MarkerMap:
             {k: landmarks[k].strip() for k in known if k in landmarks},
             side,
             clusters,
+            forearm_cluster=forearm_cluster,
         )
 
     @staticmethod
@@ -326,10 +360,97 @@ class MarkerMap:
 
     def ikid_frames(self, columns: np.ndarray) -> np.ndarray:
         """ikid's ``(n, 18)`` frames from the mapped labels' columns (``labels_in_ikid_order``):
-        as they are, or, for a one-marker hand, with its three markers made virtual."""
+        as they are, or, for a one-marker hand, with its three markers made virtual (and a
+        forearm cluster's three its anatomical points: :meth:`anatomical_forearm`)."""
         if not self.one_hand_marker:
             return columns
-        return _native.hand_from_one_marker(columns, left=self.side == "left")
+        return _native.hand_from_one_marker(self.anatomical_forearm(columns), left=self.side == "left")
+
+    def anatomical_forearm(self, columns: np.ndarray) -> np.ndarray:
+        """A one-marker hand's ``(n, 12)`` columns with a forearm cluster's three replaced by the
+        anatomical points its calibration places in the cluster's frame: the radial and ulnar
+        styloids and the mid-epicondyles, as Plug-in Gait's wrist bar and elbow give them. As
+        they are for a forearm marked at those points. An error says what to do when no
+        calibration gave them."""
+        if not self.forearm_cluster:
+            self._check_wrist_bar(columns)
+            return columns
+        if self.forearm_landmarks is None:
+            raise _native.InputError(
+                f"{self.source}: the forearm's markers (RSP {self.labels['RSP']!r}, USP "
+                f"{self.labels['USP']!r}, FAP {self.labels['FAP']!r}) are a cluster and the hand one marker "
+                f"({_native.HAND_POINT[0]} {self.labels[_native.HAND_POINT[0]]!r}): the hand's direction is "
+                "measured in the forearm's anatomical frame, which the landmarks of a static trial give. "
+                "Calibrate with them (`ikid calibrate --static STATIC --map MAP -o CAL.json`) and pass "
+                "--calibration CAL.json"
+            )
+        columns = np.array(columns, np.float64)
+        columns[:, :9] = _native.points_from_technical_frame(columns[:, :9], self.forearm_landmarks)
+        return columns
+
+    def _check_wrist_bar(self, columns: np.ndarray) -> None:
+        """Refuse a one-marker hand's forearm markers that cannot be the styloids and the elbow
+        (a plate named as RSP, USP, FAP without its landmarks): their median spans over the
+        frames that see them, against :data:`WRIST_BAR_M` and :data:`FOREARM_LENGTH_M`."""
+        rsp, usp, fap = columns[:, 0:3], columns[:, 3:6], columns[:, 6:9]
+        bar = np.linalg.norm(rsp - usp, axis=1)
+        length = np.linalg.norm(fap - (rsp + usp) / 2, axis=1)
+        seen = np.isfinite(bar) & np.isfinite(length)
+        if not seen.any():
+            return
+        bar_mm, length_mm = 1e3 * float(np.median(bar[seen])), 1e3 * float(np.median(length[seen]))
+        (lo_bar, hi_bar), (lo_len, hi_len) = WRIST_BAR_M, FOREARM_LENGTH_M
+        if lo_bar <= bar_mm / 1e3 <= hi_bar and lo_len <= length_mm / 1e3 <= hi_len:
+            return
+        raise _native.InputError(
+            f"{self.source}: with one hand marker ({_native.HAND_POINT[0]}), RSP and USP are the wrist's "
+            f"styloids (a wrist bar) and FAP the lateral epicondyle; here RSP {self.labels['RSP']!r} and USP "
+            f"{self.labels['USP']!r} are {bar_mm:.0f} mm apart ({1e3 * lo_bar:.0f}-{1e3 * hi_bar:.0f} mm for "
+            f"the styloids) and FAP {self.labels['FAP']!r} {length_mm:.0f} mm from their midpoint "
+            f"({1e3 * lo_len:.0f}-{1e3 * hi_len:.0f} mm for the forearm): they do not sit there. For a "
+            "cluster on the forearm, name the styloid and epicondyle landmarks in [landmarks] and calibrate "
+            "from a static trial that has them (docs/markersets.md)"
+        )
+
+    def forearm_landmark_points(self, data: MarkerData) -> np.ndarray:
+        """``(n, 9)``: the radial styloid, the ulnar styloid and the mid-epicondyles from the
+        map's landmark labels in ``data`` (metres, NaN where one is missing)."""
+        lateral, medial, radial, ulnar = (data.marker(lab) for lab in self.landmark_labels_in_order(data))
+        return np.concatenate([radial, ulnar, (lateral + medial) / 2.0], axis=1)
+
+    def with_forearm_landmarks(self, local: np.ndarray) -> MarkerMap:
+        """This map with a forearm cluster's anatomical points ``(3, 3)`` (see
+        :attr:`forearm_landmarks`)."""
+        return replace(self, forearm_landmarks=np.asarray(local, np.float64).reshape(3, 3))
+
+    def with_calibration(self, path: str | os.PathLike[str] | None) -> MarkerMap:
+        """This map with what a calibration file adds to it: a forearm cluster's anatomical
+        points, for a one-marker hand (the map as it is otherwise). A calibration without them,
+        for such a map, is refused, saying to calibrate with the landmarks."""
+        if path is None or not self.forearm_cluster:
+            return self
+        from ikid.calibration import calibration_info
+
+        stored = calibration_info(path).get("forearm_landmarks")
+        try:
+            points = np.asarray(stored["points_m"], np.float64)  # type: ignore[index]
+            labels = stored["in_frame_of"]  # type: ignore[index]
+            ok = points.shape == (3, 3) and bool(np.isfinite(points).all())
+        except (TypeError, KeyError, ValueError):
+            ok = False
+        if not ok:
+            raise _native.InputError(
+                f"{path}: has no forearm landmarks in the frame of the forearm's markers, which this map "
+                f"({self.source}: a forearm cluster and one hand marker) needs: calibrate with it "
+                "(`ikid calibrate --static STATIC --map MAP`), from a static trial with the landmarks"
+            )
+        mine = [self.labels[m] for m in ("RSP", "USP", "FAP")]
+        if labels != mine:
+            raise _native.InputError(
+                f"{path}: its forearm landmarks are in the frame of markers {labels}, this map's are {mine}: "
+                "calibrate again with this map"
+            )
+        return self.with_forearm_landmarks(points)
 
     def fit_clusters(self, data: MarkerData, columns: np.ndarray) -> np.ndarray:
         """``columns`` (``labels_in_ikid_order``'s, ``(n, 3m)``) with each segment that has a
@@ -505,7 +626,7 @@ class MarkerMap:
 
 
 def _clusters(
-    table: object, source: str, seen: dict[str, str], one_hand_marker: bool
+    table: object, source: str, seen: dict[str, str], one_hand_marker: bool, forearm_cluster: bool
 ) -> dict[str, tuple[str, ...]]:
     """The ``[cluster]`` table checked: segment -> its further markers' labels, each a label no
     other marker has."""
@@ -533,11 +654,16 @@ def _clusters(
                 f"{source}: [cluster] {segment} must be a list of one or more labels (the markers beyond "
                 f"the {segment}'s three, on the same rigid cluster)"
             )
-        if one_hand_marker:
+        if one_hand_marker and (segment == "hand" or not forearm_cluster):
             raise FileFormatError(
-                f"{source}: [cluster] {segment} with a one-marker hand ({_native.HAND_POINT[0]}): that set "
-                "builds each segment anew each frame from the styloids, the epicondyle and the hand marker, "
-                "not from a rigid cluster; name three hand markers (MC2, MC5, MCB) to use clusters"
+                f"{source}: [cluster] {segment} with a one-marker hand ({_native.HAND_POINT[0]}): "
+                + (
+                    "the hand is that one marker"
+                    if segment == "hand"
+                    else "its forearm markers here are the styloids and the epicondyle (its [landmarks]), "
+                    "built anew each frame, not a rigid cluster"
+                )
+                + "; a cluster is three markers of a segment in [markers] and more here"
             )
         for label in (v.strip() for v in labels):
             if label in taken:

@@ -137,6 +137,14 @@ def run(args: argparse.Namespace) -> int:
     side = args.side or mapping.side
     static = read_markers(args.static)
     chosen = _frame_selection(args.frames, len(static), args.static) if args.frames else None
+    forearm_landmarks = None
+    if mapping.forearm_cluster:
+        # A forearm cluster with one hand marker: its anatomical points, measured in the
+        # cluster's frame where the landmarks are seen, make the virtual wrist bar and elbow.
+        source = read_markers(args.landmarks) if args.landmarks else static
+        where = chosen if (chosen is not None and not args.landmarks) else slice(None)
+        forearm_landmarks = _forearm_landmarks(mapping, source, where)
+        mapping = mapping.with_forearm_landmarks(forearm_landmarks["points_m"])
     neutral = static.frames(mapping)
     try:
         ikid.check_marker_units(neutral)
@@ -208,8 +216,11 @@ def run(args: argparse.Namespace) -> int:
         if hand_points is None and mapping.one_hand_marker:
             # A one-marker hand's frame is its marker and the styloid line (as Plug-in Gait's):
             # the landmarks it stands for make the calibration read its direction, not zero.
-            columns = [source.marker(lab) for lab in mapping.labels_in_ikid_order(source)]
-            hand_points = ikid._native.one_marker_hand_landmarks(np.concatenate(columns, axis=1))[where]
+            columns = np.concatenate(
+                [source.marker(lab) for lab in mapping.labels_in_ikid_order(source)], axis=1
+            )
+            columns = mapping.anatomical_forearm(mapping.fit_clusters(source, columns))
+            hand_points = ikid._native.one_marker_hand_landmarks(columns)[where]
         cal = calibrate_neutral(
             neutral, points, landmark_frames=beside, side=side, hand_landmarks=hand_points
         )
@@ -251,7 +262,9 @@ def run(args: argparse.Namespace) -> int:
         provenance["motion_frames"] = args.motion_frames
     else:
         cal = calibrate_neutral(neutral, side=side)
-    ikid.save_calibration(cal, args.output, marker_map=mapping, **provenance)
+    ikid.save_calibration(
+        cal, args.output, marker_map=mapping, forearm_landmarks=forearm_landmarks, **provenance
+    )
     r = cal.report or {}
     spread = r.get("neutral_spread_deg", 0.0)
     used = r.get("neutral_frames", len(neutral))
@@ -290,6 +303,11 @@ def run(args: argparse.Namespace) -> int:
                 else ""
             )
         )
+    if forearm_landmarks is not None:
+        details.append(
+            f"forearm cluster's anatomical points from the landmarks in {forearm_landmarks['frames']} frames "
+            f"(spread {forearm_landmarks['spread_mm']:.1f} mm RMS)"
+        )
     if r.get("landmarks"):
         lm = r["landmarks"]
         if lm.get("hand"):
@@ -305,3 +323,34 @@ def run(args: argparse.Namespace) -> int:
         )
     print(f"{cal!r}; {'; '.join(details)} -> {args.output}")
     return 0
+
+
+def _forearm_landmarks(mapping, source, where) -> dict:
+    """A forearm cluster's anatomical points (radial and ulnar styloid, mid-epicondyles) in the
+    technical frame of its three markers, from the frames of ``source`` (``where``) that see
+    the landmarks and the cluster: their median, with how many frames and how far they spread.
+    Refused with fewer than the neutral frames a calibration needs."""
+    from ikid.io.mapping import landmark_names
+
+    columns = np.concatenate([source.marker(lab) for lab in mapping.labels_in_ikid_order(source)], axis=1)
+    three = mapping.fit_clusters(source, columns)[:, :9]
+    local = ikid._native.points_in_technical_frame(three, mapping.forearm_landmark_points(source), 3)[where]
+    local = local[np.isfinite(local).all(axis=1)]
+    least = ikid._native.MIN_NEUTRAL_FRAMES
+    if len(local) < least:
+        named = ", ".join(mapping.landmarks[k] for k in landmark_names())
+        raise ikid.InputError(
+            f"{source.source}: the forearm's landmarks ({named}) and its markers are seen together in "
+            f"{len(local)} of the frames given; the forearm cluster's anatomical points are measured over "
+            f"at least {least}: record a static trial with the styloid and epicondyle markers (or their "
+            "probed points) on"
+        )
+    points = np.median(local, axis=0)
+    spread = float(np.sqrt(np.mean(np.sum((local - points).reshape(len(local), 3, 3) ** 2, axis=2))))
+    return {
+        "in_frame_of": [mapping.labels[m] for m in ("RSP", "USP", "FAP")],
+        "points_m": points.reshape(3, 3).tolist(),
+        "points": ["radial_styloid", "ulnar_styloid", "mid_epicondyles"],
+        "frames": len(local),
+        "spread_mm": 1e3 * spread,
+    }

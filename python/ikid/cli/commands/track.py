@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
         refiner = _model_for(
             args.refiner, "ikid track --refiner", ("refine",), allow_unchecked=args.allow_unchecked_model
         )
-    mapping = MarkerMap.load(args.map) if args.map else None
+    mapping = MarkerMap.load(args.map).with_calibration(args.calibration) if args.map else None
     first = next(data.blocks(), None)
     if first is None:
         raise ikid.InputError(f"{args.input}: no frames")
