@@ -321,6 +321,31 @@ def options(b: Builder) -> None:
                 expect="error",
                 names=[needle],
             )
+    # Marker maps with a [cluster] or a one-marker hand on a forearm cluster: refused, naming
+    # what is wrong, nothing written.
+    six = '[markers]\nRSP="RSP"\nUSP="USP"\nFAP="FAP"\n'
+    for name, text, needle in (
+        ("cluster-absent", six + 'MC2="MC2"\nMC5="MC5"\nMCB="MCB"\n[cluster]\nforearm=["NOPE"]\n', "NOPE"),
+        ("cluster-reused", six + 'MC2="MC2"\nMC5="MC5"\nMCB="MCB"\n[cluster]\nhand=["RSP"]\n', "RSP"),
+        ("cluster-on-hnd", six + 'HND="MC2"\n[cluster]\nhand=["MC5"]\n', "[cluster]"),
+        (
+            "hnd-forearm-cluster",
+            six
+            + 'HND="MC2"\n[landmarks]\nlateral_epicondyle="MC5"\nmedial_epicondyle="MC5"\n'
+            + 'radial_styloid="MCB"\nulnar_styloid="MC5"\n',
+            "--calibration",
+        ),
+    ):
+        d = b.dir(f"ik-map-{name}")
+        (d / f"{name}.toml").write_text(text)
+        b.seed(d, {"out.mot": ref / "ik.mot"})
+        b.add(
+            f"ik/--map={name}",
+            ["ik", trc, "-o", d / "out.mot", "--map", d / f"{name}.toml"],
+            d,
+            expect="error",
+            names=[needle],
+        )
     # Case 3: the task is not checked; a file named like a shipped model shadows it.
     d = b.dir("ik-model-wrist-chain")
     b.seed(d, {"out.mot": ref / "ik.mot"})
