@@ -231,3 +231,27 @@ def test_a_maps_labels_come_in_frame_order_whatever_order_it_was_given(tmp_path)
     given = MarkerMap({"HND": "RFIN", "FAP": "RELB", "USP": "RWRB", "RSP": "RWRA"}, "reversed")
     assert given.labels_in_ikid_order(data) == ["RWRA", "RWRB", "RELB", "RFIN"]
     assert np.allclose(data.frames(given), data.frames(MarkerMap.plug_in_gait("right")), equal_nan=True)
+
+
+def test_a_hand_that_does_not_move_on_the_forearm_is_said_before_any_angle(tmp_path, capsys):
+    # The body model's wrist moving: its hand markers travel in the forearm's frame. A "hand"
+    # of points fixed to the forearm (here, the forearm's markers moved 5 cm) does not.
+    t = np.linspace(0.0, 2.0, 200)
+    q = np.stack([0.2 * np.sin(t), 0.6 * np.sin(3 * t), 0.3 * np.cos(2 * t)], axis=1)
+    frames = ikid.forward_markers(q)
+    six = {"RSP": "A", "USP": "B", "FAP": "C", "MC2": "D", "MC5": "E", "MCB": "F"}
+    mapping = MarkerMap.from_dict({"markers": six})
+    assert mapping.hand_held_to_forearm(frames) is None
+    fixed = frames.copy()
+    fixed[:, 9:18] = frames[:, 0:9] + np.tile([0.0, -0.05, 0.0], 3)
+    said = mapping.hand_held_to_forearm(fixed)
+    assert said is not None and "the hand's markers MC2 ('D'), MC5 ('E'), MCB ('F') stay within 0.0 mm" in said
+    # A static trial says it too (the wrist did not move); under 20 frames nothing is said.
+    assert mapping.hand_held_to_forearm(np.repeat(frames[:1], 50, axis=0)) is not None
+    assert mapping.hand_held_to_forearm(fixed[:19]) is None
+    # Through the command line, a warning before the angles (the run goes on).
+    path = io.write_trc(tmp_path / "t.trc", t, fixed, 100.0, list(six.values()))
+    (tmp_path / "m.toml").write_text(mapping.to_toml())
+    cli(["ik", str(path), "--map", str(tmp_path / "m.toml"), "-o", str(tmp_path / "o.mot")])
+    err = capsys.readouterr().err
+    assert "ikid: warning: " in err and "either the wrist did not move at all, or these markers are on the" in err, err

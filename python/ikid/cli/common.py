@@ -203,7 +203,9 @@ def _subject_calibration(frames: np.ndarray, calibration: str | None, mapping, s
         ikid.check_marker_units(frames)
         # A segment whose markers do not keep their distances names a marker of another one
         # (a "hand" with an elbow marker): said before any angle is written.
-        for problem in (mapping or MarkerMap.identity()).stretched_segments(frames):
+        checked = mapping or MarkerMap.identity()
+        held = checked.hand_held_to_forearm(frames)
+        for problem in checked.stretched_segments(frames) + ([held] if held else []):
             warnings.warn(f"{source}: {problem}", MarkerMapWarning, stacklevel=2)
         if calibration:
             check_calibration_map(calibration, mapping)

@@ -80,6 +80,13 @@ WRIST_BAR_M = (0.030, 0.120)
 FOREARM_LENGTH_M = (0.120, 0.400)
 
 
+#: Least a hand marker travels in the forearm's frame over a task trial (10th-90th percentile),
+#: metres, below which the "hand" is said to be fixed to the forearm: real wrists move their
+#: markers 32-123 mm (pyomeca, racing), a static trial 0.2-0.6 mm, markers on the forearm's
+#: own plate 0.0-0.2 mm.
+MIN_HAND_TRAVEL_M = 0.003
+
+
 class MarkerMapWarning(UserWarning):
     """A marker map that the recording's markers contradict (:meth:`MarkerMap.stretched_segments`)."""
 
@@ -357,6 +364,30 @@ class MarkerMap:
                         "sliding"
                     )
         return found
+
+    def hand_held_to_forearm(self, frames: np.ndarray) -> str | None:
+        """What says that the hand's markers, as this map names them, do not move relative to
+        the forearm's over ``frames`` (``(n, 18)``, ikid's order): each stays within
+        :data:`MIN_HAND_TRAVEL_M` (10th-90th percentile) in the forearm markers' technical
+        frame. None when one moves more, or with under 20 frames with all six. A task trial
+        shows it when the "hand" is on the forearm (or the wrist held still throughout); a
+        static trial always does, so calibration does not ask."""
+        frames = np.asarray(frames, np.float64).reshape(len(frames), 18)
+        local = _native.points_in_technical_frame(frames[:, :9], frames[:, 9:], 3).reshape(len(frames), 3, 3)
+        seen = np.isfinite(local).all(axis=(1, 2))
+        if seen.sum() < 20:
+            return None
+        lo, hi = np.percentile(local[seen], [10, 90], axis=0)
+        travel = float(np.linalg.norm(hi - lo, axis=1).max())
+        if travel > MIN_HAND_TRAVEL_M:
+            return None
+        hand = ", ".join(f"{m} ({self.label_of(m)!r})" for m in ikid_marker_names()[3:])
+        return (
+            f"the hand's markers {hand} stay within {1e3 * travel:.1f} mm of one place on the forearm over "
+            f"{int(seen.sum())} frames (10th-90th percentile): either the wrist did not move at all, or these "
+            "markers are on the forearm (or on one rigid body with its markers); check the labels the marker "
+            "map gives the hand"
+        )
 
     def ikid_frames(self, columns: np.ndarray) -> np.ndarray:
         """ikid's ``(n, 18)`` frames from the mapped labels' columns (``labels_in_ikid_order``):
