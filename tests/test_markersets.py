@@ -245,7 +245,9 @@ def test_a_hand_that_does_not_move_on_the_forearm_is_said_before_any_angle(tmp_p
     fixed = frames.copy()
     fixed[:, 9:18] = frames[:, 0:9] + np.tile([0.0, -0.05, 0.0], 3)
     said = mapping.hand_held_to_forearm(fixed)
-    assert said is not None and "the hand's markers MC2 ('D'), MC5 ('E'), MCB ('F') stay within 0.0 mm" in said
+    assert (
+        said is not None and "the hand's markers MC2 ('D'), MC5 ('E'), MCB ('F') stay within 0.0 mm" in said
+    )
     # A static trial says it too (the wrist did not move); under 20 frames nothing is said.
     assert mapping.hand_held_to_forearm(np.repeat(frames[:1], 50, axis=0)) is not None
     assert mapping.hand_held_to_forearm(fixed[:19]) is None
@@ -254,4 +256,7 @@ def test_a_hand_that_does_not_move_on_the_forearm_is_said_before_any_angle(tmp_p
     (tmp_path / "m.toml").write_text(mapping.to_toml())
     cli(["ik", str(path), "--map", str(tmp_path / "m.toml"), "-o", str(tmp_path / "o.mot")])
     err = capsys.readouterr().err
-    assert "ikid: warning: " in err and "either the wrist did not move at all, or these markers are on the" in err, err
+    assert (
+        "ikid: warning: " in err
+        and "either the wrist did not move at all, or these markers are on the" in err
+    ), err

@@ -384,9 +384,9 @@ class MarkerMap:
         hand = ", ".join(f"{m} ({self.label_of(m)!r})" for m in ikid_marker_names()[3:])
         return (
             f"the hand's markers {hand} stay within {1e3 * travel:.1f} mm of one place on the forearm over "
-            f"{int(seen.sum())} frames (10th-90th percentile): either the wrist did not move at all, or these "
-            "markers are on the forearm (or on one rigid body with its markers); check the labels the marker "
-            "map gives the hand"
+            f"{int(seen.sum())} frames (10th-90th percentile): either the wrist did not move at all, or "
+            "these markers are on the forearm (or on one rigid body with its markers); check the labels the "
+            "marker map gives the hand"
         )
 
     def ikid_frames(self, columns: np.ndarray) -> np.ndarray:
