@@ -260,3 +260,38 @@ def test_a_hand_that_does_not_move_on_the_forearm_is_said_before_any_angle(tmp_p
         "ikid: warning: " in err
         and "either the wrist did not move at all, or these markers are on the" in err
     ), err
+
+
+def test_two_hand_markers_are_refused_saying_why_and_what_to_do():
+    forearm = {"RSP": "A", "USP": "B", "FAP": "C"}
+    with pytest.raises(
+        FileFormatError,
+        match=r"does not name MCB .*two hand markers do not fix the hand's turn about the line through them.*"
+        r"read real wrists 5-17 degrees off.*name the distal one HND instead, or add a third",
+    ):
+        MarkerMap.from_dict({"markers": {**forearm, "MC2": "D", "MC5": "E"}})
+
+
+@pytest.mark.parametrize("command", ["ik", "track"])
+def test_an_uncalibrated_left_arm_is_mirrored_into_a_right_one(command, tmp_path, capsys):
+    # The body model's right arm mirrored (lab z negated) is a left arm at the model's placement:
+    # with side = "left" in its map and no calibration, its angles are the right arm's. Read as
+    # a right arm they were 45° off (flexion, supination) with exit 0.
+    t = np.arange(1500) / 1000.0
+    q = np.stack([0.3 * np.sin(1.3 * t), 0.5 * np.sin(2.1 * t), 0.2 * np.cos(1.7 * t)], axis=1)
+    left = ikid.forward_markers(q) * np.tile([1.0, 1.0, -1.0], 6)
+    names = ["RSP", "USP", "FAP", "MC2", "MC5", "MCB"]
+    path = io.write_trc(tmp_path / "left.trc", t, left, 1000.0, names)
+    (tmp_path / "left.toml").write_text(
+        'side = "left"\n[markers]\n' + "".join(f'{m} = "{m}"\n' for m in names)
+    )
+    out = tmp_path / "out.mot"
+    target = str(out) if command == "ik" else str(tmp_path / "out")
+    assert cli([command, str(path), "--map", str(tmp_path / "left.toml"), "-o", target]) == 0
+    if command == "track":
+        assert "uncalibrated, left arm mirrored into a right one" in capsys.readouterr().out
+    times, angles = io.read_mot(out)
+    rows = np.rint(times * 1000.0).astype(int)
+    settled = rows >= 100
+    rms = np.degrees(np.sqrt(np.mean((angles[settled] - q[rows[settled]]) ** 2, axis=0)))
+    assert (rms < 0.5).all(), rms

@@ -260,6 +260,26 @@ def check_calibration_map(path: str | os.PathLike[str], marker_map: MarkerMap | 
         )
 
 
+def uncalibrated(side: str) -> Calibration | None:
+    """What a run of an arm without a calibration file uses: None (the body model's placement)
+    for a right arm; for a left one (a marker map's ``side = "left"``) that placement with the
+    arm mirrored into a right one, as a left arm's calibration does. A left
+    arm read as a right one turns every angle (measured: 45° RMS on flexion and supination)."""
+    if side == "left":
+        placement = Calibration.body_model()
+        return Calibration.from_matrices(placement.forearm, placement.hand, side="left")
+    return None
+
+
+def mirrored_to_right(frames: np.ndarray, side: str) -> np.ndarray:
+    """``(n, 3m)`` marker frames of a ``side`` arm as a right arm's: a left arm's lab ``z``
+    negated (the core's ``Side::to_right``)."""
+    frames = np.asarray(frames, np.float64)
+    if side != "left":
+        return frames
+    return frames * np.tile([1.0, 1.0, -1.0], frames.shape[1] // 3)
+
+
 def load_calibration(path: str | os.PathLike[str]) -> Calibration:
     """Read a calibration written by :func:`save_calibration` (matrices checked, side as
     recorded). Check the trial's marker map against it with :func:`check_calibration_map`."""

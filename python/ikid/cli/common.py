@@ -195,7 +195,7 @@ def _subject_calibration(frames: np.ndarray, calibration: str | None, mapping, s
     checked against the marker map it was measured with; or, without one, the body model's
     placement, after checking that it can read these markers at all (units, then placement:
     an uncalibrated real recording reads 50-170° off). Errors name ``source``."""
-    from ikid.calibration import check_calibration_map
+    from ikid.calibration import check_calibration_map, mirrored_to_right, uncalibrated
     from ikid.io import MarkerMap
     from ikid.io.mapping import MarkerMapWarning
 
@@ -210,10 +210,12 @@ def _subject_calibration(frames: np.ndarray, calibration: str | None, mapping, s
         if calibration:
             check_calibration_map(calibration, mapping)
             return ikid.load_calibration(calibration)
-        ikid.check_default_placement(frames)
+        # Uncalibrated, the body model's placement; a left arm (the map's side) mirrored into
+        # a right one first, as its calibration would.
+        ikid.check_default_placement(mirrored_to_right(frames, checked.side))
     except ikid.IkidError as e:
         raise type(e)(_naming(source, e)) from None
-    return None
+    return uncalibrated(checked.side)
 
 
 def _cause(file: str, error: str) -> str:

@@ -149,6 +149,14 @@ class MarkerMap:
                 if any(m in hand for m in missing) and len(named_hand) < len(hand)
                 else ""
             )
+            if len(named_hand) == 2 and hand_point not in markers:
+                # Measured (docs/markersets.md): the wrist's centre found from the movement as the
+                # third point read real wrists 5-17 degrees off; ikid does not guess the third.
+                hint += (
+                    " (two hand markers do not fix the hand's turn about the line through them: the wrist's "
+                    "centre as the third point, found from the hand's movement, read real wrists 5-17 degrees "
+                    f"off, so ikid does not use it; name the distal one {hand_point} instead, or add a third)"
+                )
             raise FileFormatError(
                 f"{source}: [markers] does not name {', '.join(missing)} (every one of "
                 f"{', '.join(names)} is needed){hint}"

@@ -436,12 +436,26 @@ def _run(args: argparse.Namespace, source, rate_hz: float | None, refusal_reason
     return _run_with(args, source, refusal_reason, *_model_streams(args, rate_hz))
 
 
+def _stream_calibration(args: argparse.Namespace):
+    """The calibration file given, checked against the marker map (its arm, its labels); or,
+    without one, the body model's placement for the map's arm (a left arm mirrored)."""
+    from ikid.calibration import check_calibration_map, uncalibrated
+    from ikid.io import MarkerMap
+
+    marker_map = MarkerMap.load(args.map) if args.map else None
+    if args.calibration:
+        if marker_map is not None:  # frames on stdin come in ikid's order, with no map to check
+            check_calibration_map(args.calibration, marker_map)
+        return ikid.load_calibration(args.calibration)
+    return uncalibrated(marker_map.side if marker_map else "right")
+
+
 def _tracker_streams(args: argparse.Namespace, rate_hz: float | None):
     if args.torque_model or args.model != "wrist-ik" or args.missing_markers:
         raise ikid.InputError(
             "--tracker gives angles and torques itself: no --model, --torque-model or --missing-markers"
         )
-    calibration = ikid.load_calibration(args.calibration) if args.calibration else None
+    calibration = _stream_calibration(args)
     stream = _TrackerStream(rate_hz or 1000.0, calibration)
     # The tracker reads marker frames: the 18 values every source gives.
     return [stream], stream.output_names, stream.output_units, stream.rate_hz, len(ikid.marker_names()) * 3
@@ -476,7 +490,7 @@ def _model_streams(args: argparse.Namespace, rate_hz: float | None):
     for m in models:
         if m.frame_len != models[0].frame_len:
             raise ikid.InputError(f"models {models[0].name!r} and {m.name!r} read different frames")
-    calibration = ikid.load_calibration(args.calibration) if args.calibration else None
+    calibration = _stream_calibration(args)
     plain = [m.stream(missing_markers=args.missing_markers, calibration=calibration) for m in models]
     streams: list[ikid.Stream | _WithSd] = list(plain)
     names = [n for m in models for n in m.output_names]

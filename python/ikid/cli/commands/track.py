@@ -201,10 +201,12 @@ def run(args: argparse.Namespace) -> int:
     refiner_name = refiner.name if refiner else ""
     how = f"refined by {refiner_name}" if refiner else "not refined"
     placed = "uncalibrated"
-    if calibration is not None:
+    if args.calibration:
         from ikid.calibration import calibration_info
 
         placed = f"calibrated ({calibration_info(args.calibration)['method']}, {calibration.side} arm)"
+    elif calibration is not None:  # a left arm at the body model's placement, mirrored
+        placed = f"uncalibrated, {calibration.side} arm mirrored into a right one"
     notes = [f"{n} {name.replace('_', ' ')}" for name, n in counts.items() if n]
     if lost:
         notes.append(f"{lost} implausible (not written)")
