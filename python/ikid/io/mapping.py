@@ -153,9 +153,10 @@ class MarkerMap:
                 # Measured (docs/markersets.md): the wrist's centre found from the movement as the
                 # third point read real wrists 5-17 degrees off; ikid does not guess the third.
                 hint += (
-                    " (two hand markers do not fix the hand's turn about the line through them: the wrist's "
-                    "centre as the third point, found from the hand's movement, read real wrists 5-17 degrees "
-                    f"off, so ikid does not use it; name the distal one {hand_point} instead, or add a third)"
+                    " (two hand markers do not fix the hand's turn about the line through them: the "
+                    "wrist's centre as the third point, found from the hand's movement, read real wrists "
+                    f"5-17 degrees off, so ikid does not use it; name the distal one {hand_point} instead, or "
+                    "add a third)"
                 )
             raise FileFormatError(
                 f"{source}: [markers] does not name {', '.join(missing)} (every one of "
