@@ -155,8 +155,8 @@ class MarkerMap:
                 hint += (
                     " (two hand markers do not fix the hand's turn about the line through them: the "
                     "wrist's centre as the third point, found from the hand's movement, read real wrists "
-                    f"5-17 degrees off, so ikid does not use it; name the distal one {hand_point} instead, or "
-                    "add a third)"
+                    f"5-17 degrees off, so ikid does not use it; name the distal one {hand_point} instead, "
+                    "or add a third)"
                 )
             raise FileFormatError(
                 f"{source}: [markers] does not name {', '.join(missing)} (every one of "
