@@ -114,10 +114,13 @@ def test_a_marker_that_leaves_its_place_is_left_out_and_named():
     _, six, extra = arm(500)
     knocked = extra.copy()
     knocked[200:300, 3:6] += [0.0, 0.04, 0.0]  # H4 read 40 mm off in a fifth of the frames
-    with pytest.warns(
-        MarkerMapWarning, match=r"marker 'H4' of the hand's cluster is more than 15 mm .* in 100 "
-    ):
+    with pytest.warns(MarkerMapWarning) as said:
         frames = data(six, knocked).frames(MarkerMap.from_dict(CLUSTERED))
+    said = " ".join(str(w.message) for w in said)
+    assert (
+        "marker 'H4' of the hand's cluster is more than 15 mm" in said and " in 100 of the 500 frames" in said
+    )
+    assert "marker 'H4' of the hand's cluster does not keep its distances" in said, said
     np.testing.assert_allclose(frames, six, atol=1e-6)
     # A clean recording says nothing.
     with warnings.catch_warnings():
@@ -135,12 +138,16 @@ def test_every_block_of_a_file_is_fitted_with_the_shape_of_its_first():
     later[:, 0:3] = np.nan
     again = data(later, extra[200:], "long.trc").frames(mapping, whole=False)
     np.testing.assert_allclose(again, six[200:], atol=1e-6)
-    # A file whose first block never shows the cluster whole is refused, naming it.
-    with pytest.raises(
-        ikid.InputError,
-        match=r"other.trc: the forearm's cluster \(RSP 'RSP'.*'FA4'\): .*all seen in 0 of 200",
+    # A file whose first block never shows the cluster whole reads the segment's three as they
+    # are, and says so.
+    with pytest.warns(
+        MarkerMapWarning,
+        match=r"other.trc: the forearm's cluster \(RSP 'RSP'.*'FA4'\) is not used: .*all seen in 0 of 200 .*"
+        r"the forearm's three \[markers\] are read as they are",
     ):
-        data(later, extra[200:], "other.trc").frames(mapping, whole=False)
+        plain = data(later, extra[200:], "other.trc").frames(mapping, whole=False)
+    assert np.isnan(plain[:, 0:3]).all()
+    np.testing.assert_allclose(plain[:, 3:], six[200:, 3:], atol=1e-6)
 
 
 def test_ik_through_a_four_marker_cluster_reads_noisy_markers_closer_to_the_truth(tmp_path):

@@ -295,3 +295,27 @@ def test_an_uncalibrated_left_arm_is_mirrored_into_a_right_one(command, tmp_path
     settled = rows >= 100
     rms = np.degrees(np.sqrt(np.mean((angles[settled] - q[rows[settled]]) ** 2, axis=0)))
     assert (rms < 0.5).all(), rms
+
+
+def test_three_markers_on_a_line_are_refused_before_any_angle(tmp_path, capsys):
+    t = np.linspace(0.0, 2.0, 200)
+    q = np.stack([0.2 * np.sin(t), 0.6 * np.sin(3 * t), 0.3 * np.cos(2 * t)], axis=1)
+    frames = ikid.forward_markers(q)
+    six = {"RSP": "A", "USP": "B", "FAP": "C", "MC2": "D", "MC5": "E", "MCB": "F"}
+    mapping = MarkerMap.from_dict({"markers": six})
+    assert mapping.flat_segments(frames) == []
+    flat = frames.copy()
+    flat[:, 6:9] = 2 * frames[:, 3:6] - frames[:, 0:3]  # FAP on the line RSP-USP, beyond USP
+    said = mapping.flat_segments(flat)
+    assert (
+        len(said) == 1 and "the forearm's markers RSP ('A'), USP ('B'), FAP ('C') lie on one line" in said[0]
+    )
+    path = io.write_trc(tmp_path / "t.trc", t, flat, 100.0, list(six.values()))
+    (tmp_path / "m.toml").write_text(mapping.to_toml())
+    for cmd in (
+        ["ik", str(path), "-o", str(tmp_path / "o.mot")],
+        ["calibrate", "--static", str(path), "-o", str(tmp_path / "c.json")],
+    ):
+        assert cli([*cmd, "--map", str(tmp_path / "m.toml")]) == 2
+        assert "lie on one line (within 5 mm) in 200 of the 200 frames" in capsys.readouterr().err
+    assert not (tmp_path / "o.mot").exists() and not (tmp_path / "c.json").exists()

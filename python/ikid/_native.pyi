@@ -57,6 +57,7 @@ __all__ = [
     "points_in_technical_frame",
     "points_from_technical_frame",
     "MAX_CLUSTER_FIT_RESIDUAL_M",
+    "CLUSTER_SPREAD_FLOOR_M",
     "MIN_NEUTRAL_FRAMES",
     "HAND_POINT",
     "ONE_HAND_MARKER_UNDETERMINED",
@@ -298,6 +299,7 @@ def points_in_technical_frame(
 def points_from_technical_frame(markers: _Floats, local: _Floats) -> npt.NDArray[np.float64]: ...
 
 MAX_CLUSTER_FIT_RESIDUAL_M: float
+CLUSTER_SPREAD_FLOOR_M: float
 MIN_NEUTRAL_FRAMES: int
 
 HAND_POINT: tuple[str, str, str]

@@ -153,7 +153,7 @@ def save_calibration(
     """Write ``calibration`` (its method, side and report, the marker map it was measured
     with — the identity map when None —, a forearm cluster's anatomical points for a
     one-marker hand (``forearm_landmarks``: ``in_frame_of``, ``points_m``; see
-    :meth:`ikid.io.MarkerMap.with_calibration`) and any ``provenance`` given) as JSON,
+    :func:`map_with_calibration`) and any ``provenance`` given) as JSON,
     atomically."""
     from ikid.io.mapping import MarkerMap
 
@@ -249,7 +249,8 @@ def check_calibration_map(path: str | os.PathLike[str], marker_map: MarkerMap | 
         return
     theirs = recorded.get("markers", {})
     differ = [
-        f"{m} is {lab!r} here, {theirs.get(m)!r} in the calibration"
+        f"{m} is {lab!r} here, "
+        + (f"{theirs[m]!r} in the calibration" if m in theirs else "not in the calibration's map")
         for m, lab in marker_map.labels.items()
         if theirs.get(m) != lab
     ]
@@ -258,6 +259,36 @@ def check_calibration_map(path: str | os.PathLike[str], marker_map: MarkerMap | 
             f"{path}: measured with another marker map ({recorded.get('source')}): {'; '.join(differ)}. "
             "Give the marker map `ikid calibrate` was given (--map), or calibrate again with this one"
         )
+
+
+def map_with_calibration(marker_map: MarkerMap, path: str | os.PathLike[str] | None) -> MarkerMap:
+    """``marker_map`` with what the calibration file at ``path`` adds to it: a forearm
+    cluster's anatomical points, for a one-marker hand whose forearm is a cluster
+    (:meth:`ikid.io.MarkerMap.with_forearm_landmarks`); the map as it is otherwise. A
+    calibration without them, for such a map, is refused, saying to calibrate with the
+    landmarks."""
+    if path is None or not marker_map.forearm_cluster:
+        return marker_map
+    stored = calibration_info(path).get("forearm_landmarks")
+    try:
+        points = np.asarray(stored["points_m"], np.float64)  # type: ignore[index]
+        labels = stored["in_frame_of"]  # type: ignore[index]
+        ok = points.shape == (3, 3) and bool(np.isfinite(points).all())
+    except (TypeError, KeyError, ValueError):
+        ok = False
+    if not ok:
+        raise InputError(
+            f"{path}: has no forearm landmarks in the frame of the forearm's markers, which this map "
+            f"({marker_map.source}: a forearm cluster and one hand marker) needs: calibrate with it "
+            "(`ikid calibrate --static STATIC --map MAP`), from a static trial with the landmarks"
+        )
+    mine = [marker_map.labels[m] for m in ("RSP", "USP", "FAP")]
+    if labels != mine:
+        raise InputError(
+            f"{path}: its forearm landmarks are in the frame of markers {labels}, this map's are {mine}: "
+            "calibrate again with this map"
+        )
+    return marker_map.with_forearm_landmarks(points)
 
 
 def uncalibrated(side: str) -> Calibration | None:

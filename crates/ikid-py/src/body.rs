@@ -23,6 +23,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(points_in_technical_frame, m)?)?;
     m.add_function(wrap_pyfunction!(points_from_technical_frame, m)?)?;
     m.add("MAX_CLUSTER_FIT_RESIDUAL_M", ikid::cluster::MAX_FIT_RESIDUAL_M)?;
+    m.add("CLUSTER_SPREAD_FLOOR_M", ikid::cluster::SPREAD_FLOOR_M)?;
     m.add("MIN_NEUTRAL_FRAMES", ikid::calibration::MIN_NEUTRAL_FRAMES)?;
     let hp = ikid::body::HAND_POINT;
     m.add("HAND_POINT", (hp.name, hp.segment.name(), hp.description))?;
@@ -68,8 +69,9 @@ fn one_marker_hand_landmarks<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>) -
     })
 }
 
-/// The rigid shape `(k, 3)` of a cluster of `n_markers` (three or more) from frames
-/// `(n, 3·n_markers)` (metres, NaN = missing): the core's `cluster::ClusterShape::learn`.
+/// The rigid shape `(k, 4)` of a cluster of `n_markers` (three or more) from frames
+/// `(n, 3·n_markers)` (metres, NaN = missing): each marker's place `x, y, z` and its spread
+/// (the core's `cluster::ClusterShape::learn`).
 #[pyfunction]
 fn learn_cluster_shape<'py>(
     py: Python<'py>,
@@ -78,13 +80,17 @@ fn learn_cluster_shape<'py>(
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     with_f64_rows(frames, "frames", 3 * n_markers, |v, _| {
         let shape = ikid::cluster::ClusterShape::learn(v, n_markers).py_err()?;
-        shape.points().into_pyarray(py).reshape([n_markers, 3])
+        let points = shape.points();
+        let rows: Vec<f64> = (0..n_markers)
+            .flat_map(|m| [points[3 * m], points[3 * m + 1], points[3 * m + 2], shape.spread()[m]])
+            .collect();
+        rows.into_pyarray(py).reshape([n_markers, 4])
     })
 }
 
-/// A cluster's shape `(k, 3)` fitted to each frame `(n, 3k)`: `(placed (n, 3k), left_out (k,)
-/// frames each marker was seen but left out of the fit, undetermined frames)` (the core's
-/// `cluster::ClusterShape::fit`).
+/// A cluster's shape `(k, 4)` (as `learn_cluster_shape` gives it) fitted to each frame
+/// `(n, 3k)`: `(placed (n, 3k), left_out (k,) frames each marker was seen but left out of the
+/// fit, undetermined frames)` (the core's `cluster::ClusterShape::fit`).
 #[pyfunction]
 #[allow(clippy::type_complexity)]
 fn fit_cluster<'py>(
@@ -92,7 +98,11 @@ fn fit_cluster<'py>(
     frames: &Bound<'py, PyAny>,
     shape: &Bound<'py, PyAny>,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, Vec<usize>, usize)> {
-    let shape = with_f64_rows(shape, "shape", 3, |v, _| ikid::cluster::ClusterShape::from_points(v).py_err())?;
+    let shape = with_f64_rows(shape, "shape", 4, |v, _| {
+        let points: Vec<f64> = v.chunks_exact(4).flat_map(|r| r[..3].to_vec()).collect();
+        let spread: Vec<f64> = v.chunks_exact(4).map(|r| r[3]).collect();
+        ikid::cluster::ClusterShape::from_points(&points, &spread).py_err()
+    })?;
     let k = shape.len();
     with_f64_rows(frames, "frames", 3 * k, |v, n| {
         let fit = shape.fit(v).py_err()?;

@@ -29,12 +29,25 @@ pub const MIN_CLUSTER_WIDTH_M: f64 = 0.003;
 const MAX_SHAPE_FRAMES: usize = 2000;
 /// Rounds of Procrustes averaging (each aligns every frame to the last round's mean).
 const SHAPE_ROUNDS: usize = 4;
+/// Least spread a marker is given for its weight in a fit, m: the markers of a rigid plate
+/// (0.1-0.5 mm of noise) count alike.
+pub const SPREAD_FLOOR_M: f64 = 0.0005;
+
+/// How many times the cluster's median spread a marker may stray before it counts for less.
+pub const STRAY_FACTOR: f64 = 2.0;
+/// The weight of a marker straying beyond [`STRAY_FACTOR`] (at that limit; less beyond it),
+/// against 1 for the markers that keep the shape.
+pub const STRAYING_WEIGHT: f64 = 1e-4;
 
 /// A cluster's rigid shape: each marker's place in the cluster's own frame (centroid at the
-/// origin), metres.
+/// origin), metres, and how much it strays from that place as the cluster moves (its spread):
+/// a fit weighs a marker that strays well beyond the others ([`STRAY_FACTOR`]) by the inverse
+/// square of its spread, so a marker that moved on the plate part-way through, or one on
+/// another segment, counts for little against the markers that keep the shape.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ClusterShape {
     points: Vec<Vector3<f64>>,
+    spread: Vec<f64>,
 }
 
 /// One frame of [`ClusterShape::fit`]: every marker where the fitted shape puts it.
@@ -81,47 +94,80 @@ impl ClusterShape {
         let aligned: Vec<Vec<Vector3<f64>>> = samples
             .iter()
             .map(|sample| {
-                let (rot, _) = kabsch(sample, &samples[0], &all);
+                let (rot, _) = kabsch(sample, &samples[0], &vec![1.0; n_markers]);
                 sample.iter().map(|p| rot * p).collect()
             })
             .collect();
         let mut shape = Self {
             points: centred(&(0..n_markers).map(|m| median_point(aligned.iter().map(|a| a[m]))).collect::<Vec<_>>()),
+            spread: pair_spreads(&samples),
         };
         // Then the mean over the frames, each fitted as `fit` fits it (a marker off its place
-        // left out of that frame), brought into the shape's frame.
-        for _ in 0..SHAPE_ROUNDS {
-            let mut sum = vec![Vector3::zeros(); n_markers];
-            let mut count = vec![0usize; n_markers];
-            for sample in &samples {
-                if let Some((used, rot, shift)) = shape.fit_frame(sample, all.clone()) {
-                    for m in (0..n_markers).filter(|&m| used[m]) {
-                        sum[m] += rot.transpose() * (sample[m] - shift);
-                        count[m] += 1;
+        // left out of that frame, each weighed by its spread), brought into the shape's frame.
+        // The spreads come from the distances alone: residuals from a shape that a straying
+        // marker has bent would blame the others too.
+        {
+            for _ in 0..SHAPE_ROUNDS {
+                let mut sum = vec![Vector3::zeros(); n_markers];
+                let mut count = vec![0usize; n_markers];
+                for sample in &samples {
+                    if let Some((used, rot, shift)) = shape.fit_frame(sample, all.clone()) {
+                        for m in (0..n_markers).filter(|&m| used[m]) {
+                            sum[m] += rot.transpose() * (sample[m] - shift);
+                            count[m] += 1;
+                        }
                     }
                 }
+                if count.contains(&0) {
+                    break;
+                }
+                shape.points = centred(&sum.iter().zip(&count).map(|(s, &c)| s / c as f64).collect::<Vec<_>>());
             }
-            if count.contains(&0) {
-                break;
-            }
-            shape.points = centred(&sum.iter().zip(&count).map(|(s, &c)| s / c as f64).collect::<Vec<_>>());
         }
-        let mean = shape.points;
-        if width_of(&mean, &vec![true; n_markers]) < MIN_CLUSTER_WIDTH_M {
+        if width_of(&shape.points, &vec![true; n_markers]) < MIN_CLUSTER_WIDTH_M {
             return Err(bad(format!(
                 "the cluster's markers lie on a line (within {:.1} mm): they do not give its orientation",
                 1e3 * MIN_CLUSTER_WIDTH_M
             )));
         }
-        Ok(Self { points: mean })
+        Ok(shape)
     }
 
-    /// A shape from its markers' places `(k, 3)` (as [`Self::points`] gives them).
-    pub fn from_points(flat: &[f64]) -> crate::Result<Self> {
+    /// A shape from its markers' places `(k, 3)` and spreads `(k,)` (as [`Self::points`] and
+    /// [`Self::spread`] give them).
+    pub fn from_points(flat: &[f64], spread: &[f64]) -> crate::Result<Self> {
         if flat.len() < 9 || !flat.len().is_multiple_of(3) || !flat.iter().all(|v| v.is_finite()) {
             return Err(bad(format!("{} values are not three or more finite points", flat.len())));
         }
-        Ok(Self { points: centred(&points(flat)) })
+        if spread.len() != flat.len() / 3 || !spread.iter().all(|&s| s > 0.0) {
+            return Err(bad(format!(
+                "{} spreads for {} points: one positive spread per point",
+                spread.len(),
+                flat.len() / 3
+            )));
+        }
+        Ok(Self { points: centred(&points(flat)), spread: spread.to_vec() })
+    }
+
+    /// Each marker's weight in a fit: 1 while its spread is within [`STRAY_FACTOR`] times the
+    /// cluster's median spread (markers that move alike count alike, as three markers do);
+    /// beyond, [`STRAYING_WEIGHT`] and falling with the square of its spread: a marker far from
+    /// the others (an epicondyle with a wrist cluster) turns the fit by its lever arm, so it
+    /// only fixes what the others leave open (a frame with two of them).
+    fn weights(&self) -> Vec<f64> {
+        let mut sorted = self.spread.clone();
+        sorted.sort_by(f64::total_cmp);
+        let half = sorted.len() / 2;
+        let median = if sorted.len() % 2 == 1 { sorted[half] } else { (sorted[half - 1] + sorted[half]) / 2.0 };
+        let limit = STRAY_FACTOR * median;
+        self.spread.iter().map(|&s| if s <= limit { 1.0 } else { STRAYING_WEIGHT * (limit / s).powi(2) }).collect()
+    }
+
+    /// Each marker's spread, m: how much its distances to the cluster's other markers change
+    /// as the cluster moves (the median over the others of each distance's standard
+    /// deviation, at least [`SPREAD_FLOOR_M`]).
+    pub fn spread(&self) -> &[f64] {
+        &self.spread
     }
 
     /// Number of markers in the cluster.
@@ -178,7 +224,8 @@ impl ClusterShape {
             if count < 3 || width_of(&self.points, &used) < MIN_CLUSTER_WIDTH_M {
                 return None;
             }
-            let (rot, shift) = kabsch(&self.points, lab, &used);
+            let weight: Vec<f64> = used.iter().zip(self.weights()).map(|(&u, w)| if u { w } else { 0.0 }).collect();
+            let (rot, shift) = kabsch(&self.points, lab, &weight);
             let (worst, residual) = (0..lab.len())
                 .filter(|&i| used[i])
                 .map(|i| (i, (rot * self.points[i] + shift - lab[i]).norm()))
@@ -268,6 +315,27 @@ fn points(f: &[f64]) -> Vec<Vector3<f64>> {
     f.chunks_exact(3).map(|p| Vector3::new(p[0], p[1], p[2])).collect()
 }
 
+/// Each marker's first spread, from the distances it keeps to the others over the `samples`:
+/// the median over the others of their distance's standard deviation (at least
+/// [`SPREAD_FLOOR_M`]). A marker that does not belong to the cluster changes its distance to
+/// every other; a good one keeps it to all but that one.
+fn pair_spreads(samples: &[Vec<Vector3<f64>>]) -> Vec<f64> {
+    let k = samples[0].len();
+    let n = samples.len() as f64;
+    let std = |a: usize, b: usize| {
+        let d: Vec<f64> = samples.iter().map(|s| (s[a] - s[b]).norm()).collect();
+        let mean = d.iter().sum::<f64>() / n;
+        (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt()
+    };
+    (0..k)
+        .map(|m| {
+            let mut others: Vec<f64> = (0..k).filter(|&j| j != m).map(|j| std(m, j)).collect();
+            others.sort_by(f64::total_cmp);
+            others[others.len() / 2].max(SPREAD_FLOOR_M)
+        })
+        .collect()
+}
+
 /// Each coordinate's median of `points`.
 fn median_point(points: impl Iterator<Item = Vector3<f64>>) -> Vector3<f64> {
     let points: Vec<Vector3<f64>> = points.collect();
@@ -294,15 +362,19 @@ fn width_of(points: &[Vector3<f64>], used: &[bool]) -> f64 {
     eigen[1].max(0.0).sqrt()
 }
 
-/// Rotation and translation taking the `used` `local` points onto the `lab` ones, least
-/// squares (Kabsch, a reflection excluded).
-fn kabsch(local: &[Vector3<f64>], lab: &[Vector3<f64>], used: &[bool]) -> (Matrix3<f64>, Vector3<f64>) {
-    let pairs: Vec<(Vector3<f64>, Vector3<f64>)> =
-        local.iter().zip(lab).zip(used).filter(|&(_, &u)| u).map(|((a, b), _)| (*a, *b)).collect();
-    let n = pairs.len() as f64;
-    let lc = pairs.iter().map(|p| p.0).sum::<Vector3<f64>>() / n;
-    let gc = pairs.iter().map(|p| p.1).sum::<Vector3<f64>>() / n;
-    let h: Matrix3<f64> = pairs.iter().map(|(a, b)| (a - lc) * (b - gc).transpose()).sum();
+/// Rotation and translation taking the `local` points onto the `lab` ones, least squares with
+/// a weight per point (0: not used; Kabsch, a reflection excluded).
+fn kabsch(local: &[Vector3<f64>], lab: &[Vector3<f64>], weight: &[f64]) -> (Matrix3<f64>, Vector3<f64>) {
+    let total: f64 = weight.iter().sum();
+    let lc = local.iter().zip(weight).map(|(p, w)| p * *w).sum::<Vector3<f64>>() / total;
+    let gc = lab.iter().zip(weight).filter(|(_, w)| **w > 0.0).map(|(p, w)| p * *w).sum::<Vector3<f64>>() / total;
+    let h: Matrix3<f64> = local
+        .iter()
+        .zip(lab)
+        .zip(weight)
+        .filter(|(_, w)| **w > 0.0)
+        .map(|((a, b), w)| (a - lc) * (b - gc).transpose() * *w)
+        .sum();
     let svd = h.svd(true, true);
     let (u, v_t) = (svd.u.expect("requested"), svd.v_t.expect("requested"));
     let mut fix = Matrix3::identity();
@@ -450,6 +522,31 @@ mod tests {
     }
 
     #[test]
+    fn a_marker_that_moves_on_the_plate_part_way_counts_for_little() {
+        // Marker 3 moves 20 mm on the plate half-way through (knocked, stuck back): within the
+        // 15 mm a frame's fit tolerates either side of its average place. Its spread says so,
+        // and the other markers' places hold in every frame, before the knock and after.
+        let mut rng = Rng::new(10);
+        let (poses, mut frames) = moving(500, 0.0002, &mut rng);
+        for (f, pose) in poses.iter().enumerate().skip(250) {
+            let moved = pose.0 * Vector3::new(0.02, 0.0, 0.0);
+            for i in 0..3 {
+                frames[12 * f + 9 + i] += moved[i];
+            }
+        }
+        let shape = ClusterShape::learn(&frames, 4).unwrap();
+        assert!(shape.spread()[3] > 0.005, "{:?}", shape.spread());
+        assert!(shape.spread()[..3].iter().all(|&s| s < 0.001), "{:?}", shape.spread());
+        let fit = shape.fit(&frames).unwrap();
+        let worst = (0..500)
+            .flat_map(|f| (0..3).map(move |m| (f, m)))
+            .map(|(f, m)| (placed(&fit, f, m) - truth(&poses[f], m)).norm())
+            .fold(0.0, f64::max);
+        // The fourth marker at a ten-thousandth of the others' weight or less.
+        assert!(worst < 0.001, "{worst} m");
+    }
+
+    #[test]
     fn a_frame_whose_three_markers_break_the_shape_has_no_cluster() {
         let mut rng = Rng::new(5);
         let (_, mut frames) = moving(100, 0.0, &mut rng);
@@ -480,8 +577,10 @@ mod tests {
         assert!(ClusterShape::learn(&line, 4).unwrap_err().to_string().contains("on a line"));
         assert!(ClusterShape::learn(&frames[..11], 4).is_err());
         assert!(ClusterShape::learn(&frames, 2).is_err());
-        assert!(ClusterShape::from_points(&[0.0; 6]).is_err());
-        assert!(ClusterShape::from_points(&[f64::NAN; 9]).is_err());
+        assert!(ClusterShape::from_points(&[0.0; 6], &[0.001; 2]).is_err());
+        assert!(ClusterShape::from_points(&[f64::NAN; 9], &[0.001; 3]).is_err());
+        assert!(ClusterShape::from_points(&[0.0; 9], &[0.001; 2]).is_err());
+        assert!(ClusterShape::from_points(&[0.0; 9], &[0.0; 3]).is_err());
     }
 
     #[test]
@@ -518,7 +617,8 @@ mod tests {
         let mut rng = Rng::new(7);
         let (_, frames) = moving(50, 0.0, &mut rng);
         let shape = ClusterShape::learn(&frames, 4).unwrap();
-        let again = ClusterShape::from_points(&shape.points()).unwrap();
+        let again = ClusterShape::from_points(&shape.points(), shape.spread()).unwrap();
+        assert_eq!(again.spread(), shape.spread());
         assert_eq!(again.len(), 4);
         for (a, b) in shape.points().iter().zip(again.points()) {
             assert!((a - b).abs() < 1e-15);

@@ -204,6 +204,9 @@ def _subject_calibration(frames: np.ndarray, calibration: str | None, mapping, s
         # A segment whose markers do not keep their distances names a marker of another one
         # (a "hand" with an elbow marker): said before any angle is written.
         checked = mapping or MarkerMap.identity()
+        flat = checked.flat_segments(frames)
+        if flat:
+            raise ikid.InputError("; ".join(flat))
         held = checked.hand_held_to_forearm(frames)
         for problem in checked.stretched_segments(frames) + ([held] if held else []):
             warnings.warn(f"{source}: {problem}", MarkerMapWarning, stacklevel=2)

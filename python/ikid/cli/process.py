@@ -39,6 +39,7 @@ def _process_one(job: tuple[str, dict]) -> dict:
     one file replace the old ones together, or none does."""
     from contextlib import ExitStack
 
+    from ikid.calibration import map_with_calibration
     from ikid.io import MarkerMap, mot_writer, open_markers, sto_writer
     from ikid.io.markers import check_markers_seen, seen_markers
     from ikid.pipeline import run_blocks
@@ -48,7 +49,7 @@ def _process_one(job: tuple[str, dict]) -> dict:
     row: dict = {"file": path}
     try:
         data = open_markers(path)
-        mapping = MarkerMap.load(opt["map"]).with_calibration(opt["calibration"]) if opt["map"] else None
+        mapping = map_with_calibration(MarkerMap.load(opt["map"]), opt["calibration"]) if opt["map"] else None
         first = next(data.blocks(), None)
         if first is None:
             raise ikid.InputError(f"{path}: no frames")

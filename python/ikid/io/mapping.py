@@ -73,6 +73,12 @@ MAX_SEGMENT_STRETCH_M = 0.015
 _P10_P90_SIGMAS = 2.563
 
 
+#: Most a cluster's marker's distances to the others may change (the core's spread: standard
+#: deviation over the frames) before it is named, when it also changes twice as much as any
+#: other's: a rigid plate's 0.5 mm or less, pyomeca's skin clusters 0.5-3.7 mm, a marker of
+#: another segment 5-9 mm (pyomeca, racing).
+MAX_CLUSTER_STRAY_M = 0.002
+
 #: What a one-marker hand's forearm markers span when they are the styloids and the lateral
 #: epicondyle, metres: the wrist bar (Plug-in Gait's real recordings 62-68 mm) and the forearm
 #: from the mid-styloids to the elbow (236-246 mm); wide enough for children and large adults.
@@ -104,12 +110,12 @@ class MarkerMap:
     clusters: dict[str, tuple[str, ...]] = field(default_factory=dict)
     #: (file, segment) -> the cluster's shape learned from that file's first block: every
     #: block of a file is fitted with one shape.
-    _shapes: dict[tuple[str, str], np.ndarray] = field(default_factory=dict, compare=False, repr=False)
+    _shapes: dict[tuple[str, str], np.ndarray | None] = field(default_factory=dict, compare=False, repr=False)
     #: A one-marker hand whose forearm markers are a cluster, not its anatomical points.
     forearm_cluster: bool = False
     #: For such a map: the radial styloid, the ulnar styloid and the mid-epicondyles ``(3, 3)``,
     #: metres, in the technical frame of RSP, USP, FAP (core ``cluster::technical_frame``), as a
-    #: calibration measured them (:meth:`with_calibration`).
+    #: calibration measured them (``ikid.calibration.map_with_calibration``).
     forearm_landmarks: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @staticmethod
@@ -237,15 +243,20 @@ class MarkerMap:
         # not concerned.
         ulnar = str(landmarks.get("ulnar_styloid", "")).strip()
         if (not one_hand or forearm_cluster) and segment_of.get(seen.get(ulnar, ""), "") == "forearm":
+            where = (
+                "in the forearm's [cluster]"
+                if seen[ulnar].startswith("in ")
+                else f"forearm marker {seen[ulnar]}"
+            )
             raise FileFormatError(
-                f"{source}: label {ulnar!r} is forearm marker {seen[ulnar]} and landmark ulnar_styloid: "
+                f"{source}: label {ulnar!r} is {where} and landmark ulnar_styloid: "
                 "a marker on the ulna, which stays while the radius turns about it in pronation. The "
                 "hand's angles are measured from the radius, and three forearm markers one of which is on "
                 "the ulna turn with neither bone: they read part of the forearm's pronation as wrist "
                 "rotation, and how much cannot be known from them (measured on a real recording: 8-14 "
                 "degrees off). Name as RSP, USP and FAP three markers on the distal radius or a cluster "
-                "strapped to it (the radial styloid may be one of them), and the ulnar styloid in "
-                "[landmarks] only"
+                "strapped to it (the radial styloid may be one of them; more in [cluster]), and the ulnar "
+                "styloid in [landmarks] only"
             )
         return MarkerMap(
             {m: markers[m].strip() for m in names},
@@ -398,6 +409,29 @@ class MarkerMap:
             "marker map gives the hand"
         )
 
+    def flat_segments(self, frames: np.ndarray) -> list[str]:
+        """What says that a segment's three markers lie on a line (within the core's
+        ``cluster::MIN_FRAME_WIDTH_M``) in most frames that see them (``(n, 18)``, ikid's
+        order): they give no orientation, and every angle from them would be noise."""
+        frames = np.asarray(frames, np.float64).reshape(len(frames), 18)
+        names = ikid_marker_names()
+        found = []
+        for segment, first in (("forearm", 0), ("hand", 9)):
+            three = frames[:, first : first + 9]
+            seen = np.isfinite(three).all(axis=1)
+            if not seen.any():
+                continue
+            framed = np.isfinite(_native.points_in_technical_frame(three, three[:, :3], 1)).all(axis=1)
+            flat = int(np.count_nonzero(seen & ~framed))
+            if flat > seen.sum() / 2:
+                markers = ", ".join(f"{m} ({self.label_of(m)!r})" for m in names[first // 3 : first // 3 + 3])
+                found.append(
+                    f"the {segment}'s markers {markers} lie on one line (within 5 mm) in {flat} of the "
+                    f"{int(seen.sum())} frames that see them: they give the {segment} no orientation; name "
+                    "three markers that span a triangle"
+                )
+        return found
+
     def ikid_frames(self, columns: np.ndarray) -> np.ndarray:
         """ikid's ``(n, 18)`` frames from the mapped labels' columns (``labels_in_ikid_order``):
         as they are, or, for a one-marker hand, with its three markers made virtual (and a
@@ -463,35 +497,6 @@ class MarkerMap:
         :attr:`forearm_landmarks`)."""
         return replace(self, forearm_landmarks=np.asarray(local, np.float64).reshape(3, 3))
 
-    def with_calibration(self, path: str | os.PathLike[str] | None) -> MarkerMap:
-        """This map with what a calibration file adds to it: a forearm cluster's anatomical
-        points, for a one-marker hand (the map as it is otherwise). A calibration without them,
-        for such a map, is refused, saying to calibrate with the landmarks."""
-        if path is None or not self.forearm_cluster:
-            return self
-        from ikid.calibration import calibration_info
-
-        stored = calibration_info(path).get("forearm_landmarks")
-        try:
-            points = np.asarray(stored["points_m"], np.float64)  # type: ignore[index]
-            labels = stored["in_frame_of"]  # type: ignore[index]
-            ok = points.shape == (3, 3) and bool(np.isfinite(points).all())
-        except (TypeError, KeyError, ValueError):
-            ok = False
-        if not ok:
-            raise _native.InputError(
-                f"{path}: has no forearm landmarks in the frame of the forearm's markers, which this map "
-                f"({self.source}: a forearm cluster and one hand marker) needs: calibrate with it "
-                "(`ikid calibrate --static STATIC --map MAP`), from a static trial with the landmarks"
-            )
-        mine = [self.labels[m] for m in ("RSP", "USP", "FAP")]
-        if labels != mine:
-            raise _native.InputError(
-                f"{path}: its forearm landmarks are in the frame of markers {labels}, this map's are {mine}: "
-                "calibrate again with this map"
-            )
-        return self.with_forearm_landmarks(points)
-
     def fit_clusters(self, data: MarkerData, columns: np.ndarray) -> np.ndarray:
         """``columns`` (``labels_in_ikid_order``'s, ``(n, 3m)``) with each segment that has a
         ``[cluster]`` given its three markers where the cluster's rigid shape, fitted to every
@@ -525,13 +530,11 @@ class MarkerMap:
                 + ", ".join(repr(lab) for lab in extra)
             )
             if key not in self._shapes:
-                try:
-                    self._shapes[key] = _native.learn_cluster_shape(cluster, len(labels))
-                except _native.IkidError as e:
-                    raise _native.InputError(
-                        f"{source}: the {segment}'s cluster ({named}): {e.reason or e}"
-                    ) from None
-            placed, left_out, undetermined = _native.fit_cluster(cluster, self._shapes[key])
+                self._shapes[key] = self._learn_shape(cluster, labels, segment, named, source)
+            shape = self._shapes[key]
+            if shape is None:
+                continue
+            placed, left_out, undetermined = _native.fit_cluster(cluster, shape)
             # A frame the cluster does not determine keeps its three markers as seen (ikid's gap
             # filling and marker checks take it from there, as for a three-marker segment).
             fitted = np.isfinite(placed[:, :9]).all(axis=1)
@@ -557,6 +560,40 @@ class MarkerMap:
                     stacklevel=3,
                 )
         return columns
+
+    @staticmethod
+    def _learn_shape(
+        cluster: np.ndarray, labels: list[str], segment: str, named: str, source: str
+    ) -> np.ndarray | None:
+        """A cluster's shape (core ``cluster::ClusterShape``, ``(k, 4)``), its markers that
+        stray from it said; None, said, when these frames cannot give one (the segment's three
+        are then read as they are)."""
+        try:
+            shape = _native.learn_cluster_shape(cluster, len(labels))
+        except _native.IkidError as e:
+            warnings.warn(
+                f"{source}: the {segment}'s cluster ({named}) is not used: {e.reason or e} (in the "
+                f"{len(cluster)} frames its shape is learned from: the file's first block); the "
+                f"{segment}'s three [markers] are read as they are",
+                MarkerMapWarning,
+                stacklevel=4,
+            )
+            return None
+        spread = shape[:, 3]
+        for label, stray in zip(labels, spread, strict=True):
+            others = np.delete(spread, labels.index(label))
+            if stray > MAX_CLUSTER_STRAY_M and stray > 2.0 * float(np.max(others)):
+                warnings.warn(
+                    f"{source}: marker {label!r} of the {segment}'s cluster does not keep its distances to "
+                    f"the cluster's other markers: they change by {1e3 * stray:.1f} mm (standard deviation), "
+                    f"the others' by {1e3 * float(np.min(others)):.1f}-{1e3 * float(np.max(others)):.1f} mm. "
+                    "It is on another segment, moved on its plate part-way, or slides on the skin: it counts "
+                    "for almost nothing in the cluster's fit (only where fewer than three others are seen); "
+                    "check its label, or leave it out of [cluster]",
+                    MarkerMapWarning,
+                    stacklevel=4,
+                )
+        return shape
 
     def labels_in_ikid_order(self, data: MarkerData) -> list[str]:
         """The file's labels for ikid's markers, in ikid's order; an error lists what the file
@@ -591,7 +628,8 @@ class MarkerMap:
         if absent:
             raise _native.InputError(
                 f"{data.source or 'markers'}: landmark label(s) {', '.join(absent)} not found; the file has "
-                f"{', '.join(data.labels) or 'no labels'}"
+                f"{', '.join(data.labels) or 'no labels'} (landmarks recorded or probed in another file: "
+                "ikid calibrate --landmarks FILE)"
             )
         return labels
 
@@ -706,6 +744,8 @@ def _clusters(
                 + "; a cluster is three markers of a segment in [markers] and more here"
             )
         for label in (v.strip() for v in labels):
+            if taken.get(label) == f"the {segment}'s cluster":
+                raise FileFormatError(f"{source}: label {label!r} is listed twice in the {segment}'s cluster")
             if label in taken:
                 raise FileFormatError(
                     f"{source}: label {label!r} is given to both {taken[label]} and the {segment}'s cluster"

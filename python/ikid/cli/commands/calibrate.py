@@ -150,6 +150,9 @@ def run(args: argparse.Namespace) -> int:
         ikid.check_marker_units(neutral)
     except ikid.IkidError as e:
         raise type(e)(_naming(args.static, e)) from None
+    flat = mapping.flat_segments(neutral)
+    if flat:
+        raise ikid.InputError(f"{args.static}: " + "; ".join(flat))
     # Over the whole file (a static trial shows little; a task trial shows a marker across a joint).
     for problem in mapping.stretched_segments(neutral):
         warnings.warn(f"{args.static}: {problem}", MarkerMapWarning, stacklevel=1)
@@ -311,8 +314,11 @@ def run(args: argparse.Namespace) -> int:
     if r.get("landmarks"):
         lm = r["landmarks"]
         if lm.get("hand"):
+            source_of_hand = (
+                "its one marker and the styloid line" if mapping.one_hand_marker else "its landmarks"
+            )
             details.append(
-                f"hand frame from its landmarks ({lm['hand']['frames']} frames; the neutral frames read "
+                f"hand frame from {source_of_hand} ({lm['hand']['frames']} frames; the neutral frames read "
                 f"{lm['hand']['neutral_offset_deg']:.1f}° from zero)"
             )
         details.append(

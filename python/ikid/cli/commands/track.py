@@ -103,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
     the tracker's state carries from block to block)."""
     from contextlib import ExitStack
 
+    from ikid.calibration import map_with_calibration
     from ikid.io import MarkerMap, mot_writer, open_markers, sto_writer
     from ikid.io.markers import check_markers_seen, seen_markers
 
@@ -126,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
         refiner = _model_for(
             args.refiner, "ikid track --refiner", ("refine",), allow_unchecked=args.allow_unchecked_model
         )
-    mapping = MarkerMap.load(args.map).with_calibration(args.calibration) if args.map else None
+    mapping = map_with_calibration(MarkerMap.load(args.map), args.calibration) if args.map else None
     first = next(data.blocks(), None)
     if first is None:
         raise ikid.InputError(f"{args.input}: no frames")
