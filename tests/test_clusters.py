@@ -280,6 +280,15 @@ def test_one_hand_marker_with_a_forearm_cluster_is_refused_without_its_landmarks
     capsys.readouterr()
     assert cli(["ik", str(trial), "-o", str(tmp_path / "o.mot"), "--calibration", str(cal), *common]) == 2
     assert "has no forearm landmarks in the frame of the forearm's markers" in capsys.readouterr().err
+    # A calibration measured with the plate's markers named otherwise.
+    good = tmp_path / "good.json"
+    assert cli(["calibrate", "--static", str(tmp_path / "static.trc"), "-o", str(good), *common]) == 0
+    swapped = {**PLATE_MAP, "markers": {**PLATE_MAP["markers"], "RSP": "FA2", "USP": "FA1"}}
+    (tmp_path / "swapped.toml").write_text(MarkerMap.from_dict(swapped).to_toml())
+    capsys.readouterr()
+    cmd = ["ik", str(trial), "-o", str(tmp_path / "o.mot"), "--calibration", str(good)]
+    assert cli([*cmd, "--map", str(tmp_path / "swapped.toml")]) == 2
+    assert "calibrate again with this map" in capsys.readouterr().err
     # A map naming the cluster without every landmark is refused when it is read.
     lacking = {**PLATE_MAP, "landmarks": {"radial_styloid": "RWRA", "ulnar_styloid": "RWRB"}}
     with pytest.raises(FileFormatError, match="does not name lateral_epicondyle, medial_epicondyle"):
