@@ -234,7 +234,7 @@ fuzz: $(CARGO_FUZZ)
 # options, e.g. `--shuffle`: mutants in random order, so a run stopped early is a fair sample
 # of the shard (in source order it has seen only the first files).
 CARGO_MUTANTS := .tools/bin/cargo-mutants
-MUTANTS_FILES ?= features net/mlp gaps tracker/* calibration/* stream
+MUTANTS_FILES ?= features net/mlp gaps tracker/* calibration/* stream cluster
 MUTANTS_SHARD ?= 0/6
 MUTANTS_MIN_SCORE ?= 0.95
 MUTANTS_ARGS ?=
