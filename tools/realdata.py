@@ -867,9 +867,8 @@ def pyomeca_styloids(folder: Path, work: Path, log: list[str]) -> dict:
 
 
 # pyomeca with more than three markers on a segment ([cluster], docs/markersets.md): the forearm's
-# radius markers with the radial styloid, the hand's with LASTC. The reference is the three-marker
-# clusters' kinematics, so a fourth skin marker (which slides otherwise) can only move the result
-# within the reference's own spread (1.96°); what it gives is a frame from any three markers.
+# radius markers with the radial styloid, the hand's with LASTC. Skin markers: the fourth slides
+# otherwise than the three, stays out of the cluster's rigid core and stands in for a missing one.
 PYOMECA_CLUSTERS = {
     "forearm of four (+STYLr)": {"forearm": ["Daphnee:STYLr"]},
     "hand of four (+LASTC)": {"hand": ["Daphnee:LASTC"]},

@@ -69,9 +69,9 @@ fn one_marker_hand_landmarks<'py>(py: Python<'py>, frames: &Bound<'py, PyAny>) -
     })
 }
 
-/// The rigid shape `(k, 4)` of a cluster of `n_markers` (three or more) from frames
-/// `(n, 3·n_markers)` (metres, NaN = missing): each marker's place `x, y, z` and its spread
-/// (the core's `cluster::ClusterShape::learn`).
+/// The rigid shape `(k, 5)` of a cluster of `n_markers` (three or more) from frames
+/// `(n, 3·n_markers)` (metres, NaN = missing): each marker's place `x, y, z`, its spread and
+/// its weight (the core's `cluster::ClusterShape::learn`).
 #[pyfunction]
 fn learn_cluster_shape<'py>(
     py: Python<'py>,
@@ -82,13 +82,13 @@ fn learn_cluster_shape<'py>(
         let shape = ikid::cluster::ClusterShape::learn(v, n_markers).py_err()?;
         let points = shape.points();
         let rows: Vec<f64> = (0..n_markers)
-            .flat_map(|m| [points[3 * m], points[3 * m + 1], points[3 * m + 2], shape.spread()[m]])
+            .flat_map(|m| [points[3 * m], points[3 * m + 1], points[3 * m + 2], shape.spread()[m], shape.weight()[m]])
             .collect();
-        rows.into_pyarray(py).reshape([n_markers, 4])
+        rows.into_pyarray(py).reshape([n_markers, 5])
     })
 }
 
-/// A cluster's shape `(k, 4)` (as `learn_cluster_shape` gives it) fitted to each frame
+/// A cluster's shape `(k, 5)` (as `learn_cluster_shape` gives it) fitted to each frame
 /// `(n, 3k)`: `(placed (n, 3k), left_out (k,) frames each marker was seen but left out of the
 /// fit, undetermined frames)` (the core's `cluster::ClusterShape::fit`).
 #[pyfunction]
@@ -98,10 +98,11 @@ fn fit_cluster<'py>(
     frames: &Bound<'py, PyAny>,
     shape: &Bound<'py, PyAny>,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, Vec<usize>, usize)> {
-    let shape = with_f64_rows(shape, "shape", 4, |v, _| {
-        let points: Vec<f64> = v.chunks_exact(4).flat_map(|r| r[..3].to_vec()).collect();
-        let spread: Vec<f64> = v.chunks_exact(4).map(|r| r[3]).collect();
-        ikid::cluster::ClusterShape::from_points(&points, &spread).py_err()
+    let shape = with_f64_rows(shape, "shape", 5, |v, _| {
+        let points: Vec<f64> = v.chunks_exact(5).flat_map(|r| r[..3].to_vec()).collect();
+        let spread: Vec<f64> = v.chunks_exact(5).map(|r| r[3]).collect();
+        let weight: Vec<f64> = v.chunks_exact(5).map(|r| r[4]).collect();
+        ikid::cluster::ClusterShape::from_points(&points, &spread, &weight).py_err()
     })?;
     let k = shape.len();
     with_f64_rows(frames, "frames", 3 * k, |v, n| {

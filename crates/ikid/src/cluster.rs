@@ -33,21 +33,28 @@ const SHAPE_ROUNDS: usize = 4;
 /// (0.1-0.5 mm of noise) count alike.
 pub const SPREAD_FLOOR_M: f64 = 0.0005;
 
-/// How many times the cluster's median spread a marker may stray before it counts for less.
+/// How many times the core's seed's largest distance change a marker's distances to the core
+/// may change before it is left out of the core (`rigid_core`).
 pub const STRAY_FACTOR: f64 = 2.0;
-/// The weight of a marker straying beyond [`STRAY_FACTOR`] (at that limit; less beyond it),
-/// against 1 for the markers that keep the shape.
+/// Least that limit is, m.
+pub const RIGID_FLOOR_M: f64 = 0.001;
+/// Most that limit is, m: the change, beyond noise, of a rigid plate's distances is its
+/// markers' placement wobble (racing's plates: under 0.5 mm); skin markers slide by more
+/// (pyomeca's forearm: 1.5-2.2 mm among the radius' three, 2.7-10 mm to the others).
+pub const RIGID_LIMIT_M: f64 = 0.0015;
+/// The weight of a marker outside the rigid core (at the limit; less beyond it), against 1 for
+/// the core's markers.
 pub const STRAYING_WEIGHT: f64 = 1e-4;
 
 /// A cluster's rigid shape: each marker's place in the cluster's own frame (centroid at the
-/// origin), metres, and how much it strays from that place as the cluster moves (its spread):
-/// a fit weighs a marker that strays well beyond the others ([`STRAY_FACTOR`]) by the inverse
-/// square of its spread, so a marker that moved on the plate part-way through, or one on
-/// another segment, counts for little against the markers that keep the shape.
+/// origin), metres, how much it strays as the cluster moves (its spread), and its weight in a
+/// fit: a marker that moved on the plate part-way through, or one on another segment, counts
+/// for almost nothing against the markers that keep their distances together (the rigid core).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ClusterShape {
     points: Vec<Vector3<f64>>,
     spread: Vec<f64>,
+    weight: Vec<f64>,
 }
 
 /// One frame of [`ClusterShape::fit`]: every marker where the fitted shape puts it.
@@ -66,9 +73,11 @@ pub struct ClusterFit {
 
 impl ClusterShape {
     /// The shape of a cluster of `n_markers` from frames `(n, 3·n_markers)` (metres, NaN =
-    /// missing): generalised Procrustes over the frames with every marker seen (each rotated
-    /// and moved onto the running shape, then averaged), a marker off its place in a frame
-    /// (beyond [`MAX_FIT_RESIDUAL_M`]) left out of that frame's share.
+    /// missing; the first three markers the segment's own, which the rigid core starts from):
+    /// generalised Procrustes over the frames with every marker seen (each rotated and moved
+    /// onto the running shape, then averaged), a marker off its place in a frame (beyond
+    /// [`MAX_FIT_RESIDUAL_M`]) left out of that frame's share, each weighed as `rigid_core`
+    /// finds.
     pub fn learn(frames: &[f64], n_markers: usize) -> crate::Result<Self> {
         let width = 3 * n_markers;
         if n_markers < 3 || !frames.len().is_multiple_of(width) {
@@ -100,8 +109,10 @@ impl ClusterShape {
             .collect();
         let mut shape = Self {
             points: centred(&(0..n_markers).map(|m| median_point(aligned.iter().map(|a| a[m]))).collect::<Vec<_>>()),
-            spread: pair_spreads(&samples),
+            spread: vec![SPREAD_FLOOR_M; n_markers],
+            weight: vec![1.0; n_markers],
         };
+        (shape.spread, shape.weight) = rigid_core(&whole);
         // Then the mean over the frames, each fitted as `fit` fits it (a marker off its place
         // left out of that frame, each weighed by its spread), brought into the shape's frame.
         // The spreads come from the distances alone: residuals from a shape that a straying
@@ -133,9 +144,9 @@ impl ClusterShape {
         Ok(shape)
     }
 
-    /// A shape from its markers' places `(k, 3)` and spreads `(k,)` (as [`Self::points`] and
-    /// [`Self::spread`] give them).
-    pub fn from_points(flat: &[f64], spread: &[f64]) -> crate::Result<Self> {
+    /// A shape from its markers' places `(k, 3)`, spreads and weights `(k,)` (as
+    /// [`Self::points`], [`Self::spread`] and [`Self::weight`] give them).
+    pub fn from_points(flat: &[f64], spread: &[f64], weight: &[f64]) -> crate::Result<Self> {
         if flat.len() < 9 || !flat.len().is_multiple_of(3) || !flat.iter().all(|v| v.is_finite()) {
             return Err(bad(format!("{} values are not three or more finite points", flat.len())));
         }
@@ -146,26 +157,24 @@ impl ClusterShape {
                 flat.len() / 3
             )));
         }
-        Ok(Self { points: centred(&points(flat)), spread: spread.to_vec() })
+        if weight.len() != spread.len() || !weight.iter().all(|&w| w > 0.0 && w <= 1.0) {
+            return Err(bad(format!("{} weights for {} points: one in (0, 1] per point", weight.len(), spread.len())));
+        }
+        Ok(Self { points: centred(&points(flat)), spread: spread.to_vec(), weight: weight.to_vec() })
     }
 
-    /// Each marker's weight in a fit: 1 while its spread is within [`STRAY_FACTOR`] times the
-    /// cluster's median spread (markers that move alike count alike, as three markers do);
-    /// beyond, [`STRAYING_WEIGHT`] and falling with the square of its spread: a marker far from
-    /// the others (an epicondyle with a wrist cluster) turns the fit by its lever arm, so it
-    /// only fixes what the others leave open (a frame with two of them).
-    fn weights(&self) -> Vec<f64> {
-        let mut sorted = self.spread.clone();
-        sorted.sort_by(f64::total_cmp);
-        let half = sorted.len() / 2;
-        let median = if sorted.len() % 2 == 1 { sorted[half] } else { (sorted[half - 1] + sorted[half]) / 2.0 };
-        let limit = STRAY_FACTOR * median;
-        self.spread.iter().map(|&s| if s <= limit { 1.0 } else { STRAYING_WEIGHT * (limit / s).powi(2) }).collect()
+    /// Each marker's weight in a fit: 1 for the markers of the cluster's rigid core (the
+    /// largest set that keeps its distances together, [`Self::learn`]); a marker outside it
+    /// counts [`STRAYING_WEIGHT`] or less: far from the others (an epicondyle with a wrist
+    /// cluster) it would turn the fit by its lever arm, so it only fixes what the core leaves
+    /// open (a frame with two of the core's markers).
+    pub fn weight(&self) -> &[f64] {
+        &self.weight
     }
 
-    /// Each marker's spread, m: how much its distances to the cluster's other markers change
-    /// as the cluster moves (the median over the others of each distance's standard
-    /// deviation, at least [`SPREAD_FLOOR_M`]).
+    /// Each marker's spread, m: how much its distances to the rigid core's markers change as
+    /// the cluster moves (the median over them of each distance's standard deviation, at least
+    /// [`SPREAD_FLOOR_M`]).
     pub fn spread(&self) -> &[f64] {
         &self.spread
     }
@@ -224,7 +233,7 @@ impl ClusterShape {
             if count < 3 || width_of(&self.points, &used) < MIN_CLUSTER_WIDTH_M {
                 return None;
             }
-            let weight: Vec<f64> = used.iter().zip(self.weights()).map(|(&u, w)| if u { w } else { 0.0 }).collect();
+            let weight: Vec<f64> = used.iter().zip(&self.weight).map(|(&u, &w)| if u { w } else { 0.0 }).collect();
             let (rot, shift) = kabsch(&self.points, lab, &weight);
             let (worst, residual) = (0..lab.len())
                 .filter(|&i| used[i])
@@ -315,25 +324,81 @@ fn points(f: &[f64]) -> Vec<Vector3<f64>> {
     f.chunks_exact(3).map(|p| Vector3::new(p[0], p[1], p[2])).collect()
 }
 
-/// Each marker's first spread, from the distances it keeps to the others over the `samples`:
-/// the median over the others of their distance's standard deviation (at least
-/// [`SPREAD_FLOOR_M`]). A marker that does not belong to the cluster changes its distance to
-/// every other; a good one keeps it to all but that one.
-fn pair_spreads(samples: &[Vec<Vector3<f64>>]) -> Vec<f64> {
-    let k = samples[0].len();
-    let n = samples.len() as f64;
-    let std = |a: usize, b: usize| {
-        let d: Vec<f64> = samples.iter().map(|s| (s[a] - s[b]).norm()).collect();
+/// How much the distance between each two markers changes over `frames` (in time order, every
+/// marker seen) beyond the markers' own noise: its variance less the noise's (from consecutive
+/// frames; the median of a χ²(1) is 0.4549), as a standard deviation, m. Skin that slides or a
+/// marker moved on its plate changes a distance slowly; white noise does not count.
+fn distance_changes(frames: &[&[f64]]) -> Vec<Vec<f64>> {
+    let k = frames[0].len() / 3;
+    let markers: Vec<Vec<Vector3<f64>>> = frames.iter().map(|f| points(f)).collect();
+    let beyond_noise = |a: usize, b: usize| {
+        if a == b {
+            return 0.0;
+        }
+        let d: Vec<f64> = markers.iter().map(|m| (m[a] - m[b]).norm()).collect();
+        let n = d.len() as f64;
         let mean = d.iter().sum::<f64>() / n;
-        (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt()
+        let variance = d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
+        let mut steps: Vec<f64> = d.windows(2).map(|w| (w[1] - w[0]).powi(2)).collect();
+        steps.sort_by(f64::total_cmp);
+        let noise = if steps.is_empty() { 0.0 } else { steps[steps.len() / 2] / 2.0 / 0.4549 };
+        (variance - noise).max(0.0).sqrt()
     };
-    (0..k)
+    (0..k).map(|a| (0..k).map(|b| beyond_noise(a, b)).collect()).collect()
+}
+
+/// The cluster's rigid core, and each marker's spread and weight, from how much the distance
+/// between each two markers changes beyond noise ([`distance_changes`]). The core starts from
+/// the segment's three markers (the cluster's first three), unless they change their distances
+/// more than [`STRAY_FACTOR`] times the steadiest three (and [`RIGID_LIMIT_M`]): then from
+/// those. It takes in, one at a time, the marker whose largest change to the core's markers is
+/// least, while that stays within [`STRAY_FACTOR`] times the seed's, clamped to
+/// [[`RIGID_FLOOR_M`], [`RIGID_LIMIT_M`]]: a rigid plate's markers join, skin markers that slide
+/// do not (the segment's three define it; the others stand in for a missing one), nor does a
+/// marker on another segment or one that moved on its plate, however many such markers there
+/// are. Spread: the median change of a marker's distances to the core's other markers; weight:
+/// 1 in the core, [`STRAYING_WEIGHT`] × (limit / spread)² (at most [`STRAYING_WEIGHT`]) outside.
+fn rigid_core(frames: &[&[f64]]) -> (Vec<f64>, Vec<f64>) {
+    let change = distance_changes(frames);
+    let k = change.len();
+    let worst_of = |set: &[usize]| {
+        set.iter().flat_map(|&a| set.iter().map(move |&b| (a, b))).map(|(a, b)| change[a][b]).fold(0.0, f64::max)
+    };
+    let mut steadiest = (f64::INFINITY, vec![0, 1, 2]);
+    for a in 0..k {
+        for b in a + 1..k {
+            for c in b + 1..k {
+                let worst = worst_of(&[a, b, c]);
+                if worst < steadiest.0 {
+                    steadiest = (worst, vec![a, b, c]);
+                }
+            }
+        }
+    }
+    let three = worst_of(&[0, 1, 2]);
+    let (seed_worst, mut core) =
+        if three <= (STRAY_FACTOR * steadiest.0).max(RIGID_LIMIT_M) { (three, vec![0, 1, 2]) } else { steadiest };
+    let limit = (STRAY_FACTOR * seed_worst).clamp(RIGID_FLOOR_M, RIGID_LIMIT_M);
+    let worst_to = |m: usize, set: &[usize]| set.iter().map(|&j| change[m][j]).fold(0.0, f64::max);
+    while let Some((m, worst)) =
+        (0..k).filter(|m| !core.contains(m)).map(|m| (m, worst_to(m, &core))).min_by(|a, b| a.1.total_cmp(&b.1))
+    {
+        if worst > limit {
+            break;
+        }
+        core.push(m);
+    }
+    let spread: Vec<f64> = (0..k)
         .map(|m| {
-            let mut others: Vec<f64> = (0..k).filter(|&j| j != m).map(|j| std(m, j)).collect();
-            others.sort_by(f64::total_cmp);
-            others[others.len() / 2].max(SPREAD_FLOOR_M)
+            let mut to_core: Vec<f64> = core.iter().filter(|&&j| j != m).map(|&j| change[m][j]).collect();
+            to_core.sort_by(f64::total_cmp);
+            to_core[to_core.len() / 2].max(SPREAD_FLOOR_M)
         })
-        .collect()
+        .collect();
+    let weight = (0..k)
+        .map(|m| if core.contains(&m) { 1.0 } else { STRAYING_WEIGHT * (limit / spread[m]).powi(2).min(1.0) })
+        .collect();
+    (spread, weight)
 }
 
 /// Each coordinate's median of `points`.
@@ -547,6 +612,38 @@ mod tests {
     }
 
     #[test]
+    fn two_straying_markers_are_left_out_of_the_core_together() {
+        // Five markers: the plate's first three, marker 3 moving 14 mm on it half-way through,
+        // and a fifth on another segment (swinging 25 mm about the plate). A median over the
+        // five would count them in; the core of the three that keep their distances does not.
+        let mut rng = Rng::new(11);
+        let (poses, four) = moving(600, 0.0002, &mut rng);
+        let mut frames = Vec::new();
+        for (f, pose) in poses.iter().enumerate() {
+            let mut frame = four[12 * f..12 * f + 12].to_vec();
+            if f >= 300 {
+                let moved = pose.0 * Vector3::new(0.0, 0.014, 0.0);
+                (0..3).for_each(|i| frame[9 + i] += moved[i]);
+            }
+            let swing = Vector3::new(0.06 + 0.025 * (0.05 * f as f64).sin(), 0.02, 0.01);
+            frame.extend_from_slice((pose.0 * swing + pose.1).as_slice());
+            frames.extend(frame);
+        }
+        let shape = ClusterShape::learn(&frames, 5).unwrap();
+        assert_eq!(&shape.weight()[..3], &[1.0; 3], "{:?}", shape.weight());
+        assert!(shape.weight()[3..].iter().all(|&w| w <= STRAYING_WEIGHT), "{:?}", shape.weight());
+        let fit = shape.fit(&frames).unwrap();
+        let worst = (0..600)
+            .flat_map(|f| (0..3).map(move |m| (f, m)))
+            .map(|(f, m)| {
+                let i = 15 * f + 3 * m;
+                (Vector3::new(fit.placed[i], fit.placed[i + 1], fit.placed[i + 2]) - truth(&poses[f], m)).norm()
+            })
+            .fold(0.0, f64::max);
+        assert!(worst < 0.001, "{worst} m");
+    }
+
+    #[test]
     fn a_frame_whose_three_markers_break_the_shape_has_no_cluster() {
         let mut rng = Rng::new(5);
         let (_, mut frames) = moving(100, 0.0, &mut rng);
@@ -577,10 +674,11 @@ mod tests {
         assert!(ClusterShape::learn(&line, 4).unwrap_err().to_string().contains("on a line"));
         assert!(ClusterShape::learn(&frames[..11], 4).is_err());
         assert!(ClusterShape::learn(&frames, 2).is_err());
-        assert!(ClusterShape::from_points(&[0.0; 6], &[0.001; 2]).is_err());
-        assert!(ClusterShape::from_points(&[f64::NAN; 9], &[0.001; 3]).is_err());
-        assert!(ClusterShape::from_points(&[0.0; 9], &[0.001; 2]).is_err());
-        assert!(ClusterShape::from_points(&[0.0; 9], &[0.0; 3]).is_err());
+        assert!(ClusterShape::from_points(&[0.0; 6], &[0.001; 2], &[1.0; 2]).is_err());
+        assert!(ClusterShape::from_points(&[f64::NAN; 9], &[0.001; 3], &[1.0; 3]).is_err());
+        assert!(ClusterShape::from_points(&[0.0; 9], &[0.001; 2], &[1.0; 2]).is_err());
+        assert!(ClusterShape::from_points(&[0.0; 9], &[0.0; 3], &[1.0; 3]).is_err());
+        assert!(ClusterShape::from_points(&[0.0; 9], &[0.001; 3], &[0.0; 3]).is_err());
     }
 
     #[test]
@@ -617,8 +715,8 @@ mod tests {
         let mut rng = Rng::new(7);
         let (_, frames) = moving(50, 0.0, &mut rng);
         let shape = ClusterShape::learn(&frames, 4).unwrap();
-        let again = ClusterShape::from_points(&shape.points(), shape.spread()).unwrap();
-        assert_eq!(again.spread(), shape.spread());
+        let again = ClusterShape::from_points(&shape.points(), shape.spread(), shape.weight()).unwrap();
+        assert_eq!((again.spread(), again.weight()), (shape.spread(), shape.weight()));
         assert_eq!(again.len(), 4);
         for (a, b) in shape.points().iter().zip(again.points()) {
             assert!((a - b).abs() < 1e-15);

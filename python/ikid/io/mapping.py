@@ -73,12 +73,6 @@ MAX_SEGMENT_STRETCH_M = 0.015
 _P10_P90_SIGMAS = 2.563
 
 
-#: Most a cluster's marker's distances to the others may change (the core's spread: standard
-#: deviation over the frames) before it is named, when it also changes twice as much as any
-#: other's: a rigid plate's 0.5 mm or less, pyomeca's skin clusters 0.5-3.7 mm, a marker of
-#: another segment 5-9 mm (pyomeca, racing).
-MAX_CLUSTER_STRAY_M = 0.002
-
 #: What a one-marker hand's forearm markers span when they are the styloids and the lateral
 #: epicondyle, metres: the wrist bar (Plug-in Gait's real recordings 62-68 mm) and the forearm
 #: from the mid-styloids to the elbow (236-246 mm); wide enough for children and large adults.
@@ -579,17 +573,18 @@ class MarkerMap:
                 stacklevel=4,
             )
             return None
-        spread = shape[:, 3]
-        for label, stray in zip(labels, spread, strict=True):
-            others = np.delete(spread, labels.index(label))
-            if stray > MAX_CLUSTER_STRAY_M and stray > 2.0 * float(np.max(others)):
+        spread, core = shape[:, 3], shape[:, 4] >= 1.0
+        kept = ", ".join(repr(lab) for lab, c in zip(labels, core, strict=True) if c)
+        for label, stray, in_core in zip(labels, spread, core, strict=True):
+            if not in_core:
                 warnings.warn(
                     f"{source}: marker {label!r} of the {segment}'s cluster does not keep its distances to "
-                    f"the cluster's other markers: they change by {1e3 * stray:.1f} mm (standard deviation), "
-                    f"the others' by {1e3 * float(np.min(others)):.1f}-{1e3 * float(np.max(others)):.1f} mm. "
-                    "It is on another segment, moved on its plate part-way, or slides on the skin: it counts "
-                    "for almost nothing in the cluster's fit (only where fewer than three others are seen); "
-                    "check its label, or leave it out of [cluster]",
+                    f"the markers that keep theirs together ({kept}): they change by {1e3 * stray:.1f} mm "
+                    f"(standard deviation), theirs by {1e3 * float(np.min(spread[core])):.1f}-"
+                    f"{1e3 * float(np.max(spread[core])):.1f} mm. It is on another segment, moved on "
+                    "its plate part-way, or slides on the skin: it counts for almost nothing in the "
+                    "cluster's fit (only where fewer than three of those are seen); check its label, or "
+                    "leave it out of [cluster]",
                     MarkerMapWarning,
                     stacklevel=4,
                 )
