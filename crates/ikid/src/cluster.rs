@@ -26,9 +26,7 @@ pub const MAX_FIT_RESIDUAL_M: f64 = 0.015;
 pub const MIN_CLUSTER_WIDTH_M: f64 = 0.003;
 /// Most frames the shape is learned from (evenly spaced over the whole ones): more average
 /// nothing further and cost time.
-const MAX_SHAPE_FRAMES: usize = 2000;
-/// Rounds of Procrustes averaging (each aligns every frame to the last round's mean).
-const SHAPE_ROUNDS: usize = 4;
+pub const MAX_SHAPE_FRAMES: usize = 2000;
 /// Least spread a marker is given for its weight in a fit, m: the markers of a rigid plate
 /// (0.1-0.5 mm of noise) count alike.
 pub const SPREAD_FLOOR_M: f64 = 0.0005;
@@ -74,10 +72,9 @@ pub struct ClusterFit {
 impl ClusterShape {
     /// The shape of a cluster of `n_markers` from frames `(n, 3·n_markers)` (metres, NaN =
     /// missing; the first three markers the segment's own, which the rigid core starts from):
-    /// generalised Procrustes over the frames with every marker seen (each rotated and moved
-    /// onto the running shape, then averaged), a marker off its place in a frame (beyond
-    /// [`MAX_FIT_RESIDUAL_M`]) left out of that frame's share, each weighed as `rigid_core`
-    /// finds.
+    /// over the frames with every marker seen (at most [`MAX_SHAPE_FRAMES`], evenly spaced),
+    /// each turned onto the first by a least-squares fit weighed as `rigid_core` finds, each
+    /// marker's median place.
     pub fn learn(frames: &[f64], n_markers: usize) -> crate::Result<Self> {
         let width = 3 * n_markers;
         if n_markers < 3 || !frames.len().is_multiple_of(width) {
@@ -97,44 +94,23 @@ impl ClusterShape {
         }
         let step = whole.len().div_ceil(MAX_SHAPE_FRAMES);
         let samples: Vec<Vec<Vector3<f64>>> = whole.iter().step_by(step).map(|f| centred(&points(f))).collect();
-        let all = vec![true; n_markers];
-        // A first shape robust to frames where a marker is off its place (a swapped label, a
-        // marker knocked): each marker's median over the frames rotated onto the first.
+        // Which markers move as one body, and each marker's weight ([`rigid_core`]); then each
+        // frame turned onto the first by those weights, and each marker's median place: robust
+        // to frames with a marker off its place (a swapped label, a marker knocked), and to
+        // markers outside the core, which would turn a plain fit by their lever arm.
+        let (spread, weight) = rigid_core(&whole);
         let aligned: Vec<Vec<Vector3<f64>>> = samples
             .iter()
             .map(|sample| {
-                let (rot, _) = kabsch(sample, &samples[0], &vec![1.0; n_markers]);
+                let (rot, _) = kabsch(sample, &samples[0], &weight);
                 sample.iter().map(|p| rot * p).collect()
             })
             .collect();
-        let mut shape = Self {
+        let shape = Self {
             points: centred(&(0..n_markers).map(|m| median_point(aligned.iter().map(|a| a[m]))).collect::<Vec<_>>()),
-            spread: vec![SPREAD_FLOOR_M; n_markers],
-            weight: vec![1.0; n_markers],
+            spread,
+            weight,
         };
-        (shape.spread, shape.weight) = rigid_core(&whole);
-        // Then the mean over the frames, each fitted as `fit` fits it (a marker off its place
-        // left out of that frame, each weighed by its spread), brought into the shape's frame.
-        // The spreads come from the distances alone: residuals from a shape that a straying
-        // marker has bent would blame the others too.
-        {
-            for _ in 0..SHAPE_ROUNDS {
-                let mut sum = vec![Vector3::zeros(); n_markers];
-                let mut count = vec![0usize; n_markers];
-                for sample in &samples {
-                    if let Some((used, rot, shift)) = shape.fit_frame(sample, all.clone()) {
-                        for m in (0..n_markers).filter(|&m| used[m]) {
-                            sum[m] += rot.transpose() * (sample[m] - shift);
-                            count[m] += 1;
-                        }
-                    }
-                }
-                if count.contains(&0) {
-                    break;
-                }
-                shape.points = centred(&sum.iter().zip(&count).map(|(s, &c)| s / c as f64).collect::<Vec<_>>());
-            }
-        }
         if width_of(&shape.points, &vec![true; n_markers]) < MIN_CLUSTER_WIDTH_M {
             return Err(bad(format!(
                 "the cluster's markers lie on a line (within {:.1} mm): they do not give its orientation",
@@ -708,6 +684,34 @@ mod tests {
         assert!(points_in_technical_frame(&line, &[0.0; 6]).unwrap().iter().all(|v| v.is_nan()));
         assert!(points_from_technical_frame(&line, &[f64::NAN; 3]).is_err());
         assert!(points_in_technical_frame(&line, &[0.0; 4]).is_err());
+    }
+
+    #[test]
+    fn ten_whole_frames_are_enough_and_three_points_a_shape() {
+        let mut rng = Rng::new(12);
+        let (_, frames) = moving(MIN_WHOLE_FRAMES, 0.0, &mut rng);
+        let shape = ClusterShape::learn(&frames, 4).unwrap();
+        let three = ClusterShape::from_points(&shape.points()[..9], &shape.spread()[..3], &[1.0; 3]).unwrap();
+        assert_eq!(three.len(), 3);
+        // A cluster of three markers is one too (a segment whose [cluster] is its three).
+        let only_three: Vec<f64> = frames.chunks_exact(12).flat_map(|f| f[..9].to_vec()).collect();
+        assert_eq!(ClusterShape::learn(&only_three, 3).unwrap().len(), 3);
+    }
+
+    #[test]
+    fn a_first_frame_with_a_marker_off_its_place_teaches_no_wrong_shape() {
+        // The frames are turned onto the first: its marker 1, read 30 mm off, must not bend the
+        // shape (the median over the frames, the core's weights).
+        let mut rng = Rng::new(13);
+        let (poses, mut frames) = moving(300, 0.0, &mut rng);
+        frames[4] += 0.03;
+        let shape = ClusterShape::learn(&frames, 4).unwrap();
+        let fit = shape.fit(&frames).unwrap();
+        for f in [1, 150, 299] {
+            for m in 0..4 {
+                assert!((placed(&fit, f, m) - truth(&poses[f], m)).norm() < 1e-6, "frame {f} marker {m}");
+            }
+        }
     }
 
     #[test]
