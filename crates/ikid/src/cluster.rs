@@ -626,13 +626,14 @@ mod tests {
         let shape = ClusterShape::learn(&frames, 4).unwrap();
         frames[12 * 10..12 * 10 + 3].fill(f64::NAN);
         frames[12 * 10 + 3] += 0.05;
-        // Two markers only in frame 20.
+        // Two markers only in frames 20 and 21.
         frames[12 * 20..12 * 20 + 6].fill(f64::NAN);
+        frames[12 * 21..12 * 21 + 6].fill(f64::NAN);
         let fit = shape.fit(&frames).unwrap();
         assert!(fit.placed[12 * 10..12 * 11].iter().all(|v| v.is_nan()));
         assert!(fit.placed[12 * 20..12 * 21].iter().all(|v| v.is_nan()));
         assert!(fit.placed[12 * 11..12 * 12].iter().all(|v| v.is_finite()));
-        assert_eq!(fit.undetermined, 1, "frame 10 had three markers seen, frame 20 two");
+        assert_eq!(fit.undetermined, 1, "frame 10 had three markers seen, frames 20 and 21 two");
     }
 
     #[test]
@@ -712,6 +713,27 @@ mod tests {
                 assert!((placed(&fit, f, m) - truth(&poses[f], m)).norm() < 1e-6, "frame {f} marker {m}");
             }
         }
+    }
+
+    #[test]
+    fn three_markers_of_a_cluster_on_a_line_do_not_fix_it() {
+        // A plate whose first three markers lie nearly on a line (1 mm off it) and a fourth off
+        // it: with the fourth missing, the three leave the roll about their line open.
+        let plate = [[0.0, 0.0, 0.0], [0.03, 0.0, 0.0], [0.06, 0.001, 0.0], [0.02, 0.04, 0.01]];
+        let mut frames = Vec::new();
+        for i in 0..50 {
+            let rot = Rotation3::from_euler_angles(0.02 * i as f64, 0.5, -0.01 * i as f64);
+            for p in plate {
+                frames.extend_from_slice((rot * Vector3::from(p)).as_slice());
+            }
+        }
+        let shape = ClusterShape::learn(&frames, 4).unwrap();
+        assert!(!shape.is_empty());
+        frames[12 * 30 + 9..12 * 31].fill(f64::NAN);
+        let fit = shape.fit(&frames).unwrap();
+        assert!(fit.placed[12 * 30..12 * 31].iter().all(|v| v.is_nan()));
+        assert!(fit.placed[12 * 29..12 * 30].iter().all(|v| v.is_finite()));
+        assert_eq!(fit.undetermined, 1);
     }
 
     #[test]
