@@ -678,9 +678,12 @@ mod tests {
             let want = pose.0 * fixed + pose.1;
             assert!((Vector3::from_row_slice(&back[3 * f..3 * f + 3]) - want).norm() < 1e-12, "frame {f}");
         }
-        // A frame of three markers on a line has no technical frame.
+        // A frame of three markers on a line has no technical frame, wherever the line lies.
         let line = [0.0, 0.0, 0.0, 0.05, 0.0, 0.0, 0.1, 0.001, 0.0];
         assert!(technical_frame(&line).is_none());
+        let shifted: Vec<f64> = line.iter().zip([0.2, 1.0, -0.3].iter().cycle()).map(|(v, o)| v + o).collect();
+        assert!(technical_frame(&shifted).is_none());
+        assert!(points_in_technical_frame(&[0.0; 10], &[0.0; 3]).is_err());
         assert!(points_from_technical_frame(&line, &[0.0; 3]).unwrap().iter().all(|v| v.is_nan()));
         assert!(points_in_technical_frame(&line, &[0.0; 6]).unwrap().iter().all(|v| v.is_nan()));
         assert!(points_from_technical_frame(&line, &[f64::NAN; 3]).is_err());
