@@ -684,6 +684,7 @@ mod tests {
         let shifted: Vec<f64> = line.iter().zip([0.2, 1.0, -0.3].iter().cycle()).map(|(v, o)| v + o).collect();
         assert!(technical_frame(&shifted).is_none());
         assert!(points_in_technical_frame(&[0.0; 10], &[0.0; 3]).is_err());
+        assert!(points_from_technical_frame(&[0.0; 10], &[0.0; 3]).is_err());
         assert!(points_from_technical_frame(&line, &[0.0; 3]).unwrap().iter().all(|v| v.is_nan()));
         assert!(points_in_technical_frame(&line, &[0.0; 6]).unwrap().iter().all(|v| v.is_nan()));
         assert!(points_from_technical_frame(&line, &[f64::NAN; 3]).is_err());
@@ -737,6 +738,26 @@ mod tests {
         assert!(fit.placed[12 * 30..12 * 31].iter().all(|v| v.is_nan()));
         assert!(fit.placed[12 * 29..12 * 30].iter().all(|v| v.is_finite()));
         assert_eq!(fit.undetermined, 1);
+    }
+
+    #[test]
+    fn white_noise_keeps_a_plate_whole_and_a_slow_slide_does_not() {
+        // Every marker with 1 mm of white noise; marker 3 also slides 3 mm to and fro, slowly
+        // (skin). The noise alone changes each distance by about 1.4 mm, beyond the rigid limit:
+        // taken out, the plate's three stay one body and the sliding marker does not.
+        let mut rng = Rng::new(14);
+        let (poses, mut frames) = moving(3000, 0.001, &mut rng);
+        for (f, pose) in poses.iter().enumerate() {
+            let slide = pose.0 * Vector3::new(0.003 * (0.004 * f as f64).sin(), 0.0, 0.0);
+            (0..3).for_each(|i| frames[12 * f + 9 + i] += slide[i]);
+        }
+        let shape = ClusterShape::learn(&frames, 4).unwrap();
+        assert_eq!(&shape.weight()[..3], &[1.0; 3], "{:?} {:?}", shape.weight(), shape.spread());
+        assert!(shape.weight()[3] <= STRAYING_WEIGHT, "{:?} {:?}", shape.weight(), shape.spread());
+        // Without the slide, 1.5 mm of noise (distances changing by 2 mm) leaves all four one body.
+        let (_, noisy) = moving(3000, 0.0015, &mut rng);
+        let shape = ClusterShape::learn(&noisy, 4).unwrap();
+        assert_eq!(shape.weight(), &[1.0; 4], "{:?}", shape.spread());
     }
 
     #[test]
