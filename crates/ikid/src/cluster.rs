@@ -761,6 +761,35 @@ mod tests {
     }
 
     #[test]
+    fn a_knocked_segment_marker_leaves_the_core_to_the_steadiest_three() {
+        // Six markers: the segment's three (0-2), of which marker 0 is moved 12 mm on the plate
+        // half-way through, two more plate markers (3, 4) and a sixth (5) sliding 1.8 mm slowly.
+        // The core is then seeded by the steadiest three, not the segment's, and keeps out both
+        // marker 0 and the slider (its change beyond the plate's 1 mm limit).
+        let mut rng = Rng::new(15);
+        let (poses, four) = moving(2000, 0.0001, &mut rng);
+        let extra = [Vector3::new(0.05, 0.03, -0.01), Vector3::new(0.02, -0.03, 0.02)];
+        let mut frames = Vec::new();
+        for (f, pose) in poses.iter().enumerate() {
+            let mut frame = four[12 * f..12 * f + 12].to_vec();
+            if f >= 1000 {
+                let moved = pose.0 * Vector3::new(0.012, 0.0, 0.0);
+                (0..3).for_each(|i| frame[i] += moved[i]);
+            }
+            let slide = Vector3::new(0.0018 * (0.003 * f as f64).sin(), 0.0018 * (0.003 * f as f64).cos(), 0.0);
+            for (j, e) in extra.iter().enumerate() {
+                let p = pose.0 * (e + if j == 1 { slide } else { Vector3::zeros() }) + pose.1;
+                frame.extend_from_slice(p.as_slice());
+            }
+            frames.extend(frame);
+        }
+        let shape = ClusterShape::learn(&frames, 6).unwrap();
+        let w = shape.weight();
+        assert_eq!([w[1], w[2], w[3], w[4]], [1.0; 4], "{w:?} {:?}", shape.spread());
+        assert!(w[0] <= STRAYING_WEIGHT && w[5] <= STRAYING_WEIGHT, "{w:?} {:?}", shape.spread());
+    }
+
+    #[test]
     fn a_shape_round_trips_through_its_points() {
         let mut rng = Rng::new(7);
         let (_, frames) = moving(50, 0.0, &mut rng);
