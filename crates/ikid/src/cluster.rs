@@ -790,6 +790,19 @@ mod tests {
     }
 
     #[test]
+    fn the_median_point_is_each_coordinates_middle_value() {
+        let odd = [Vector3::new(3.0, 0.0, 1.0), Vector3::new(1.0, 5.0, 1.0), Vector3::new(2.0, 4.0, 7.0)];
+        assert_eq!(median_point(odd.into_iter()), Vector3::new(2.0, 4.0, 1.0));
+        let even = [
+            Vector3::new(1.0, 0.0, 0.0),
+            Vector3::new(2.0, 0.0, 0.0),
+            Vector3::new(4.0, 0.0, 0.0),
+            Vector3::new(8.0, 0.0, 0.0),
+        ];
+        assert_eq!(median_point(even.into_iter()).x, 3.0);
+    }
+
+    #[test]
     fn a_shape_round_trips_through_its_points() {
         let mut rng = Rng::new(7);
         let (_, frames) = moving(50, 0.0, &mut rng);
