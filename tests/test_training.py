@@ -97,8 +97,12 @@ def test_session_specs_cover_every_body_with_its_own_seed_and_refuse_unknown_key
         D.session_specs({"speed": 2.0}, [0.0], [1.0])
 
 
-@pytest.mark.parametrize("offset", [False, True], ids=["plain", "output_offset"])
-def test_a_config_trains_and_exports_a_model_with_its_card(tmp_path, offset):
+@pytest.mark.parametrize(
+    ("offset", "relative"),
+    [(False, False), (True, False), (True, True)],
+    ids=["plain", "output_offset", "relative_inputs"],
+)
+def test_a_config_trains_and_exports_a_model_with_its_card(tmp_path, offset, relative):
     cfg_path = tmp_path / "tiny.toml"
     cfg_path.write_text(
         """
@@ -121,8 +125,10 @@ max_minutes = 0.05
 samples_per_epoch = 2000
 noise_levels = [0.0, 0.01]
 """
+        + ("relative_inputs = true\n" if relative else "")
     )
     model, path = run(load_config(cfg_path), tmp_path, progress=False)
+    assert card_scaling_says_relative(model.card) == relative
     assert path.exists() and (tmp_path / "tiny-ik.onnx").exists()
     card = model.card
     assert (
@@ -160,6 +166,35 @@ noise_levels = [0.0, 0.01]
     if offset:  # the newest frame's angles are part of the output: the network is a correction
         base = x[:, -3:]
         assert np.abs(got - base).max() < np.abs(got).max()
+
+
+def test_relative_inputs_fold_into_the_first_layer_of_an_ordinary_network():
+    # The relative_inputs network, fed each older frame minus the newest (computed here frame by
+    # frame, scaled), is the same function as the folded network on the raw window.
+    from ikid_training.export import Affine
+    from ikid_training.train import fold_relative_inputs, mlp, relative_to_newest
+
+    rng = np.random.default_rng(3)
+    feature_len, frames = 3, 6
+    x = (rng.normal(size=(40, frames * feature_len)) * 2.0).astype(np.float32)
+    rel = x.reshape(40, frames, feature_len).copy()
+    for f in range(frames - 1):
+        rel[:, f] -= x.reshape(40, frames, feature_len)[:, -1]
+    rel = rel.reshape(40, -1)
+    np.testing.assert_allclose(relative_to_newest(x, feature_len), rel, atol=1e-6)
+    inp = Affine.minmax(rel.min(0), rel.max(0))
+    net = mlp(x.shape[1], [8], 3)
+    folded, identity = fold_relative_inputs(net, inp, feature_len)
+    assert np.all(identity.scale == 1) and np.all(identity.shift == 0)
+    with torch.no_grad():
+        want = net(torch.as_tensor(rel * inp.scale + inp.shift)).numpy()
+        got = folded(torch.as_tensor(x)).numpy()
+    np.testing.assert_allclose(got, want, atol=1e-5)
+    assert np.abs(want).max() > 1e-2  # not two zero functions
+
+
+def card_scaling_says_relative(card: dict) -> bool:
+    return card["scaling"]["input"].startswith("relative to the newest frame")
 
 
 def test_occlusion_bursts_hide_one_marker_at_a_time_after_the_warmup():

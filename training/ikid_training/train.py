@@ -69,6 +69,12 @@ TRAIN_DEFAULTS: dict[str, Any] = {
     # the Y-Z-X singularity (e_f near ±90°): fitted to them, the scaling spends the network's
     # precision on targets no window can predict.
     "output_quantile": 0.0,
+    # Inputs relative to the window's newest frame: every older frame's features minus the
+    # newest's (the newest kept whole), each scaled to [-1, 1] on the training windows, then
+    # folded into the first layer, so the exported model is an ordinary one (a linear map of
+    # its window). The posture no longer fills the scaled range, the shape of the window does:
+    # noise and speed get the resolution.
+    "relative_inputs": False,
 }
 
 #: With ``output_quantile``: scaled targets beyond this (the quantile range maps to [-1, 1]) are
@@ -206,6 +212,43 @@ def newest_features(x: np.ndarray, feature_len: int, n: int) -> np.ndarray:
     return x[:, start : start + n]
 
 
+def relative_to_newest(x: np.ndarray, feature_len: int) -> np.ndarray:
+    """Flattened windows ``x`` with every older frame's features minus the newest frame's (the
+    newest frame's kept as they are): the ``relative_inputs`` representation."""
+    w = np.asarray(x).reshape(len(x), -1, feature_len)
+    out = w - w[:, -1:, :]
+    out[:, -1, :] = w[:, -1, :]
+    return out.reshape(len(x), -1).astype(x.dtype, copy=False)
+
+
+def relative_map(n_in: int, feature_len: int) -> np.ndarray:
+    """The matrix ``T`` with ``relative_to_newest(x) = x @ T.T`` (float64)."""
+    t = np.eye(n_in)
+    newest = n_in - feature_len
+    for i in range(newest):
+        t[i, newest + i % feature_len] -= 1.0
+    return t
+
+
+def fold_relative_inputs(net: nn.Sequential, inp: Affine, feature_len: int) -> tuple[nn.Sequential, Affine]:
+    """``net`` on scaled relative inputs as an equivalent network on the raw window: the first
+    layer ``W (s ⊙ T x + c) + b`` becomes ``(W diag(s) T) x + (W c + b)`` and the input scaling
+    the identity (float64 for the product, float32 stored, as every layer)."""
+    first = net[0]
+    assert isinstance(first, nn.Linear)
+    w = first.weight.detach().double().numpy()
+    b = first.bias.detach().double().numpy()
+    s, c = inp.scale.astype(np.float64), inp.shift.astype(np.float64)
+    t = relative_map(w.shape[1], feature_len)
+    folded = copy.deepcopy(net)
+    layer = folded[0]
+    assert isinstance(layer, nn.Linear)
+    with torch.no_grad():
+        layer.weight.copy_(torch.as_tensor((w * s[None, :]) @ t, dtype=torch.float32))
+        layer.bias.copy_(torch.as_tensor(w @ c + b, dtype=torch.float32))
+    return folded, Affine.identity(w.shape[1])
+
+
 def training_window_change(cfg: dict[str, Any]) -> np.ndarray:
     """The ``window_change`` :func:`train` writes into the card of ``cfg``'s model, from its
     training data rebuilt (same recordings, seeds and noise): for models trained before cards
@@ -220,7 +263,7 @@ def training_window_change(cfg: dict[str, Any]) -> np.ndarray:
             _noisy(train_parts, t, np.random.default_rng(t["seed"] + 2)), task, fs, window, stride=7
         )
         seen.append(noisy)
-    return np.max([window_change(w, D.feature_len(fs)) for w in seen], axis=0)
+    return window_change(seen, D.feature_len(fs))
 
 
 def train(
@@ -243,7 +286,15 @@ def train(
     # Scaling (min-max to [-1, 1], stored in the model file): inputs from the clean training
     # windows; outputs from the targets, noisy ones for a correction (on clean windows it is ~0).
     x0, y0 = D.stack_windows(train_parts, task, fs, window, stride=7)
-    inp = Affine.minmax(x0.min(0), x0.max(0))
+    fl = D.feature_len(fs)
+    relative = bool(t["relative_inputs"])
+
+    def inputs(x: np.ndarray) -> np.ndarray:
+        return relative_to_newest(x, fl) if relative else x
+
+    x0_in = inputs(x0)
+    inp = Affine.minmax(x0_in.min(0), x0_in.max(0))
+    del x0_in
     clean = (x0, y0)
     if offset:
         x0, y0 = D.stack_windows(
@@ -270,7 +321,7 @@ def train(
     )
     yv = targets(xv, yv) * out_fwd.scale + out_fwd.shift
     keep = inliers(yv)
-    xv_t = torch.as_tensor((xv * inp.scale + inp.shift)[keep])
+    xv_t = torch.as_tensor((inputs(xv) * inp.scale + inp.shift)[keep])
     yv_t = torch.as_tensor(yv[keep])
 
     net = mlp(xv.shape[1], list(m["hidden"]), yv.shape[1])
@@ -296,7 +347,7 @@ def train(
         )
         y = targets(x, y) * out_fwd.scale + out_fwd.shift
         keep = inliers(y)
-        xs = torch.as_tensor((x * inp.scale + inp.shift)[keep])
+        xs = torch.as_tensor((inputs(x) * inp.scale + inp.shift)[keep])
         ys = torch.as_tensor(y[keep])
         net.train()
         perm = torch.randperm(len(xs))
@@ -334,6 +385,8 @@ def train(
             break
     bar.close()
     net.load_state_dict(best_state)
+    if relative:
+        net, inp = fold_relative_inputs(net, inp, fl)
     return Trained(net.eval(), inp, out_fwd.inverse(), log, time.perf_counter() - start, best, envelope)
 
 
@@ -352,7 +405,12 @@ def spec_for(
         output_names=ikid.coordinate_names(),
         envelope=trained.envelope,
         scaling={
-            "input": "minmax(-1,1) on clean training windows",
+            "input": (
+                "relative to the newest frame, minmax(-1,1) on clean training windows, "
+                "folded into the first layer"
+                if cfg["train"]["relative_inputs"]
+                else "minmax(-1,1) on clean training windows"
+            ),
             "output": (
                 f"quantiles {cfg['train']['output_quantile']:g}-{1 - cfg['train']['output_quantile']:g} "
                 "of training targets to (-1,1)"
