@@ -179,6 +179,38 @@ def test_a_70hz_recording_runs_one_stream_over_the_model_grid(monkeypatch):
     assert "its family has no model at 70 Hz, only at 100, 250, 1000 Hz" in run.summary()
 
 
+def test_grid_points_the_stream_refused_are_said_not_called_time_gaps(monkeypatch):
+    # A 71 Hz recording with no time gap, MC2 missing in every 5th frame: points of the 1 kHz
+    # grid around those frames miss MC2 and the stream refuses some; the window restarts after
+    # them. The summary counts them by reason instead of reporting time gaps the file does not
+    # have (real racing: 3 grid points, "MC2, MCB jumped", read as "1 window restarts after
+    # time gaps").
+    trial = ikid.simulate("random", seed=9507, duration=10.0)
+    time, markers = trial.time[::14], trial.markers[::14].copy()
+    assert np.ptp(np.diff(time)) < 1e-9  # evenly spaced: no time gap
+    clean = pipeline.run_model("wrist-ik", markers, time)
+    assert clean.gap_restarts == 0 and not clean.grid_refused
+    markers[::5, 9:12] = np.nan
+    refusals = []
+    push = pipeline._push
+
+    def counted(stream, t, frame, window):
+        got = push(stream, t, frame, window)
+        on_frame = np.abs(time - t).min() < 1e-9
+        if got[0] == "none" and got[1] != "window filling" and not on_frame:
+            refusals.append(got[1])
+        return got
+
+    monkeypatch.setattr(pipeline, "_push", counted)
+    run = pipeline.run_model("wrist-ik", markers, time)
+    assert run.gap_restarts > 0 and refusals
+    assert sum(run.grid_refused.values()) >= len(refusals)  # every refused point between frames
+    assert set(run.grid_refused) == set(refusals) | set(run.refused)
+    summary = run.summary()
+    assert f"{sum(run.grid_refused.values())} points of the model's grid refused" in summary
+    assert "after time gaps or refused grid points" in summary
+
+
 def _angles(time: np.ndarray) -> np.ndarray:
     """Wrist-like angles (rad): slow sines within the range of motion, plus a little noise."""
     w = 2 * np.pi * np.array([0.7, 1.1, 0.4])

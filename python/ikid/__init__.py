@@ -5,7 +5,7 @@ angles (or torques), frame by frame, in microseconds::
 
     import ikid
     model = ikid.load("path/to/wrist-ik.safetensors")
-    angles = model.predict(frames)          # (n, 18) markers -> (n - 4, 3) radians
+    angles = model.predict(frames)          # (n, 18) markers -> (n - window + 1, 3) radians
     stream = model.stream()
     for frame in frames:
         out = stream.push(frame)            # None until the window is full

@@ -129,6 +129,11 @@ class Run:
     #: where the stream gave none (a model whose card has no ``uncertainty``, or the first
     #: frames after the window restarted).
     sd: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    #: Points of the model's grid the stream refused, by reason (a recording resampled to the
+    #: model's rate, ``at_recording_frames``): a frame between two of them keeps the output of
+    #: the grid point on its other side if it has one (a frame on a refused point is counted in
+    #: :attr:`refused`), and the window restarts after them, as after a time gap.
+    grid_refused: Counter = field(default_factory=Counter)
 
     @property
     def n_outputs(self) -> int:
@@ -173,8 +178,13 @@ class Run:
             example = self.examples.get(reason)
             explained = any(w in reason for w in _SELF_EXPLAINED) or not example
             parts.append(f"{n} {reason}" if explained else f"{n} {reason} (first: {example})")
+        if self.grid_refused:
+            reasons = "; ".join(f"{n} {reason}" for reason, n in self.grid_refused.most_common())
+            n = self.grid_refused.total()
+            parts.append(f"{n} points of the model's grid refused ({reasons})")
         if self.gap_restarts:
-            parts.append(f"{self.gap_restarts} window restarts after time gaps")
+            after = "time gaps or refused grid points" if self.grid_refused else "time gaps"
+            parts.append(f"{self.gap_restarts} window restarts after {after}")
         if self.resampled_from_hz:
             parts.append(f"resampled {self.resampled_from_hz:g} -> {self.rate_hz:g} Hz")
         if self.model_name:
@@ -460,6 +470,8 @@ class _Tally:
         self.counts = Counts()
         self.refused: Counter = Counter()
         self.examples: dict[str, str] = {}
+        #: Grid points refused by the stream (:class:`_ModelGrid`), by reason.
+        self.grid_refused: Counter = Counter()
 
     def _block(self) -> None:
         self.rows: list = []
@@ -531,6 +543,7 @@ class _Tally:
             self.counts,
             family_rates,
             joined(cols[5], np.float64, (0, model.n_outputs)).reshape(-1, model.n_outputs),
+            self.grid_refused,
         )
 
 
@@ -673,7 +686,10 @@ class _ModelGrid:
                     on_b = np.abs(grid_t - t_b) <= self.EPS * self.period
                     pts[on_b] = values[m + 1]
                     for k, g, p in zip(range(k_first, k_end), grid_t, pts, strict=True):
-                        self.outcomes[k] = _push(self.stream, g, p, self.model.window)
+                        got = _push(self.stream, g, p, self.model.window)
+                        if got[0] == "none" and got[1] != "window filling":
+                            self.tally.grid_refused[got[1]] += 1
+                        self.outcomes[k] = got
             self.next_interval = j + 1
             self.ran_until = float(t_b)
             self._give_frames(upto=j + 1)
