@@ -363,10 +363,15 @@ def test_functional_axes_from_circles_restore_the_nominal_accuracy(motion, seed,
     assert abs(report["supination_held_deg"] - np.degrees(pronation)) < 1.0, report
     assert report["flexion_range_deg"] > 60 and report["deviation_range_deg"] > 25, report
     trial = subject.markers(motion, 0.005, 4)
-    nominal = mse(model, ikid.forward_markers(motion, SHOULDER), motion)
+    # Yardsticks with the trial's own noise (0.5 %): the model's placement with that noise, and
+    # the single-coordinate protocol's calibration from clean trials on this very trial. (Against
+    # the clean nominal, the retrained wrist-ik's 1.5e-6, the noise alone is 4x.)
+    nominal = mse(model, _native.noise_uniform(ikid.forward_markers(motion, SHOULDER), 0.005, 4), motion)
+    protocol = mse(model, trial, motion, ikid.calibrate(*subject.calibration_trials()))
     uncalibrated = mse(model, trial, motion)
     calibrated = mse(model, trial, motion, cal)
     assert calibrated < 2.0 * nominal < uncalibrated, (calibrated, nominal, uncalibrated)
+    assert calibrated < 1.2 * protocol, (calibrated, protocol)
 
     labels = [f"L{i}" for i in range(6)]
     both = np.concatenate([neutral, moving])
