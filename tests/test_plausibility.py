@@ -42,7 +42,7 @@ def test_a_flipped_sign_bit_in_a_shipped_model_is_refused(tmp_path, name):
 def test_frame_status_bits_are_the_c_headers():
     header = (ROOT / "include" / "ikid.h").read_text(encoding="utf-8")
     defined = {m[0].lower(): int(m[1]) for m in re.findall(r"#define IKID_FRAME_(\w+) (\d+)", header)}
-    assert defined == dict(_native.FRAME_STATUS) and len(defined) == 9
+    assert defined == dict(_native.FRAME_STATUS) and len(defined) == 10
 
 
 def _markers(seed: int) -> np.ndarray:
@@ -168,3 +168,40 @@ def test_a_wrist_moving_faster_than_any_training_trial_reads_its_per_frame_angle
     trial = ikid.simulate("random", seed=9507, duration=10.0)
     calm = run_model("wrist-ik", trial.markers, trial.time)
     assert not (calm.status[window - 1 :] & ikid.FRAME_STATUS["per_frame"]).any()
+
+
+@pytest.mark.parametrize("pair", [("MC2", "MC5"), ("RSP", "USP")])
+def test_labels_swapped_throughout_after_a_clean_calibration_write_nothing_and_say_why(tmp_path, pair):
+    """A recording whose two metacarpal heads (or styloids) carry each other's labels from the
+    first frame, calibrated from a static trial labelled right: the segment's shape is the
+    same, so only the posture tells. Every frame reads the hand turned over; ``ik`` and
+    ``track`` write no file and say why (before, ``track`` wrote 0 rows and exited 0)."""
+    import shutil
+    import subprocess
+    import sys
+
+    cli = shutil.which("ikid", path=str(Path(sys.executable).parent)) or "ikid"
+    trial = simulate(seed=41, duration=1.5)
+    names = list(ikid.marker_names())
+    a, b = (names.index(n) for n in pair)
+    markers = np.asarray(trial.markers, np.float64).copy()
+    markers[:, 3 * a : 3 * a + 3], markers[:, 3 * b : 3 * b + 3] = (
+        trial.markers[:, 3 * b : 3 * b + 3],
+        trial.markers[:, 3 * a : 3 * a + 3],
+    )
+    ikid.io.write_trc(tmp_path / "swapped.trc", trial.time, markers)
+    ikid.io.write_trc(tmp_path / "right.trc", trial.time, trial.markers)
+    cal = ikid.Calibration.from_neutral(_native.forward_markers(np.zeros((10, 3))))
+    ikid.save_calibration(cal, tmp_path / "cal.json")
+    for cmd in (["ik", "-o", "out.mot"], ["track", "-o", "out"]):
+        argv = [cli, cmd[0], "swapped.trc", *cmd[1:], "--calibration", "cal.json"]
+        r = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+        assert r.returncode == 2, (cmd, r.stdout, r.stderr)
+        assert "turned over" in r.stderr and "MC2/MC5 or RSP/USP" in r.stderr, (cmd, r.stderr)
+        assert not list(tmp_path.glob("out*")), cmd
+        # The same trial labelled right runs and writes every row.
+        argv[2] = "right.trc"
+        r = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0 and "turned over" not in r.stdout, (cmd, r.stdout, r.stderr)
+        for p in tmp_path.glob("out*"):
+            p.unlink()

@@ -547,6 +547,15 @@ class _Tally:
         )
 
 
+#: Why a frame whose hand reads turned over on the forearm (status bit ``turned_over``) has
+#: no output: the tracker's summary says the same.
+TURNED_OVER_REASON = (
+    "the hand reads turned over on the forearm, further from neutral than a wrist turns (two markers of "
+    "a segment under each other's labels throughout, e.g. MC2/MC5 or RSP/USP, or a calibration made "
+    "with another labelling): not written; check the labels of the hand's and the forearm's markers"
+)
+
+
 def _push(stream: _native.Stream, t: float, frame: np.ndarray, window: int) -> tuple:
     """One frame through ``stream``: ``("out", values, filled, status, filling, sd)``
     (``filling``: an early output, the window not yet full; ``sd``: the outputs' standard
@@ -560,6 +569,8 @@ def _push(stream: _native.Stream, t: float, frame: np.ndarray, window: int) -> t
     if stream.status & _native.FRAME_STATUS["implausible"]:
         # Nothing no wrist can give is written as a number: the frame is counted instead.
         reason = "implausible outputs (far outside the model's training range), not written"
+        if stream.status & _native.FRAME_STATUS["turned_over"]:
+            reason = TURNED_OVER_REASON
         return ("none", reason, np.array2string(np.asarray(out), precision=3))
     status = stream.status
     filled = bool(status & _native.FRAME_STATUS["filled"])

@@ -48,6 +48,9 @@ pub const IKID_FRAME_SWAPPED: u32 = 128;
 /// Frame status bit: a stream's first output after it took its source's new clock (the source
 /// was restarted): frames were lost before it.
 pub const IKID_FRAME_RESYNCED: u32 = 256;
+/// Frame status bit: the hand reads turned over on the forearm (two hand labels swapped, or a
+/// hand cluster mapped or calibrated the other way round); always with `IKID_FRAME_IMPLAUSIBLE`.
+pub const IKID_FRAME_TURNED_OVER: u32 = 512;
 
 // cbindgen writes literals only: the values above are the core's (ikid::status), checked here.
 const _: () = {
@@ -61,5 +64,6 @@ const _: () = {
     assert!(IKID_FRAME_PER_FRAME == status::PER_FRAME as u32);
     assert!(IKID_FRAME_SWAPPED == status::SWAPPED as u32);
     assert!(IKID_FRAME_RESYNCED == status::RESYNCED as u32);
-    assert!(status::ALL.len() == 9);
+    assert!(IKID_FRAME_TURNED_OVER == status::TURNED_OVER as u32);
+    assert!(status::ALL.len() == 10);
 };

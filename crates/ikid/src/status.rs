@@ -47,8 +47,15 @@ pub const SWAPPED: u16 = 128;
 /// frames were lost before it, and its window holds the new clock's frames only.
 pub const RESYNCED: u16 = 256;
 
+/// The hand reads turned further from its neutral posture on the forearm than any wrist turns
+/// (see [`TurnedOverWatch`]). It is what two markers under each other's labels throughout,
+/// or a cluster mapped or calibrated the other way round, read as (the hand or the forearm
+/// half a turn off): the labels or the calibration are wrong, not the wrist. Always set with
+/// [`IMPLAUSIBLE`], so writers leave the frame out; this bit says why.
+pub const TURNED_OVER: u16 = 512;
+
 /// Every bit with its name (the CLI's legend and the bindings' constant tables).
-pub const ALL: [(u16, &str); 9] = [
+pub const ALL: [(u16, &str); 10] = [
     (FILLED, "filled"),
     (REJECTED_MARKER, "rejected_marker"),
     (RESTARTED, "restarted"),
@@ -58,6 +65,7 @@ pub const ALL: [(u16, &str); 9] = [
     (PER_FRAME, "per_frame"),
     (SWAPPED, "swapped"),
     (RESYNCED, "resynced"),
+    (TURNED_OVER, "turned_over"),
 ];
 
 /// How far beyond a coordinate's anatomical range ([`crate::body::COORDINATES`]) an angle may
@@ -70,6 +78,61 @@ pub const RANGE_MARGIN_RAD: f64 = std::f64::consts::FRAC_PI_4;
 pub fn angle_implausible(c: usize, q: f64) -> bool {
     let (lo, hi) = crate::body::COORDINATES[c].range;
     !(q >= lo - RANGE_MARGIN_RAD && q <= hi + RANGE_MARGIN_RAD)
+}
+
+/// How far from its neutral posture the hand may read turned on the forearm (the angle of
+/// its rotation there, whatever its axis), degrees, before it is [`TURNED_OVER`]. Every
+/// coordinate at the end of its range at once turns the hand 125° at most (the body model's
+/// ranges, [`crate::body::COORDINATES`]); real wheelchair racing, the farthest-turning recording
+/// ikid was tried on (its independent reference), turns it 96°. Two hand markers under each
+/// other's labels read as the hand half a turn off, so as 180° less its true turn or more:
+/// 130° is passed as soon as the true turn is under 50°, as it is at rest.
+pub const TURNED_OVER_DEG: f64 = 130.0;
+/// Once turned over, the hand reads upright again only when turned less than this, degrees. A
+/// hand read through swapped labels turns about 180° less its true turn, so more than 60°
+/// while the true turn is under 120° (every posture of the body model's ranges but their
+/// farthest corners), and stays flagged while the wrist goes far; a tracker that lost such a
+/// hand and restarted read it 88° turned where its true turn was 101°. A real wrist comes
+/// back under 60° whenever it comes near rest.
+pub const UPRIGHT_DEG: f64 = 60.0;
+
+/// The angle, degrees, by which wrist angles `q` (rad) turn the hand from its neutral posture
+/// on the forearm: the rotation angle of [`wrist_rotation`](crate::body::wrist_rotation),
+/// whatever its axis (near gimbal lock the angles are not defined, this is).
+pub fn hand_turn_deg(q: &[f64; 3]) -> f64 {
+    crate::body::wrist_rotation(q).angle().to_degrees()
+}
+
+/// Whether a stream's or a tracker's hand reads turned over ([`TURNED_OVER`]), frame after
+/// frame: on when turned past [`TURNED_OVER_DEG`], off again only under [`UPRIGHT_DEG`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TurnedOverWatch {
+    turned: bool,
+}
+
+impl TurnedOverWatch {
+    /// A watch that has seen nothing (upright).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Takes the next frame's wrist angles `q` (rad) and returns its bits: [`TURNED_OVER`] |
+    /// [`IMPLAUSIBLE`] while the hand reads turned over, else 0. Angles that are not finite
+    /// change nothing.
+    pub fn update(&mut self, q: &[f64; 3]) -> u16 {
+        let turn = hand_turn_deg(q);
+        if turn > TURNED_OVER_DEG {
+            self.turned = true;
+        } else if turn < UPRIGHT_DEG {
+            self.turned = false;
+        }
+        self.bits()
+    }
+
+    /// The bits of the last frame ([`update`](Self::update)).
+    pub fn bits(&self) -> u16 {
+        if self.turned { TURNED_OVER | IMPLAUSIBLE } else { 0 }
+    }
 }
 
 /// Largest joint torque about any wrist coordinate a wrist of the default subject
@@ -123,6 +186,38 @@ mod tests {
         assert!(angle_implausible(0, -130f64.to_radians()));
         assert!(angle_implausible(1, f64::NAN));
         assert!(!angle_implausible(2, 0.0));
+    }
+
+    #[test]
+    fn the_hands_turn_is_its_rotation_angle_whatever_the_axis() {
+        // Oracle: one coordinate alone turns the hand by its own angle; at gimbal lock
+        // (e_f = 90°) s_p and ad_ab turn it about one axis, so opposite equal values cancel
+        // (axes -y and x both land on that axis with e_f's quarter turn about z).
+        for deg in [-170.0f64, -95.0, 0.0, 45.0, 129.0, 131.0] {
+            for c in 0..3 {
+                let mut q = [0.0; 3];
+                q[c] = deg.to_radians();
+                assert!((hand_turn_deg(&q) - deg.abs()).abs() < 1e-9, "{c} {deg}");
+            }
+        }
+        let locked = hand_turn_deg(&[1.0, std::f64::consts::FRAC_PI_2, 1.0]);
+        assert!((locked - 90.0).abs() < 1e-9, "{locked}");
+    }
+
+    #[test]
+    fn a_hand_turned_over_stays_flagged_until_it_reads_upright() {
+        let at = |deg: f64| [deg.to_radians(), 0.0, 0.0];
+        let mut watch = TurnedOverWatch::new();
+        assert_eq!(watch.update(&at(60.0)), 0);
+        assert_eq!(watch.update(&at(-125.0)), 0, "as far as every range at once reaches");
+        // Past 130°: turned over, and implausible with it so that writers leave the frame out.
+        assert_eq!(watch.update(&at(135.0)), TURNED_OVER | IMPLAUSIBLE);
+        // Back under 130° but not yet under 60°: still turned over.
+        assert_eq!(watch.update(&at(95.0)), TURNED_OVER | IMPLAUSIBLE);
+        assert_eq!(watch.update(&at(-62.0)), TURNED_OVER | IMPLAUSIBLE);
+        assert_eq!(watch.update(&at(f64::NAN)), TURNED_OVER | IMPLAUSIBLE, "NaN changes nothing");
+        assert_eq!(watch.update(&at(-58.0)), 0);
+        assert_eq!(watch.bits(), 0);
     }
 
     #[test]

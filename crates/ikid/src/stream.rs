@@ -1,8 +1,9 @@
 //! Frame-by-frame inference over a fixed ring window, without heap allocation per frame.
 
-use crate::body::MARKER_FRAME_LEN;
+use crate::body::{MARKER_FRAME_LEN, N_COORDINATES};
 use crate::calibration::{Calibration, MarkerShapes};
 use crate::error::{Error, Result};
+use crate::features::FeatureSet;
 use crate::gaps::{GapFiller, MissingMarkers};
 use crate::model::{Model, SdState};
 use crate::net::Scratch;
@@ -91,6 +92,10 @@ pub struct Stream {
     early_outputs: bool,
     /// The outputs' standard deviations, for a model whose card says how ([`SdState`]).
     sd: Option<SdState>,
+    /// Whether the hand, read from each accepted frame's markers, is turned over on the
+    /// forearm (labels or calibration the wrong way round), and the bits it gave the last one.
+    turned_over: status::TurnedOverWatch,
+    posture_status: u16,
 }
 
 impl Model {
@@ -133,6 +138,8 @@ impl Stream {
             sd: crate::model::uncertainty::ANGLE_FEATURE_SETS
                 .contains(&model.card().feature_set.as_str())
                 .then(|| SdState::new(model.card().uncertainty.clone(), model.n_outputs(), model.window() as f64)),
+            turned_over: status::TurnedOverWatch::new(),
+            posture_status: 0,
             model,
         }
     }
@@ -188,6 +195,7 @@ impl Stream {
         // the first complete frame instead of waiting for the wrist to move about every axis.
         self.filler.set_calibration(calibration.as_ref());
         self.calibration = calibration;
+        self.turned_over = status::TurnedOverWatch::new(); // the hand is read anew
         self.shapes = MarkerShapes::new(self.model.card().frame_rate_hz);
         Ok(())
     }
@@ -298,7 +306,29 @@ impl Stream {
             self.head = 0;
             self.filled = 0;
         }
+        self.posture_status = self.watch_hand(frame);
         Ok(())
+    }
+
+    /// The [`status::TurnedOverWatch`]'s bits for the frame just prepared (`frame` as pushed):
+    /// the hand's posture is its per-frame angles (the features of a model that reads them,
+    /// else computed from the markers as filled and calibrated). 0 for a model without marker
+    /// frames: it has no hand to read.
+    fn watch_hand(&mut self, frame: &[f32]) -> u16 {
+        let set = self.model.feature_set();
+        let mut q = [0f32; N_COORDINATES];
+        match set {
+            FeatureSet::Angles | FeatureSet::AnglesGravity => q.copy_from_slice(&self.incoming[..N_COORDINATES]),
+            _ if set.frame_len() == MARKER_FRAME_LEN => {
+                let prepared = self.policy == MissingMarkers::Fill || self.calibration.is_some();
+                let markers = if prepared { &self.frame_buf[..] } else { frame };
+                if FeatureSet::Angles.compute(markers, &mut q, 0).is_err() {
+                    return self.turned_over.bits();
+                }
+            }
+            _ => return 0,
+        }
+        self.turned_over.update(&q.map(f64::from))
     }
 
     /// Accepts the prepared frame into the window and runs the network once it is full.
@@ -324,7 +354,10 @@ impl Stream {
             // The per-frame solution: the offset's features, as a withheld correction gives.
             let n = self.output.len();
             self.output.copy_from_slice(&self.incoming[..n]);
-            self.status = filled | status::PER_FRAME | self.model.frame_status(&self.incoming, &self.output);
+            self.status = filled
+                | status::PER_FRAME
+                | self.posture_status
+                | self.model.frame_status(&self.incoming, &self.output);
             if let Some(sd) = &mut self.sd {
                 sd.set_output(&self.output, &self.incoming, true, true);
             }
@@ -337,7 +370,7 @@ impl Stream {
         self.input[tail..].copy_from_slice(&self.ring[..split]);
         let corrected = self.model.net().run(&self.input, &mut self.scratch, &mut self.output, index)?;
         let per_frame = if corrected { 0 } else { status::PER_FRAME };
-        self.status = filled | per_frame | self.model.frame_status(&self.incoming, &self.output);
+        self.status = filled | per_frame | self.posture_status | self.model.frame_status(&self.incoming, &self.output);
         if let Some(sd) = &mut self.sd {
             sd.set_output(&self.output, &self.incoming, !corrected, self.model.adds_newest_features());
         }
@@ -526,7 +559,8 @@ impl Stream {
     /// [`status`] bits of the last prediction (valid after a `push` that returned `Some`):
     /// [`status::FILLED`], [`status::OUTSIDE_TRAINING`] (the newest frame's features beyond
     /// the model's training envelope), [`status::IMPLAUSIBLE`] (an output far beyond it),
-    /// [`status::PER_FRAME`] (a correcting model's correction withheld, or an early output).
+    /// [`status::PER_FRAME`] (a correcting model's correction withheld, or an early output),
+    /// [`status::TURNED_OVER`] (with `IMPLAUSIBLE`: the hand reads turned over on the forearm).
     pub fn status(&self) -> u16 {
         self.status
     }

@@ -264,3 +264,117 @@ fn early_outputs_give_the_per_frame_solution_while_the_window_fills() {
     let e = plain.stream().set_early_outputs(true).unwrap_err().to_string();
     assert!(e.contains("no per-frame solution"), "{e}");
 }
+
+/// Wrist angles (rad) at `rate` Hz over `seconds`: each coordinate swinging over 90 % of its
+/// range about its middle, at its own frequency, from neutral (the body model's ranges).
+fn swinging_wrist(seconds: f64, rate: f64) -> Vec<f64> {
+    let n = (seconds * rate) as usize;
+    let mut q = Vec::with_capacity(3 * n);
+    for i in 0..n {
+        let t = i as f64 / rate;
+        for (c, hz) in [0.7, 1.1, 1.3].into_iter().enumerate() {
+            let (lo, hi) = body::COORDINATES[c].range;
+            let ramp = (t / 0.5).min(1.0); // from neutral, as a trial starts at rest
+            q.push(ramp * (0.5 * (lo + hi) + 0.45 * (hi - lo) * (std::f64::consts::TAU * hz * t).sin()));
+        }
+    }
+    q
+}
+
+/// `frames` with markers `a` and `b` under each other's labels throughout.
+fn swapped(frames: &[f64], a: usize, b: usize) -> Vec<f64> {
+    let mut out = frames.to_vec();
+    for f in out.chunks_exact_mut(MARKER_FRAME_LEN) {
+        for k in 0..3 {
+            f.swap(3 * a + k, 3 * b + k);
+        }
+    }
+    out
+}
+
+/// Status bits of every output of a stream of an angles-reading model over `frames`.
+fn stream_statuses(frames: &[f64]) -> Vec<u16> {
+    // Two outputs: a random network's outputs are no wrist angles, so only the markers flag.
+    let mut s = random_model(FeatureSet::Angles, 5, &[8], 2, 3).stream();
+    let mut bits = Vec::new();
+    for f in frames.chunks_exact(MARKER_FRAME_LEN) {
+        let f32s: Vec<f32> = f.iter().map(|&v| v as f32).collect();
+        if s.push(&f32s).unwrap().is_some() {
+            bits.push(s.status());
+        }
+    }
+    bits
+}
+
+fn tracker_statuses(frames: &[f64]) -> Vec<u16> {
+    let mut tracker = ikid::Tracker::new(BodyModel::default(), ikid::TrackerSettings::default()).unwrap();
+    let mut bits = Vec::new();
+    tracker.run(frames, |_, out, _| bits.push(out.status)).unwrap();
+    bits
+}
+
+#[test]
+fn markers_under_each_others_labels_throughout_read_as_a_hand_turned_over_and_are_implausible() {
+    let body = BodyModel::default();
+    let frames = body.marker_frames(&swinging_wrist(4.0, 1000.0), 30f64.to_radians()).unwrap();
+    let turned = status::TURNED_OVER | status::IMPLAUSIBLE;
+    // The wrist as it is: nothing turned over, through the stream and the tracker.
+    for (path, bits) in [("stream", stream_statuses(&frames)), ("tracker", tracker_statuses(&frames))] {
+        assert!(bits.len() > 3500, "{path}");
+        assert_eq!(bits.iter().filter(|&&b| b & status::TURNED_OVER != 0).count(), 0, "{path}");
+    }
+    // The two metacarpal heads, or the two styloids, swapped from the first frame: the
+    // segment's shape stays (its markers nearly mirror one another), so nothing but the posture
+    // they read can tell. Every output of either path is flagged turned over, so not written.
+    // Any other two markers of a segment swapped break its shape as well: every output is
+    // flagged (the stream's turned over; the tracker's turned over or its markers rejected).
+    for (a, b) in [(3, 4), (0, 1), (3, 5), (4, 5), (0, 2), (1, 2)] {
+        let (na, nb) = (body::MARKERS[a].name, body::MARKERS[b].name);
+        let wrong = swapped(&frames, a, b);
+        let mirrored = [(3, 4), (0, 1)].contains(&(a, b));
+        for (path, bits) in [("stream", stream_statuses(&wrong)), ("tracker", tracker_statuses(&wrong))] {
+            let missed = if mirrored || path == "stream" {
+                bits.iter().filter(|&&b| b & turned != turned).count()
+            } else {
+                bits.iter().filter(|&&b| b == 0).count()
+            };
+            assert!(
+                bits.len() > 3500 && missed == 0,
+                "{path}, {na} and {nb} swapped: {missed} of {} not flagged",
+                bits.len()
+            );
+        }
+    }
+}
+
+#[test]
+fn a_wrist_at_the_end_of_every_range_at_once_is_not_turned_over() {
+    // The farthest posture the body model's ranges allow: supinated 80°, flexed 80°, adducted
+    // 30° (the hand turned 125° from neutral), reached and held, then back to neutral.
+    let far = [-80f64.to_radians(), 80f64.to_radians(), 30f64.to_radians()];
+    let q: Vec<f64> = (0..2000)
+        .flat_map(|i| {
+            let x = (i as f64 / 800.0).min(1.0) * if i < 1500 { 1.0 } else { (2000 - i) as f64 / 500.0 };
+            far.map(|v| v * x)
+        })
+        .collect();
+    let frames = BodyModel::default().marker_frames(&q, 0.0).unwrap();
+    assert!((status::hand_turn_deg(&far) - 125.2).abs() < 0.1);
+    for (path, bits) in [("stream", stream_statuses(&frames)), ("tracker", tracker_statuses(&frames))] {
+        assert_eq!(bits.iter().filter(|&&b| b & status::TURNED_OVER != 0).count(), 0, "{path}");
+    }
+}
+
+#[test]
+fn a_model_flags_per_frame_angles_or_angle_outputs_that_turn_the_hand_over() {
+    let angles = random_model(FeatureSet::Angles, 5, &[8], 3, 4);
+    let turned = status::TURNED_OVER | status::IMPLAUSIBLE;
+    let at = |deg: f32| [deg.to_radians(), 0.0, 0.0];
+    // The newest frame's per-frame angles, or the outputs (named as the wrist's angles).
+    assert_eq!(angles.frame_status(&at(125.0), &at(10.0)), 0);
+    assert_eq!(angles.frame_status(&at(135.0), &at(10.0)), turned);
+    assert_eq!(angles.frame_status(&at(10.0), &at(-135.0)), turned);
+    // Outputs that are not the wrist's angles say nothing of the hand.
+    let two = random_model(FeatureSet::JointState, 5, &[8], 2, 4);
+    assert_eq!(two.frame_status(&[3.0; 9], &[3.0, 0.0]), 0);
+}

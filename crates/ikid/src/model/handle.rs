@@ -4,6 +4,7 @@
 
 use super::card::{Bounds, Envelope, ModelCard};
 use super::file;
+use crate::body::N_COORDINATES;
 use crate::error::{Error, Result};
 use crate::features::FeatureSet;
 use crate::gaps::MissingMarkers;
@@ -26,6 +27,8 @@ struct Inner {
     mlp: Mlp,
     net: Network,
     limits: Option<Limits>,
+    /// The outputs are the wrist angles in coordinate order (the IK family).
+    outputs_are_angles: bool,
 }
 
 /// How far past its training range a feature may go, in widths of that range, before the
@@ -138,7 +141,9 @@ impl Model {
         // Finite tensors can still overflow once the scaling is folded in: refused here.
         let net = Network::new(&mlp, offset)?;
         let limits = card.envelope.as_ref().map(Limits::new);
-        Ok(Model { inner: Arc::new(Inner { card, feature_set, mlp, net, limits }) })
+        let outputs_are_angles =
+            card.outputs.iter().map(|o| o.name.as_str()).eq(crate::body::COORDINATES.iter().map(|c| c.name));
+        Ok(Model { inner: Arc::new(Inner { card, feature_set, mlp, net, limits, outputs_are_angles }) })
     }
 
     /// This model with its card's `uncertainty` replaced by `uncertainty` (`None` removes it):
@@ -179,11 +184,25 @@ impl Model {
     /// [`status`] bits for one output: [`status::OUTSIDE_TRAINING`] if a feature of the newest
     /// frame (`newest`, [`FeatureSet::feature_len`] values) lies beyond the card's envelope by
     /// more than [`ENVELOPE_MARGIN`] of its range, [`status::IMPLAUSIBLE`] if an output (`outputs`)
-    /// lies beyond it by more than [`IMPLAUSIBLE_MARGIN`]. 0 for a model without an envelope.
-    /// Allocation-free, a few dozen comparisons: cheap enough for every push.
+    /// lies beyond it by more than [`IMPLAUSIBLE_MARGIN`], and [`status::TURNED_OVER`] (with
+    /// `IMPLAUSIBLE`) if the newest frame's per-frame angles (a feature set that has them) or
+    /// the outputs (the IK family's) turn the hand past [`status::TURNED_OVER_DEG`] (a
+    /// [`Stream`](crate::Stream) also keeps the flag until the hand reads upright again,
+    /// [`status::TurnedOverWatch`]). Allocation-free, a few dozen
+    /// comparisons: cheap enough for every push.
     pub fn frame_status(&self, newest: &[f32], outputs: &[f32]) -> u16 {
-        let Some(limits) = &self.inner.limits else { return 0 };
         let mut bits = 0;
+        let turned = |q: &[f32]| {
+            let q: [f64; N_COORDINATES] = std::array::from_fn(|c| f64::from(q[c]));
+            status::hand_turn_deg(&q) > status::TURNED_OVER_DEG
+        };
+        let angles_first = matches!(self.inner.feature_set, FeatureSet::Angles | FeatureSet::AnglesGravity);
+        if (angles_first && newest.len() >= N_COORDINATES && turned(newest))
+            || (self.inner.outputs_are_angles && outputs.len() == N_COORDINATES && turned(outputs))
+        {
+            bits |= status::TURNED_OVER | status::IMPLAUSIBLE;
+        }
+        let Some(limits) = &self.inner.limits else { return bits };
         if outside(newest, &limits.input) {
             bits |= status::OUTSIDE_TRAINING;
         }

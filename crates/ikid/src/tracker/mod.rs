@@ -211,6 +211,8 @@ pub struct Tracker {
     torque_limit: f64,
     /// Whether the refiner corrected the last estimate ([`Tracker::output_sd`]).
     refined: bool,
+    /// Whether the estimate reads the hand turned over on the forearm ([`status::TURNED_OVER`]).
+    turned_over: status::TurnedOverWatch,
 }
 
 /// What one frame's steps share ([`Tracker::push`]), on the stack: the frame as checked, its
@@ -283,6 +285,7 @@ impl Tracker {
             roll: Roll::idle(),
             torque_limit: 0.0,
             refined: false,
+            turned_over: status::TurnedOverWatch::new(),
         };
         // The subject's mass scale: its hand's mass over the default subject's.
         tracker.torque_limit = status::torque_limit(tracker.body.hand.mass / BodyModel::default().hand.mass);
@@ -321,6 +324,7 @@ impl Tracker {
         self.forearm_noise = ForearmNoise::new();
         self.roll = Roll::idle();
         self.refined = false;
+        self.turned_over = status::TurnedOverWatch::new();
         if let Some(r) = self.refiner.as_mut() {
             r.reset();
         }

@@ -60,9 +60,9 @@ impl TrackerOutput {
 impl Tracker {
     /// The frame's output: the torques of `state` by Newton–Euler (gravity's direction from the
     /// forearm's pose `forearm`), and [`status::IMPLAUSIBLE`] for an angle or a torque no wrist
-    /// reaches.
+    /// reaches, or a hand that reads turned over on the forearm ([`status::TURNED_OVER`]).
     pub(super) fn output(
-        &self,
+        &mut self,
         step: &mut Step,
         forearm: &Isometry3<f64>,
         state: JointState,
@@ -72,6 +72,7 @@ impl Tracker {
         if (0..N_COORDINATES).any(|c| status::angle_implausible(c, state.q[c])) {
             step.flags |= status::IMPLAUSIBLE;
         }
+        step.flags |= self.turned_over.update(&state.q);
         let tau = reference::inverse_dynamics_at(&self.body, &forearm.rotation.to_rotation_matrix(), &state)?;
         if tau.iter().any(|&t| status::torque_implausible(t, self.torque_limit)) {
             step.flags |= status::IMPLAUSIBLE;

@@ -21,6 +21,7 @@ from ikid.cli.common import (
 )
 from ikid.cli.options import SUBJECT_LENGTH, SUBJECT_MASS, _number, unchecked_option
 from ikid.io._atomic import atomic_outputs
+from ikid.pipeline import TURNED_OVER_REASON
 
 
 def _is_shipped_refiner(refiner: ikid.Model) -> bool:
@@ -148,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
         raise type(e)(_naming(args.input, e)) from None
     bits = ikid.FRAME_STATUS
     k: int | None = None  # the first frame with an estimate
-    n_frames = kept = lost = 0
+    n_frames = kept = lost = turned_over = 0
     counts = dict.fromkeys(bits, 0)
     seen = np.zeros(6, bool)
     flagged_after_start = False
@@ -183,6 +184,7 @@ def run(args: argparse.Namespace) -> int:
             keep = np.arange(len(frames)) >= start
             implausible = keep & (status & bits["implausible"] != 0)
             keep &= ~implausible  # nothing no wrist can do is written as a number
+            turned_over += int(np.count_nonzero(implausible & (status & bits["turned_over"] != 0)))
             q_sd, tau_sd = (out["q_sd"][keep], out["tau_sd"][keep]) if with_sd else (None, None)
             write_q(block.time[keep], out["q"][keep], status[keep], q_sd)
             write_tau(block.time[keep], out["tau"][keep], status[keep], tau_sd)
@@ -198,6 +200,12 @@ def run(args: argparse.Namespace) -> int:
                 f"{args.input}: none of the {n_frames} frames has every marker present and consistent, "
                 "so the tracker never started"
             )
+        if kept == 0:  # every estimate implausible: no file that looks like a result
+            why = f"; {turned_over} because {TURNED_OVER_REASON}" if turned_over else ""
+            raise ikid.InputError(
+                f"{args.input}: no frame tracked: the {lost} estimates from frame {k} on are all "
+                f"implausible{why}"
+            )
     noise_mm = ", ".join(f"{v * 1e3:.2f}" for v in tracker.marker_noise)
     refiner_name = refiner.name if refiner else ""
     how = f"refined by {refiner_name}" if refiner else "not refined"
@@ -211,6 +219,8 @@ def run(args: argparse.Namespace) -> int:
     notes = [f"{n} {name.replace('_', ' ')}" for name, n in counts.items() if n]
     if lost:
         notes.append(f"{lost} implausible (not written)")
+    if turned_over:
+        notes.append(f"{turned_over} of them because {TURNED_OVER_REASON}")
     if tracker.restarts:
         notes.append(f"{tracker.restarts} restarts after losing the hand")
     print(
