@@ -1201,7 +1201,9 @@ def _children(pid: int) -> list[int]:
     return found
 
 
-def _until(what, timeout: float = 30.0) -> None:
+def _until(what, timeout: float = 300.0) -> None:
+    # Generous: on a loaded 2-core machine (probes in parallel, a build beside) the batch's first
+    # file took over 30 s, and the probe failed as "no worker was running".
     deadline = time.monotonic() + timeout
     while not what():
         if time.monotonic() > deadline:
@@ -1249,7 +1251,7 @@ def stopped_batches(b: Builder) -> None:
                 else:
                     proc.send_signal(signal.SIGTERM)  # `kill PID`: the parent alone
             try:
-                proc.wait(timeout=30)
+                proc.wait(timeout=120)
             except subprocess.TimeoutExpired:
                 return  # the runner reports the hang
             try:
@@ -1288,7 +1290,7 @@ def stopped_batches(b: Builder) -> None:
                 names=["died (killed by SIGKILL" if case == "worker-SIGKILL" else f"stopped by {case}"],
                 interact=interact,
                 check_any=check,
-                timeout=60.0,
+                timeout=600.0,
             )
         )
 
