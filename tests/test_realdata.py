@@ -87,10 +87,17 @@ def test_the_100hz_ik_network_corrects_all_but_5_percent_of_pyomecas_rows(result
     # Issue #28: the per-frame fallback (the window's posture beyond the network's training: the
     # ulnar deviation to 46°, docs/realdata.md) on at most 5 % of ik's rows, the window's filling
     # aside; 313 of 580 before wrist-ik-100hz trained on sessions past the anatomical ranges.
-    # Racing (the 1 kHz member on its 70 Hz frames) is not bounded: 189 of 700 rows, its windows
-    # 2-6x faster than the 1 kHz member's training and postures past it (issue #28).
     beyond, rows = results["pyomeca"]["ik_per_frame"]
     assert rows >= 500 and beyond <= 0.05 * rows, (beyond, rows, results["pyomeca"]["ik_how"])
+
+
+def test_the_1khz_ik_network_corrects_most_of_racings_rows(results):
+    # Racing (the 1 kHz member on its 70 Hz frames): 72 of 700 rows fall back, its windows faster
+    # than all but 0.1 % of the member's training windows; 194 before wrist-ik trained on fast
+    # sessions. Issue #28 asks for 5 %: not met, and not loosened to meet it (windows that fast
+    # read 2-3° off through the network against 0.5° per frame, docs/realdata.md).
+    beyond, rows = results["racing"]["ik_per_frame"]
+    assert rows >= 650 and beyond <= 0.15 * rows, (beyond, rows, results["racing"]["ik_how"])
 
 
 def test_uncalibrated_ik_is_refused_with_what_to_do_instead(results):

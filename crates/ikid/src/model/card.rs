@@ -54,10 +54,11 @@ pub struct Envelope {
     pub inputs: Bounds,
     /// Per output.
     pub outputs: Bounds,
-    /// Per feature, the largest change of its mean from the older half of a training window to
-    /// the newer half (halves of `window / 2` frames): how fast the model saw each feature
-    /// move, noise averaged out. A correcting model (`output_offset`) does not correct a window
-    /// that changes faster (see [`crate::net::NewestFeatures`]). Absent in older files.
+    /// Per feature, how much its mean changes from the older half of a training window to the
+    /// newer half (halves of `window / 2` frames), at the 99.9th percentile of the training
+    /// windows: how fast the model learned each feature to move, noise averaged out. A
+    /// correcting model (`output_offset`) does not correct a window that changes faster (see
+    /// [`crate::net::NewestFeatures`]). Absent in older files.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub window_change: Option<Vec<f64>>,
 }

@@ -40,8 +40,9 @@ pub const ENVELOPE_MARGIN: f64 = 0.1;
 /// [`NewestFeatures`]): 2 %, the margin at which simulated trials' own extremes stop
 /// triggering it.
 pub const CORRECTION_MARGIN: f64 = 0.02;
-/// How much faster than its fastest training window a correcting model's window may move before
-/// it stops correcting it (see [`NewestFeatures`]): 10 % of the largest change seen.
+/// How much faster than its card's `window_change` (the speed of all but the fastest 0.1 % of
+/// its training windows) a correcting model's window may move before it stops correcting it
+/// (see [`NewestFeatures`]): 10 %.
 pub const CHANGE_MARGIN: f64 = 0.1;
 /// How far past its training range an output may go, in widths of that range, before it is
 /// [`status::IMPLAUSIBLE`]: twice the range the model ever learned to give.
