@@ -168,6 +168,33 @@ noise_levels = [0.0, 0.01]
         assert np.abs(got - base).max() < np.abs(got).max()
 
 
+def test_a_recording_resampled_from_a_lower_rate_is_what_the_pipeline_makes_of_one():
+    """``[train] resampled_share``: the frames kept at the low rate carry the noise, the frames
+    between are the cubic Hermite through them with the slopes numpy.gradient gives (scipy's
+    spline as the oracle, not the pipeline's own functions), and the truth stays at 1 kHz."""
+    from scipy.interpolate import CubicHermiteSpline
+
+    rec = D.simulate_one({"name": "r", "protocol": "random", "seed": 77, "duration": 0.6})
+    got = D.resampled(rec, 100.0, "uniform", 0.02, seed=5)
+    kept = np.arange(0, len(rec), 10)
+    n = kept[-1] + 1
+    assert len(got) == n and np.array_equal(got.q, rec.q[:n]) and np.array_equal(got.tau, rec.tau[:n])
+    low = got.markers[kept]
+    noise = low - rec.markers[kept]
+    # The thesis' noise on the kept frames: within ±2 % of each column's range there, not zero.
+    span = np.ptp(rec.markers[kept], axis=0)
+    assert np.all(np.abs(noise) <= 0.02 * span + 1e-12) and np.all(np.abs(noise[:, 9:]).max(axis=0) > 0)
+    t_low = kept / 1000.0
+    spline = CubicHermiteSpline(t_low, low, np.gradient(low, t_low, axis=0, edge_order=1), axis=0)
+    assert np.allclose(got.markers, spline(np.arange(n) / 1000.0), rtol=0, atol=1e-12)
+    # Clean, the Hermite through 100 Hz frames of a wrist moving as the simulator does stays
+    # within a millimetre of the 1 kHz markers.
+    clean = D.resampled(rec, 100.0, "uniform", 0.0, seed=5)
+    assert np.abs(clean.markers - rec.markers[:n]).max() < 1e-3
+    with pytest.raises(ValueError, match="whole number"):
+        D.resampled(rec, 300.0, "uniform", 0.0, seed=5)
+
+
 def test_relative_inputs_fold_into_the_first_layer_of_an_ordinary_network():
     # The relative_inputs network, fed each older frame minus the newest (computed here frame by
     # frame, scaled), is the same function as the folded network on the raw window.

@@ -287,6 +287,31 @@ def simulate_session(spec: dict[str, Any], rate_hz: float = 1000.0) -> Recording
     return Recording(spec["name"], markers, q, qd, qdd, tau, meta)
 
 
+def resampled(rec: Recording, from_hz: float, kind: str, level: float, seed: int) -> Recording:
+    """``rec`` (at the simulator's 1 kHz) as a recording at ``from_hz`` reaches a 1 kHz model
+    through ``ikid.pipeline``: every ``1000 / from_hz``-th frame kept, noise added to those
+    (:func:`add_noise`), the frames between made by the pipeline's own cubic Hermite
+    (``_local_slopes``, ``_hermite``), the truth left at 1 kHz. Ends at the last kept frame."""
+    from ikid.pipeline import _hermite, _local_slopes
+
+    step = int(round(1000.0 / from_hz))
+    if step < 1 or abs(1000.0 / step - from_hz) > 1e-9 * from_hz:
+        raise ValueError(f"resampled_from_hz {from_hz} is not 1000 Hz divided by a whole number")
+    kept = np.arange(0, len(rec), step)
+    low = add_noise(Recording(rec.name, rec.markers[kept], *(a[kept] for a in rec.arrays()[1:])), kind, level, seed)
+    n = int(kept[-1]) + 1
+    t_low, t = kept / 1000.0, np.arange(n) / 1000.0
+    slopes = _local_slopes(t_low, low.markers, gap=1.5 * step / 1000.0)
+    markers, _ = _hermite(t_low, low.markers, slopes, t, np.inf)
+    markers[kept] = low.markers  # a frame on a kept one is that frame, exactly (as the pipeline)
+    return Recording(
+        rec.name,
+        markers,
+        *(a[:n] for a in rec.arrays()[1:]),
+        {**rec.meta, "resampled_from_hz": from_hz, "noise": {"kind": kind, "level": level, "seed": seed}},
+    )
+
+
 def load_recordings(folder: str | os.PathLike[str]) -> list[Recording]:
     """Every ``*.npz`` trial in ``folder`` (written by ``Trial.save`` / ``ikid dataset``)."""
     paths = sorted(Path(folder).glob("*.npz"))

@@ -75,6 +75,12 @@ TRAIN_DEFAULTS: dict[str, Any] = {
     # its window). The posture no longer fills the scaled range, the shape of the window does:
     # noise and speed get the resolution.
     "relative_inputs": False,
+    # Share of the recordings that reach the model as a recording at a lower rate does through
+    # ikid.pipeline: frames kept at one of resampled_from_hz, the noise added there, the rest
+    # made by the pipeline's cubic Hermite (D.resampled). The noise is then smooth between the
+    # kept frames, which white noise at the model's rate never teaches. 0: none (the default).
+    "resampled_share": 0.0,
+    "resampled_from_hz": [100.0, 250.0],
 }
 
 #: With ``output_quantile``: scaled targets beyond this (the quantile range maps to [-1, 1]) are
@@ -192,11 +198,18 @@ class Trained:
 
 
 def _noisy(recs: list[D.Recording], tcfg: dict[str, Any], rng: np.random.Generator) -> list[D.Recording]:
-    """Fresh noise (a level drawn per recording) and, if configured, occlusion bursts."""
+    """Fresh noise (a level drawn per recording), some recordings (``resampled_share``) as they
+    come from a lower rate, and, if configured, occlusion bursts."""
     levels = tcfg["noise_levels"]
     out = [
         D.add_noise(r, tcfg["noise_kind"], float(rng.choice(levels)), int(rng.integers(2**62))) for r in recs
     ]
+    if tcfg["resampled_share"] > 0:  # drawn only with a share: configs without one are as before
+        for i, r in enumerate(recs):
+            if rng.uniform() < tcfg["resampled_share"]:
+                rate = float(rng.choice(tcfg["resampled_from_hz"]))
+                level = float(rng.choice(levels))
+                out[i] = D.resampled(r, rate, tcfg["noise_kind"], level, int(rng.integers(2**62)))
     if tcfg["occlusion_bursts_per_s"] > 0:
         lo, hi = tcfg["occlusion_s"]
         out = [
