@@ -99,9 +99,30 @@ pub const UPRIGHT_DEG: f64 = 60.0;
 /// The angle, degrees, by which wrist angles `q` (rad) turn the hand from its neutral posture
 /// on the forearm: the rotation angle of [`wrist_rotation`](crate::body::wrist_rotation),
 /// whatever its axis (near gimbal lock the angles are not defined, this is).
+///
+/// From the scalar part of the chain's quaternion, without building the rotation (it runs on
+/// every push): for three mutually orthogonal axes `a₁, a₂, a₃` and half-angles `hᵢ`,
+/// `w = cos h₁ cos h₂ cos h₃ − ((a₁ × a₂)·a₃) sin h₁ sin h₂ sin h₃`, and the angle is
+/// `2 acos |w|`.
 pub fn hand_turn_deg(q: &[f64; 3]) -> f64 {
-    crate::body::wrist_rotation(q).angle().to_degrees()
+    (2.0 * turn_cos_half(q).clamp(0.0, 1.0).acos()).to_degrees() // clamp keeps a NaN a NaN
 }
+
+/// `|w|`, the cosine of half the hand's turn ([`hand_turn_deg`]).
+fn turn_cos_half(q: &[f64; 3]) -> f64 {
+    use crate::body::COORDINATES;
+    let [a1, a2, a3] = COORDINATES.map(|c| nalgebra::Vector3::from(c.axis));
+    let handedness = a1.cross(&a2).dot(&a3);
+    let (s1, c1) = (0.5 * q[0]).sin_cos();
+    let (s2, c2) = (0.5 * q[1]).sin_cos();
+    let (s3, c3) = (0.5 * q[2]).sin_cos();
+    (c1 * c2 * c3 - handedness * s1 * s2 * s3).abs()
+}
+
+/// cos(½ [`TURNED_OVER_DEG`]) and cos(½ [`UPRIGHT_DEG`]): the watch compares `|w|` with them
+/// instead of taking an arccosine on every push (checked in the tests).
+const TURNED_OVER_COS_HALF: f64 = 0.42261826174069944;
+const UPRIGHT_COS_HALF: f64 = 0.8660254037844387;
 
 /// Whether a stream's or a tracker's hand reads turned over ([`TURNED_OVER`]), frame after
 /// frame: on when turned past [`TURNED_OVER_DEG`], off again only under [`UPRIGHT_DEG`].
@@ -120,10 +141,10 @@ impl TurnedOverWatch {
     /// [`IMPLAUSIBLE`] while the hand reads turned over, else 0. Angles that are not finite
     /// change nothing.
     pub fn update(&mut self, q: &[f64; 3]) -> u16 {
-        let turn = hand_turn_deg(q);
-        if turn > TURNED_OVER_DEG {
+        let cos_half = turn_cos_half(q); // smaller: turned further
+        if cos_half < TURNED_OVER_COS_HALF {
             self.turned = true;
-        } else if turn < UPRIGHT_DEG {
+        } else if cos_half > UPRIGHT_COS_HALF {
             self.turned = false;
         }
         self.bits()
@@ -202,6 +223,19 @@ mod tests {
         }
         let locked = hand_turn_deg(&[1.0, std::f64::consts::FRAC_PI_2, 1.0]);
         assert!((locked - 90.0).abs() < 1e-9, "{locked}");
+        // Any angles: the rotation angle nalgebra finds in the chain's matrix.
+        let mut rng = crate::rng::SplitMix::new(7);
+        for _ in 0..1000 {
+            let q = [rng.uniform(-3.5, 3.5), rng.uniform(-3.5, 3.5), rng.uniform(-3.5, 3.5)];
+            let oracle = crate::body::wrist_rotation(&q).angle().to_degrees();
+            assert!((hand_turn_deg(&q) - oracle).abs() < 1e-6, "{q:?}: {} vs {oracle}", hand_turn_deg(&q));
+        }
+    }
+
+    #[test]
+    fn the_watchs_thresholds_are_its_angles() {
+        assert!((TURNED_OVER_COS_HALF - (0.5 * TURNED_OVER_DEG).to_radians().cos()).abs() < 1e-15);
+        assert!((UPRIGHT_COS_HALF - (0.5 * UPRIGHT_DEG).to_radians().cos()).abs() < 1e-15);
     }
 
     #[test]
