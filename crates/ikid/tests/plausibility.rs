@@ -374,7 +374,16 @@ fn a_model_flags_per_frame_angles_or_angle_outputs_that_turn_the_hand_over() {
     assert_eq!(angles.frame_status(&at(125.0), &at(10.0)), 0);
     assert_eq!(angles.frame_status(&at(135.0), &at(10.0)), turned);
     assert_eq!(angles.frame_status(&at(10.0), &at(-135.0)), turned);
-    // Outputs that are not the wrist's angles say nothing of the hand.
+    // Outputs that are not the wrist's angles say nothing of the hand: fewer of them, or
+    // torques named after the coordinates (wrist-id's and wrist-chain's, in N*m).
     let two = random_model(FeatureSet::JointState, 5, &[8], 2, 4);
     assert_eq!(two.frame_status(&[3.0; 9], &[3.0, 0.0]), 0);
+    let ik = random_model(FeatureSet::JointState, 5, &[8], 3, 4);
+    let mut card = ik.card().clone();
+    for o in &mut card.outputs {
+        o.unit = "N*m".into();
+    }
+    let torques = Model::from_parts(card, ik.mlp().clone()).unwrap();
+    assert_eq!(ik.frame_status(&[0.0; 9], &[3.0, 0.0, 0.0]), turned, "3 rad of s_p alone: 172°");
+    assert_eq!(torques.frame_status(&[0.0; 9], &[3.0, 0.0, 0.0]), 0, "3 N·m");
 }

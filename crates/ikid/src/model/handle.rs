@@ -27,7 +27,7 @@ struct Inner {
     mlp: Mlp,
     net: Network,
     limits: Option<Limits>,
-    /// The outputs are the wrist angles in coordinate order (the IK family).
+    /// The outputs are the wrist angles in coordinate order, in radians (the IK family).
     outputs_are_angles: bool,
 }
 
@@ -142,8 +142,12 @@ impl Model {
         // Finite tensors can still overflow once the scaling is folded in: refused here.
         let net = Network::new(&mlp, offset)?;
         let limits = card.envelope.as_ref().map(Limits::new);
-        let outputs_are_angles =
-            card.outputs.iter().map(|o| o.name.as_str()).eq(crate::body::COORDINATES.iter().map(|c| c.name));
+        // Named as the coordinates and in radians: torque models name theirs alike, in N*m.
+        let outputs_are_angles = card
+            .outputs
+            .iter()
+            .map(|o| (o.name.as_str(), o.unit.as_str()))
+            .eq(crate::body::COORDINATES.iter().map(|c| (c.name, "rad")));
         Ok(Model { inner: Arc::new(Inner { card, feature_set, mlp, net, limits, outputs_are_angles }) })
     }
 
