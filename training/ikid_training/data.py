@@ -298,18 +298,18 @@ def resampled(rec: Recording, from_hz: float, kind: str, level: float, seed: int
     if step < 1 or abs(1000.0 / step - from_hz) > 1e-9 * from_hz:
         raise ValueError(f"resampled_from_hz {from_hz} is not 1000 Hz divided by a whole number")
     kept = np.arange(0, len(rec), step)
-    low = add_noise(Recording(rec.name, rec.markers[kept], *(a[kept] for a in rec.arrays()[1:])), kind, level, seed)
+    at_low_rate = Recording(
+        rec.name, rec.markers[kept], rec.q[kept], rec.qd[kept], rec.qdd[kept], rec.tau[kept]
+    )
+    low = add_noise(at_low_rate, kind, level, seed)
     n = int(kept[-1]) + 1
     t_low, t = kept / 1000.0, np.arange(n) / 1000.0
     slopes = _local_slopes(t_low, low.markers, gap=1.5 * step / 1000.0)
     markers, _ = _hermite(t_low, low.markers, slopes, t, np.inf)
     markers[kept] = low.markers  # a frame on a kept one is that frame, exactly (as the pipeline)
-    return Recording(
-        rec.name,
-        markers,
-        *(a[:n] for a in rec.arrays()[1:]),
-        {**rec.meta, "resampled_from_hz": from_hz, "noise": {"kind": kind, "level": level, "seed": seed}},
-    )
+    noise = {"kind": kind, "level": level, "seed": seed}
+    meta = {**rec.meta, "resampled_from_hz": from_hz, "noise": noise}
+    return Recording(rec.name, markers, rec.q[:n], rec.qd[:n], rec.qdd[:n], rec.tau[:n], meta)
 
 
 def load_recordings(folder: str | os.PathLike[str]) -> list[Recording]:
