@@ -52,13 +52,17 @@ def _drop(n: int, stamped: bool) -> Fault:
     return fault
 
 
-def _swap(frames_from: int, length: int | None) -> Fault:
+def _swap(frames_from: int, length: int | None, a: int = 3, b: int = 4) -> Fault:
+    """Markers ``a`` and ``b`` (MC2 and MC5 by default) under each other's labels from
+    ``frames_from`` on, for ``length`` frames (None: to the end)."""
+
     def fault(frames, times):
         f = frames.copy()
         end = len(f) if length is None else frames_from + length
-        f[frames_from:end, 9:12], f[frames_from:end, 12:15] = (
-            frames[frames_from:end, 12:15],
-            frames[frames_from:end, 9:12],
+        ca, cb = slice(3 * a, 3 * a + 3), slice(3 * b, 3 * b + 3)
+        f[frames_from:end, ca], f[frames_from:end, cb] = (
+            frames[frames_from:end, cb],
+            frames[frames_from:end, ca],
         )
         return f, times, np.arange(len(f)), end if length is not None else len(f) + 10**6
 
@@ -108,6 +112,11 @@ FAULTS: dict[str, Fault] = {
     "labels-MC2-MC5-swapped-from-1500": _swap(K0, None),
     "labels-MC2-MC5-swapped-one-frame": _swap(K0, 1),
     "labels-MC2-MC5-swapped-throughout": _swap(0, None),
+    # The other pairs from the first frame: the styloids keep the forearm's shape as the
+    # metacarpal heads keep the hand's; the others break it (read as a hand turned over).
+    "labels-RSP-USP-swapped-throughout": _swap(0, None, 0, 1),
+    "labels-MC2-MCB-swapped-throughout": _swap(0, None, 3, 5),
+    "labels-USP-FAP-swapped-throughout": _swap(0, None, 1, 2),
 }
 TIME_FAULTS: dict[str, Fault] = {
     "time-backwards": _time_edit(lambda t: t.__setitem__(K0, t[K0 - 2])),
