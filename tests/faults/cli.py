@@ -1236,16 +1236,26 @@ def stopped_batches(b: Builder) -> None:
             return sum(not p.name.startswith(".") for p in out.glob("*.sto")) if out.is_dir() else 0
 
         def interact(proc: subprocess.Popen, case=case, seen=seen, written=written) -> None:
+            found: list[int] = []
+
+            def workers_or_end() -> bool:
+                # One look at /proc, kept: a second look may fall between two files, when the
+                # batch has no worker for a moment (the probe then failed as a harness error).
+                found[:] = _children(proc.pid)
+                return bool(found) or proc.poll() is not None
+
             if case == "worker-SIGKILL":
-                _until(lambda: _children(proc.pid) or proc.poll() is not None)
-                seen["workers"] = _children(proc.pid)
-                if seen["workers"]:
-                    os.kill(seen["workers"][0], signal.SIGKILL)
+                _until(workers_or_end)
+                seen["workers"] = list(found)
+                if found:
+                    try:
+                        os.kill(found[0], signal.SIGKILL)
+                    except ProcessLookupError:  # it ended just now: its file is done
+                        seen["workers"] = []
             else:
                 _until(lambda: written() > 0 or proc.poll() is not None)
-                # Between two files the batch may have no worker for a moment: wait for one.
-                _until(lambda: _children(proc.pid) or proc.poll() is not None)
-                seen["workers"] = _children(proc.pid)
+                _until(workers_or_end)
+                seen["workers"] = list(found)
                 if case == "SIGINT":
                     os.killpg(proc.pid, signal.SIGINT)  # a terminal's Ctrl-C: the whole group
                 else:
