@@ -53,8 +53,9 @@
 // was restarted): frames were lost before it.
 #define IKID_FRAME_RESYNCED 256
 
-// Frame status bit: the hand reads turned over on the forearm (two hand labels swapped, or a
-// hand cluster mapped or calibrated the other way round); always with `IKID_FRAME_IMPLAUSIBLE`.
+// Frame status bit: the hand reads turned over on the forearm (two labels of one segment
+// swapped throughout, hand or forearm: MC2/MC5, RSP/USP; or a cluster mapped or calibrated
+// the other way round); always with `IKID_FRAME_IMPLAUSIBLE`.
 #define IKID_FRAME_TURNED_OVER 512
 
 // Result of every fallible libikid call.

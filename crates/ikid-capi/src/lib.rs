@@ -48,8 +48,9 @@ pub const IKID_FRAME_SWAPPED: u32 = 128;
 /// Frame status bit: a stream's first output after it took its source's new clock (the source
 /// was restarted): frames were lost before it.
 pub const IKID_FRAME_RESYNCED: u32 = 256;
-/// Frame status bit: the hand reads turned over on the forearm (two hand labels swapped, or a
-/// hand cluster mapped or calibrated the other way round); always with `IKID_FRAME_IMPLAUSIBLE`.
+/// Frame status bit: the hand reads turned over on the forearm (two labels of one segment
+/// swapped throughout, hand or forearm: MC2/MC5, RSP/USP; or a cluster mapped or calibrated
+/// the other way round); always with `IKID_FRAME_IMPLAUSIBLE`.
 pub const IKID_FRAME_TURNED_OVER: u32 = 512;
 
 // cbindgen writes literals only: the values above are the core's (ikid::status), checked here.

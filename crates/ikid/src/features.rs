@@ -101,6 +101,14 @@ impl FeatureSet {
         })
     }
 
+    /// Whether the first [`N_COORDINATES`] features of a frame are the wrist's angles (rad,
+    /// coordinate order): the per-frame angles of [`Angles`](Self::Angles) and
+    /// [`AnglesGravity`](Self::AnglesGravity), a [`JointState`](Self::JointState)'s q. What
+    /// the σ's noise term and the turned-over check read.
+    pub fn leads_with_angles(self) -> bool {
+        matches!(self, FeatureSet::Angles | FeatureSet::AnglesGravity | FeatureSet::JointState)
+    }
+
     /// What one raw input frame holds.
     pub fn frame_kind(self) -> FrameKind {
         match self {

@@ -124,6 +124,23 @@ fn turn_cos_half(q: &[f64; 3]) -> f64 {
 const TURNED_OVER_COS_HALF: f64 = 0.42261826174069944;
 const UPRIGHT_COS_HALF: f64 = 0.8660254037844387;
 
+/// [`TURNED_OVER_DEG`] and [`UPRIGHT_DEG`] in radians, for [`turn_bound_rad`].
+const TURNED_OVER_RAD: f64 = TURNED_OVER_DEG * (std::f64::consts::PI / 180.0);
+const UPRIGHT_RAD: f64 = UPRIGHT_DEG * (std::f64::consts::PI / 180.0);
+
+/// `|q₁| + |q₂| + |q₃|`, rad: the hand's turn is at most this. A rotation's angle is a
+/// distance between rotations, so along the chain's three turns the triangle inequality holds.
+/// A wrist near rest, nearly every frame, is decided by it without trigonometry.
+fn turn_bound_rad(q: &[f64; 3]) -> f64 {
+    q[0].abs() + q[1].abs() + q[2].abs()
+}
+
+/// True if wrist angles `q` (rad) turn the hand past [`TURNED_OVER_DEG`]: the stateless check
+/// of one frame (a [`TurnedOverWatch`] also keeps the flag until the hand reads upright).
+pub fn turned_over(q: &[f64; 3]) -> bool {
+    turn_bound_rad(q) > TURNED_OVER_RAD && turn_cos_half(q) < TURNED_OVER_COS_HALF
+}
+
 /// Whether a stream's or a tracker's hand reads turned over ([`TURNED_OVER`]), frame after
 /// frame: on when turned past [`TURNED_OVER_DEG`], off again only under [`UPRIGHT_DEG`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -141,12 +158,17 @@ impl TurnedOverWatch {
     /// [`IMPLAUSIBLE`] while the hand reads turned over, else 0. Angles that are not finite
     /// change nothing.
     pub fn update(&mut self, q: &[f64; 3]) -> u16 {
-        let cos_half = turn_cos_half(q); // smaller: turned further
-        if cos_half < TURNED_OVER_COS_HALF {
-            self.turned = true;
-        } else if cos_half > UPRIGHT_COS_HALF {
-            self.turned = false;
-        }
+        let bound = turn_bound_rad(q);
+        if bound < UPRIGHT_RAD {
+            self.turned = false; // turned less than the bound: upright
+        } else if self.turned || bound > TURNED_OVER_RAD {
+            let cos_half = turn_cos_half(q); // smaller: turned further
+            if cos_half < TURNED_OVER_COS_HALF {
+                self.turned = true;
+            } else if cos_half > UPRIGHT_COS_HALF {
+                self.turned = false;
+            }
+        } // else not turned over, and within the bound it cannot have turned over
         self.bits()
     }
 
@@ -252,6 +274,39 @@ mod tests {
         assert_eq!(watch.update(&at(f64::NAN)), TURNED_OVER | IMPLAUSIBLE, "NaN changes nothing");
         assert_eq!(watch.update(&at(-58.0)), 0);
         assert_eq!(watch.bits(), 0);
+    }
+
+    #[test]
+    fn the_watch_and_the_one_frame_check_agree_with_the_rotation_angle_on_random_walks() {
+        // Oracle: the hysteresis written on nalgebra's rotation angle of the chain. The walks
+        // reach postures where |q₁|+|q₂|+|q₃| passes 130° long before the hand does (the
+        // bound's shortcut must not decide those) and cross both thresholds many times.
+        let mut rng = crate::rng::SplitMix::new(11);
+        let (mut crossings, mut bound_only) = (0, 0);
+        for walk in 0..40 {
+            let mut watch = TurnedOverWatch::new();
+            let mut oracle = false;
+            let reach = if walk % 2 == 0 { 1.6 } else { 3.4 };
+            let mut q = [0.0f64; 3];
+            for _ in 0..500 {
+                for qc in &mut q {
+                    *qc = (*qc + rng.uniform(-0.25, 0.25)).clamp(-reach, reach);
+                }
+                let turn = crate::body::wrist_rotation(&q).angle().to_degrees();
+                let was = oracle;
+                if turn > TURNED_OVER_DEG {
+                    oracle = true;
+                } else if turn < UPRIGHT_DEG {
+                    oracle = false;
+                }
+                crossings += usize::from(was != oracle);
+                bound_only += usize::from(turn_bound_rad(&q) > TURNED_OVER_RAD && turn <= TURNED_OVER_DEG);
+                let expected = if oracle { TURNED_OVER | IMPLAUSIBLE } else { 0 };
+                assert_eq!(watch.update(&q), expected, "{q:?}: turned {turn}°");
+                assert_eq!(turned_over(&q), turn > TURNED_OVER_DEG, "{q:?}: turned {turn}°");
+            }
+        }
+        assert!(crossings > 50 && bound_only > 1000, "the walks test little: {crossings} {bound_only}");
     }
 
     #[test]

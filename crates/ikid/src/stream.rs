@@ -135,8 +135,9 @@ impl Stream {
             early_outputs: false,
             // Models that read per-frame angles keep the σ's running means even without the
             // card's coefficients (a study fits them from these), remembering a window.
-            sd: crate::model::uncertainty::ANGLE_FEATURE_SETS
-                .contains(&model.card().feature_set.as_str())
+            sd: model
+                .feature_set()
+                .leads_with_angles()
                 .then(|| SdState::new(model.card().uncertainty.clone(), model.n_outputs(), model.window() as f64)),
             turned_over: status::TurnedOverWatch::new(),
             posture_status: 0,
@@ -311,22 +312,23 @@ impl Stream {
     }
 
     /// The [`status::TurnedOverWatch`]'s bits for the frame just prepared (`frame` as pushed):
-    /// the hand's posture is its per-frame angles (the features of a model that reads them,
-    /// else computed from the markers as filled and calibrated). 0 for a model without marker
-    /// frames: it has no hand to read.
+    /// the hand's posture is the angles a model's features lead with (per-frame angles, a joint
+    /// state's q), else the per-frame angles of the markers as filled and calibrated. 0 for a
+    /// model that has neither: it has no hand to read. (The model's
+    /// [`frame_status`](Model::frame_status) leaves these angles to this watch.)
     fn watch_hand(&mut self, frame: &[f32]) -> u16 {
         let set = self.model.feature_set();
         let mut q = [0f32; N_COORDINATES];
-        match set {
-            FeatureSet::Angles | FeatureSet::AnglesGravity => q.copy_from_slice(&self.incoming[..N_COORDINATES]),
-            _ if set.frame_len() == MARKER_FRAME_LEN => {
-                let prepared = self.policy == MissingMarkers::Fill || self.calibration.is_some();
-                let markers = if prepared { &self.frame_buf[..] } else { frame };
-                if FeatureSet::Angles.compute(markers, &mut q, 0).is_err() {
-                    return self.turned_over.bits();
-                }
+        if set.leads_with_angles() {
+            q.copy_from_slice(&self.incoming[..N_COORDINATES]);
+        } else if set.frame_len() == MARKER_FRAME_LEN {
+            let prepared = self.policy == MissingMarkers::Fill || self.calibration.is_some();
+            let markers = if prepared { &self.frame_buf[..] } else { frame };
+            if FeatureSet::Angles.compute(markers, &mut q, 0).is_err() {
+                return self.turned_over.bits();
             }
-            _ => return 0,
+        } else {
+            return 0;
         }
         self.turned_over.update(&q.map(f64::from))
     }
@@ -357,7 +359,7 @@ impl Stream {
             self.status = filled
                 | status::PER_FRAME
                 | self.posture_status
-                | self.model.frame_status(&self.incoming, &self.output);
+                | self.model.frame_status_of(&self.incoming, &self.output, false);
             if let Some(sd) = &mut self.sd {
                 sd.set_output(&self.output, &self.incoming, true, true);
             }
@@ -370,7 +372,8 @@ impl Stream {
         self.input[tail..].copy_from_slice(&self.ring[..split]);
         let corrected = self.model.net().run(&self.input, &mut self.scratch, &mut self.output, index)?;
         let per_frame = if corrected { 0 } else { status::PER_FRAME };
-        self.status = filled | per_frame | self.posture_status | self.model.frame_status(&self.incoming, &self.output);
+        self.status =
+            filled | per_frame | self.posture_status | self.model.frame_status_of(&self.incoming, &self.output, false);
         if let Some(sd) = &mut self.sd {
             sd.set_output(&self.output, &self.incoming, !corrected, self.model.adds_newest_features());
         }

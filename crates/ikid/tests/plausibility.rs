@@ -377,7 +377,13 @@ fn a_model_flags_per_frame_angles_or_angle_outputs_that_turn_the_hand_over() {
     // Outputs that are not the wrist's angles say nothing of the hand: fewer of them, or
     // torques named after the coordinates (wrist-id's and wrist-chain's, in N*m).
     let two = random_model(FeatureSet::JointState, 5, &[8], 2, 4);
-    assert_eq!(two.frame_status(&[3.0; 9], &[3.0, 0.0]), 0);
+    assert_eq!(two.frame_status(&[0.0; 9], &[3.0, 0.0]), 0);
+    // A joint state leads with the wrist's angles: its q is checked as per-frame angles are.
+    let mut joint_state = [0.0f32; 9];
+    joint_state[..3].copy_from_slice(&at(135.0));
+    assert_eq!(two.frame_status(&joint_state, &[0.0, 0.0]), turned);
+    joint_state[..3].copy_from_slice(&[1.3, 1.3, 1.3]); // 223° of |q|, 87° of turn
+    assert_eq!(two.frame_status(&joint_state, &[0.0, 0.0]), 0);
     let ik = random_model(FeatureSet::JointState, 5, &[8], 3, 4);
     let mut card = ik.card().clone();
     for o in &mut card.outputs {

@@ -190,19 +190,22 @@ impl Model {
     /// frame (`newest`, [`FeatureSet::feature_len`] values) lies beyond the card's envelope by
     /// more than [`ENVELOPE_MARGIN`] of its range, [`status::IMPLAUSIBLE`] if an output (`outputs`)
     /// lies beyond it by more than [`IMPLAUSIBLE_MARGIN`], and [`status::TURNED_OVER`] (with
-    /// `IMPLAUSIBLE`) if the newest frame's per-frame angles (a feature set that has them) or
-    /// the outputs (the IK family's) turn the hand past [`status::TURNED_OVER_DEG`] (a
-    /// [`Stream`](crate::Stream) also keeps the flag until the hand reads upright again,
-    /// [`status::TurnedOverWatch`]). Allocation-free, a few dozen
-    /// comparisons: cheap enough for every push.
+    /// `IMPLAUSIBLE`) if the newest frame's angles (a feature set that
+    /// [leads with them](FeatureSet::leads_with_angles)) or the outputs (the IK family's) turn
+    /// the hand past [`status::TURNED_OVER_DEG`] (a [`Stream`](crate::Stream) also keeps the
+    /// flag until the hand reads upright again, [`status::TurnedOverWatch`]). Allocation-free,
+    /// a few dozen comparisons: cheap enough for every push.
     pub fn frame_status(&self, newest: &[f32], outputs: &[f32]) -> u16 {
+        self.frame_status_of(newest, outputs, true)
+    }
+
+    /// [`frame_status`](Self::frame_status), the newest frame's angles left out unless
+    /// `check_newest_angles` (a [`Stream`](crate::Stream) watches them itself).
+    pub(crate) fn frame_status_of(&self, newest: &[f32], outputs: &[f32], check_newest_angles: bool) -> u16 {
         let mut bits = 0;
-        let turned = |q: &[f32]| {
-            let q: [f64; N_COORDINATES] = std::array::from_fn(|c| f64::from(q[c]));
-            status::hand_turn_deg(&q) > status::TURNED_OVER_DEG
-        };
-        let angles_first = matches!(self.inner.feature_set, FeatureSet::Angles | FeatureSet::AnglesGravity);
-        if (angles_first && newest.len() >= N_COORDINATES && turned(newest))
+        let turned = |q: &[f32]| status::turned_over(&std::array::from_fn(|c| f64::from(q[c])));
+        let newest_angles = check_newest_angles && self.inner.feature_set.leads_with_angles();
+        if (newest_angles && newest.len() >= N_COORDINATES && turned(newest))
             || (self.inner.outputs_are_angles && outputs.len() == N_COORDINATES && turned(outputs))
         {
             bits |= status::TURNED_OVER | status::IMPLAUSIBLE;

@@ -29,6 +29,7 @@
 
 use crate::body::N_COORDINATES;
 use crate::error::{Error, Result};
+use crate::features::{FEATURE_SETS, FeatureSet};
 use serde::{Deserialize, Serialize};
 
 /// The card's `uncertainty.method` this build computes.
@@ -37,9 +38,6 @@ pub const SD_METHOD: &str = "affine-variance-v1";
 /// Third differences seen since the window (re)started before a σ is given: fewer are too
 /// few to tell the markers' noise (the first outputs after a restart carry none).
 pub const MIN_NOISE_FRAMES: usize = 8;
-
-/// Feature sets whose first [`N_COORDINATES`] features of a frame are the wrist's angles.
-pub const ANGLE_FEATURE_SETS: [&str; 3] = ["angles", "angles_gravity", "joint_state"];
 
 /// The card's `uncertainty`: how the model's per-frame standard deviations are computed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -77,9 +75,11 @@ impl SdCard {
         if self.method != SD_METHOD {
             return bad(format!("method is {:?}, expected {SD_METHOD:?}", self.method));
         }
-        if !ANGLE_FEATURE_SETS.contains(&feature_set) {
+        if !FeatureSet::from_name(feature_set).is_ok_and(FeatureSet::leads_with_angles) {
+            let with_angles: Vec<_> =
+                FEATURE_SETS.into_iter().filter(|f| f.leads_with_angles()).map(FeatureSet::name).collect();
             return bad(format!(
-                "needs per-frame angles among the features; feature set {feature_set:?} has none (one of {ANGLE_FEATURE_SETS:?} has)"
+                "needs per-frame angles among the features; feature set {feature_set:?} has none (one of {with_angles:?} has)"
             ));
         }
         if !(self.power > 0.0 && self.power <= 2.0) {
