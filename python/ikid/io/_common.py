@@ -23,6 +23,11 @@ class FileFormatError(_native.InputError):
     what is wrong (and the line, for text formats)."""
 
 
+class MarkerMapWarning(UserWarning):
+    """A marker map that the recording's markers contradict
+    (:meth:`ikid.io.mapping.MarkerMap.stretched_segments`, a cluster's marker off its shape)."""
+
+
 def is_float(text: str) -> bool:
     """Whether a text cell reads as a number (the text readers' check before naming a bad cell)."""
     try:

@@ -45,7 +45,6 @@ from __future__ import annotations
 import json
 import os
 import sys
-import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -53,7 +52,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ikid import _native
+from ikid.io import cluster_fit, marker_checks
 from ikid.io._common import FileFormatError, ikid_marker_names, read_text
+from ikid.io._common import MarkerMapWarning as MarkerMapWarning  # its old home, re-exported
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -62,33 +63,6 @@ else:  # pragma: no cover - Python 3.10
 
 if TYPE_CHECKING:
     from ikid.io.markers import MarkerData
-
-
-#: How much the distance between two markers of one segment may change over a recording (its
-#: 10th to 90th percentile, the markers' frame-to-frame noise taken out), metres: on the real
-#: recordings' forearms and hands skin markers change by up to 12 mm and rigid plates by 1 mm,
-#: while a "segment" with a marker across the wrist or the elbow changes by 18-120 mm.
-MAX_SEGMENT_STRETCH_M = 0.015
-# The 10th-90th percentile range of a Gaussian, in standard deviations.
-_P10_P90_SIGMAS = 2.563
-
-
-#: What a one-marker hand's forearm markers span when they are the styloids and the lateral
-#: epicondyle, metres: the wrist bar (Plug-in Gait's real recordings 62-68 mm) and the forearm
-#: from the mid-styloids to the elbow (236-246 mm); wide enough for children and large adults.
-WRIST_BAR_M = (0.030, 0.120)
-FOREARM_LENGTH_M = (0.120, 0.400)
-
-
-#: Least a hand marker travels in the forearm's frame over a task trial (10th-90th percentile),
-#: metres, below which the "hand" is said to be fixed to the forearm: real wrists move their
-#: markers 32-123 mm (pyomeca, racing), a static trial 0.2-0.6 mm, markers on the forearm's
-#: own plate 0.0-0.2 mm.
-MIN_HAND_TRAVEL_M = 0.003
-
-
-class MarkerMapWarning(UserWarning):
-    """A marker map that the recording's markers contradict (:meth:`MarkerMap.stretched_segments`)."""
 
 
 @dataclass(frozen=True)
@@ -102,9 +76,9 @@ class MarkerMap:
     side: str = "right"
     #: Segment -> the labels of further markers rigid with its three (``[cluster]``).
     clusters: dict[str, tuple[str, ...]] = field(default_factory=dict)
-    #: (file, segment) -> the cluster's shape learned from that file's first block: every
-    #: block of a file is fitted with one shape.
-    _shapes: dict[tuple[str, str], np.ndarray | None] = field(default_factory=dict, compare=False, repr=False)
+    #: The clusters' shapes learned so far (:data:`cluster_fit.Shapes`): every block of a file is
+    #: fitted with one shape.
+    _shapes: cluster_fit.Shapes = field(default_factory=dict, compare=False, repr=False)
     #: A one-marker hand whose forearm markers are a cluster, not its anatomical points.
     forearm_cluster: bool = False
     #: For such a map: the radial styloid, the ulnar styloid and the mid-epicondyles ``(3, 3)``,
@@ -340,91 +314,19 @@ class MarkerMap:
         }
 
     def stretched_segments(self, frames: np.ndarray) -> list[str]:
-        """What says that a segment's markers, as this map names them, are not on one segment:
-        per pair of markers of a segment (frames ``(n, 18)``, ikid's order, metres) whose
-        distance changes over the frames by more than :data:`MAX_SEGMENT_STRETCH_M` (10th-90th
-        percentile, less the markers' own noise measured from consecutive frames), a sentence
-        naming both and their labels. Empty when none does, or with under 20 frames of the pair;
-        a wrist that does not move does not show a marker across it. A one-marker hand's
-        virtual markers are rigid by construction and not checked."""
-        frames = np.asarray(frames, np.float64).reshape(len(frames), 6, 3)
-        names = ikid_marker_names()
-        found = []
-        for segment, first in (("forearm", 0), ("hand", 3)):
-            if segment == "hand" and self.one_hand_marker:
-                continue
-            for a, b in ((0, 1), (0, 2), (1, 2)):
-                d = np.linalg.norm(frames[:, first + a] - frames[:, first + b], axis=1)
-                seen = np.isfinite(d)
-                if seen.sum() < 20:
-                    continue
-                lo, hi = np.percentile(d[seen], [10, 90])
-                step = np.diff(d)
-                step = step[np.isfinite(step)]
-                # Noise variance from consecutive frames (median of chi-square(1) is 0.4549).
-                noise = float(np.median(step**2)) / 2 / 0.4549 if len(step) else 0.0
-                spread = (hi - lo) / _P10_P90_SIGMAS
-                stretch = _P10_P90_SIGMAS * np.sqrt(max(spread**2 - noise, 0.0))
-                if stretch > MAX_SEGMENT_STRETCH_M:
-                    ma, mb = names[first + a], names[first + b]
-                    found.append(
-                        f"the {segment}'s markers {ma} ({self.labels.get(ma, ma)!r}) and {mb} "
-                        f"({self.labels.get(mb, mb)!r}) are {1e3 * lo:.0f}-{1e3 * hi:.0f} mm apart "
-                        f"(10th-90th percentile; {1e3 * stretch:.0f} mm beyond the markers' noise), and "
-                        "one segment's markers keep their distances within "
-                        f"{1e3 * MAX_SEGMENT_STRETCH_M:.0f} mm: one of them seems to be on another segment "
-                        "(across the wrist or the elbow), or they slide on the skin that far; check the "
-                        "labels the marker map gives them, and expect skin markers' angles to carry that "
-                        "sliding"
-                    )
-        return found
+        """Pairs of a segment's markers, as this map names them, whose distance changes more
+        than one segment's do: sentences naming them (:func:`marker_checks.stretched_segments`)."""
+        return marker_checks.stretched_segments(self, frames)
 
     def hand_held_to_forearm(self, frames: np.ndarray) -> str | None:
-        """What says that the hand's markers, as this map names them, do not move relative to
-        the forearm's over ``frames`` (``(n, 18)``, ikid's order): each stays within
-        :data:`MIN_HAND_TRAVEL_M` (10th-90th percentile) in the forearm markers' technical
-        frame. None when one moves more, or with under 20 frames with all six. A task trial
-        shows it when the "hand" is on the forearm (or the wrist held still throughout); a
-        static trial always does, so calibration does not ask."""
-        frames = np.asarray(frames, np.float64).reshape(len(frames), 18)
-        local = _native.points_in_technical_frame(frames[:, :9], frames[:, 9:], 3).reshape(len(frames), 3, 3)
-        seen = np.isfinite(local).all(axis=(1, 2))
-        if seen.sum() < 20:
-            return None
-        lo, hi = np.percentile(local[seen], [10, 90], axis=0)
-        travel = float(np.linalg.norm(hi - lo, axis=1).max())
-        if travel > MIN_HAND_TRAVEL_M:
-            return None
-        hand = ", ".join(f"{m} ({self.label_of(m)!r})" for m in ikid_marker_names()[3:])
-        return (
-            f"the hand's markers {hand} stay within {1e3 * travel:.1f} mm of one place on the forearm over "
-            f"{int(seen.sum())} frames (10th-90th percentile): either the wrist did not move at all, or "
-            "these markers are on the forearm (or on one rigid body with its markers); check the labels the "
-            "marker map gives the hand"
-        )
+        """A sentence when the hand's markers, as this map names them, do not move on the
+        forearm (:func:`marker_checks.hand_held_to_forearm`); None when they do."""
+        return marker_checks.hand_held_to_forearm(self, frames)
 
     def flat_segments(self, frames: np.ndarray) -> list[str]:
-        """What says that a segment's three markers lie on a line (within the core's
-        ``cluster::MIN_FRAME_WIDTH_M``) in most frames that see them (``(n, 18)``, ikid's
-        order): they give no orientation, and every angle from them would be noise."""
-        frames = np.asarray(frames, np.float64).reshape(len(frames), 18)
-        names = ikid_marker_names()
-        found = []
-        for segment, first in (("forearm", 0), ("hand", 9)):
-            three = frames[:, first : first + 9]
-            seen = np.isfinite(three).all(axis=1)
-            if not seen.any():
-                continue
-            framed = np.isfinite(_native.points_in_technical_frame(three, three[:, :3], 1)).all(axis=1)
-            flat = int(np.count_nonzero(seen & ~framed))
-            if flat > seen.sum() / 2:
-                markers = ", ".join(f"{m} ({self.label_of(m)!r})" for m in names[first // 3 : first // 3 + 3])
-                found.append(
-                    f"the {segment}'s markers {markers} lie on one line (within 5 mm) in {flat} of the "
-                    f"{int(seen.sum())} frames that see them: they give the {segment} no orientation; name "
-                    "three markers that span a triangle"
-                )
-        return found
+        """Segments whose three markers lie on a line in most frames: sentences naming them
+        (:func:`marker_checks.flat_segments`)."""
+        return marker_checks.flat_segments(self, frames)
 
     def ikid_frames(self, columns: np.ndarray) -> np.ndarray:
         """ikid's ``(n, 18)`` frames from the mapped labels' columns (``labels_in_ikid_order``):
@@ -441,7 +343,7 @@ class MarkerMap:
         they are for a forearm marked at those points. An error says what to do when no
         calibration gave them."""
         if not self.forearm_cluster:
-            self._check_wrist_bar(columns)
+            marker_checks.check_wrist_bar(self, columns)
             return columns
         if self.forearm_landmarks is None:
             raise _native.InputError(
@@ -456,30 +358,6 @@ class MarkerMap:
         columns[:, :9] = _native.points_from_technical_frame(columns[:, :9], self.forearm_landmarks)
         return columns
 
-    def _check_wrist_bar(self, columns: np.ndarray) -> None:
-        """Refuse a one-marker hand's forearm markers that cannot be the styloids and the elbow
-        (a plate named as RSP, USP, FAP without its landmarks): their median spans over the
-        frames that see them, against :data:`WRIST_BAR_M` and :data:`FOREARM_LENGTH_M`."""
-        rsp, usp, fap = columns[:, 0:3], columns[:, 3:6], columns[:, 6:9]
-        bar = np.linalg.norm(rsp - usp, axis=1)
-        length = np.linalg.norm(fap - (rsp + usp) / 2, axis=1)
-        seen = np.isfinite(bar) & np.isfinite(length)
-        if not seen.any():
-            return
-        bar_mm, length_mm = 1e3 * float(np.median(bar[seen])), 1e3 * float(np.median(length[seen]))
-        (lo_bar, hi_bar), (lo_len, hi_len) = WRIST_BAR_M, FOREARM_LENGTH_M
-        if lo_bar <= bar_mm / 1e3 <= hi_bar and lo_len <= length_mm / 1e3 <= hi_len:
-            return
-        raise _native.InputError(
-            f"{self.source}: with one hand marker ({_native.HAND_POINT[0]}), RSP and USP are the wrist's "
-            f"styloids (a wrist bar) and FAP the lateral epicondyle; here RSP {self.labels['RSP']!r} and USP "
-            f"{self.labels['USP']!r} are {bar_mm:.0f} mm apart ({1e3 * lo_bar:.0f}-{1e3 * hi_bar:.0f} mm for "
-            f"the styloids) and FAP {self.labels['FAP']!r} {length_mm:.0f} mm from their midpoint "
-            f"({1e3 * lo_len:.0f}-{1e3 * hi_len:.0f} mm for the forearm): they do not sit there. For a "
-            "cluster on the forearm, name the styloid and epicondyle landmarks in [landmarks] and calibrate "
-            "from a static trial that has them (docs/markersets.md)"
-        )
-
     def forearm_landmark_points(self, data: MarkerData) -> np.ndarray:
         """``(n, 9)``: the radial styloid, the ulnar styloid and the mid-epicondyles from the
         map's landmark labels in ``data`` (metres, NaN where one is missing)."""
@@ -492,103 +370,11 @@ class MarkerMap:
         return replace(self, forearm_landmarks=np.asarray(local, np.float64).reshape(3, 3))
 
     def fit_clusters(self, data: MarkerData, columns: np.ndarray) -> np.ndarray:
-        """``columns`` (``labels_in_ikid_order``'s, ``(n, 3m)``) with each segment that has a
-        ``[cluster]`` given its three markers where the cluster's rigid shape, fitted to every
-        marker of it seen, puts them (core ``cluster``); a frame with fewer than three of its
-        markers seen (or whose markers break the shape) keeps the three as they are. The shape
-        is learned from the first block of ``data``'s file that is fitted and kept for the
-        rest. A marker of the cluster
-        often left out of the fit (it leaves its place), or frames whose markers break the
-        shape, are said as a :class:`MarkerMapWarning`."""
-        if not self.clusters:
-            return columns
-        source = data.source or "markers"
-        columns = np.array(columns, np.float64)
-        for segment, extra in self.clusters.items():
-            first = {"forearm": 0, "hand": 9}[segment]  # the columns' order: forearm's three, hand's three
-            names = self.marker_names()[first // 3 : first // 3 + 3]
-            labels = [self.labels[m] for m in names] + list(extra)
-            absent = [lab for lab in extra if lab not in data.labels]
-            if absent:
-                raise _native.InputError(
-                    f"{source}: the {segment}'s cluster label(s) {', '.join(absent)} not found; the file has "
-                    f"{', '.join(data.labels)}"
-                )
-            cluster = np.concatenate(
-                [columns[:, first : first + 9]] + [data.marker(lab) for lab in extra], axis=1
-            )
-            key = (source, segment)
-            named = (
-                ", ".join(f"{n} {lab!r}" for n, lab in zip(names, labels, strict=False))
-                + ", "
-                + ", ".join(repr(lab) for lab in extra)
-            )
-            if key not in self._shapes:
-                self._shapes[key] = self._learn_shape(cluster, labels, segment, named, source)
-            shape = self._shapes[key]
-            if shape is None:
-                continue
-            placed, left_out, undetermined = _native.fit_cluster(cluster, shape)
-            # A frame the cluster does not determine keeps its three markers as seen (ikid's gap
-            # filling and marker checks take it from there, as for a three-marker segment).
-            fitted = np.isfinite(placed[:, :9]).all(axis=1)
-            columns[fitted, first : first + 9] = placed[fitted, :9]
-            seen = np.isfinite(cluster.reshape(len(cluster), -1, 3)).all(axis=2).sum(axis=0)
-            margin = 1e3 * _native.MAX_CLUSTER_FIT_RESIDUAL_M
-            for label, out, n_seen in zip(labels, left_out, seen, strict=True):
-                if out > max(1, 0.01 * n_seen):
-                    warnings.warn(
-                        f"{source}: marker {label!r} of the {segment}'s cluster is more than {margin:.0f} mm "
-                        f"from where the cluster's other markers put it in {out} of the {n_seen} frames it "
-                        "is seen in, and is left out of those frames' fit: it does not keep its place on the "
-                        "cluster; check its label, or that it is on the same rigid cluster",
-                        MarkerMapWarning,
-                        stacklevel=3,
-                    )
-            if undetermined:
-                warnings.warn(
-                    f"{source}: in {undetermined} frame(s) the {segment}'s cluster markers seen do not keep "
-                    f"its shape (within {margin:.0f} mm) or lie on a line: those frames read its three "
-                    "markers as they are",
-                    MarkerMapWarning,
-                    stacklevel=3,
-                )
-        return columns
-
-    @staticmethod
-    def _learn_shape(
-        cluster: np.ndarray, labels: list[str], segment: str, named: str, source: str
-    ) -> np.ndarray | None:
-        """A cluster's shape (core ``cluster::ClusterShape``, ``(k, 4)``), its markers that
-        stray from it said; None, said, when these frames cannot give one (the segment's three
-        are then read as they are)."""
-        try:
-            shape = _native.learn_cluster_shape(cluster, len(labels))
-        except _native.IkidError as e:
-            warnings.warn(
-                f"{source}: the {segment}'s cluster ({named}) is not used: {e.reason or e} (in the "
-                f"{len(cluster)} frames its shape is learned from: the file's first block); the "
-                f"{segment}'s three [markers] are read as they are",
-                MarkerMapWarning,
-                stacklevel=4,
-            )
-            return None
-        spread, core = shape[:, 3], shape[:, 4] >= 1.0
-        kept = ", ".join(repr(lab) for lab, c in zip(labels, core, strict=True) if c)
-        for label, stray, in_core in zip(labels, spread, core, strict=True):
-            if not in_core:
-                warnings.warn(
-                    f"{source}: marker {label!r} of the {segment}'s cluster does not keep its distances to "
-                    f"the markers that keep theirs together ({kept}): they change by {1e3 * stray:.1f} mm "
-                    f"(standard deviation), theirs by {1e3 * float(np.min(spread[core])):.1f}-"
-                    f"{1e3 * float(np.max(spread[core])):.1f} mm. It is on another segment, moved on "
-                    "its plate part-way, or slides on the skin: it counts for almost nothing in the "
-                    "cluster's fit (only where fewer than three of those are seen); check its label, or "
-                    "leave it out of [cluster]",
-                    MarkerMapWarning,
-                    stacklevel=4,
-                )
-        return shape
+        """``columns`` (``labels_in_ikid_order``'s) with each ``[cluster]`` segment's three
+        markers where its rigid shape, fitted to every marker of it seen, puts them
+        (:func:`cluster_fit.fit_clusters`; the shape learned from a file's first block is kept
+        in this map for the rest)."""
+        return cluster_fit.fit_clusters(self, data, columns, self._shapes)
 
     def labels_in_ikid_order(self, data: MarkerData) -> list[str]:
         """The file's labels for ikid's markers, in ikid's order; an error lists what the file
