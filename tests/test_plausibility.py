@@ -215,3 +215,44 @@ def test_labels_swapped_throughout_after_a_clean_calibration_write_nothing_and_s
         assert r.returncode == 0 and "turned over" not in r.stdout, (cmd, r.stdout, r.stderr)
         for p in tmp_path.glob("out*"):
             p.unlink()
+
+
+def test_id_fed_angles_that_turn_the_hand_over_writes_none_of_them_and_says_it_is_the_angles(tmp_path):
+    """``ikid id`` on angles whose middle turns the hand past 130 degrees (supination run to
+    150 degrees: a convention whose zero is elsewhere, or degrees read as another unit): those
+    rows are not written, and the reason names the angles, not marker labels (there are none)."""
+    import shutil
+    import subprocess
+    import sys
+
+    from scipy.spatial.transform import Rotation
+
+    cli = shutil.which("ikid", path=str(Path(sys.executable).parent)) or "ikid"
+    trial = simulate(seed=43, duration=3.0)
+    time, q = np.asarray(trial.time), np.asarray(trial.q, np.float64).copy()
+    # A smooth excursion of s_p by +150 degrees over the middle second and back.
+    phase = np.clip((time - time[0] - 0.8) / 1.4, 0.0, 1.0)
+    q[:, 0] += np.radians(150.0) * np.sin(np.pi * phase) ** 2
+    ikid.io.write_mot(tmp_path / "angles.mot", time, q)
+    r = subprocess.run(
+        [cli, "id", "angles.mot", "-o", "tau.sto"], cwd=tmp_path, capture_output=True, text=True, timeout=300
+    )
+    assert r.returncode == 0, (r.stdout, r.stderr)
+    said = r.stdout + r.stderr
+    assert "input angles turn the hand" in said and "MC2/MC5" not in said, said
+    # Oracle: the hand's turn from scipy's rotations about the body model's axes.
+    axes = [np.array(a) for a in ([0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])]
+    turn = np.degrees(
+        (
+            Rotation.from_rotvec(q[:, :1] * axes[0])
+            * Rotation.from_rotvec(q[:, 1:2] * axes[1])
+            * Rotation.from_rotvec(q[:, 2:3] * axes[2])
+        ).magnitude()
+    )
+    written, _ = ikid.io.read_sto(tmp_path / "tau.sto")
+    over = time[turn > 130.0]
+    assert len(over) > 100
+    assert not np.isin(np.round(written, 6), np.round(over, 6)).any()
+    # Before the excursion every row is written (the window filling and the ends aside).
+    calm = time[(time > time[0] + 0.2) & (time < time[0] + 0.7)]
+    assert np.isin(np.round(calm, 6), np.round(written, 6)).all()

@@ -437,7 +437,7 @@ def run_blocks(
             for time, frames in blocks:
                 time = np.asarray(time, np.float64)
                 for t, frame in zip(time, np.asarray(frames, np.float64), strict=True):
-                    tally.add(t, _push(stream, t, frame, model.window))
+                    tally.add(t, _push(stream, t, frame, model))
                 tally.flush()
                 if bar is not None:
                     bar.update(len(time))
@@ -554,9 +554,16 @@ TURNED_OVER_REASON = (
     "a segment under each other's labels throughout, e.g. MC2/MC5 or RSP/USP, or a calibration made "
     "with another labelling): not written; check the labels of the hand's and the forearm's markers"
 )
+#: The same for a model fed angles (a joint state): the angles themselves turn it over.
+TURNED_OVER_ANGLES_REASON = (
+    "the input angles turn the hand further from neutral on the forearm than a wrist turns (over "
+    "130 degrees): not written; check the angles' convention (units, the zero posture, the order "
+    + ", ".join(c[0] for c in _native.COORDINATES)
+    + ")"
+)
 
 
-def _push(stream: _native.Stream, t: float, frame: np.ndarray, window: int) -> tuple:
+def _push(stream: _native.Stream, t: float, frame: np.ndarray, model: _native.Model) -> tuple:
     """One frame through ``stream``: ``("out", values, filled, status, filling, sd)``
     (``filling``: an early output, the window not yet full; ``sd``: the outputs' standard
     deviations, NaN without) or ``("none", reason, example message or None)``."""
@@ -570,13 +577,13 @@ def _push(stream: _native.Stream, t: float, frame: np.ndarray, window: int) -> t
         # Nothing no wrist can give is written as a number: the frame is counted instead.
         reason = "implausible outputs (far outside the model's training range), not written"
         if stream.status & _native.FRAME_STATUS["turned_over"]:
-            reason = TURNED_OVER_REASON
+            reason = TURNED_OVER_REASON if model.frame_kind == "markers" else TURNED_OVER_ANGLES_REASON
         return ("none", reason, np.array2string(np.asarray(out), precision=3))
     status = stream.status
     filled = bool(status & _native.FRAME_STATUS["filled"])
     sd = stream.output_sd
     sd = np.full(len(out), np.nan) if sd is None else sd
-    return ("out", out, filled, status, stream.filled < window, sd)
+    return ("out", out, filled, status, stream.filled < model.window, sd)
 
 
 def _combine(a: tuple | None, b: tuple | None, w: float) -> tuple:
@@ -697,7 +704,7 @@ class _ModelGrid:
                     on_b = np.abs(grid_t - t_b) <= self.EPS * self.period
                     pts[on_b] = values[m + 1]
                     for k, g, p in zip(range(k_first, k_end), grid_t, pts, strict=True):
-                        got = _push(self.stream, g, p, self.model.window)
+                        got = _push(self.stream, g, p, self.model)
                         if got[0] == "none" and got[1] != "window filling":
                             self.tally.grid_refused[got[1]] += 1
                         self.outcomes[k] = got

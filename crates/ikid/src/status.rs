@@ -225,8 +225,14 @@ mod tests {
     fn angles_are_implausible_only_well_beyond_their_range() {
         // s_p's range is ±80°: 120° is within the 45° margin, 130° is not.
         assert!(!angle_implausible(0, 120f64.to_radians()));
+        assert!(!angle_implausible(0, -120f64.to_radians()));
         assert!(angle_implausible(0, 130f64.to_radians()));
         assert!(angle_implausible(0, -130f64.to_radians()));
+        // e_f's is -70°..80°: the margin is added on each side of its own range.
+        assert!(!angle_implausible(1, -110f64.to_radians()));
+        assert!(angle_implausible(1, -120f64.to_radians()));
+        assert!(!angle_implausible(1, 120f64.to_radians()));
+        assert!(angle_implausible(1, 130f64.to_radians()));
         assert!(angle_implausible(1, f64::NAN));
         assert!(!angle_implausible(2, 0.0));
     }
