@@ -217,10 +217,14 @@ def test_labels_swapped_throughout_after_a_clean_calibration_write_nothing_and_s
             p.unlink()
 
 
-def test_id_fed_angles_that_turn_the_hand_over_writes_none_of_them_and_says_it_is_the_angles(tmp_path):
-    """``ikid id`` on angles whose middle turns the hand past 130 degrees (supination run to
-    150 degrees: a convention whose zero is elsewhere, or degrees read as another unit): those
-    rows are not written, and the reason names the angles, not marker labels (there are none)."""
+@pytest.mark.parametrize("reference", [False, True], ids=["wrist-id", "reference"])
+def test_id_fed_angles_that_turn_the_hand_over_writes_none_of_them_and_says_it_is_the_angles(
+    tmp_path, reference
+):
+    """``ikid id`` (the network, or the exact Newton-Euler reference) on angles whose middle
+    turns the hand past 130 degrees (supination run 150 degrees further: a convention whose
+    zero is elsewhere): those rows are not written, and the reason names the angles, not
+    marker labels (there are none)."""
     import shutil
     import subprocess
     import sys
@@ -234,12 +238,12 @@ def test_id_fed_angles_that_turn_the_hand_over_writes_none_of_them_and_says_it_i
     phase = np.clip((time - time[0] - 0.8) / 1.4, 0.0, 1.0)
     q[:, 0] += np.radians(150.0) * np.sin(np.pi * phase) ** 2
     ikid.io.write_mot(tmp_path / "angles.mot", time, q)
-    r = subprocess.run(
-        [cli, "id", "angles.mot", "-o", "tau.sto"], cwd=tmp_path, capture_output=True, text=True, timeout=300
-    )
+    argv = [cli, "id", "angles.mot", "-o", "tau.sto"] + (["--reference"] if reference else [])
+    r = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, (r.stdout, r.stderr)
     said = r.stdout + r.stderr
-    assert "input angles turn the hand" in said and "MC2/MC5" not in said, said
+    why = "angles or torques no wrist gives" if reference else "input angles turn the hand"
+    assert why in said and "MC2/MC5" not in said, said
     # Oracle: the hand's turn from scipy's rotations about the body model's axes.
     axes = [np.array(a) for a in ([0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])]
     turn = np.degrees(
@@ -256,3 +260,31 @@ def test_id_fed_angles_that_turn_the_hand_over_writes_none_of_them_and_says_it_i
     # Before the excursion every row is written (the window filling and the ends aside).
     calm = time[(time > time[0] + 0.2) & (time < time[0] + 0.7)]
     assert np.isin(np.round(calm, 6), np.round(written, 6)).all()
+
+
+@pytest.mark.parametrize("reference", [False, True], ids=["wrist-id", "reference"])
+def test_id_refuses_angles_in_degrees_read_as_radians_and_writes_nothing(tmp_path, reference):
+    """A .mot in degrees whose header says radians (``inDegrees=no``): nearly every angle lies
+    where no wrist goes. Before, the network wrote 1 row of 9,370 and exited 0, and the
+    reference wrote torques of thousands of N·m; now both refuse the file, naming the units."""
+    import shutil
+    import subprocess
+    import sys
+
+    cli = shutil.which("ikid", path=str(Path(sys.executable).parent)) or "ikid"
+    trial = simulate(seed=44, duration=2.0)
+    ikid.io.write_mot(tmp_path / "degrees.mot", trial.time, trial.q)
+    text = (tmp_path / "degrees.mot").read_text()
+    assert "inDegrees=yes" in text
+    (tmp_path / "said_radians.mot").write_text(text.replace("inDegrees=yes", "inDegrees=no"))
+    for name, refused in (("said_radians.mot", True), ("degrees.mot", False)):
+        argv = [cli, "id", name, "-o", "tau.sto"] + (["--reference"] if reference else [])
+        r = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+        if refused:
+            assert r.returncode == 2, (r.stdout, r.stderr)
+            assert "inDegrees" in r.stderr and "nothing written" in r.stderr, r.stderr
+            assert not (tmp_path / "tau.sto").exists()
+        else:
+            assert r.returncode == 0 and "no wrist" not in r.stdout, (r.stdout, r.stderr)
+            time, tau = ikid.io.read_sto(tmp_path / "tau.sto")
+            assert len(time) >= len(trial.time) - 10 and np.isfinite(tau).all()

@@ -38,6 +38,7 @@ __all__ = [
     "body_model",
     "reference_ik",
     "reference_id",
+    "joint_status",
     "SIMULATOR",
     "simulate",
     "noise_uniform",
@@ -333,6 +334,9 @@ def reference_id(
     length_scale: float = 1.0,
     mass_scale: float = 1.0,
 ) -> npt.NDArray[np.float64]: ...
+def joint_status(
+    q: _Floats, tau: _Floats | None = None, mass_scale: float = 1.0
+) -> npt.NDArray[np.uint16]: ...
 def simulate(
     protocol: str = "random",
     seed: int = 0,

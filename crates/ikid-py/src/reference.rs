@@ -4,12 +4,14 @@ use crate::conv::with_f64_rows;
 use crate::errors::IntoPy;
 use ikid::body::{BodyModel, MARKER_FRAME_LEN, N_COORDINATES};
 use ikid::reference::{inverse_dynamics_rows, inverse_kinematics};
-use numpy::{IntoPyArray, PyArray2, PyArrayMethods};
+use ikid::status;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reference_ik, m)?)?;
     m.add_function(wrap_pyfunction!(reference_id, m)?)?;
+    m.add_function(wrap_pyfunction!(joint_status, m)?)?;
     Ok(())
 }
 
@@ -57,4 +59,36 @@ fn reference_id<'py>(
     let mut tau = vec![0.0; q.len()];
     py.detach(|| inverse_dynamics_rows(&body, shoulder_flexion, &q, &qd, &qdd, &mut tau)).py_err()?;
     tau.into_pyarray(py).reshape([n, N_COORDINATES])
+}
+
+/// Per row, the `FRAME_STATUS` bits of joint angles `q` `(n, 3)` (rad) read from elsewhere and,
+/// given, their torques `tau` `(n, 3)` (N·m) against a subject of `mass_scale`'s limit, each row
+/// alone (core `status::joint_status`): `implausible` for an angle far past its range or a
+/// torque past the limit, `turned_over` with it for angles that turn the hand over.
+#[pyfunction]
+#[pyo3(signature = (q, tau=None, mass_scale=1.0))]
+fn joint_status<'py>(
+    py: Python<'py>,
+    q: &Bound<'py, PyAny>,
+    tau: Option<&Bound<'py, PyAny>>,
+    mass_scale: f64,
+) -> PyResult<Bound<'py, PyArray1<u16>>> {
+    subject(1.0, mass_scale)?; // refuses a mass scale out of range, as reference_id does
+    let limit = status::torque_limit(mass_scale);
+    let q = with_f64_rows(q, "q", N_COORDINATES, |v, _| Ok(v.to_vec()))?;
+    let tau = tau.map(|t| with_f64_rows(t, "tau", N_COORDINATES, |v, _| Ok(v.to_vec()))).transpose()?;
+    if let Some(t) = &tau
+        && t.len() != q.len()
+    {
+        return Err(crate::errors::input(format!(
+            "tau: {} rows, q {}: one torque row per joint state",
+            t.len() / N_COORDINATES,
+            q.len() / N_COORDINATES
+        )));
+    }
+    let row = |v: &[f64], i: usize| -> [f64; N_COORDINATES] { std::array::from_fn(|c| v[N_COORDINATES * i + c]) };
+    let bits: Vec<u16> = (0..q.len() / N_COORDINATES)
+        .map(|i| status::joint_status(&row(&q, i), tau.as_ref().map(|t| row(t, i)).as_ref(), limit))
+        .collect();
+    Ok(bits.into_pyarray(py))
 }

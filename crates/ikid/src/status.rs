@@ -200,6 +200,25 @@ pub fn torque_implausible(tau: f64, limit: f64) -> bool {
     !tau.is_finite() || tau.abs() > limit
 }
 
+/// The bits of one joint state a writer did not make itself (angles read from a file, torques
+/// computed from them), taken alone: [`IMPLAUSIBLE`] for an angle `q` (rad) beyond its range by
+/// more than [`RANGE_MARGIN_RAD`] or a torque `tau` (N·m, when given) beyond `torque_limit`
+/// ([`torque_limit`]), and [`TURNED_OVER`] with it for angles that turn the hand over
+/// ([`turned_over`]). A stream and the tracker check their own frames as they go.
+pub fn joint_status(q: &[f64; 3], tau: Option<&[f64; 3]>, torque_limit: f64) -> u16 {
+    let mut bits = 0;
+    if (0..3).any(|c| angle_implausible(c, q[c])) {
+        bits |= IMPLAUSIBLE;
+    }
+    if turned_over(q) {
+        bits |= TURNED_OVER | IMPLAUSIBLE;
+    }
+    if tau.is_some_and(|t| t.iter().any(|&t| torque_implausible(t, torque_limit))) {
+        bits |= IMPLAUSIBLE;
+    }
+    bits
+}
+
 /// The names of the bits set in `status`, comma-separated ("" for 0).
 pub fn describe(status: u16) -> String {
     ALL.iter().filter(|(bit, _)| status & bit != 0).map(|(_, name)| *name).collect::<Vec<_>>().join(",")
@@ -313,6 +332,28 @@ mod tests {
             }
         }
         assert!(crossings > 50 && bound_only > 1000, "the walks test little: {crossings} {bound_only}");
+    }
+
+    #[test]
+    fn a_joint_state_read_from_elsewhere_is_checked_angle_by_angle_turn_and_torque() {
+        let limit = torque_limit(1.0);
+        assert_eq!(joint_status(&[0.3, -0.2, 0.1], Some(&[1.0, -2.0, 0.5]), limit), 0);
+        assert_eq!(joint_status(&[0.3, -0.2, 0.1], None, limit), 0);
+        // e_f's range ends at -70°: -120° is past the 45° margin, the hand turned 120° only.
+        assert_eq!(joint_status(&[0.0, (-120f64).to_radians(), 0.0], None, limit), IMPLAUSIBLE);
+        // 3 rad of supination alone: past its range, and the hand turned 172°. (100 "rad", degrees
+        // read as radians, turns it 30°: past the range is what tells then.)
+        assert_eq!(joint_status(&[3.0, 0.0, 0.0], None, limit), TURNED_OVER | IMPLAUSIBLE);
+        assert_eq!(joint_status(&[100.0, 0.0, 0.0], None, limit), IMPLAUSIBLE);
+        // Each angle within its margin (s_p 124° of 125°, ad_ab 70° of 75°), the two together
+        // turning the hand 134.8° (cos ½θ = cos 62° cos 35°): turned over.
+        let (s_p, ad_ab) = (124f64.to_radians(), 70f64.to_radians());
+        assert_eq!(joint_status(&[s_p, 0.0, ad_ab], None, limit), TURNED_OVER | IMPLAUSIBLE);
+        assert_eq!(joint_status(&[s_p, 0.0, 0.0], None, limit), 0);
+        // A torque past the limit, or not finite.
+        assert_eq!(joint_status(&[0.0, 0.0, 0.0], Some(&[0.0, limit * 1.01, 0.0]), limit), IMPLAUSIBLE);
+        assert_eq!(joint_status(&[0.0, 0.0, 0.0], Some(&[0.0, f64::NAN, 0.0]), limit), IMPLAUSIBLE);
+        assert_eq!(joint_status(&[f64::NAN, 0.0, 0.0], None, limit), IMPLAUSIBLE);
     }
 
     #[test]

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 import ikid
+from ikid import _native
 from ikid.cli.common import (
     _check_uncertainty,
     _is_folder,
@@ -156,31 +157,66 @@ def run(args: argparse.Namespace) -> int:
                 0, f"angles resampled {rate:g} -> {model.frame_rate_hz:g} Hz (cubic Hermite, --resample)"
             )
             rate = model.frame_rate_hz
-    rows = short = 0
+    rows = short = implausible_angles = 0
+    first_implausible: tuple[float, np.ndarray] | None = None
 
     def states() -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """The joint states of the rows in stretches long enough to filter and difference."""
-        nonlocal rows, short
+        """The joint states of the rows in stretches long enough to filter and difference; the
+        rows whose angles no wrist reaches are counted (most of a file: it is refused below)."""
+        nonlocal rows, short, implausible_angles, first_implausible
         for time_s, state in joint_state_blocks(angles, rate, lowpass):
             known = np.all(np.isfinite(state), axis=1)
             rows += len(time_s)
             short += int((~known).sum())
             if known.any():
+                bad = _native.joint_status(state[known, :3]) != 0
+                implausible_angles += int(bad.sum())
+                if first_implausible is None and bad.any():
+                    k = int(np.argmax(bad))
+                    first_implausible = (float(time_s[known][k]), state[known][k, :3])
                 yield time_s[known], state[known]
+
+    def refuse_if_mostly_implausible() -> None:
+        """Refuses a file most of whose angles no wrist reaches (far past a coordinate's range,
+        or turning the hand over: core ``status::joint_status``): its units or convention are not ikid's,
+        and a file of the few rows left would read as a result."""
+        used = rows - short
+        if first_implausible is None or implausible_angles * 2 <= used:
+            return
+        t, q = first_implausible
+        names = ikid.coordinate_names()
+        shown = ", ".join(f"{n} {v:.3g} rad ({math.degrees(v):.0f}°)" for n, v in zip(names, q, strict=True))
+        raise ikid.InputError(
+            f"{args.input}: the angles of {implausible_angles} of its {used} rows lie where no wrist goes "
+            f"(far past a coordinate's range, or turning the hand over; first at {t:g} s, as read: "
+            f"{shown}): the file's units (its header's inDegrees) or its convention (zero posture, signs, "
+            f"the order {', '.join(ikid.coordinate_names())}) are not ikid's; nothing written"
+        )
 
     lacking = written = 0
     output.parent.mkdir(parents=True, exist_ok=True)
     # The file becomes whole when the block ends, or is not written (an error part-way).
     with sto_writer(output, with_status=model is not None, with_sd=args.sd) as write:
         if model is None:
+            implausible = 0
             for time_s, state in states():
-                write(time_s, _reference(args, state))
-                written += len(time_s)
+                tau = _reference(args, state)
+                # What no wrist gives is not written as a number (the network's path flags it).
+                ok = _native.joint_status(state[:, :3], tau, args.mass_scale) == 0
+                implausible += int((~ok).sum())
+                write(time_s[ok], tau[ok])
+                written += int(ok.sum())
             summary = (
                 f"{rows - short} frames, exact Newton-Euler (subject ×{args.length_scale:g} length, "
                 f"×{args.mass_scale:g} mass)"
             )
-            clean = True
+            if implausible:
+                notes.append(
+                    f"{implausible} rows whose angles or torques no wrist gives (far past a coordinate's "
+                    "range, the hand turned over, or past a wrist's torque for the subject's mass), "
+                    "not written"
+                )
+            clean = implausible == 0
         else:
 
             def sink(_frame, time_s, tau, status, sd) -> None:
@@ -197,6 +233,7 @@ def run(args: argparse.Namespace) -> int:
             summary, clean = run.summary(), run.clean
         if rows < least:
             raise too_few(rows)
+        refuse_if_mostly_implausible()
         if short:
             notes.append(
                 f"{short} rows in stretches between time gaps shorter than {least} rows "
