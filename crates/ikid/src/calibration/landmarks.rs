@@ -78,6 +78,21 @@ pub(super) fn forearm_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Re
             1e3 * MIN_STYLOID_SPAN_M
         )));
     }
+    // The markers the landmarks are measured against must be on the forearm they span.
+    let cluster_centroid = cluster.iter().sum::<Vector3<f64>>() / (3 * cluster_frames) as f64;
+    let distal = (rs + us) / 2.0;
+    let along = ((cluster_centroid - distal).dot(&long) / long.norm_squared()).clamp(0.0, 1.0);
+    let off_forearm = (cluster_centroid - (distal + along * long)).norm();
+    if off_forearm > MAX_CLUSTER_FROM_FOREARM_M {
+        return Err(bad(format!(
+            "the forearm's markers are {:.0} mm from the forearm its landmarks span (the line from the \
+             mid-styloids to the mid-epicondyles; at most {:.0} mm): the landmarks are not on the arm those \
+             markers are on (another arm's, or another subject's labels); name in [landmarks] the landmarks \
+             of the arm whose markers [markers] names",
+            1e3 * off_forearm,
+            1e3 * MAX_CLUSTER_FROM_FOREARM_M
+        )));
+    }
     let styloid_axis_deg = long.angle(&across).to_degrees();
     if styloid_axis_deg.min(180.0 - styloid_axis_deg) < MIN_LANDMARK_ANGLE_DEG {
         return Err(bad(format!(

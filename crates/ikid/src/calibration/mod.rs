@@ -105,6 +105,12 @@ pub const MAX_PLACEMENT_DEG: f64 = 60.0;
 pub const MIN_FOREARM_AXIS_M: f64 = 0.05;
 /// Shortest distance between the radial and the ulnar styloid, metres.
 pub const MIN_STYLOID_SPAN_M: f64 = 0.01;
+/// Farthest the forearm's three markers (their centroid) may lie from the forearm their
+/// landmarks span (the segment from the mid-styloids to the mid-epicondyles), metres. On the
+/// real recordings a skin cluster lies 16 mm from it and a rigid plate 58 mm; the other arm's
+/// plate under this arm's landmarks (a map naming one arm's markers and the other's
+/// landmarks) 706 mm.
+pub const MAX_CLUSTER_FROM_FOREARM_M: f64 = 0.15;
 /// Largest RMS residual of a functional fit, degrees: more means the forearm turned
 /// (pronation-supination) during the movement, which a two-axis fit cannot describe.
 pub const MAX_FUNCTIONAL_RESIDUAL_DEG: f64 = 5.0;
@@ -1020,6 +1026,29 @@ mod tests {
     }
 
     #[test]
+    fn landmarks_of_another_arm_are_refused_naming_how_far_the_markers_are_from_them() {
+        // The landmarks as recorded, then moved 0.7 m across the body (the other arm's, as a
+        // map naming one arm's plate and the other's landmarks gives; racing: 706 mm).
+        let (markers, landmarks) = neutral_session(10, &SHIFT, 40.0, [0.0; 3]);
+        let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: None };
+        assert!(Calibration::from_neutral(&markers, Some(trial), Side::Right).is_ok());
+        for (across_m, refused) in [(0.1, false), (0.7, true)] {
+            let moved: Vec<f32> =
+                landmarks.iter().enumerate().map(|(i, &v)| if i % 3 == 2 { v + across_m } else { v }).collect();
+            let trial = LandmarkTrial { markers: &markers, landmarks: &moved, hand_landmarks: None };
+            let got = Calibration::from_neutral(&markers, Some(trial), Side::Right);
+            if refused {
+                let err = got.unwrap_err().to_string();
+                assert!(err.contains("landmarks are not on the arm those markers are on"), "{err}");
+                let mm: f64 = err.split("markers are ").nth(1).unwrap().split(" mm").next().unwrap().parse().unwrap();
+                assert!((650.0..=750.0).contains(&mm), "{err}");
+            } else {
+                assert!(got.is_ok(), "{across_m} m: {:?}", got.err());
+            }
+        }
+    }
+
+    #[test]
     fn a_left_arm_is_its_mirror_image_and_reads_the_same_anatomical_angles() {
         // A left arm in the same anatomical pose as a right one is the right one's mirror image.
         let (markers, landmarks) = neutral_session(10, &SHIFT, 40.0, [0.0; 3]);
@@ -1188,6 +1217,13 @@ mod tests {
         assert!(Calibration::from_neutral(&clean, None, Side::Right).is_ok());
         let err = Calibration::from_neutral(&clean[MARKER_FRAME_LEN..], None, Side::Right).unwrap_err().to_string();
         assert!(err.contains("4 of the 4 neutral frames have all six markers (at least 5 are needed"), "{err}");
+        // A marker lost in most frames of a static trial (racing's GloveR1): named, with its count.
+        let mut lost = frames(&[[0.0; 3]; 8], &SHIFT, 1.0, 0.0);
+        for i in 0..6 {
+            lost[i * MARKER_FRAME_LEN + 9] = f32::NAN; // MC2's x
+        }
+        let err = Calibration::from_neutral(&lost, None, Side::Right).unwrap_err().to_string();
+        assert!(err.contains("2 of the 8 neutral frames") && err.contains("missing: MC2 in 6)"), "{err}");
         let one = &clean[..MARKER_FRAME_LEN];
         let err = Calibration::from_neutral(one, None, Side::Right).unwrap_err().to_string();
         assert!(err.contains("1 of the 1 neutral frames"), "{err}");

@@ -86,13 +86,13 @@ pub(super) fn neutral_posture(neutral: &[f32], side: Side) -> Result<HeldPosture
             relative.push(Rotation3::from_matrix_unchecked(b_f.transpose() * b_h));
         }
     }
+    let missing: Vec<String> = unseen
+        .iter()
+        .enumerate()
+        .filter(|&(_, &c)| c > 0)
+        .map(|(m, c)| format!("{} in {c}", body::MARKERS[m].name))
+        .collect();
     if relative.is_empty() {
-        let missing: Vec<String> = unseen
-            .iter()
-            .enumerate()
-            .filter(|&(_, &c)| c > 0)
-            .map(|(m, c)| format!("{} in {c}", body::MARKERS[m].name))
-            .collect();
         return Err(bad(format!(
             "no usable neutral frame: none of the {n} has all six markers (missing: {}); choose frames of \
              the neutral posture where every marker is seen, or record a static trial with all six",
@@ -102,9 +102,11 @@ pub(super) fn neutral_posture(neutral: &[f32], side: Side) -> Result<HeldPosture
     if relative.len() < MIN_NEUTRAL_FRAMES {
         return Err(bad(format!(
             "{} of the {n} neutral frames have all six markers (at least {MIN_NEUTRAL_FRAMES} are needed: one \
-             frame's noise would be the calibration's error); choose more frames of the neutral posture where \
-             every marker is seen, or record a static trial of a second or more",
-            relative.len()
+             frame's noise would be the calibration's error; missing: {}); choose more frames of the neutral \
+             posture where every marker is seen (a task trial's, if the static trial lost a marker), or record \
+             a static trial of a second or more with all six",
+            relative.len(),
+            missing.join(", ")
         )));
     }
     let held = HeldPosture::of(&relative);
