@@ -319,3 +319,21 @@ def test_three_markers_on_a_line_are_refused_before_any_angle(tmp_path, capsys):
         assert cli([*cmd, "--map", str(tmp_path / "m.toml")]) == 2
         assert "lie on one line (within 5 mm) in 200 of the 200 frames" in capsys.readouterr().err
     assert not (tmp_path / "o.mot").exists() and not (tmp_path / "c.json").exists()
+
+
+@pytest.mark.parametrize("prefix", ["", "Subject:"])
+def test_plug_in_gait_labels_of_the_other_arm_than_side_are_refused(prefix):
+    """Plug-in Gait's left arm (LWRA, LWRB, LELB, LFIN) under ``side = "right"`` read every
+    flexion as extension on a real recording (r = -0.996 against Vicon's angles) and was
+    accepted; now the map is refused, naming the side to set. Each arm under its own side,
+    and the shipped maps, are accepted."""
+    for arm, letter, other in (("right", "R", "left"), ("left", "L", "right")):
+        labels = {"RSP": "WRA", "USP": "WRB", "FAP": "ELB", "HND": "FIN"}
+        table = {"side": other, "markers": {m: f"{prefix}{letter}{n}" for m, n in labels.items()}}
+        with pytest.raises(FileFormatError, match=f'Plug-in Gait\'s {arm} arm .*set side = "{arm}"'):
+            MarkerMap.from_dict(table)
+        assert MarkerMap.from_dict({**table, "side": arm}).side == arm
+        assert MarkerMap.plug_in_gait(arm, prefix).side == arm
+    # Labels that merely end alike on a three-marker hand are no Plug-in Gait set.
+    three = {"RSP": "LWRA", "USP": "LWRB", "FAP": "LELB", "MC2": "A", "MC5": "B", "MCB": "C"}
+    assert MarkerMap.from_dict({"side": "right", "markers": three}).side == "right"
