@@ -337,3 +337,19 @@ def test_plug_in_gait_labels_of_the_other_arm_than_side_are_refused(prefix):
     # Labels that merely end alike on a three-marker hand are no Plug-in Gait set.
     three = {"RSP": "LWRA", "USP": "LWRB", "FAP": "LELB", "MC2": "A", "MC5": "B", "MCB": "C"}
     assert MarkerMap.from_dict({"side": "right", "markers": three}).side == "right"
+
+
+def test_a_missing_map_or_calibration_file_is_named_first_without_pythons_errno(tmp_path, capsys):
+    """``--map`` or ``--calibration`` naming no file: one line, the file first and what is
+    wrong (before: ``[Errno 2] No such file or directory: 'nothere.toml'``), exit 2."""
+    from ikid.sim import simulate
+
+    trial = simulate(seed=45, duration=0.5)
+    io.write_trc(tmp_path / "t.trc", trial.time, trial.markers)
+    for option in ("--map", "--calibration"):
+        missing = tmp_path / f"nothere{option}"
+        code = cli(["ik", str(tmp_path / "t.trc"), option, str(missing), "-o", str(tmp_path / "o.mot")])
+        err = capsys.readouterr().err
+        assert code == 2, err
+        assert f"ikid: error: {missing}: no such file or directory" in err and "Errno" not in err, err
+        assert not (tmp_path / "o.mot").exists()

@@ -171,9 +171,16 @@ def _inputs(paths: list[str]) -> list[Path]:
 
 
 def _message(error: BaseException) -> str:
-    """The error's message as the command line says it: a model file without a checksum names
-    this command's opt-in (:data:`UNCHECKED_FLAG`), not the Python API's."""
+    """The error's message as the command line says it: a file the system could not open named
+    first, and a model file without a checksum names this command's opt-in
+    (:data:`UNCHECKED_FLAG`), not the Python API's."""
     message = str(error)
+    if isinstance(error, OSError) and error.filename is not None and error.strerror:
+        # Python's "[Errno 2] No such file or directory: 'x.toml'" read as ikid's messages are:
+        # the file first, then what is wrong with it.
+        reason = error.strerror[:1].lower() + error.strerror[1:]
+        also = f" (and {error.filename2})" if error.filename2 is not None else ""
+        return f"{error.filename}{also}: {reason}"
     if getattr(error, "code", None) == "missing_checksum":
         message = message.replace(
             ikid.UNCHECKED_OPT_IN, f"or give {UNCHECKED_FLAG} to load it anyway (with a warning)"
