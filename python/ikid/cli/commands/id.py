@@ -190,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
             f"{args.input}: the angles of {implausible_angles} of its {used} rows lie where no wrist goes "
             f"(far past a coordinate's range, or turning the hand over; first at {t:g} s, as read: "
             f"{shown}): the file's units (its header's inDegrees) or its convention (zero posture, signs, "
-            f"the order {', '.join(ikid.coordinate_names())}) are not ikid's; nothing written"
+            f"the order {', '.join(names)}) are not ikid's; nothing written"
         )
 
     lacking = written = 0
