@@ -78,11 +78,12 @@ pub(super) fn forearm_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Re
             1e3 * MIN_STYLOID_SPAN_M
         )));
     }
-    // The markers the landmarks are measured against must be on the forearm they span.
-    let cluster_centroid = cluster.iter().sum::<Vector3<f64>>() / (3 * cluster_frames) as f64;
+    // The markers the landmarks are measured against must be on the forearm they span: their
+    // centroid, the technical frame's origin, near the segment from the mid-styloids (`distal`)
+    // to the mid-epicondyles.
     let distal = (rs + us) / 2.0;
-    let along = ((cluster_centroid - distal).dot(&long) / long.norm_squared()).clamp(0.0, 1.0);
-    let off_forearm = (cluster_centroid - (distal + along * long)).norm();
+    let along = (-distal.dot(&long) / long.norm_squared()).clamp(0.0, 1.0);
+    let off_forearm = (distal + along * long).norm();
     if off_forearm > MAX_CLUSTER_FROM_FOREARM_M {
         return Err(bad(format!(
             "the forearm's markers are {:.0} mm from the forearm its landmarks span (the line from the \

@@ -1032,16 +1032,22 @@ mod tests {
         let (markers, landmarks) = neutral_session(10, &SHIFT, 40.0, [0.0; 3]);
         let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: None };
         assert!(Calibration::from_neutral(&markers, Some(trial), Side::Right).is_ok());
-        for (across_m, refused) in [(0.1, false), (0.7, true)] {
+        // Along the forearm too: 0.4 m along its long axis puts the markers beyond an end of the
+        // forearm the landmarks span, though on its line.
+        let at = |k: usize| Vector3::from_fn(|r, _| f64::from(landmarks[3 * k + r]));
+        let long = ((at(0) + at(1)) / 2.0 - (at(2) + at(3)) / 2.0).normalize();
+        let z = Vector3::z();
+        for (shift, across_m, refused) in [(z, 0.1, false), (z, 0.7, true), (long, 0.4, true)] {
             let moved: Vec<f32> =
-                landmarks.iter().enumerate().map(|(i, &v)| if i % 3 == 2 { v + across_m } else { v }).collect();
+                landmarks.iter().enumerate().map(|(i, &v)| v + (across_m * shift[i % 3]) as f32).collect();
             let trial = LandmarkTrial { markers: &markers, landmarks: &moved, hand_landmarks: None };
             let got = Calibration::from_neutral(&markers, Some(trial), Side::Right);
             if refused {
                 let err = got.unwrap_err().to_string();
                 assert!(err.contains("landmarks are not on the arm those markers are on"), "{err}");
                 let mm: f64 = err.split("markers are ").nth(1).unwrap().split(" mm").next().unwrap().parse().unwrap();
-                assert!((650.0..=750.0).contains(&mm), "{err}");
+                let expected = if shift == z { 650.0..=750.0 } else { 250.0..=450.0 };
+                assert!(expected.contains(&mm), "{err}");
             } else {
                 assert!(got.is_ok(), "{across_m} m: {:?}", got.err());
             }
