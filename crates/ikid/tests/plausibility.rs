@@ -393,3 +393,97 @@ fn a_model_flags_per_frame_angles_or_angle_outputs_that_turn_the_hand_over() {
     assert_eq!(ik.frame_status(&[0.0; 9], &[3.0, 0.0, 0.0]), turned, "3 rad of s_p alone: 172°");
     assert_eq!(torques.frame_status(&[0.0; 9], &[3.0, 0.0, 0.0]), 0, "3 N·m");
 }
+
+/// A hand supinated from neutral to 160° and back over `n` frames (1 kHz) while it flexes and
+/// deviates a little, its markers, and its turn from neutral (the oracle: the joint chain's
+/// rotation, `R = Rot(−y, s_p) Rot(z, e_f) Rot(x, ad_ab)`, as nalgebra measures its angle).
+fn supinating_past_over(n: usize) -> (Vec<f64>, Vec<f32>) {
+    use nalgebra::{Rotation3, Vector3};
+    let q: Vec<[f64; 3]> = (0..n)
+        .map(|i| {
+            let t = i as f64 / n as f64;
+            let tau = std::f64::consts::TAU;
+            let s_p = 80.0 * (1.0 - (tau * t).cos());
+            [s_p, 20.0 * (3.0 * tau * t).sin(), 10.0 * (5.0 * tau * t).sin()].map(f64::to_radians)
+        })
+        .collect();
+    let turn_deg = q
+        .iter()
+        .map(|c| {
+            let r = Rotation3::from_axis_angle(&-Vector3::y_axis(), c[0])
+                * Rotation3::from_axis_angle(&Vector3::z_axis(), c[1])
+                * Rotation3::from_axis_angle(&Vector3::x_axis(), c[2]);
+            r.angle().to_degrees()
+        })
+        .collect();
+    let frames = BodyModel::default().marker_frames(&q.concat(), 0.0).unwrap();
+    (turn_deg, frames.iter().map(|&v| v as f32).collect())
+}
+
+/// Pushes `frames` through `stream`, one status per frame (0 before the window is full).
+fn statuses_of(stream: &mut ikid::Stream, frames: &[f32]) -> Vec<u16> {
+    frames
+        .chunks_exact(MARKER_FRAME_LEN)
+        .map(|f| if stream.push(f).unwrap().is_some() { stream.status() } else { 0 })
+        .collect()
+}
+
+/// Frames whose true turn is clearly over (> 135°) and not flagged, and frames clearly upright
+/// (under 125° before the first crossing, under 55° after the way back) that are flagged.
+fn misread(turn_deg: &[f64], bits: &[u16], only: impl Fn(usize) -> bool) -> (usize, usize) {
+    let peak = turn_deg.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).unwrap().0;
+    let flagged = |i: usize| bits[i] & status::TURNED_OVER != 0;
+    let over = (5..turn_deg.len()).filter(|&i| only(i) && turn_deg[i] > 135.0 && !flagged(i)).count();
+    let upright = (5..turn_deg.len())
+        .filter(|&i| only(i) && flagged(i))
+        .filter(|&i| (i < peak && turn_deg[i] < 125.0) || (i > peak && turn_deg[i] < 55.0))
+        .count();
+    (over, upright)
+}
+
+#[test]
+fn a_marker_model_stream_reads_the_turn_from_the_markers_it_was_given_or_filled() {
+    // A network over the raw markers leads with no angles: the stream's watch computes them
+    // from the frame. Two outputs (no wrist angles), so only the markers can flag.
+    let model = random_model(FeatureSet::Markers, 5, &[8], 2, 3);
+    let (turn_deg, frames) = supinating_past_over(4000);
+    let mut plain = model.stream();
+    let bits = statuses_of(&mut plain, &frames);
+    assert_eq!(misread(&turn_deg, &bits, |_| true), (0, 0), "complete markers, nothing filled");
+    assert!(bits.iter().filter(|&&b| b & status::TURNED_OVER != 0).count() > 500);
+
+    // FAP missing while the hand crosses over (120° to 140° on the way up), filled: the watch
+    // reads the filled frame, so it sees the crossing inside the gap.
+    let gap: Vec<usize> = (0..2000).filter(|&i| (120.0..140.0).contains(&turn_deg[i])).collect();
+    let mut holed = frames.clone();
+    for &i in &gap {
+        holed[i * MARKER_FRAME_LEN + 6..i * MARKER_FRAME_LEN + 9].fill(f32::NAN);
+    }
+    let mut filling = model.stream();
+    filling.set_missing_markers(ikid::MissingMarkers::Fill).unwrap();
+    let bits = statuses_of(&mut filling, &holed);
+    let in_gap = |i: usize| gap.contains(&i);
+    assert!(gap.iter().filter(|&&i| turn_deg[i] > 135.0).count() > 20, "the gap spans the crossing");
+    assert_eq!(misread(&turn_deg, &bits, in_gap), (0, 0), "inside the gap");
+    assert_eq!(misread(&turn_deg, &bits, |_| true), (0, 0), "throughout");
+}
+
+#[test]
+fn a_calibrated_stream_watches_the_hand_as_calibrated_which_is_what_its_network_reads() {
+    // A calibration saying the hand's markers sit turned 150° from the body model's placement:
+    // markers of a wrist at rest read, calibrated, as a hand turned 150° over. Raw, they read
+    // upright. The watch must judge what the network is given.
+    let model = random_model(FeatureSet::Markers, 5, &[8], 2, 3);
+    let body_model = ikid::Calibration::body_model();
+    let turn = nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::x_axis(), 150f64.to_radians());
+    let cal = ikid::Calibration::from_matrices(body_model.forearm.into_inner(), (turn * body_model.hand).into_inner())
+        .unwrap();
+    let (_, frames) = supinating_past_over(400);
+    let at_rest: Vec<f32> = frames[..MARKER_FRAME_LEN].repeat(200);
+    let mut calibrated = model.stream();
+    calibrated.set_calibration(Some(cal)).unwrap();
+    let bits = statuses_of(&mut calibrated, &at_rest);
+    assert!(bits[4..].iter().all(|&b| b & status::TURNED_OVER != 0), "{:?}", &bits[..10]);
+    let bits = statuses_of(&mut model.stream(), &at_rest);
+    assert!(bits.iter().all(|&b| b & status::TURNED_OVER == 0));
+}
