@@ -391,7 +391,18 @@ def _bad_truncated_c3d(trial, tmp_path):
 def _bad_not_a_c3d(trial, tmp_path):
     path = tmp_path / "bad.c3d"
     path.write_bytes(b"\x00" * 100)
-    return path, r"not a readable C3D file"
+    return path, r"not a readable C3D file: 100 bytes, shorter than a C3D file's 512-byte header"
+
+
+def _bad_c3d_cut_in_its_parameters(trial, tmp_path):
+    # Cut before its data starts: ezc3d's own message advises its ignoreBadFormatting flag, which
+    # no ikid option sets; the error says what happened to the file instead.
+    path = io.write_c3d(tmp_path / "bad.c3d", lab_data(trial, tuple(ikid.marker_names()), extra=False))
+    path.write_bytes(path.read_bytes()[:1000])
+    return (
+        path,
+        r"not a readable C3D file: it stops \(1000 bytes\) before the parameters or data its header (?!.*ignoreBadFormatting)",
+    )
 
 
 def _bad_zeros(trial, tmp_path):
@@ -410,6 +421,7 @@ def _bad_zeros(trial, tmp_path):
         _bad_truncated_trc,
         _bad_truncated_c3d,
         _bad_not_a_c3d,
+        _bad_c3d_cut_in_its_parameters,
         _bad_zeros,
     ],
 )

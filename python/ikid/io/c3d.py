@@ -80,6 +80,23 @@ def _header_frame_count(path: Path) -> tuple[int, bool] | None:
     return last - first + 1, last == 0xFFFF
 
 
+def _unreadable_because(path: Path, parser_said: str) -> str:
+    """Why ezc3d could not read ``path``, in a lab's words: its message without the advice to
+    set ezc3d's ``ignoreBadFormatting`` (no ikid option) and without the Python exception's name,
+    and, where the file is shorter than a header or stops before what it announces, that first."""
+    said = parser_said.split(": ", 1)[1] if parser_said.split(": ", 1)[0].isidentifier() else parser_said
+    said = said.replace(" If you want to ignore this error, set ignoreBadFormatting to true", "")
+    size = path.stat().st_size
+    if size < 512:
+        return f"{size} bytes, shorter than a C3D file's 512-byte header (cut short, or not a C3D file)"
+    if "iostream error" in said or said.startswith("Could not read"):
+        return (
+            f"it stops ({size} bytes) before the parameters or data its header announces: the file was "
+            f"cut short (an interrupted copy or export) or is not a C3D file (the parser: {said})"
+        )
+    return said
+
+
 def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
     """Read the 3D points of a ``.c3d`` file; positions in metres, NaN where not seen."""
     path = Path(path)
@@ -104,7 +121,7 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
             last = (run.stderr.strip().splitlines() or ["no message"])[-1]
             if run.returncode < 0:
                 last = f"the C3D parser crashed (signal {-run.returncode})"
-            raise FileFormatError(f"{src}: not a readable C3D file: {last}")
+            raise FileFormatError(f"{src}: not a readable C3D file: {_unreadable_because(path, last)}")
         with np.load(out) as z:
             points, residuals = z["points"], z["residuals"]
             labels = tuple(str(s).strip() for s in z["labels"])
