@@ -124,6 +124,40 @@ def test_a_segment_whose_markers_do_not_keep_their_distances_is_named_before_any
     assert "ikid: warning: " in err and "the hand's markers MC2 ('ELB') and" in err, err
 
 
+def test_a_forearm_and_a_hand_marker_under_each_others_labels_are_refused_naming_the_swap(tmp_path, capsys):
+    # The body model's arm flexing and deviating, FAP's and MC2's columns exchanged (the oracle:
+    # the swap made here). As labelled, each segment has a marker of the other; the angles
+    # of such a map are wrong throughout and read like right ones.
+    t = np.linspace(0.0, 4.0, 400)
+    q = np.stack([0.2 * np.sin(t), 0.6 * np.sin(3 * t), 0.3 * np.cos(2 * t)], axis=1)
+    frames = ikid.forward_markers(q)
+    swapped = frames.copy()
+    swapped[:, 6:9], swapped[:, 9:12] = frames[:, 9:12], frames[:, 6:9]
+    six = {"RSP": "A", "USP": "B", "FAP": "C", "MC2": "D", "MC5": "E", "MCB": "F"}
+    mapping = MarkerMap.from_dict({"markers": six})
+    for noise in (None, 0.003):
+        good = frames if noise is None else ikid._native.noise_gaussian(frames, noise, 3)
+        wrong = swapped if noise is None else ikid._native.noise_gaussian(swapped, noise, 3)
+        assert mapping.swapped_across_segments(good) is None
+        found = mapping.swapped_across_segments(wrong)
+        assert found is not None and "FAP ('C') and the hand's MC2 ('D') seem to be each other's" in found
+        assert "give FAP = 'D' and MC2 = 'C'" in found, found
+    # A hand marker on the elbow (no swap puts it right) is a warning, as before, not this refusal.
+    elbow = frames.copy()
+    elbow[:, 9:12] = frames[:, 6:9] + (frames[:, 6:9] - frames[:, 0:3]) * 0.5
+    assert mapping.stretched_segments(elbow) and mapping.swapped_across_segments(elbow) is None
+    # Through the command line: refused before anything is written, by every command that reads it.
+    path = io.write_trc(tmp_path / "t.trc", t, swapped, 100.0, list("ABCDEF"))
+    (tmp_path / "m.toml").write_text("[markers]\n" + "".join(f'{k}="{v}"\n' for k, v in six.items()))
+    for cmd in (["ik", "-o", str(tmp_path / "o.mot")], ["track", "-o", str(tmp_path / "o")]):
+        assert cli([cmd[0], str(path), *cmd[1:], "--map", str(tmp_path / "m.toml")]) == 2
+        assert "FAP ('C') and the hand's MC2 ('D') seem to be each other's" in capsys.readouterr().err
+    cal = ["calibrate", "--static", str(path), "--frames", "0-20", "--method", "neutral"]
+    assert cli([*cal, "--map", str(tmp_path / "m.toml"), "-o", str(tmp_path / "c.json")]) == 2
+    assert "seem to be each other's" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.toml", "t.trc"]
+
+
 def test_a_map_says_a_hand_is_three_markers_or_one():
     forearm = {"RSP": "RWRA", "USP": "RWRB", "FAP": "RELB"}
     with pytest.raises(

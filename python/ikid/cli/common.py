@@ -212,8 +212,9 @@ def _subject_calibration(frames: np.ndarray, calibration: str | None, mapping, s
         # (a "hand" with an elbow marker): said before any angle is written.
         checked = mapping or MarkerMap.identity()
         flat = checked.flat_segments(frames)
-        if flat:
-            raise ikid.InputError("; ".join(flat))
+        swapped = checked.swapped_across_segments(frames)
+        if flat or swapped:
+            raise ikid.InputError("; ".join(flat + ([swapped] if swapped else [])))
         held = checked.hand_held_to_forearm(frames)
         for problem in checked.stretched_segments(frames) + ([held] if held else []):
             warnings.warn(f"{source}: {problem}", MarkerMapWarning, stacklevel=2)

@@ -330,6 +330,11 @@ class MarkerMap:
         than one segment's do: sentences naming them (:func:`marker_checks.stretched_segments`)."""
         return marker_checks.stretched_segments(self, frames)
 
+    def swapped_across_segments(self, frames: np.ndarray) -> str | None:
+        """A sentence when a forearm and a hand marker, as this map names them, are each
+        other's (:func:`marker_checks.swapped_across_segments`); None otherwise."""
+        return marker_checks.swapped_across_segments(self, frames)
+
     def hand_held_to_forearm(self, frames: np.ndarray) -> str | None:
         """A sentence when the hand's markers, as this map names them, do not move on the
         forearm (:func:`marker_checks.hand_held_to_forearm`); None when they do."""

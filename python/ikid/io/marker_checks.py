@@ -25,6 +25,8 @@ if TYPE_CHECKING:
 MAX_SEGMENT_STRETCH_M = 0.015
 # The 10th-90th percentile range of a Gaussian, in standard deviations.
 _P10_P90_SIGMAS = 2.563
+# A segment's marker pairs (indices among its three).
+_PAIRS = ((0, 1), (0, 2), (1, 2))
 
 
 #: What a one-marker hand's forearm markers span when they are the styloids and the lateral
@@ -55,19 +57,11 @@ def stretched_segments(mapping: MarkerMap, frames: np.ndarray) -> list[str]:
     for segment, first in (("forearm", 0), ("hand", 3)):
         if segment == "hand" and mapping.one_hand_marker:
             continue
-        for a, b in ((0, 1), (0, 2), (1, 2)):
+        for a, b in _PAIRS:
             d = np.linalg.norm(frames[:, first + a] - frames[:, first + b], axis=1)
-            seen = np.isfinite(d)
-            if seen.sum() < 20:
-                continue
-            lo, hi = np.percentile(d[seen], [10, 90])
-            step = np.diff(d)
-            step = step[np.isfinite(step)]
-            # Noise variance from consecutive frames (median of chi-square(1) is 0.4549).
-            noise = float(np.median(step**2)) / 2 / 0.4549 if len(step) else 0.0
-            spread = (hi - lo) / _P10_P90_SIGMAS
-            stretch = _P10_P90_SIGMAS * np.sqrt(max(spread**2 - noise, 0.0))
-            if stretch > MAX_SEGMENT_STRETCH_M:
+            stretch = _stretch_m(d)
+            if stretch is not None and stretch > MAX_SEGMENT_STRETCH_M:
+                lo, hi = np.percentile(d[np.isfinite(d)], [10, 90])
                 ma, mb = names[first + a], names[first + b]
                 found.append(
                     f"the {segment}'s markers {ma} ({mapping.labels.get(ma, ma)!r}) and {mb} "
@@ -80,6 +74,72 @@ def stretched_segments(mapping: MarkerMap, frames: np.ndarray) -> list[str]:
                     "sliding"
                 )
     return found
+
+
+def _stretch_m(d: np.ndarray) -> float | None:
+    """How much a distance between two markers changes over the frames, metres: its 10th-90th
+    percentile range less the markers' frame-to-frame noise. None with under 20 frames of it."""
+    seen = np.isfinite(d)
+    if seen.sum() < 20:
+        return None
+    lo, hi = np.percentile(d[seen], [10, 90])
+    step = np.diff(d)
+    step = step[np.isfinite(step)]
+    # Noise variance from consecutive frames (median of chi-square(1) is 0.4549).
+    noise = float(np.median(step**2)) / 2 / 0.4549 if len(step) else 0.0
+    spread = (hi - lo) / _P10_P90_SIGMAS
+    return float(_P10_P90_SIGMAS * np.sqrt(max(spread**2 - noise, 0.0)))
+
+
+def _segment_stretches_m(frames: np.ndarray) -> tuple[float, float]:
+    """The largest :func:`_stretch_m` of the forearm's and of the hand's marker pairs, frames
+    ``(n, 6, 3)``."""
+    found = []
+    for first in (0, 3):
+        pairs = (
+            _stretch_m(np.linalg.norm(frames[:, first + a] - frames[:, first + b], axis=1)) for a, b in _PAIRS
+        )
+        found.append(max((s for s in pairs if s is not None), default=0.0))
+    return found[0], found[1]
+
+
+def swapped_across_segments(mapping: MarkerMap, frames: np.ndarray) -> str | None:
+    """A sentence when a forearm marker and a hand marker, as this map names them, are each
+    other's: as labelled, both segments stretch (one beyond :data:`MAX_SEGMENT_STRETCH_M`,
+    each beyond half of it and twice what it does with the two labels exchanged), and with
+    them exchanged every segment keeps its distances within it. Every output of such a map
+    would be a wrong angle that reads like a right one (on pyomeca's recording, 30° RMS off),
+    so the caller refuses. A marker of another segment with no swap to undo (an elbow marker
+    on the "hand", whose forearm keeps its shape) is :func:`stretched_segments`' warning.
+    None otherwise, and for maps whose markers are not six labels of their own (a one-marker
+    hand, ``[cluster]``)."""
+    if mapping.one_hand_marker or mapping.clusters:
+        return None
+    frames = np.asarray(frames, np.float64).reshape(len(frames), 6, 3)
+    as_labelled = _segment_stretches_m(frames)
+    if max(as_labelled) <= MAX_SEGMENT_STRETCH_M or min(as_labelled) <= MAX_SEGMENT_STRETCH_M / 2:
+        return None
+    for f in range(3):
+        for h in range(3, 6):
+            exchanged = frames.copy()
+            exchanged[:, [f, h]] = frames[:, [h, f]]
+            stretches = _segment_stretches_m(exchanged)
+            if max(stretches) > MAX_SEGMENT_STRETCH_M or any(
+                lab <= 2 * ex for lab, ex in zip(as_labelled, stretches, strict=True)
+            ):
+                continue
+            names = ikid_marker_names()
+            fa, ha = names[f], names[h]
+            lf, lh = mapping.labels.get(fa, fa), mapping.labels.get(ha, ha)
+            return (
+                f"the forearm's marker {fa} ({lf!r}) and the hand's {ha} ({lh!r}) seem to be each "
+                "other's: as labelled, the forearm's and the hand's markers change their distances by up "
+                f"to {1e3 * as_labelled[0]:.0f} and {1e3 * as_labelled[1]:.0f} mm over the recording, where "
+                f"one segment's keep them within {1e3 * MAX_SEGMENT_STRETCH_M:.0f} mm; with the two "
+                f"exchanged, by {1e3 * stretches[0]:.0f} and {1e3 * stretches[1]:.0f} mm. Every angle from "
+                f"this map would be wrong; in the marker map, give {fa} = {lh!r} and {ha} = {lf!r}"
+            )
+    return None
 
 
 def hand_held_to_forearm(mapping: MarkerMap, frames: np.ndarray) -> str | None:

@@ -151,8 +151,9 @@ def run(args: argparse.Namespace) -> int:
     except ikid.IkidError as e:
         raise type(e)(_naming(args.static, e)) from None
     flat = mapping.flat_segments(neutral)
-    if flat:
-        raise ikid.InputError(f"{args.static}: " + "; ".join(flat))
+    swapped = mapping.swapped_across_segments(neutral)
+    if flat or swapped:
+        raise ikid.InputError(f"{args.static}: " + "; ".join(flat + ([swapped] if swapped else [])))
     # Over the whole file (a static trial shows little; a task trial shows a marker across a joint).
     for problem in mapping.stretched_segments(neutral):
         warnings.warn(f"{args.static}: {problem}", MarkerMapWarning, stacklevel=1)
