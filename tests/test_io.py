@@ -401,7 +401,8 @@ def _bad_c3d_cut_in_its_parameters(trial, tmp_path):
     path.write_bytes(path.read_bytes()[:1000])
     return (
         path,
-        r"not a readable C3D file: it stops \(1000 bytes\) before the parameters or data its header (?!.*ignoreBadFormatting)",
+        r"not a readable C3D file: it stops \(1000 bytes\) before the parameters or data its header "
+        r"(?!.*ignoreBadFormatting)",
     )
 
 
