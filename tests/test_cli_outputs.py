@@ -143,3 +143,16 @@ def test_the_same_file_under_another_name_is_allowed_as_output_when_it_is_not_an
     assert r.returncode == 0, r.stderr
     assert (d / "t.mot").read_bytes() == (files / "t.mot").read_bytes()
     assert ikid.io.read_sto(d / "out" / "t.sto")[1].shape[1] == 3
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_dash_as_the_output_is_refused_not_written_as_a_file_named_dash(files, tmp_path, case):
+    # "-o -" reads elsewhere as standard output; every command here writes whole files instead.
+    argv = [a if a not in ("OUT", "o") else "-" for a in CASES[case][0]]
+    for name in ("t.trc", "t.mot", "map.toml", "cal.json", "lab"):
+        (shutil.copytree if name == "lab" else shutil.copyfile)(files / name, tmp_path / name)
+    before = digests(tmp_path)
+    done = run(argv, tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith("ikid: error: -o -: ikid writes files") and "name a file" in done.stderr
+    assert digests(tmp_path) == before and done.stdout == ""

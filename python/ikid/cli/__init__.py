@@ -90,6 +90,12 @@ def main(argv: list[str] | None = None) -> int:
         try:
             args = parser.parse_args(argv)
             args.argv = list(argv)
+            if getattr(args, "output", None) == "-":
+                # Read elsewhere as standard output: ikid writes whole files atomically instead.
+                raise ikid.ArgumentError(
+                    "-o -: ikid writes files (written whole or not at all, never part of one), not "
+                    "standard output; name a file or a folder"
+                )
             return args.func(args)
         except (ikid.IkidError, OSError) as e:
             print(f"ikid: error: {_message(e)}", file=sys.stderr)
