@@ -196,7 +196,9 @@ def run(args: argparse.Namespace) -> int:
     lacking = written = 0
     output.parent.mkdir(parents=True, exist_ok=True)
     # The file becomes whole when the block ends, or is not written (an error part-way).
-    with sto_writer(output, with_status=model is not None, with_sd=args.sd) as write:
+    # Every .sto ikid writes has its ikid_status column, so one reader takes either path's
+    # (the reference's rows are all 0: what no wrist gives is left out, not flagged).
+    with sto_writer(output, with_status=True, with_sd=args.sd) as write:
         if model is None:
             implausible = 0
             for time_s, state in states():
@@ -204,7 +206,7 @@ def run(args: argparse.Namespace) -> int:
                 # What no wrist gives is not written as a number (the network's path flags it).
                 ok = _native.joint_status(state[:, :3], tau, args.mass_scale) == 0
                 implausible += int((~ok).sum())
-                write(time_s[ok], tau[ok])
+                write(time_s[ok], tau[ok], np.zeros(int(ok.sum()), np.uint16))
                 written += int(ok.sum())
             summary = (
                 f"{rows - short} frames, exact Newton-Euler (subject ×{args.length_scale:g} length, "
