@@ -186,7 +186,8 @@ def test_id_from_a_mot_file_equals_the_api(trial, tmp_path, capsys):
     t, tau = read_sto(tmp_path / "ref.sto")
     # Its ikid_status column, as the network's .sto has: every row written is plausible (0).
     stored = ikid.io.read_storage(tmp_path / "ref.sto")
-    assert stored.columns[-1] == "ikid_status" and not stored.values[:, -1].any() and len(stored.time) == len(t)
+    assert stored.columns[-1] == "ikid_status" and len(stored.time) == len(t)
+    assert not stored.values[:, -1].any()
     t_file, q = read_mot(tmp_path / "t.mot")  # the angles as the file holds them
     qd = np.gradient(q, t_file, axis=0)
     want = ikid.reference_id(q, qd, np.gradient(qd, t_file, axis=0))
