@@ -260,6 +260,26 @@ def test_bad_landmarks_and_neutral_frames_say_what_to_record():
         calibrate_neutral(neutral, landmarks[:, :9])
 
 
+def test_a_static_trial_short_of_neutral_frames_is_named_with_its_markers_labels(tmp_path, capsys):
+    # The core counts ikid's markers; a lab knows them by its file's labels (racing's static
+    # trial: "MC2 in 697" was GloveR1): the command's error names the file and gives both.
+    frames = ikid.forward_markers(np.zeros((20, 3)))
+    frames[:17, 12:15] = np.nan  # MC5 in 17 frames
+    frames[18, 0:3] = np.nan  # RSP in one
+    labels = ["Fa1", "Fa2", "Fa3", "Gl1", "Gl2", "Gl3"]
+    path = io.write_trc(tmp_path / "static.trc", np.arange(20) / 100.0, frames, 100.0, labels)
+    (tmp_path / "m.toml").write_text(
+        "[markers]\n"
+        + "".join(f'{m} = "{lab}"\n' for m, lab in zip(ikid.marker_names(), labels, strict=True))
+    )
+    argv = ["calibrate", "--static", str(path), "--method", "neutral", "--map", str(tmp_path / "m.toml")]
+    assert cli([*argv, "-o", str(tmp_path / "c.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"ikid: error: {path}: calibration: 2 of the 20 neutral frames"), err
+    assert "missing: RSP ('Fa1') in 1, MC5 ('Gl2') in 17)" in err, err
+    assert not (tmp_path / "c.json").exists()
+
+
 def test_calibrate_command_from_landmarks_and_neutral_frames_of_a_task_trial(motion, tmp_path, capsys):
     from ikid.calibration import calibration_info, check_calibration_map
 

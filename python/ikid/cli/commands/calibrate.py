@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import re
 import warnings
+from collections.abc import Iterator
 
 import numpy as np
 
 import ikid
-from ikid.cli.common import _naming, _refuse_over_inputs
+from ikid.cli.common import _message, _naming, _refuse_over_inputs
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -225,9 +228,10 @@ def run(args: argparse.Namespace) -> int:
             )
             columns = mapping.anatomical_forearm(mapping.fit_clusters(source, columns))
             hand_points = ikid._native.one_marker_hand_landmarks(columns)[where]
-        cal = calibrate_neutral(
-            neutral, points, landmark_frames=beside, side=side, hand_landmarks=hand_points
-        )
+        with _about_the_static_trial(args.static, mapping):
+            cal = calibrate_neutral(
+                neutral, points, landmark_frames=beside, side=side, hand_landmarks=hand_points
+            )
         provenance["landmarks"] = args.landmarks or args.static
     elif method == "mirror":
         source = read_markers(args.landmarks) if args.landmarks else static
@@ -265,7 +269,8 @@ def run(args: argparse.Namespace) -> int:
         provenance["motion"] = args.motion
         provenance["motion_frames"] = args.motion_frames
     else:
-        cal = calibrate_neutral(neutral, side=side)
+        with _about_the_static_trial(args.static, mapping):
+            cal = calibrate_neutral(neutral, side=side)
     ikid.save_calibration(
         cal, args.output, marker_map=mapping, forearm_landmarks=forearm_landmarks, **provenance
     )
@@ -330,6 +335,21 @@ def run(args: argparse.Namespace) -> int:
         )
     print(f"{cal!r}; {'; '.join(details)} -> {args.output}")
     return 0
+
+
+@contextlib.contextmanager
+def _about_the_static_trial(static: str, mapping) -> Iterator[None]:
+    """A calibration's error from the static trial's frames, in the lab's terms: named after
+    that file, each marker it counts ("missing: MC2 in 697") with the label the map gives it."""
+    try:
+        yield
+    except ikid.IkidError as e:
+        labelled = re.sub(
+            rf"\b({'|'.join(ikid.marker_names())}) in (\d+)",
+            lambda m: f"{m[1]} ({mapping.labels.get(m[1], m[1])!r}) in {m[2]}",
+            _message(e),
+        )
+        raise type(e)(_naming(static, type(e)(labelled))) from None
 
 
 def _forearm_landmarks(mapping, source, where) -> dict:
