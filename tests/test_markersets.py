@@ -373,6 +373,56 @@ def test_plug_in_gait_labels_of_the_other_arm_than_side_are_refused(prefix):
     assert MarkerMap.from_dict({"side": "right", "markers": three}).side == "right"
 
 
+@pytest.mark.parametrize(
+    "labels",
+    [
+        # racing's (kinematics_racing_*.c3d): CamelCase words ending in the arm's letter
+        {
+            "RSP": "Forearm{S}1",
+            "USP": "Forearm{S}2",
+            "FAP": "Forearm{S}3",
+            "MC2": "Glove{S}1",
+            "MC5": "Glove{S}2",
+        },
+        {"RSP": "{S}_radius", "USP": "{S}_ulna", "FAP": "{S}_forearm", "MC2": "{S}_MCP2", "MC5": "{S}_MCP5"},
+        {
+            "RSP": "rsp.{side}",
+            "USP": "usp.{side}",
+            "FAP": "fap.{side}",
+            "MC2": "mc2.{side}",
+            "MC5": "mc5.{side}",
+        },
+    ],
+)
+def test_labels_that_name_the_other_arm_than_side_are_refused(labels):
+    """Nothing in the markers tells a right arm from a left one (a mirror image of one is the
+    other): racing's right arm under ``side = "left"`` was calibrated and tracked 93° off with
+    status 0. Labels that name an arm by a word of their own settle it; a map whose labels name
+    the other arm is refused, naming the side to set. Labels naming no arm are taken as said."""
+    for arm, other in (("right", "left"), ("left", "right")):
+        named = {m: v.format(S=arm[0].upper(), side=arm) for m, v in labels.items()} | {"MCB": "hand3"}
+        with pytest.raises(
+            FileFormatError,
+            match=rf"side = '{other}', but its labels name the {arm} arm .*"
+            rf'set side = "{arm}"',
+        ):
+            MarkerMap.from_dict({"side": other, "markers": named})
+        assert MarkerMap.from_dict({"side": arm, "markers": named}).side == arm
+    # pyomeca's labels: a lower-case letter is the bone or the side of it (STYLr: radial; EPICl:
+    # lateral), LARM is the lower arm: no arm named, either side taken as said.
+    pyomeca = {
+        "RSP": "Daphnee:LARM_ant",
+        "USP": "Daphnee:STYLr_up",
+        "FAP": "Daphnee:WRIST",
+        "MC2": "Daphnee:INDEX",
+        "MC5": "Daphnee:MEDH",
+        "MCB": "Daphnee:LATH",
+    }
+    landmarks = {"lateral_epicondyle": "Daphnee:EPICl", "radial_styloid": "Daphnee:STYLr"}
+    for side in ("right", "left"):
+        assert MarkerMap.from_dict({"side": side, "markers": pyomeca, "landmarks": landmarks}).side == side
+
+
 def test_a_missing_map_or_calibration_file_is_named_first_without_pythons_errno(tmp_path, capsys):
     """``--map`` or ``--calibration`` naming no file: one line, the file first and what is
     wrong (before: ``[Errno 2] No such file or directory: 'nothere.toml'``), exit 2."""

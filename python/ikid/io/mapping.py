@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -175,6 +176,7 @@ class MarkerMap:
             raise FileFormatError(
                 f"{source}: the label for landmark {', '.join(bad)} must be a non-empty string"
             )
+        _check_side_against_labels(source, side, markers, landmarks)
         one_hand = hand_point in markers
         # With one hand marker, the forearm's three are its anatomical points themselves (Plug-in
         # Gait's wrist bar and elbow: the styloid landmarks are RSP's and USP's labels), or a
@@ -460,7 +462,8 @@ class MarkerMap:
         descr = {m[0]: m[2] for m in _native.MARKERS} | {_native.HAND_POINT[0]: _native.HAND_POINT[2]}
         lines = [
             "# ikid marker = the label in your C3D/TRC files",
-            f'side = "{self.side}"  # "right" or "left": the arm these markers are on',
+            f'side = "{self.side}"  # "right" or "left": the arm these markers are on (check it: a wrong '
+            "side mirrors every flexion and supination, and markers cannot show it)",
             "[markers]",
         ]
         lines += [f'{m} = "{lab}"  # {descr[m]}' for m, lab in self.labels.items()]
@@ -499,6 +502,38 @@ class MarkerMap:
             else:
                 lines.append(f'# {k} = "LABEL"  # {lm_descr[k]}')
         return "\n".join(lines) + "\n"
+
+
+def _side_of_label(label: str) -> str | None:
+    """The arm a label names by a word of its own ("right"/"left" in any case, or "R"/"L" beside
+    another word): ``ForearmR1``, ``RadialStyloidR``, ``R_Wrist``, ``wrist.left`` (after any
+    ``Subject:`` prefix). None when it names none. An all-capitals run stays one word
+    (``LARM_ant``, ``RWRA``: Plug-in Gait's are checked by name), a lower-case letter is not read
+    as a side (``STYLr``: the radial styloid; ``EPICl``: lateral), nor a letter with a number
+    alone (``L0``, ``R2``)."""
+    words = re.findall(r"[A-Z]?[a-z]+|[A-Z]+(?![a-z])", label.rsplit(":", 1)[-1])
+    # A letter alone is a side beside another word only (GloveR1); "L0", "R2" are numbered markers.
+    letters = {"R": "right", "L": "left"} if len(words) > 1 else {}
+    named = {letters.get(w) or w.lower() for w in words} & {"right", "left"}
+    return named.pop() if len(named) == 1 else None
+
+
+def _check_side_against_labels(source: str, side: str, markers: dict, landmarks: dict) -> None:
+    """Refuses a map whose labels name the other arm than ``side``: at least three of its
+    marker and landmark labels name an arm, all the same one, not ``side``. Nothing in the
+    markers themselves tells a right arm from a left (a mirror image of one is the other), so
+    a wrong side reads every flexion and supination mirrored and nothing else can say so."""
+    named = {str(v).strip(): _side_of_label(str(v)) for v in [*markers.values(), *landmarks.values()]}
+    sides = {s for s in named.values() if s is not None}
+    if len(sides) != 1 or sum(s is not None for s in named.values()) < 3 or side in sides:
+        return
+    other = sides.pop()
+    shown = [label for label, s in named.items() if s is not None][:4]
+    raise FileFormatError(
+        f"{source}: side = {side!r}, but its labels name the {other} arm ({', '.join(map(repr, shown))}): "
+        f"the {other} arm read as the {side} would give every flexion and supination mirrored; set side = "
+        f'"{other}" (or name the {side} arm\'s markers)'
+    )
 
 
 def _clusters(
