@@ -73,7 +73,7 @@ def stream_reference(model: ikid.Model, frames: np.ndarray) -> np.ndarray:
 def test_stream_from_stdin_gives_one_line_per_frame_equal_to_stream_push(trial, monkeypatch, capsys):
     frames = trial.markers.astype(np.float32).astype(np.float64)
     monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames)))
-    assert cli(["stream", "--model", "wrist-ik", "--torque-model", "wrist-chain"]) == 0
+    assert cli(["stream", "--rate", "1000", "--model", "wrist-ik", "--torque-model", "wrist-chain"]) == 0
     captured = capsys.readouterr()
     header, status, values = parse_output(captured.out, 6)
     assert header == ["frame", "status", *ikid.coordinate_names(), *ikid.coordinate_names()]
@@ -97,7 +97,9 @@ def test_stream_reports_each_bad_line_and_goes_on(trial, monkeypatch, capsys):
     frames_nan[57, 3:6] = np.nan
     text[57] = csv_lines(frames_nan[57:58]).strip()  # a marker missing early: not fillable yet
     monkeypatch.setattr(sys, "stdin", io.StringIO("\n".join(text) + "\n"))
-    assert cli(["stream", "--missing-markers", "refuse"]) == 3  # ran to the end, frames refused
+    assert (
+        cli(["stream", "--rate", "1000", "--missing-markers", "refuse"]) == 3
+    )  # ran to the end, frames refused
     captured = capsys.readouterr()
     _, status, values = parse_output(captured.out, 3)
     assert len(status) == 60
@@ -116,7 +118,7 @@ def test_stream_reports_each_bad_line_and_goes_on(trial, monkeypatch, capsys):
 
 def test_stream_strict_stops_at_the_first_refused_frame(monkeypatch, capsys):
     monkeypatch.setattr(sys, "stdin", io.StringIO("1,2,3\n"))
-    assert cli(["stream", "--strict"]) == 2
+    assert cli(["stream", "--rate", "1000", "--strict"]) == 2
     assert "frame 0: expected 18 values" in capsys.readouterr().err
 
 
@@ -137,11 +139,33 @@ def test_stream_at_another_rate_is_refused_with_the_reason(trial, monkeypatch, c
     assert status[2] == "filling"  # 0.8 ms after the last accepted frame: within jitter
 
 
+def test_stream_of_unknown_rate_is_refused_and_stamps_at_another_rate_say_which(trial, monkeypatch, capsys):
+    # No --rate, no time stamps, a stdin source (which declares none): the rate is an input, not
+    # a guess (a 100 Hz source read at 1 kHz gave 3.6 N·m torque errors, every line "ok").
+    for argv in (["stream"], ["stream", "--tracker"], ["stream", "--frame-number"]):
+        monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(trial.markers[:60])))
+        assert cli(argv) == 2, argv
+        captured = capsys.readouterr()
+        assert "the source's frame rate is not known" in captured.err and "give --rate HZ" in captured.err
+        assert captured.out == ""
+    # Stamped at 100 Hz, read by the 1 kHz model: every frame is 9 lost, and the summary says
+    # what the stamps show and what to give.
+    frames = trial.markers[::10][:100]
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames, with_time=np.arange(100) * 0.01)))
+    assert cli(["stream", "--time"]) == 3
+    err = capsys.readouterr().err
+    assert "the time stamps come 10 ms apart, a 100 Hz source read at 1000 Hz: give --rate 100" in err, err
+    # At its own rate, nothing of the kind.
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames, with_time=np.arange(100) * 0.01)))
+    assert cli(["stream", "--time", "--rate", "100"]) == 0
+    assert "time stamps come" not in capsys.readouterr().err
+
+
 def test_stream_over_udp_on_localhost(trial):
     """A subprocess listening on a free port; datagrams in, lines out; stops by itself."""
     frames = trial.markers[:120].astype(np.float32).astype(np.float64)
     proc = subprocess.Popen(
-        [IKID, "stream", "--udp", "0", "--count", str(len(frames)), "--idle", "20"],
+        [IKID, "stream", "--rate", "1000", "--udp", "0", "--count", str(len(frames)), "--idle", "20"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -166,7 +190,10 @@ def test_stream_over_udp_on_localhost(trial):
 
 def test_stream_over_udp_stops_when_idle():
     proc = subprocess.run(
-        [IKID, "stream", "--udp", "0", "--idle", "0.5"], capture_output=True, text=True, timeout=60
+        [IKID, "stream", "--rate", "1000", "--udp", "0", "--idle", "0.5"],
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert proc.returncode == 0 and "no frame for 0.5 s" in proc.stderr
     assert proc.stdout.strip() == "frame,status,ra_wr_s_p,ra_wr_e_f,ra_wr_ad_ab"
@@ -256,6 +283,28 @@ def test_lab_recordings_read_markers_angles_and_torques(lab):
     np.testing.assert_allclose(recs[0].q, t.q, atol=1e-8)
     np.testing.assert_allclose(recs[0].tau, t.tau, rtol=1e-8, atol=1e-9)
     assert recs[0].meta["rate_hz"] == 1000.0
+
+
+def test_report_of_a_torque_model_on_trials_without_torques_is_refused_naming_them(lab, tmp_path, capsys):
+    # A trial with markers and angles but no .sto: scoring wrist-chain on it printed a table of
+    # "nan" (and a .json with bare NaN) and exited 0.
+    root, mapping = lab
+    folder = tmp_path / "trials"
+    folder.mkdir()
+    for ext in (".trc", ".mot", ".sto"):
+        (folder / f"s01_t9{ext}").write_bytes((root / "test" / f"s01_t9{ext}").read_bytes())
+    for ext in (".trc", ".mot"):
+        (folder / f"s01_t8{ext}").write_bytes((root / "test" / f"s01_t9{ext}").read_bytes())
+    argv = ["report", "--model", "wrist-chain", "--data", str(folder), "--map", str(mapping), "--clean-only"]
+    assert cli([*argv, "-o", str(tmp_path / "r.md")]) == 2
+    err = capsys.readouterr().err
+    assert "is scored against each trial's torques (a same-stem .sto)" in err and "s01_t8 (" in err, err
+    assert "s01_t9" not in err.split("without them:")[1], err
+    assert not (tmp_path / "r.md").exists() and not (tmp_path / "r.json").exists()
+    (folder / "s01_t8.trc").unlink()
+    (folder / "s01_t8.mot").unlink()
+    assert cli([*argv, "-o", str(tmp_path / "r.md")]) == 0
+    assert "nan" not in (tmp_path / "r.md").read_text(encoding="utf-8")
 
 
 def test_lab_folder_problems_are_named(lab, tmp_path):
@@ -929,7 +978,7 @@ def test_a_model_of_the_wrong_task_is_refused_naming_model_task_and_need(
 
 def test_stream_refuses_a_torque_model_that_gives_angles(monkeypatch, capsys):
     monkeypatch.setattr(sys, "stdin", io.StringIO(""))
-    assert cli(["stream", "--torque-model", "wrist-ik"]) == 2
+    assert cli(["stream", "--rate", "1000", "--torque-model", "wrist-ik"]) == 2
     assert "model 'wrist-ik' has task 'ik'" in capsys.readouterr().err
 
 
@@ -1014,7 +1063,19 @@ def test_stream_over_udp_counts_lost_datagrams_by_frame_number_and_sizes_its_buf
     numbers.insert(150, numbers[149])  # one repeated
     lines = [f"{n}," + csv_lines(frames[k : k + 1]).strip() for k, n in enumerate(numbers)]
     proc = subprocess.Popen(
-        [IKID, "stream", "--udp", "0", "--frame-number", "--count", str(len(lines)), "--idle", "10"],
+        [
+            IKID,
+            "stream",
+            "--rate",
+            "1000",
+            "--udp",
+            "0",
+            "--frame-number",
+            "--count",
+            str(len(lines)),
+            "--idle",
+            "10",
+        ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -7,6 +7,8 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
+
 import ikid
 from ikid.cli.common import (
     TRAINING_HINT,
@@ -89,6 +91,20 @@ def run(args: argparse.Namespace) -> int:
 
     for rate in rates:
         check_rate(model, rate, str(args.data), allow_resample=False)
+    # Each trial needs what the model is scored against (a torque model: its .sto): a trial
+    # without it would make every figure NaN, the table a page of "nan".
+    lacking = [
+        f"{r.name} ({int((~np.isfinite(t).all(axis=1)).sum())} of {len(t)} rows)"
+        for r in recs
+        if not np.isfinite(t := D.target(r, model.task)).all()
+    ]
+    if lacking:
+        what = "torques (a same-stem .sto)" if model.task in ("chain", "id") else "angles (a same-stem .mot)"
+        raise ikid.InputError(
+            f"{args.data}: model {model.name!r} is scored against each trial's {what}; without them: "
+            f"{', '.join(lacking[:5])}{' ...' if len(lacking) > 5 else ''}: give those trials theirs, "
+            "or leave them out of --data"
+        )
     levels = {"clean": 0.0} if args.clean_only else None
     result = evaluate_recordings(model, recs, levels)
     text = f"# ikid report: `{model.name}` on {args.data}\n\n" + markdown(result)
