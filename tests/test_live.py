@@ -344,7 +344,11 @@ def test_one_bad_frame_number_on_stdin_is_refused_alone():
     buf = io.StringIO()
     np.savetxt(buf, rows, delimiter=",", fmt="%.17g")
     r = subprocess.run(
-        [*IKID, "stream", "--frame-number"], input=buf.getvalue(), capture_output=True, text=True, timeout=120
+        [*IKID, "stream", "--rate", "1000", "--frame-number"],
+        input=buf.getvalue(),
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     _, out = _header_and_rows(r.stdout)
     assert [k for k, row in enumerate(out) if row[1].startswith("refused")] == [k0], r.stderr

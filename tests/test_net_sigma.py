@@ -155,7 +155,9 @@ def test_stream_sd_follows_each_output_by_its_sd(monkeypatch, capsys):
     buf = io.StringIO()
     np.savetxt(buf, frames, delimiter=",", fmt="%.9g")
     monkeypatch.setattr(sys, "stdin", io.StringIO(buf.getvalue()))
-    assert cli(["stream", "--model", "wrist-ik", "--torque-model", "wrist-chain", "--sd"]) == 0
+    assert (
+        cli(["stream", "--rate", "1000", "--model", "wrist-ik", "--torque-model", "wrist-chain", "--sd"]) == 0
+    )
     lines = capsys.readouterr().out.strip().splitlines()
     names = [*coordinate_names(), *coordinate_names()]
     assert lines[0].split(",") == ["frame", "status", *[x for n in names for x in (n, f"{n}_sd")]]

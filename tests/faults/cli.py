@@ -776,7 +776,12 @@ def weights(b: Builder) -> None:
             "wrist-id",
         ),
         "bench": (["bench", "--frames", "1000", "--model", bad["wrist-ik"]], None, {}, "wrist-ik"),
-        "stream": (["stream", "--model", bad["wrist-ik"], "--count", "10"], None, {}, "wrist-ik"),
+        "stream": (
+            ["stream", "--rate", "1000", "--model", bad["wrist-ik"], "--count", "10"],
+            None,
+            {},
+            "wrist-ik",
+        ),
     }
     for name, (argv, target, seeded, model) in cases.items():
         d = b.dir(f"{name}-corrupt-weights")
@@ -907,7 +912,8 @@ def stream(b: Builder) -> None:
         d = b.dir(f"stream-{name}")
         b.add(
             f"stream/{name}",
-            ["stream", *args],
+            # The corpus is at 1 kHz; a probe of --rate gives its own.
+            ["stream", *(() if "--rate" in args else ("--rate", "1000")), *args],
             d,
             stdin=("\n".join(body) + "\n").encode("utf-8", "surrogateescape"),
             check_any=stream_check(c, index, end),
@@ -1017,7 +1023,7 @@ def stream(b: Builder) -> None:
         b.out.append(
             Cli(
                 name=f"cli/stream/{name}",
-                argv=["stream", "--udp", "0", "--idle", idle, "--flush"],
+                argv=["stream", "--rate", "1000", "--udp", "0", "--idle", idle, "--flush"],
                 cwd=d,
                 interact=interact,
                 check_any=udp_check,

@@ -379,7 +379,12 @@ def build(root: Path) -> Corpus:
     np.savetxt(c.ref / "long_frames.csv", long.markers, fmt="%.9g", delimiter=",")
     lines = (c.ref / "long_frames.csv").read_bytes()
     run = subprocess.run(
-        [*map(str, IKID), "stream"], input=lines, capture_output=True, cwd=c.ref, timeout=120, check=True
+        [*map(str, IKID), "stream", "--rate", "1000"],
+        input=lines,
+        capture_output=True,
+        cwd=c.ref,
+        timeout=120,
+        check=True,
     )
     (c.ref / "stream.csv").write_bytes(run.stdout)
     sizes = {f.name: f.stat().st_size for f in c.ref.iterdir()}

@@ -9,8 +9,8 @@ Examples::
     ikid calibrate --static st.c3d --movement ra_wr_e_f=fe.c3d --movement ra_wr_s_p=ps.c3d -o s01.json
     ikid ik trial.c3d -o trial.mot --calibration s01.json    # the subject's own marker placement
     ikid id trial.mot -o trial.sto                           # angles -> torques (wrist-id; or --reference)
-    ikid stream --model wrist-ik < frames.csv                # one frame per line in, one result per line out
-    ikid stream --udp 9870 --count 10000                     # frames as UDP datagrams on 127.0.0.1
+    ikid stream --rate 1000 < frames.csv                     # one frame per line in, one result per line out
+    ikid stream --rate 100 --udp 9870 --count 10000          # frames as UDP datagrams on 127.0.0.1
     ikid train --data lab/ --map lab.toml --task ik -o models/lab-ik.safetensors
     ikid report --model models/lab-ik.safetensors --data lab_test/ --map lab.toml
     ikid bench --model wrist-ik                              # push latency and batch throughput here
