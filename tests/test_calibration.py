@@ -280,6 +280,39 @@ def test_a_static_trial_short_of_neutral_frames_is_named_with_its_markers_labels
     assert not (tmp_path / "c.json").exists()
 
 
+def test_a_calibration_is_refused_for_markers_laid_out_otherwise_than_it_was_measured_on(tmp_path, capsys):
+    # A calibration of one subject (or session, or cluster) applied to another's trial with the
+    # same labels wrote 4 rows of 700 (the rest turned over) and exited 0. The calibration now
+    # keeps its markers' distances; a trial whose segments are laid out otherwise is refused.
+    q = np.zeros((20, 3))
+    static = io.write_trc(tmp_path / "static.trc", np.arange(20) / 1000.0, ikid.forward_markers(q), 1000.0)
+    cal = tmp_path / "cal.json"
+    assert cli(["calibrate", "--static", str(static), "--method", "neutral", "-o", str(cal)]) == 0
+    # The oracle: the body model's own marker offsets, distances taken here.
+    offsets = np.array([m["offset"] for m in ikid.body_model()["markers"]])
+    pairs = ((0, 1), (0, 2), (1, 2))
+    kept = json.loads(cal.read_text())["marker_distances_m"]
+    for segment, first in (("forearm", 0), ("hand", 3)):
+        want = [np.linalg.norm(offsets[first + a] - offsets[first + b]) for a, b in pairs]
+        np.testing.assert_allclose(kept[segment], want, atol=1e-9)
+    capsys.readouterr()
+    for scale, refused in ((1.0, False), (0.7, True)):
+        trial = ikid.simulate("random", seed=51, duration=1.0, length_scale=scale)
+        path = io.write_trc(tmp_path / f"t{scale}.trc", trial.time, trial.markers, 1000.0)
+        out = tmp_path / f"t{scale}"
+        code = cli(["track", str(path), "--calibration", str(cal), "-o", str(out)])
+        err = capsys.readouterr().err
+        if refused:
+            assert code == 2, err
+            assert (
+                "its forearm's markers RSP and FAP are" in err
+                and "another session, subject or cluster" in err
+            )
+            assert not list(tmp_path.glob(f"t{scale}.*[mo][ot]"))
+        else:
+            assert code == 0, err
+
+
 def test_calibrate_command_from_landmarks_and_neutral_frames_of_a_task_trial(motion, tmp_path, capsys):
     from ikid.calibration import calibration_info, check_calibration_map
 

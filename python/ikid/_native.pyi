@@ -32,6 +32,8 @@ __all__ = [
     "REFINER_GATE_NOISE",
     "REFINED_SD_SCALE_Q",
     "REFINED_SD_SCALE_TAU",
+    "RIGID_TOLERANCE_M",
+    "RIGID_TOLERANCE_REL",
     "SD_SCALE_TAU",
     "build_model",
     "forward_markers",
@@ -233,6 +235,8 @@ REFINER_OUTPUTS: list[str]
 REFINER_GATE_NOISE: float
 REFINED_SD_SCALE_Q: float
 REFINED_SD_SCALE_TAU: float
+RIGID_TOLERANCE_M: float
+RIGID_TOLERANCE_REL: float
 
 @final
 class Tracker:

@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ikid import _native
 from ikid._native import Calibration, InputError, fill_gaps
 from ikid.io._atomic import write_text_atomic
 from ikid.io.markers import FileFormatError, read_text
@@ -148,6 +149,7 @@ def save_calibration(
     *,
     marker_map: MarkerMap | None = None,
     forearm_landmarks: dict | None = None,
+    marker_distances: dict[str, list[float]] | None = None,
     **provenance,
 ) -> Path:
     """Write ``calibration`` (its method, side and report, the marker map it was measured
@@ -177,7 +179,55 @@ def save_calibration(
     }
     if forearm_landmarks is not None:
         doc["forearm_landmarks"] = forearm_landmarks
+    if marker_distances:
+        doc["marker_distances_m"] = marker_distances
     return write_text_atomic(path, json.dumps(doc, indent=1) + "\n")
+
+
+#: A segment's marker pairs, as ``marker_distances_m`` lists their distances.
+_PAIRS = ((0, 1), (0, 2), (1, 2))
+
+
+def marker_distances(frames: np.ndarray, one_hand_marker: bool = False) -> dict[str, list[float]]:
+    """Each segment's three marker distances (pairs 01, 02, 12; median over the frames, metres)
+    in ``frames`` ``(n, 18)``: what a calibration keeps of its markers' layout, for
+    :func:`check_marker_distances`. A one-marker hand's (virtual) markers are left out; a
+    segment with no frame of all three, too."""
+    f = np.asarray(frames, np.float64).reshape(len(frames), 6, 3)
+    out = {}
+    for segment, first in (("forearm", 0), ("hand", 3)):
+        if segment == "hand" and one_hand_marker:
+            continue
+        d = np.stack([np.linalg.norm(f[:, first + a] - f[:, first + b], axis=1) for a, b in _PAIRS], axis=1)
+        d = d[np.isfinite(d).all(axis=1)]
+        if len(d):
+            out[segment] = np.median(d, axis=0).tolist()
+    return out
+
+
+def check_marker_distances(path: str | os.PathLike[str], frames: np.ndarray, source: str) -> None:
+    """Refuse (``ikid.InputError``) a trial whose markers are not laid out as those the
+    calibration at ``path`` was measured with: a distance between two of a segment's markers
+    (median over ``frames``) further from the calibration's than the tracker lets a rigid
+    segment stray (``RIGID_TOLERANCE_M`` plus ``RIGID_TOLERANCE_REL`` of it). Such a trial is of
+    another session, subject or cluster: the calibration says nothing of where its markers sit
+    (one of another subject's clusters wrote 4 rows of 700, the rest turned over, exit 0). A
+    file written before calibrations kept the distances passes."""
+    stored = calibration_info(path).get("marker_distances_m") or {}
+    names = _native.MARKERS
+    now = marker_distances(frames)
+    for segment, first in (("forearm", 0), ("hand", 3)):
+        if segment not in stored or segment not in now:
+            continue
+        for (a, b), then, here in zip(_PAIRS, stored[segment], now[segment], strict=True):
+            if abs(here - then) > _native.RIGID_TOLERANCE_M + _native.RIGID_TOLERANCE_REL * then:
+                raise InputError(
+                    f"{source}: its {segment}'s markers {names[first + a][0]} and {names[first + b][0]} are "
+                    f"{1e3 * here:.0f} mm apart, {1e3 * then:.0f} mm in the calibration ({path}): it was "
+                    "measured on markers laid out otherwise (another session, subject or cluster), so it "
+                    "cannot say where these sit; calibrate this session (`ikid calibrate` on its own static "
+                    "trial)"
+                )
 
 
 def calibration_info(path: str | os.PathLike[str]) -> dict[str, Any]:

@@ -8,8 +8,8 @@ use crate::errors::{IntoPy, input};
 use crate::model::Model;
 use ikid::body::{MARKER_FRAME_LEN, N_COORDINATES};
 use ikid::tracker::{
-    DEFAULT_JERK_NOISE, REFINED_SD_SCALE_Q, REFINED_SD_SCALE_TAU, REFINER_GATE_NOISE, SD_SCALE_TAU,
-    Tracker as CoreTracker, TrackerOutput, TrackerSettings, refiner_outputs,
+    DEFAULT_JERK_NOISE, REFINED_SD_SCALE_Q, REFINED_SD_SCALE_TAU, REFINER_GATE_NOISE, RIGID_TOLERANCE_M,
+    RIGID_TOLERANCE_REL, SD_SCALE_TAU, Tracker as CoreTracker, TrackerOutput, TrackerSettings, refiner_outputs,
 };
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
@@ -25,6 +25,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("REFINER_GATE_NOISE", REFINER_GATE_NOISE)?;
     m.add("REFINED_SD_SCALE_Q", REFINED_SD_SCALE_Q)?;
     m.add("REFINED_SD_SCALE_TAU", REFINED_SD_SCALE_TAU)?;
+    m.add("RIGID_TOLERANCE_M", RIGID_TOLERANCE_M)?;
+    m.add("RIGID_TOLERANCE_REL", RIGID_TOLERANCE_REL)?;
     Ok(())
 }
 

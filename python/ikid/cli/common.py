@@ -202,7 +202,12 @@ def _subject_calibration(frames: np.ndarray, calibration: str | None, mapping, s
     checked against the marker map it was measured with; or, without one, the body model's
     placement, after checking that it can read these markers at all (units, then placement:
     an uncalibrated real recording reads 50-170° off). Errors name ``source``."""
-    from ikid.calibration import check_calibration_map, mirrored_to_right, uncalibrated
+    from ikid.calibration import (
+        check_calibration_map,
+        check_marker_distances,
+        mirrored_to_right,
+        uncalibrated,
+    )
     from ikid.io import MarkerMap
     from ikid.io.mapping import MarkerMapWarning
 
@@ -220,6 +225,7 @@ def _subject_calibration(frames: np.ndarray, calibration: str | None, mapping, s
             warnings.warn(f"{source}: {problem}", MarkerMapWarning, stacklevel=2)
         if calibration:
             check_calibration_map(calibration, mapping)
+            check_marker_distances(calibration, frames, source)
             return ikid.load_calibration(calibration)
         # Uncalibrated, the body model's placement; a left arm (the map's side) mirrored into
         # a right one first, as its calibration would.

@@ -271,8 +271,16 @@ def run(args: argparse.Namespace) -> int:
     else:
         with _about_the_static_trial(args.static, mapping):
             cal = calibrate_neutral(neutral, side=side)
+    from ikid.calibration import marker_distances
+
     ikid.save_calibration(
-        cal, args.output, marker_map=mapping, forearm_landmarks=forearm_landmarks, **provenance
+        cal,
+        args.output,
+        marker_map=mapping,
+        forearm_landmarks=forearm_landmarks,
+        # The markers' layout as calibrated: a trial laid out otherwise is refused (another session).
+        marker_distances=marker_distances(neutral, mapping.one_hand_marker),
+        **provenance,
     )
     r = cal.report or {}
     spread = r.get("neutral_spread_deg", 0.0)
