@@ -362,6 +362,14 @@ enum ikid_status ikid_stream_set_calibration_side(struct ikid_stream *stream,
                                                   const double *hand,
                                                   const char *side);
 
+// `*rows` receives the rows the last failed `ikid_stream_push_many` wrote into its `out` for
+// the frames before the one it refused (they stay pushed); 0 after a block refused whole
+// (nothing pushed) or pushed whole.
+//
+// # Safety
+// `stream` must be a live handle; `rows` must point to writable storage.
+enum ikid_status ikid_stream_rows_before_refusal(const struct ikid_stream *stream, size_t *rows);
+
 // `*mask` receives the markers filled in the last accepted frame (bit `i` = marker `i` in
 // frame order; 0 when the frame was complete): the flag on an output that rests on filled
 // positions.
@@ -393,9 +401,10 @@ enum ikid_status ikid_stream_output_sd(const struct ikid_stream *stream,
 
 // Pushes `n_frames` frames (`n_frames × frame_len` floats, e.g. a packet from the
 // acquisition system) and writes one row of `n_outputs` into `out` for each frame that
-// completes a window; `*rows` receives the row count. On failure (a refused frame)
-// `ikid_last_error()` names the frame, `*rows` is not written and the contents of `out` are
-// unspecified; the frames before the refused one stay pushed.
+// completes a window; `*rows` receives the row count. On failure `ikid_last_error()` names
+// the frame and `*rows` is not written; when a frame was refused part-way, the frames before
+// it stay pushed and their rows stay written at the start of `out` (the rest of it is
+// unspecified): `ikid_stream_rows_before_refusal` says how many.
 //
 // # Safety
 // As `ikid_stream_push`, with `frames` holding `n_frames × frame_len` floats and `rows`

@@ -226,3 +226,18 @@ def test_markers_far_outside_any_arm_are_an_error_not_nan(frames):
     spread = np.tile(np.arange(18, dtype=np.float32), (10, 1)) * np.float32(1e36)
     with pytest.raises(ikid.InputError, match="are the units mm, read as metres"):
         m.predict(spread)
+
+
+def test_push_many_refusing_a_frame_part_way_gives_the_rows_before_it_with_the_error():
+    # The reviewer's case: RSP and USP lost at frame 300 of a block (no fill for two markers).
+    # The 251 predictions of frames 49-299 were computed, and pushed: they come with the error,
+    # equal to what frame-by-frame pushes give (the oracle).
+    model = ikid.load("wrist-ik")
+    frames = ikid.simulate("random", seed=61, duration=0.5).markers.astype(np.float32)
+    frames[300, 0:6] = np.nan
+    one_by_one = model.stream()
+    want = [r for f in frames[:300] if (r := one_by_one.push(f)) is not None]
+    with pytest.raises(ikid.InputError) as refused:
+        model.stream().push_many(frames)
+    assert refused.value.frame == 300 and refused.value.outputs.shape == (251, 3)
+    np.testing.assert_array_equal(refused.value.outputs, np.array(want))

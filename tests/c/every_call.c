@@ -109,6 +109,8 @@ int main(int argc, char **argv) {
     CHECK(ikid_stream_reset(stream) == IKID_STATUS_OK, "reset again");
     size_t packet = 64, packet_rows = 0;
     CHECK(ikid_stream_push_many(stream, frames, packet, 18, out, out_len, &packet_rows) == IKID_STATUS_OK && packet_rows == packet - info.window + 1, "ikid_stream_push_many");
+    size_t before_refusal = 99;
+    CHECK(ikid_stream_rows_before_refusal(stream, &before_refusal) == IKID_STATUS_OK && before_refusal == 0, "ikid_stream_rows_before_refusal");
     ikid_stream_free(stream);
     ikid_model_free(model);
 

@@ -201,6 +201,23 @@ int main(int argc, char **argv) {
     CHECK(ikid_stream_push_at(timed, 0.0, frames, 18, out, 3, &ready) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "does not follow"), "time backwards");
     ikid_stream_free(timed);
 
+    /* push_many refusing frame 20 part-way (RSP and USP lost: only one marker is filled): the
+       16 rows of frames 4-19 stay in out, *rows says so, and they are the expected ones. */
+    ikid_stream *part = NULL;
+    float *holed = malloc(21 * 18 * sizeof(float));
+    memcpy(holed, frames, 21 * 18 * sizeof(float));
+    for (int k = 0; k < 6; k++) holed[20 * 18 + k] = NAN;
+    size_t part_rows = 99;
+    float part_out[21 * 3];
+    CHECK(ikid_stream_new(model, &part) == IKID_STATUS_OK && ikid_stream_set_missing_markers(part, IKID_MISSING_MARKERS_FILL) == IKID_STATUS_OK, "part-way stream");
+    CHECK(ikid_stream_push_many(part, holed, 21, 18, part_out, 21 * 3, &part_rows) == IKID_STATUS_INPUT && contains(ikid_last_error(), "frame 20") && part_rows == 99, "part-way refusal: %s", ikid_last_error());
+    CHECK(ikid_stream_rows_before_refusal(part, &part_rows) == IKID_STATUS_OK && part_rows == 16 && memcmp(part_out, expected, 16 * 3 * sizeof(float)) == 0, "rows before the refusal: %zu", part_rows);
+    CHECK(ikid_stream_push_many(part, holed, 21, 18, part_out, 2, &part_rows) == IKID_STATUS_INVALID_ARGUMENT, "out too short");
+    CHECK(ikid_stream_rows_before_refusal(part, &part_rows) == IKID_STATUS_OK && part_rows == 0, "a block refused whole pushed no row");
+    CHECK(ikid_stream_rows_before_refusal(NULL, &part_rows) == IKID_STATUS_NULL_PARAMETER && ikid_stream_rows_before_refusal(part, NULL) == IKID_STATUS_NULL_PARAMETER, "NULL arguments");
+    ikid_stream_free(part);
+    free(holed);
+
     /* Calibration: both matrices (row-major, as a calibration file holds them) -> the outputs
        Python computes with the same calibration; both NULL removes it. */
     ikid_stream *cal = NULL;

@@ -10,6 +10,8 @@ use ikid_core::Stream;
 /// A causal frame-by-frame stream over a model (opaque). Use from one thread at a time.
 pub struct ikid_stream {
     stream: Stream,
+    /// Rows the last `ikid_stream_push_many` wrote before a frame it refused (0 if none).
+    rows_before_refusal: usize,
 }
 
 /// Creates a stream over `model`; on success `*out` receives a handle to release with
@@ -22,7 +24,7 @@ pub unsafe extern "C" fn ikid_stream_new(model: *const ikid_model, out: *mut *mu
     guard(|| {
         let m = unsafe { non_null(model, "model") }?;
         let out = unsafe { non_null_mut(out, "out") }?;
-        *out = Box::into_raw(Box::new(ikid_stream { stream: m.model.stream() }));
+        *out = Box::into_raw(Box::new(ikid_stream { stream: m.model.stream(), rows_before_refusal: 0 }));
         Ok(())
     })
 }
@@ -185,6 +187,21 @@ pub unsafe extern "C" fn ikid_stream_set_calibration_side(
     })
 }
 
+/// `*rows` receives the rows the last failed `ikid_stream_push_many` wrote into its `out` for
+/// the frames before the one it refused (they stay pushed); 0 after a block refused whole
+/// (nothing pushed) or pushed whole.
+///
+/// # Safety
+/// `stream` must be a live handle; `rows` must point to writable storage.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_rows_before_refusal(stream: *const ikid_stream, rows: *mut usize) -> ikid_status {
+    guard(|| {
+        let handle = unsafe { non_null(stream, "stream") }?;
+        *unsafe { non_null_mut(rows, "rows") }? = handle.rows_before_refusal;
+        Ok(())
+    })
+}
+
 /// `*mask` receives the markers filled in the last accepted frame (bit `i` = marker `i` in
 /// frame order; 0 when the frame was complete): the flag on an output that rests on filled
 /// positions.
@@ -243,9 +260,10 @@ pub unsafe extern "C" fn ikid_stream_output_sd(
 
 /// Pushes `n_frames` frames (`n_frames × frame_len` floats, e.g. a packet from the
 /// acquisition system) and writes one row of `n_outputs` into `out` for each frame that
-/// completes a window; `*rows` receives the row count. On failure (a refused frame)
-/// `ikid_last_error()` names the frame, `*rows` is not written and the contents of `out` are
-/// unspecified; the frames before the refused one stay pushed.
+/// completes a window; `*rows` receives the row count. On failure `ikid_last_error()` names
+/// the frame and `*rows` is not written; when a frame was refused part-way, the frames before
+/// it stay pushed and their rows stay written at the start of `out` (the rest of it is
+/// unspecified): `ikid_stream_rows_before_refusal` says how many.
 ///
 /// # Safety
 /// As `ikid_stream_push`, with `frames` holding `n_frames × frame_len` floats and `rows`
@@ -261,11 +279,19 @@ pub unsafe extern "C" fn ikid_stream_push_many(
     rows: *mut usize,
 ) -> ikid_status {
     guard(|| {
-        let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
+        let handle = unsafe { non_null_mut(stream, "stream") }?;
+        handle.rows_before_refusal = 0;
+        let s = &mut handle.stream;
         let rows = unsafe { non_null_mut(rows, "rows") }?;
         let n_rows = s.rows_for(n_frames);
         let (frames, out) = unsafe { recording_args(s.model(), frames, n_frames, frame_len, out, out_len, n_rows) }?;
-        *rows = s.push_many(frames, out)?;
+        match s.push_many(frames, out) {
+            Ok(n) => *rows = n,
+            Err(e) => {
+                handle.rows_before_refusal = s.rows_before_refusal();
+                return Err(e.into());
+            }
+        }
         Ok(())
     })
 }

@@ -316,8 +316,9 @@ impl Stream {
     }
 
     /// Pushes a block of frames `(n, frame_len)`; returns the predictions of the frames that
-    /// completed a window, `(k, n_outputs)`. Stops at the first refused frame (its error is
-    /// raised; the frames before it stay pushed). Releases the GIL.
+    /// completed a window, `(k, n_outputs)`. Stops at the first refused frame: its error is
+    /// raised, the frames before it stay pushed and their predictions are the error's
+    /// `outputs` `(j, n_outputs)`. Releases the GIL.
     fn push_many<'py>(&mut self, py: Python<'py>, frames: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let stream = &mut self.inner;
         let (fl, no) = (stream.model().frame_len(), stream.model().n_outputs());
@@ -326,8 +327,17 @@ impl Stream {
                 return Err(input(format!("frames: {} columns, the model takes {fl} per frame", shape[1])));
             }
             let mut out = vec![0f32; stream.rows_for(shape[0]) * no];
-            let rows = py.detach(|| stream.push_many(values, &mut out)).py_err()?;
-            out.into_pyarray(py).reshape([rows, no])
+            match py.detach(|| stream.push_many(values, &mut out)) {
+                Ok(rows) => out.into_pyarray(py).reshape([rows, no]),
+                Err(e) => {
+                    // The frames before the refused one stay pushed: their rows go with the error.
+                    let rows = stream.rows_before_refusal();
+                    out.truncate(rows * no);
+                    let err = crate::errors::to_py(e);
+                    err.value(py).setattr("outputs", out.into_pyarray(py).reshape([rows, no])?)?;
+                    Err(err)
+                }
+            }
         })
     }
 

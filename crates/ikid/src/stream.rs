@@ -76,6 +76,8 @@ pub struct Stream {
     time_candidate: Option<f64>,
     time_candidate_frames: u32,
     time_reanchors: u64,
+    /// Rows the last [`push_many`](Stream::push_many) wrote before the frame it refused.
+    rows_before_refusal: usize,
     /// A new clock was taken and no output has been given since ([`status::RESYNCED`]).
     resynced: bool,
     /// The subject's marker placement, applied to each (filled) frame before its features.
@@ -127,6 +129,7 @@ impl Stream {
             time_candidate: None,
             time_candidate_frames: 0,
             time_reanchors: 0,
+            rows_before_refusal: 0,
             resynced: false,
             calibration: None,
             shapes: MarkerShapes::new(model.card().frame_rate_hz),
@@ -510,8 +513,11 @@ impl Stream {
     /// [`MissingMarkers::Fill`] each frame is filled as by [`push`](Self::push) (flags of
     /// single frames: push them one at a time). A later failure (degenerate markers, a
     /// non-finite prediction) stops at that frame with its error (numbered within `frames`);
-    /// the frames before it stay pushed. Does not allocate on success.
+    /// the frames before it stay pushed and their rows stay written in `out`
+    /// ([`rows_before_refusal`](Self::rows_before_refusal) says how many). Does not allocate
+    /// on success.
     pub fn push_many(&mut self, frames: &[f32], out: &mut [f32]) -> Result<usize> {
+        self.rows_before_refusal = 0;
         let (fl, no) = (self.model.frame_len(), self.model.n_outputs());
         if !frames.len().is_multiple_of(fl) {
             return Err(Error::BadArgument {
@@ -543,10 +549,20 @@ impl Stream {
                     rows += 1;
                 }
                 Ok(None) => {}
-                Err(e) => return Err(e.renumbered(i)),
+                Err(e) => {
+                    self.rows_before_refusal = rows;
+                    return Err(e.renumbered(i));
+                }
             }
         }
         Ok(rows)
+    }
+
+    /// After [`push_many`](Self::push_many) refused a frame part-way: the rows it wrote into
+    /// `out` for the frames before that one (pushed, their outputs valid). 0 after a block
+    /// refused whole or pushed whole.
+    pub fn rows_before_refusal(&self) -> usize {
+        self.rows_before_refusal
     }
 
     /// Rows [`push_many`](Self::push_many) will write for `n_frames` more frames.

@@ -169,3 +169,33 @@ fn stream_errors_name_the_frame_by_its_number_in_the_stream() {
     let err = timed.push_at(0.001, &frames[30 * 18..31 * 18]).unwrap_err();
     assert_eq!(err.frame(), Some(2), "{err}");
 }
+
+#[test]
+fn push_many_refusing_a_frame_part_way_keeps_the_rows_of_the_frames_before_it() {
+    // Frame 150 loses two markers (unfillable): the 146 rows of frames 4-149 were computed and
+    // stay in `out`, equal to what frame-by-frame pushes give (the oracle).
+    let fill = with_policy(&random_model(FeatureSet::Angles, 5, &[32], 3, 3), "fill").unwrap();
+    let (mut frames, _) = occluded_frames();
+    frames[150 * 18..150 * 18 + 6].fill(f32::NAN); // RSP and USP
+    let mut one_by_one = fill.stream();
+    let mut want = vec![];
+    for frame in frames[..150 * 18].chunks_exact(18) {
+        if let Some(o) = one_by_one.push(frame).unwrap() {
+            want.extend_from_slice(o);
+        }
+    }
+    let mut stream = fill.stream();
+    let mut out = vec![f32::NAN; stream.rows_for(400) * 3];
+    let err = stream.push_many(&frames, &mut out).unwrap_err();
+    assert!(err.to_string().contains("frame 150") && err.to_string().contains("RSP, USP"), "{err}");
+    assert_eq!(stream.rows_before_refusal(), 146);
+    assert_eq!(&out[..146 * 3], &want[..]);
+    // A block refused whole (a missing value under the refuse policy) wrote none.
+    let mut refusing = fill.stream();
+    refusing.set_missing_markers(MissingMarkers::Refuse).unwrap();
+    assert!(refusing.push_many(&frames, &mut out).is_err());
+    assert_eq!(refusing.rows_before_refusal(), 0);
+    // And a block pushed whole says 0 too.
+    assert_eq!(stream.push_many(&frames[151 * 18..160 * 18], &mut out).unwrap(), 9);
+    assert_eq!(stream.rows_before_refusal(), 0);
+}
