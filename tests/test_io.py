@@ -63,6 +63,24 @@ def test_trc_round_trip_keeps_positions_and_gaps(trial, tmp_path, units):
     np.testing.assert_allclose(data.time, trial.time, atol=1e-6)
 
 
+def test_a_trc_gap_written_as_zeros_is_a_gap_and_filled_like_an_empty_one(trial, tmp_path, capsys):
+    # Some exporters write an unseen marker as 0, 0, 0: read as a position, its 20 frames were
+    # dropped with a hint about units. Read as a gap, they are filled, as empty cells are.
+    gap = trial.markers.copy()
+    gap[2500:2520, 9:12] = np.nan
+    zeros = io.write_trc(tmp_path / "zeros.trc", trial.time, np.nan_to_num(gap, nan=0.0), trial.rate_hz)
+    io.write_trc(tmp_path / "empty.trc", trial.time, gap, trial.rate_hz)
+    assert np.array_equal(np.isnan(io.read_trc(zeros).frames()), np.isnan(gap))
+    for name in ("zeros", "empty"):
+        assert cli(["ik", str(tmp_path / f"{name}.trc"), "-o", str(tmp_path / f"{name}.mot")]) == 0
+    assert "20 with a filled marker" in capsys.readouterr().out
+    a, b = io.read_mot(tmp_path / "zeros.mot"), io.read_mot(tmp_path / "empty.mot")
+    np.testing.assert_array_equal(a[1], b[1])
+    # A marker at the origin in every frame (a file in that marker's own frame) stays a marker.
+    still = trial.markers - np.tile(trial.markers[:, 0:3], 6)  # every marker relative to RSP
+    assert np.isfinite(io.read_trc(io.write_trc(tmp_path / "o.trc", trial.time, still)).frames()).all()
+
+
 @pytest.mark.parametrize("units", ["mm", "m"])
 def test_csv_round_trip_keeps_positions_and_gaps(trial, tmp_path, units):
     markers = trial.markers.copy()

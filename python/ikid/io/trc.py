@@ -192,6 +192,11 @@ def _trc_blocks(
                 positions[~np.isfinite(positions)] = np.nan
                 # A marker is seen or not: a frame with a partial xyz is missing.
                 positions[~np.isfinite(positions).all(axis=2)] = np.nan
+                # Some exporters write a gap as 0, 0, 0: a marker exactly at the lab's origin in
+                # some frames and elsewhere in others was not seen there (one at the origin
+                # throughout is left as it is: a file in a marker's own frame).
+                at_origin = (positions == 0.0).all(axis=2)
+                positions[at_origin & ~at_origin.all(axis=0)] = np.nan
                 seen += len(rows)
                 yield MarkerData(labels, time, positions, rate, src, header["Units"], {"header": header})
     if seen != n_frames:
