@@ -389,6 +389,11 @@ def test_calibrate_command_from_landmarks_and_neutral_frames_of_a_task_trial(mot
     assert "the hand moves" in capsys.readouterr().err
     with pytest.raises(SystemExit, match="outside frames"):
         cli(base + ["--frames", f"0-{len(frames)}"])
+    # A range given backwards, or a frame named twice (it would count twice), says so.
+    with pytest.raises(SystemExit, match=r"'9-0': 9-0 runs backwards; give the first frame first \(0-9\)"):
+        cli(base + ["--frames", "9-0"])
+    with pytest.raises(SystemExit, match=r"frame 0, 3 given more than once; name each frame once"):
+        cli(base + ["--frames", "0,0,3,0-5"])
 
 
 def circles(n: int = 3000, pronation: float = 0.0) -> np.ndarray:

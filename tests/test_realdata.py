@@ -310,7 +310,7 @@ def test_a_calibration_from_one_frame_is_refused_saying_how_many_and_what_to_rec
     done = tool.run(cmd, [])
     message = done.stdout + done.stderr
     assert done.returncode == 2, message
-    assert "1 of the 1 neutral frames have all six markers (at least 5 are needed" in message, message
+    assert "1 neutral frame, with all six markers (at least 5 are needed" in message, message
     assert "record a static trial" in message, message
     assert not out.exists()
 

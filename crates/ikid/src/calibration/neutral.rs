@@ -100,13 +100,20 @@ pub(super) fn neutral_posture(neutral: &[f32], side: Side) -> Result<HeldPosture
         )));
     }
     if relative.len() < MIN_NEUTRAL_FRAMES {
+        let counted = if missing.is_empty() {
+            format!(
+                "{n} neutral frame{}",
+                if n == 1 { ", with all six markers" } else { "s, each with all six markers" }
+            )
+        } else {
+            format!("{} of the {n} neutral frames have all six markers", relative.len())
+        };
+        let lost = if missing.is_empty() { String::new() } else { format!("; missing: {}", missing.join(", ")) };
         return Err(bad(format!(
-            "{} of the {n} neutral frames have all six markers (at least {MIN_NEUTRAL_FRAMES} are needed: one \
-             frame's noise would be the calibration's error; missing: {}); choose more frames of the neutral \
-             posture where every marker is seen (a task trial's, if the static trial lost a marker), or record \
-             a static trial of a second or more with all six",
-            relative.len(),
-            missing.join(", ")
+            "{counted} (at least {MIN_NEUTRAL_FRAMES} are needed: one frame's noise would be the calibration's \
+             error{lost}); choose more frames of the neutral posture where every marker is seen (a task \
+             trial's, if the static trial lost a marker), or record a static trial of a second or more with all \
+             six"
         )));
     }
     let held = HeldPosture::of(&relative);

@@ -123,12 +123,24 @@ def run(args: argparse.Namespace) -> int:
                 raise SystemExit(
                     f"ikid: error: --frames {spec!r}: expected frame numbers such as 0-9 or 41,76,220"
                 ) from None
+            if first > last:
+                raise SystemExit(
+                    f"ikid: error: --frames {spec!r}: {part.strip()} runs backwards; give the first frame "
+                    f"first ({last}-{first})"
+                )
             if not 0 <= first <= last < n:
                 raise SystemExit(
                     f"ikid: error: --frames {spec!r}: {part.strip()} is outside frames 0-{n - 1} of {source}"
                 )
             chosen += range(first, last + 1)
-        return np.array(sorted(set(chosen)), np.int64)
+        repeated = sorted({f for f in chosen if chosen.count(f) > 1})
+        if repeated:
+            # A frame given twice would count twice: its noise as if measured twice.
+            raise SystemExit(
+                f"ikid: error: --frames {spec!r}: frame {', '.join(map(str, repeated[:5]))} given more than "
+                "once; name each frame once"
+            )
+        return np.array(sorted(chosen), np.int64)
 
     movement_files = [spec.partition("=")[2] or None for spec in args.movement]
     _refuse_over_inputs(
