@@ -155,6 +155,11 @@ def test_stream_of_unknown_rate_is_refused_and_stamps_at_another_rate_say_which(
     assert cli(["stream", "--time"]) == 3
     err = capsys.readouterr().err
     assert "the time stamps come 10 ms apart, a 100 Hz source read at 1000 Hz: give --rate 100" in err, err
+    # Stamped in milliseconds: said so.
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(trial.markers[:100], with_time=np.arange(100.0))))
+    assert cli(["stream", "--time"]) == 3
+    err = capsys.readouterr().err
+    assert "the time stamps step by 1, a frame at 1000 Hz: are they in ms? --time reads seconds" in err, err
     # At its own rate, nothing of the kind.
     monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames, with_time=np.arange(100) * 0.01)))
     assert cli(["stream", "--time", "--rate", "100"]) == 0

@@ -63,6 +63,14 @@ def test_trc_round_trip_keeps_positions_and_gaps(trial, tmp_path, units):
     np.testing.assert_allclose(data.time, trial.time, atol=1e-6)
 
 
+def test_trc_times_printed_to_a_few_decimals_agree_with_the_header_rate(tmp_path):
+    # 120 Hz with times to the ms (steps of 8 and 9 ms): the mean regular step is the header's.
+    trial = ikid.simulate("random", seed=52, duration=1.0, output_every=1)
+    frames, time = trial.markers[::8][:100], np.round(np.arange(100) / 120.0, 3)
+    path = io.write_trc(tmp_path / "t.trc", time, frames, 120.0)
+    assert io.read_trc(path).rate_hz == 120.0
+
+
 def test_a_trc_gap_written_as_zeros_is_a_gap_and_filled_like_an_empty_one(trial, tmp_path, capsys):
     # Some exporters write an unseen marker as 0, 0, 0: read as a position, its 20 frames were
     # dropped with a hint about units. Read as a gap, they are filled, as empty cells are.
@@ -424,6 +432,12 @@ def _bad_c3d_cut_in_its_parameters(trial, tmp_path):
     )
 
 
+def _bad_rate_contradicts_times(trial, tmp_path):
+    # Header 120 Hz, times 1 ms apart (the trial's 1 kHz): which one is right cannot be known.
+    path = io.write_trc(tmp_path / "bad.trc", trial.time, trial.markers, 120.0)
+    return path, r"header's DataRate is 120 Hz but its Time column steps 1 ms \(1000 Hz\).*correct the one"
+
+
 def _bad_zeros(trial, tmp_path):
     # (A file at another rate is no longer bad: the IK family runs any rate, tests/test_rates.py.)
     return io.write_trc(
@@ -441,6 +455,7 @@ def _bad_zeros(trial, tmp_path):
         _bad_truncated_c3d,
         _bad_not_a_c3d,
         _bad_c3d_cut_in_its_parameters,
+        _bad_rate_contradicts_times,
         _bad_zeros,
     ],
 )

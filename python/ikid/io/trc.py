@@ -187,6 +187,8 @@ def _trc_blocks(
                         f"{src}: time goes from {before} to {time[k]} s at frame {seen + k + 1}; "
                         "it must increase"
                     )
+                if seen == 0:
+                    _check_rate_against_times(time, rate, src)
                 last_time = float(time[-1])
                 positions = rows[:, 2:].reshape(len(rows), len(labels), 3) * scale
                 positions[~np.isfinite(positions)] = np.nan
@@ -201,6 +203,25 @@ def _trc_blocks(
                 yield MarkerData(labels, time, positions, rate, src, header["Units"], {"header": header})
     if seen != n_frames:
         raise FileFormatError(f"{src}: header says {n_frames} frames, the file has {seen} (truncated?)")
+
+
+def _check_rate_against_times(time: np.ndarray, rate: float, src: str) -> None:
+    """Refuses a file whose header's DataRate contradicts its Time column by more than 1 %:
+    which one is right cannot be known, and every rate-dependent result (the model's member,
+    velocities, torques) would follow the header. The step is the mean of the regular steps
+    (under 1.5 of the median: time gaps left out), so times printed to a few decimals (8 and
+    9 ms at 120 Hz) average to the true one."""
+    steps = np.diff(time)
+    if len(steps) < 10:
+        return
+    regular = steps[steps < 1.5 * np.median(steps)]
+    step = float(regular.mean()) if len(regular) >= 10 else float(np.median(steps))
+    if abs(step * rate - 1.0) > 0.01:
+        raise FileFormatError(
+            f"{src}: its header's DataRate is {rate:g} Hz but its Time column steps {1e3 * step:.4g} ms "
+            f"({1.0 / step:.5g} Hz): which one is right cannot be known; correct the one that is wrong "
+            "(DataRate and CameraRate on the header's third line, or the times)"
+        )
 
 
 def _parse_rows(chunk: list[str], first_lineno: int, width: int, src: str) -> np.ndarray:

@@ -655,10 +655,16 @@ def _run_with(
     if numbered or timed:
         parts.append(f"{losses.lost} lost (by {'frame number' if numbered else 'time'})")
     if timed and (other := losses.other_rate()) is not None:
-        parts.append(
-            f"the time stamps come {1e3 / other:.3g} ms apart, a {other:.4g} Hz source read at {rate:g} Hz: "
-            f"give --rate {other:.4g} (the family's member at that rate)"
-        )
+        if abs(other * 1e3 / rate - 1.0) <= 0.2:
+            parts.append(
+                f"the time stamps step by {1 / other:.3g}, a frame at {rate:g} Hz: are they in ms? "
+                "--time reads seconds"
+            )
+        else:
+            parts.append(
+                f"the time stamps come {1e3 / other:.3g} ms apart, a {other:.4g} Hz source read at {rate:g} Hz: "
+                f"give --rate {other:.4g} (the family's member at that rate)"
+            )
     else:
         parts.append("lost not counted (no frame numbers or times: --frame-number, --time)")
     skipped = notes["skipped"]
