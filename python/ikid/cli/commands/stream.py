@@ -662,8 +662,8 @@ def _run_with(
             )
         else:
             parts.append(
-                f"the time stamps come {1e3 / other:.3g} ms apart, a {other:.4g} Hz source read at {rate:g} Hz: "
-                f"give --rate {other:.4g} (the family's member at that rate)"
+                f"the time stamps come {1e3 / other:.3g} ms apart, a {other:.4g} Hz source read at "
+                f"{rate:g} Hz: give --rate {other:.4g} (the family's member at that rate)"
             )
     else:
         parts.append("lost not counted (no frame numbers or times: --frame-number, --time)")
