@@ -312,6 +312,17 @@ def test_report_of_a_torque_model_on_trials_without_torques_is_refused_naming_th
     assert "nan" not in (tmp_path / "r.md").read_text(encoding="utf-8")
 
 
+def test_report_runs_the_family_member_at_the_trials_rate(tmp_path, capsys):
+    # As `ikid ik` does: wrist-ik on 100 Hz trials is wrist-ik-100hz (it said to resample).
+    folder = tmp_path / "trials"
+    folder.mkdir()
+    ikid.simulate("random", seed=9931, duration=3.0, output_every=10).save(folder / "s01_t1")
+    (folder / "s01_t1.npz").unlink()
+    assert cli(["report", "--data", str(folder), "--clean-only", "-o", str(tmp_path / "r.md")]) == 0
+    assert "`wrist-ik-100hz`" in (tmp_path / "r.md").read_text(encoding="utf-8")
+    capsys.readouterr()
+
+
 def test_lab_folder_problems_are_named(lab, tmp_path):
     from ikid.recordings import load_lab_recordings
 

@@ -87,7 +87,19 @@ def run(args: argparse.Namespace) -> int:
         )
     recs = D.load_lab_recordings(args.data, args.map, model.frame_rate_hz if args.resample else None)
     rates = {r.meta["rate_hz"] for r in recs}
-    from ikid.pipeline import check_rate
+    from ikid.pipeline import check_rate, family_members, same_rate
+
+    if len(rates) == 1 and not args.resample:
+        # A family's name (wrist-ik) is its member at the trials' rate, as for `ikid ik`.
+        rate = next(iter(rates))
+        member = [m for m in family_members(args.model) if same_rate(rate, m.frame_rate_hz)]
+        if member and not same_rate(rate, model.frame_rate_hz):
+            model = _model_for(
+                member[0].name,
+                "ikid report --model",
+                ("ik", "chain", "id"),
+                allow_unchecked=args.allow_unchecked_model,
+            )
 
     for rate in rates:
         check_rate(model, rate, str(args.data), allow_resample=False)
