@@ -199,3 +199,25 @@ def test_a_nights_batch_names_every_failed_trial_and_touches_nothing_else(tmp_pa
             "is not refused yet; its outputs were written"
         )
     assert re.search(broken[UNITS], failed[UNITS]), failed[UNITS]
+
+
+def test_a_folder_names_its_subfolders_of_trials_and_stems_named_twice(tmp_path, capsys):
+    # A folder is searched, not its subfolders: trials there were passed by without a word ("1/1
+    # files processed"); two inputs of one stem were refused without naming them.
+    from ikid.cli import main as cli
+
+    t = ikid.simulate("random", seed=9932, duration=0.3)
+    (tmp_path / "lab" / "s02").mkdir(parents=True)
+    write_trc(tmp_path / "lab" / "a.trc", t.time, t.markers)
+    write_trc(tmp_path / "lab" / "s02" / "b.trc", t.time, t.markers)
+    assert cli(["ik", str(tmp_path / "lab"), "-o", str(tmp_path / "out")]) == 0
+    sub = str(tmp_path / "lab" / "s02")
+    assert f"subfolders are not searched ({sub} hold marker files: name them too)" in capsys.readouterr().err
+    (tmp_path / "empty" / "s03").mkdir(parents=True)
+    write_trc(tmp_path / "empty" / "s03" / "c.trc", t.time, t.markers)
+    assert cli(["ik", str(tmp_path / "empty"), "-o", str(tmp_path / "o4")]) == 2
+    assert "subfolders are not searched" in capsys.readouterr().err
+    write_trc(tmp_path / "lab" / "s02" / "a.trc", t.time, t.markers)
+    assert cli(["ik", str(tmp_path / "lab"), sub, "-o", str(tmp_path / "o5")]) == 2
+    err = capsys.readouterr().err
+    assert f"several inputs are named a ({tmp_path / 'lab' / 'a.trc'}, {sub}/a.trc)" in err, err

@@ -158,15 +158,27 @@ def _inputs(paths: list[str]) -> list[Path]:
     from ikid.io import MARKER_READERS
 
     found: list[Path] = []
+    unsearched: list[str] = []  # subfolders holding marker files: named, never silently passed by
     for p in map(Path, paths):
         if p.is_dir():
             found += sorted(f for f in p.iterdir() if f.suffix.lower() in MARKER_READERS)
+            unsearched += sorted(
+                str(d)
+                for d in p.iterdir()
+                if d.is_dir() and any(f.suffix.lower() in MARKER_READERS for f in d.iterdir())
+            )
         elif os.path.lexists(p):
             found.append(p)
         else:
             raise ikid.NotFoundError(f"{p}: no such file or folder")
+    shown = ", ".join(unsearched[:3]) + (" ..." if len(unsearched) > 3 else "")
+    inside = f"; subfolders are not searched ({shown} hold marker files: name them too)" if unsearched else ""
     if not found:
-        raise ikid.ArgumentError(f"no marker files ({', '.join(MARKER_READERS)}) in {', '.join(paths)}")
+        raise ikid.ArgumentError(
+            f"no marker files ({', '.join(MARKER_READERS)}) in {', '.join(paths)}{inside}"
+        )
+    if inside:
+        warnings.warn(f"{len(found)} marker files in {', '.join(paths)}{inside}", UserWarning, stacklevel=2)
     return found
 
 

@@ -160,8 +160,10 @@ def process_files(args: argparse.Namespace) -> int:
     stems = [p.stem for p in inputs]
     clash = sorted({s for s in stems if stems.count(s) > 1})
     if many and clash:
+        named = "; ".join(", ".join(str(p) for p in inputs if p.stem == c) for c in clash[:3])
         raise ikid.ArgumentError(
-            f"several inputs are named {', '.join(clash)}; their outputs would overwrite each other"
+            f"several inputs are named {', '.join(clash)} ({named}); their outputs would overwrite each "
+            "other: give one of each, or move the others elsewhere"
         )
     # Several inputs, or -o naming a folder: outputs inside it, named after their inputs.
     out = Path(args.output)
