@@ -151,3 +151,14 @@ def test_a_short_frame_names_a_marker_frame_for_a_model_that_reads_markers():
         assert f"{model.feature_set!r}" not in str(e.value) or model.feature_set == "markers", str(e.value)
     with pytest.raises(ikid.InputError, match="marker frame"):
         ikid.Tracker().push(np.zeros(17))
+
+
+def test_forward_markers_refuses_angles_beyond_a_half_turn_as_degrees_given():
+    # Every posture has angles within ±π; [[10, 20, -5]] (degrees) were taken as radians and gave
+    # markers of a hand turned round and round, silently.
+    with pytest.raises(
+        ikid.ArgumentError, match=r"row 0: ra_wr_s_p is 10 rad \(573°\), beyond ±π.*degrees given"
+    ):
+        ikid.forward_markers(np.array([[10.0, 20.0, -5.0]]))
+    at_limit = np.array([[np.pi, 0.0, -np.pi]])
+    assert np.isfinite(ikid.forward_markers(at_limit)).all()

@@ -587,6 +587,19 @@ impl BodyModel {
                 detail: format!("row {}: {name} is {}", i / N_COORDINATES, q[i]),
             });
         }
+        // Every posture has angles within ±π: beyond is a unit mistake (degrees), not a wrist.
+        if let Some(i) = q.iter().position(|v| v.abs() > std::f64::consts::PI + 1e-9) {
+            let name = COORDINATES[i % N_COORDINATES].name;
+            return Err(Error::BadArgument {
+                what: "q",
+                detail: format!(
+                    "row {}: {name} is {} rad ({:.0}°), beyond ±π: the angles are radians (degrees given?)",
+                    i / N_COORDINATES,
+                    q[i],
+                    q[i].to_degrees()
+                ),
+            });
+        }
         if !shoulder_flexion.is_finite() {
             return Err(Error::BadArgument { what: "shoulder_flexion", detail: format!("is {shoulder_flexion}") });
         }
