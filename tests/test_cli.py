@@ -815,6 +815,18 @@ def test_track_writes_the_trackers_angles_and_torques(
 # --- outputs: -o FOLDER/, outputs that go together, errors as messages -------------------------
 
 
+def test_simulate_below_100_hz_keeps_every_kth_step_of_a_1_khz_physics(tmp_path, capsys):
+    # --rate 60 was refused as "dt is 0.0166...: a step between 0 and 0.01 s": the option is the
+    # output rate; the physics keeps its ≤ 10 ms step (17 steps of 1/1020 s a frame).
+    assert cli(["simulate", "--rate", "60", "--duration", "2", "-o", str(tmp_path / "s")]) == 0
+    data = ikid.io.read_trc(tmp_path / "s.trc")
+    assert data.rate_hz == 60.0 and len(data.time) >= 120  # the protocol ends its last move
+    np.testing.assert_allclose(np.diff(data.time), 1 / 60, atol=1e-6)
+    t, q = read_mot(tmp_path / "s.mot")
+    assert len(t) == len(data.time) and np.ptp(q, axis=0).min() > 0.05  # it moves
+    capsys.readouterr()
+
+
 @pytest.fixture
 def trc(trial, tmp_path) -> Path:
     (tmp_path / "in").mkdir()
@@ -1050,6 +1062,20 @@ def test_a_bare_name_that_is_not_shipped_is_not_a_path(tmp_path, monkeypatch):
 
 
 # --- stream: lost frames, buffer, summary and exit status --------------------------------------
+
+
+def test_stream_numbers_no_unreadable_line_and_does_not_count_it_lost(trial, monkeypatch, capsys):
+    # Frame 50's line unreadable, frames 80-82 dropped: the unreadable line is written with no
+    # frame number (it was the receive count, a number another row also had) and 3 are lost, not 4.
+    lines = [f"{n}," + csv_lines(trial.markers[n : n + 1]).strip() for n in range(120) if not 80 <= n < 83]
+    lines[50] = "50,abc"
+    monkeypatch.setattr(sys, "stdin", io.StringIO("\n".join(lines) + "\n"))
+    assert cli(["stream", "--rate", "1000", "--frame-number"]) == 3
+    captured = capsys.readouterr()
+    rows = [line.split(",", 2) for line in captured.out.strip().splitlines()[1:]]
+    assert rows[50][0] == "" and rows[50][1].startswith("refused:")
+    assert [r[0] for r in rows].count("50") == 0 and len(rows) == 117
+    assert "3 lost (by frame number)" in captured.err, captured.err
 
 
 def test_stream_counts_frames_lost_from_their_times(trial, monkeypatch, capsys):

@@ -246,6 +246,8 @@ class _Losses:
         self.jumps = 0
         #: The first steps between time stamps, s: what rate the source sends at.
         self.steps: list[float] = []
+        #: Unreadable lines since the last frame number: frames that came, not lost.
+        self.unnumbered = 0
 
     def number(self, n: int) -> None:
         last = self.last_number
@@ -259,8 +261,10 @@ class _Losses:
             self.reanchors += 1
             last = None
         if last is not None:
-            self.lost += n - last - 1
+            # Lines that came unreadable since the last number took some of the numbers between.
+            self.lost += max(0, n - last - 1 - self.unnumbered)
         self.last_number, self.candidate, self.candidate_frames = n, None, 0
+        self.unnumbered = 0
 
     def time(self, t: float) -> None:
         if self.last_time is not None and len(self.steps) < self.RATE_STEPS and t > self.last_time:
@@ -591,6 +595,11 @@ def _run_with(
             status, values, label = "ok", "", f.number if f.number is not None else frame
             try:
                 if f.error is not None:
+                    if numbered:
+                        # Its number is unknown (the line is unreadable): none is made up, and the
+                        # next number's jump does not count it lost.
+                        label = ""
+                        losses.unnumbered += 1
                     raise _Refused(f.error, "unreadable frame" if live else "unreadable line")
                 if f.number is not None:
                     try:
