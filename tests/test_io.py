@@ -63,6 +63,19 @@ def test_trc_round_trip_keeps_positions_and_gaps(trial, tmp_path, units):
     np.testing.assert_allclose(data.time, trial.time, atol=1e-6)
 
 
+def test_a_gap_before_the_filler_knows_the_wrist_is_counted_with_why_and_what_carries_through(
+    trial, tmp_path, capsys
+):
+    # MC2 unseen at 0.3 s: no joint centre yet to fill it from. The summary said "(not fillable)".
+    gap = trial.markers.copy()
+    gap[300:320, 9:12] = np.nan
+    path = io.write_trc(tmp_path / "early.trc", trial.time, gap, trial.rate_hz)
+    assert cli(["ik", str(path), "-o", str(tmp_path / "early.mot")]) == 0
+    out = capsys.readouterr().out
+    assert "20 missing MC2 (not fillable: the gap filler had not yet located the wrist's centre" in out, out
+    assert "`ikid track` carries through such gaps" in out
+
+
 def test_trc_times_printed_to_a_few_decimals_agree_with_the_header_rate(tmp_path):
     # 120 Hz with times to the ms (steps of 8 and 9 ms): the mean regular step is the header's.
     trial = ikid.simulate("random", seed=52, duration=1.0, output_every=1)

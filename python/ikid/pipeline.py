@@ -216,7 +216,15 @@ def refusal_reason(error: _native.InputError) -> str:
     stable code; never the message, whose numbers differ from frame to frame)."""
     markers = ", ".join(error.markers)
     if error.code == "missing_markers":
-        return f"missing {markers} (not fillable)"
+        # The core's fixed reason (no numbers in it) for a gap before the filler knows the wrist.
+        early = "locate the joint centre" in (error.reason or "")
+        why = (
+            ": the gap filler had not yet located the wrist's centre from the motion before it; "
+            "`ikid track` carries through such gaps"
+            if early
+            else ""
+        )
+        return f"missing {markers} (not fillable{why})"
     if error.code == "outlier_marker":
         return f"{markers} jumped"
     if error.code == "non_finite_input":
