@@ -606,7 +606,7 @@ def _arm_map(side: str, forearm: tuple[str, str, str], landmarks: dict[str, str]
 def test_mirror_calibration_reads_a_hand_built_left_arms_angles_and_refuses_what_it_cannot_know(
     tmp_path, capsys
 ):
-    t = np.linspace(0.0, 1.0, 70)
+    t = np.arange(70) / 70.0  # at the 70 Hz its file says (DataRate is checked against the times)
     q = np.zeros((70, 3))
     q[20:] = np.stack([0.4 * np.sin(6 * t[20:]), 0.7 * np.sin(9 * t[20:]), 0.25 * np.cos(5 * t[20:])], axis=1)
     q[20:] -= q[20]  # from the neutral posture (the first 20 frames)
