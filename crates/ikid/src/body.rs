@@ -790,4 +790,25 @@ mod tests {
         assert!((big.hand.mass - 1.1 * base.hand.mass).abs() < 1e-15);
         assert!((big.marker_offsets[3][1] - 1.2 * base.marker_offsets[3][1]).abs() < 1e-15);
     }
+
+    #[test]
+    fn marker_frames_take_angles_within_a_half_turn_and_name_the_first_beyond_it() {
+        let body = super::BodyModel::default();
+        let pi = std::f64::consts::PI;
+        // Every posture has angles within ±π: the bounds themselves are postures.
+        assert!(body.marker_frames(&[pi, 0.0, -pi, 0.0, pi / 2.0, 0.0], 0.0).is_ok());
+        // Degrees given as radians: refused, naming the row, the coordinate and both units.
+        for (q, row, name, shown) in [
+            (vec![0.0, 0.0, 0.0, 0.1, 0.2, 10.0], 1, "ra_wr_ad_ab", "10 rad (573°)"),
+            (vec![-4.0, 20.0, 0.0], 0, "ra_wr_s_p", "-4 rad (-229°)"),
+            (vec![0.0, 0.0, 0.0, 0.0, pi + 1e-6, 0.0], 1, "ra_wr_e_f", "rad (180°)"),
+        ] {
+            let err = body.marker_frames(&q, 0.0).unwrap_err().to_string();
+            assert!(err.contains(&format!("row {row}: {name} is")) && err.contains(shown), "{err}");
+            assert!(err.contains("degrees given?"), "{err}");
+        }
+        // A non-finite value is named the same way (its coordinate, its row).
+        let err = body.marker_frames(&[0.0, 0.0, 0.0, 0.0, 0.0, f64::NAN], 0.0).unwrap_err().to_string();
+        assert!(err.contains("row 1: ra_wr_ad_ab is NaN"), "{err}");
+    }
 }
