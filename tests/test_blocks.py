@@ -180,8 +180,8 @@ def test_a_70hz_recording_runs_one_stream_over_the_model_grid(monkeypatch):
 
 
 def test_grid_points_the_stream_refused_are_said_not_called_time_gaps(monkeypatch):
-    # A 71 Hz recording with no time gap, MC2 missing in every 5th frame: points of the 1 kHz
-    # grid around those frames miss MC2 and the stream refuses some; the window restarts after
+    # A 71 Hz recording with no time gap, MC2 and MC5 missing in every 5th frame: points of the
+    # 1 kHz grid around those frames miss them and the stream refuses some; the window restarts after
     # them. The summary counts them by reason instead of reporting time gaps the file does not
     # have (real racing: 3 grid points, "MC2, MCB jumped", read as "1 window restarts after
     # time gaps").
@@ -190,7 +190,7 @@ def test_grid_points_the_stream_refused_are_said_not_called_time_gaps(monkeypatc
     assert np.ptp(np.diff(time)) < 1e-9  # evenly spaced: no time gap
     clean = pipeline.run_model("wrist-ik", markers, time)
     assert clean.gap_restarts == 0 and not clean.grid_refused
-    markers[::5, 9:12] = np.nan
+    markers[::5, 9:15] = np.nan  # MC2 and MC5: not fillable, from the motion before or after
     refusals = []
     push = pipeline._push
 

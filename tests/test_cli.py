@@ -711,7 +711,7 @@ def test_track_writes_the_trackers_angles_and_torques(
         "uniform", 6, fraction=0.01
     )
     markers = t.markers.copy()
-    markers[0, 9] = np.nan  # the first frame lacks MC2: the tracker starts on the second
+    markers[0, 9:15] = np.nan  # the first frame lacks MC2 and MC5 (not fillable): it starts on the second
     write_trc(tmp_path / "t.trc", t.time, markers, 1000.0)
     assert (
         cli(
@@ -1076,6 +1076,23 @@ def test_stream_numbers_no_unreadable_line_and_does_not_count_it_lost(trial, mon
     assert rows[50][0] == "" and rows[50][1].startswith("refused:")
     assert [r[0] for r in rows].count("50") == 0 and len(rows) == 117
     assert "3 lost (by frame number)" in captured.err, captured.err
+
+
+def test_stream_restarts_the_window_after_frames_lost_by_number(trial, monkeypatch, capsys):
+    # Frames 100-109 never arrive: no output may mix the frames on both sides of the loss
+    # (docs/RELIABILITY.md), so the window fills again from frame 110, as with time stamps.
+    window = ikid.load("wrist-ik").window
+    lines = [f"{n}," + csv_lines(trial.markers[n : n + 1]).strip() for n in range(200) if not 100 <= n < 110]
+    monkeypatch.setattr(sys, "stdin", io.StringIO("\n".join(lines) + "\n"))
+    assert cli(["stream", "--rate", "1000", "--frame-number"]) == 3
+    captured = capsys.readouterr()
+    rows = {int(r[0]): r[1] for r in (line.split(",", 2) for line in captured.out.strip().splitlines()[1:])}
+    assert rows[99] == "ok" and rows[110] == "filling"
+    assert all(rows[n] == "filling" for n in range(110, 110 + window - 1))
+    assert rows[110 + window - 1] == "ok"
+    assert "10 lost (by frame number)" in captured.err and "lost not counted" not in captured.err, (
+        captured.err
+    )
 
 
 def test_stream_counts_frames_lost_from_their_times(trial, monkeypatch, capsys):

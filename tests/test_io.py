@@ -63,17 +63,87 @@ def test_trc_round_trip_keeps_positions_and_gaps(trial, tmp_path, units):
     np.testing.assert_allclose(data.time, trial.time, atol=1e-6)
 
 
-def test_a_gap_before_the_filler_knows_the_wrist_is_counted_with_why_and_what_carries_through(
-    trial, tmp_path, capsys
+@pytest.mark.parametrize(("command", "start"), [("ik", 300), ("ik", 0), ("track", 0)])
+def test_a_gap_before_the_filler_knows_the_wrist_is_filled_from_the_motion_after_it(
+    trial, tmp_path, capsys, command, start
 ):
-    # MC2 unseen at 0.3 s: no joint centre yet to fill it from. The summary said "(not fillable)".
+    # MC2 unseen from the first frame or at 0.3 s, before the gap filler has located the wrist
+    # from the motion: live, those frames have no output (ik refused them; track starts on the
+    # first complete frame). A file is whole: they are filled from the motion after them,
+    # flagged, and as close to the simulator's truth as the frames after them.
     gap = trial.markers.copy()
-    gap[300:320, 9:12] = np.nan
+    gap[start : start + 20, 9:12] = np.nan
+    path = io.write_trc(tmp_path / "early.trc", trial.time, gap, trial.rate_hz)
+    out_file = tmp_path / ("early.mot" if command == "ik" else "early")
+    assert cli([command, str(path), "-o", str(out_file)]) == 0
+    out = capsys.readouterr().out
+    n = len(trial.time)
+    if command == "ik":
+        assert f"{n}/{n} frames with output, 20 with a filled marker" in out, out
+    else:
+        assert f"{n}/{n} frames tracked from frame 0" in out and "20 filled" in out, out
+    table = io.read_storage(tmp_path / "early.mot")
+    status = table.column("ikid_status").astype(int)
+    filled = (status & ikid.FRAME_STATUS["filled"]) != 0
+    assert np.array_equal(np.flatnonzero(filled), np.arange(start, start + 20))
+    q = np.radians(table.select(ikid.coordinate_names()))
+    err = np.degrees(np.abs(q - trial.q)).max(axis=1)
+    gap_err, after = err[start : start + 20].max(), err[start + 20 : start + 60].max()
+    assert gap_err < max(3.0 * after, 0.5), (gap_err, after)
+
+
+def test_leading_gaps_are_filled_from_the_motion_after_them_and_nothing_else_is_touched():
+    # Oracle: the frames themselves and the simulator's markers. A recording without gaps has
+    # nothing filled; in the first LEADING_FILL_S the gaps are filled from the motion after
+    # them, where the marker was; past them nothing is; the frames always come back as they
+    # were, in order, and the fills do not depend on how the recording is cut into blocks.
+    from ikid.pipeline import LEADING_FILL_S, fill_leading_gaps
+
+    trial = ikid.simulate("random", seed=7002, duration=LEADING_FILL_S + 2.0)
+    rate, markers = trial.rate_hz, trial.markers.astype(np.float64)
+
+    def blocks(frames, size):
+        return [(trial.time[k : k + size], frames[k : k + size]) for k in range(0, len(frames), size)]
+
+    assert all(filled is None for _, _, filled in fill_leading_gaps(blocks(markers, 4000), rate))
+
+    gappy = markers.copy()
+    gappy[300:320, 9:12] = np.nan  # before the filler knows the wrist
+    gappy[1700:1720, 12:15] = np.nan
+    late = int(LEADING_FILL_S * rate) + 500
+    gappy[late : late + 20, 12:15] = np.nan  # past the start: untouched
+    results = []
+    for size in (4000, 777):
+        got = list(fill_leading_gaps(blocks(gappy, size), rate))
+        assert np.array_equal(np.concatenate([t for t, _, _ in got]), trial.time)
+        assert np.array_equal(np.concatenate([f for _, f, _ in got]), gappy, equal_nan=True)
+        results.append(np.concatenate([f if g is None else g for _, f, g in got]))
+    filled = results[0]
+    np.testing.assert_array_equal(results[1], filled)
+    changed = np.flatnonzero((np.isnan(gappy) != np.isnan(filled)).any(axis=1))
+    assert np.array_equal(changed, np.r_[300:320, 1700:1720])
+    untouched = np.ones(len(filled), bool)
+    untouched[changed] = False
+    assert np.array_equal(filled[untouched], gappy[untouched], equal_nan=True)
+    # Filled where the marker is: the rigid hand carries it (1 mm on clean markers).
+    assert np.abs(filled[changed][:, 9:15] - markers[changed][:, 9:15]).max() < 1e-3
+
+
+@pytest.mark.parametrize("rate", [200.0, 100.0])
+def test_a_leading_gap_is_filled_at_a_rate_with_or_without_a_model_of_its_own(rate, tmp_path, capsys):
+    # 200 Hz runs the 1 kHz model on its grid between the recording's frames, 100 Hz a model of
+    # its own: both fill a leading gap the same way, and only where the stream refused it.
+    trial = ikid.simulate("random", seed=7003, duration=4.0, output_every=int(1000 / rate))
+    gap = trial.markers.copy()
+    gap[int(0.2 * rate) : int(0.5 * rate), 12:15] = np.nan  # MC5 unseen from 0.2 to 0.5 s
     path = io.write_trc(tmp_path / "early.trc", trial.time, gap, trial.rate_hz)
     assert cli(["ik", str(path), "-o", str(tmp_path / "early.mot")]) == 0
     out = capsys.readouterr().out
-    assert "20 missing MC2 (not fillable: the gap filler had not yet located the wrist's centre" in out, out
-    assert "`ikid track` carries through such gaps" in out
+    n, k = len(trial.time), int(0.3 * rate)
+    assert f"{n}/{n} frames with output, {k} with a filled marker" in out, out
+    table = io.read_storage(tmp_path / "early.mot")
+    filled = (table.column("ikid_status").astype(int) & ikid.FRAME_STATUS["filled"]) != 0
+    assert np.array_equal(np.flatnonzero(filled), np.arange(int(0.2 * rate), int(0.5 * rate)))
 
 
 def test_trc_times_printed_to_a_few_decimals_agree_with_the_header_rate(tmp_path):

@@ -34,6 +34,12 @@ card's ``frame_rate_hz`` (the suffix only finds the files). For a recording at r
 
 A model given as a file (or an explicit per-rate name, or a loaded :class:`ikid.Model`) is
 that model: at another rate than its card's it is refused unless ``resample_to_model``.
+
+**A gap at the start of a recording** (:func:`fill_leading_gaps`). Live, a marker missing before
+the gap filler has learned the wrist from the motion cannot be filled. A file is whole: a frame
+of its first :data:`LEADING_FILL_S` that the stream refuses for such a gap is pushed again with
+the gap filled from the motion after it (the same filler, run backwards in time), flagged
+``filled``.
 """
 
 from __future__ import annotations
@@ -219,8 +225,8 @@ def refusal_reason(error: _native.InputError) -> str:
         # The core's fixed reason (no numbers in it) for a gap before the filler knows the wrist.
         early = "locate the joint centre" in (error.reason or "")
         why = (
-            ": the gap filler had not yet located the wrist's centre from the motion before it; "
-            "`ikid track` carries through such gaps"
+            ": the gap filler had not yet located the wrist's centre from the motion around it; "
+            "`ikid track` carries through such gaps once it has started"
             if early
             else ""
         )
@@ -332,6 +338,76 @@ def pick_model(
     return chosen, ("resample" if resample_to_model else "at_frames")
 
 
+#: How much of a recording's start :func:`fill_leading_gaps` fills from the motion after it, s
+#: (held from its first gap: at most 10 s at 1 kHz, 1.4 MB): the gap filler needs enough wrist
+#: motion to locate the wrist (about ±10° about every axis), which a session's first seconds
+#: may not have.
+LEADING_FILL_S = 10.0
+
+
+def fill_leading_gaps(
+    blocks: Iterable[tuple[np.ndarray, np.ndarray]], rate_hz: float | None
+) -> Iterable[tuple[np.ndarray, np.ndarray, np.ndarray | None]]:
+    """``(time, frames, filled)`` for each ``(time, frames)`` block of a recording of marker
+    frames (18 values), in order (a block may come in parts). ``filled`` is ``frames`` with the
+    missing markers of the recording's first :data:`LEADING_FILL_S` filled from the motion after
+    them — :func:`ikid.fill_gaps` run backwards in time, from the end of those seconds to their
+    first gap —, or ``None`` where a part has nothing filled. A gap it cannot fill (two markers
+    of a segment) stays missing. Where to use them is the caller's: :func:`run_blocks` pushes a
+    filled frame only where its stream refuses the frame as it is (live, a gap before the filler
+    has learned the wrist from the motion has no output); ``ikid track`` only before its
+    tracker starts. Memory: the frames from the first gap to :data:`LEADING_FILL_S` are held (cut
+    by content and time, so the result does not depend on how the recording is blocked); a
+    recording whose first seconds are whole passes through."""
+    it = iter(blocks)
+    held: list[tuple[np.ndarray, np.ndarray]] = []
+    rest: tuple[np.ndarray, np.ndarray] | None = None
+    t0: float | None = None
+    for time, frames in it:
+        time, frames = np.asarray(time, np.float64), np.asarray(frames, np.float64)
+        if len(time) == 0:
+            continue
+        t0 = float(time[0]) if t0 is None else t0
+        end = int(np.searchsorted(time - t0, LEADING_FILL_S, side="left"))  # frames inside
+        start = 0
+        if not held:
+            gaps = np.flatnonzero(np.isnan(frames[:end]).any(axis=1))
+            start = int(gaps[0]) if len(gaps) else end
+            if start:
+                yield time[:start], frames[:start], None
+        if start < end:
+            held.append((time[start:end], frames[start:end]))
+        if end < len(time):
+            rest = (time[max(start, end) :], frames[max(start, end) :])
+            break
+    if held:
+        frames = np.concatenate([f for _, f in held])
+        filled: np.ndarray | None = None
+        if frames.shape[1] == 18 and rate_hz:
+            backward = _native.fill_gaps(frames[::-1].copy(), unfillable="keep", rate_hz=float(rate_hz))[0][
+                ::-1
+            ]
+            take = _missing(frames) & ~_missing(backward)
+            if take.any():
+                filled = frames.copy()
+                cells = np.repeat(take, 3, axis=1)
+                filled[cells] = backward[cells].astype(np.float64)
+        k = 0
+        for time, block in held:
+            part = None if filled is None else filled[k : k + len(block)]
+            yield time, block, None if part is None or np.array_equal(part, block, equal_nan=True) else part
+            k += len(block)
+    if rest is not None and len(rest[0]):
+        yield rest[0], rest[1], None
+    for time, frames in it:
+        yield time, frames, None
+
+
+def _missing(frames: np.ndarray) -> np.ndarray:
+    """Per frame and marker of ``(n, 18)`` frames: is it missing."""
+    return np.isnan(frames).reshape(len(frames), 6, 3).any(axis=2)
+
+
 #: Frames per block when :func:`run_model` runs over arrays (the same code as a file read in
 #: blocks, :func:`run_blocks`).
 BLOCK_FRAMES = 65536
@@ -427,25 +503,39 @@ def run_blocks(
         missing_markers=missing_markers, calibration=calibration, early_outputs=early_outputs
     )
     tally = _Tally(model.n_outputs, on_rows)
+    # A file is whole: a frame refused for a gap at its start is pushed again with the gap
+    # filled from the motion after it (fill_leading_gaps), and flagged filled. Not on the
+    # --resample path (its frames are the model's grid's).
+    fills = (missing_markers or model.missing_markers) == "fill" and model.frame_kind == "markers"
+    with_fills = (
+        fill_leading_gaps(blocks, rate_hz)
+        if fills and rate_hz and how != "resample"
+        else ((t, f, None) for t, f in blocks)
+    )
     bar = _progress(n_frames, source) if progress else None
     resampled_from = None
     try:
         if how == "resample":
             # A block at a time, each stretch between time gaps alone: no frame is made in a gap.
             blocks = resample_stretches(blocks, rate_hz, model.frame_rate_hz)
+            with_fills = ((t, f, None) for t, f in blocks)
             resampled_from, rate_hz = rate_hz, model.frame_rate_hz
         if how == "at_frames":
             grid = _ModelGrid(model, stream, rate_hz, tally)
-            for time, frames in blocks:
-                grid.feed(np.asarray(time, np.float64), np.asarray(frames, np.float64))
+            for time, frames, filled in with_fills:
+                grid.feed(np.asarray(time, np.float64), np.asarray(frames, np.float64), filled)
                 if bar is not None:
                     bar.update(len(time))
             grid.finish()
         else:
-            for time, frames in blocks:
+            for time, frames, filled in with_fills:
                 time = np.asarray(time, np.float64)
-                for t, frame in zip(time, np.asarray(frames, np.float64), strict=True):
-                    tally.add(t, _push(stream, t, frame, model))
+                frames = np.asarray(frames, np.float64)
+                for i, (t, frame) in enumerate(zip(time, frames, strict=True)):
+                    got = _push(stream, t, frame, model)
+                    if filled is not None:
+                        got = _retry_filled(stream, t, got, filled[i], model)
+                    tally.add(t, got)
                 tally.flush()
                 if bar is not None:
                     bar.update(len(time))
@@ -594,6 +684,19 @@ def _push(stream: _native.Stream, t: float, frame: np.ndarray, model: _native.Mo
     return ("out", out, filled, status, stream.filled < model.window, sd)
 
 
+def _retry_filled(stream: _native.Stream, t: float, got: tuple, filled: np.ndarray, model) -> tuple:
+    """``got``; or, where the stream refused its frame for a missing marker that
+    :func:`fill_leading_gaps` filled (``filled``: the frame with it), the outcome of the filled
+    frame, flagged ``filled`` (a refused push leaves the stream as it was)."""
+    if got[0] != "none" or not got[1].startswith("missing ") or np.isnan(filled).any():
+        return got
+    again = _push(stream, t, filled, model)
+    if again[0] != "out":
+        return got
+    _, values, _, status, filling, sd = again
+    return ("out", values, True, status | _native.FRAME_STATUS["filled"], filling, sd)
+
+
 def _combine(a: tuple | None, b: tuple | None, w: float) -> tuple:
     """A recording frame's outcome from those of the model's grid points before (``a``) and
     after (``b``) it, ``w`` of the way to ``b``: the outputs (and their standard deviations: NaN
@@ -640,6 +743,8 @@ class _ModelGrid:
         self.t0: float | None = None
         self.time = np.empty(0)
         self.values = np.empty((0, model.frame_len))
+        #: ``values`` with a file's leading gaps filled (:func:`fill_leading_gaps`), once any are.
+        self.filled: np.ndarray | None = None
         #: Global index of ``self.time[0]``, and the first interval not yet run (global index
         #: of its first frame).
         self.base = 0
@@ -652,7 +757,9 @@ class _ModelGrid:
         #: Time of the end of the last interval run: grid points before it have run.
         self.ran_until = -np.inf
 
-    def feed(self, time: np.ndarray, values: np.ndarray) -> None:
+    def feed(self, time: np.ndarray, values: np.ndarray, filled: np.ndarray | None = None) -> None:
+        """The next recording frames; ``filled``: the same with leading gaps filled (a grid point
+        refused for a missing marker is pushed again from them, flagged filled), or ``None``."""
         if len(time) == 0:
             return
         if not np.all(np.isfinite(time)) or np.any(np.diff(np.concatenate([self.time[-1:], time])) <= 0):
@@ -661,6 +768,11 @@ class _ModelGrid:
             self.t0 = float(time[0])
         if self.labels is not None:
             values = self._put_right(values)
+        if filled is not None or self.filled is not None:
+            if self.filled is None:
+                self.filled = self.values.copy()
+            add = values if filled is None else np.where(np.isnan(values) & ~np.isnan(filled), filled, values)
+            self.filled = np.concatenate([self.filled, add])
         self.time = np.concatenate([self.time, time])
         self.values = np.concatenate([self.values, values])
         self.n_seen += len(time)
@@ -692,8 +804,9 @@ class _ModelGrid:
         frames), then drops the frames no later interval needs."""
         if last < self.next_interval:
             return
-        time, values = self.time, self.values
+        time, values, filled = self.time, self.values, self.filled
         slopes = _local_slopes(time, values, self.gap)
+        filled_slopes = None if filled is None else _local_slopes(time, filled, self.gap)
         assert self.t0 is not None
         for j in range(self.next_interval, last + 1):
             m = j - self.base
@@ -711,8 +824,16 @@ class _ModelGrid:
                     pts[on_a] = values[m]
                     on_b = np.abs(grid_t - t_b) <= self.EPS * self.period
                     pts[on_b] = values[m + 1]
-                    for k, g, p in zip(range(k_first, k_end), grid_t, pts, strict=True):
+                    pts_filled = None
+                    if filled is not None and filled_slopes is not None:
+                        pts_filled, _ = _hermite(
+                            time[m : m + 2], filled[m : m + 2], filled_slopes[m : m + 2], grid_t, np.inf
+                        )
+                        pts_filled[on_a], pts_filled[on_b] = filled[m], filled[m + 1]
+                    for i, (k, g, p) in enumerate(zip(range(k_first, k_end), grid_t, pts, strict=True)):
                         got = _push(self.stream, g, p, self.model)
+                        if pts_filled is not None:
+                            got = _retry_filled(self.stream, g, got, pts_filled[i], self.model)
                         if got[0] == "none" and got[1] != "window filling":
                             self.tally.grid_refused[got[1]] += 1
                         self.outcomes[k] = got
@@ -724,6 +845,10 @@ class _ModelGrid:
         drop = min(self.next_interval - 1, self.next_frame) - self.base
         if drop > 0:
             self.time, self.values = time[drop:], values[drop:]
+            if filled is not None:
+                self.filled = filled[drop:]
+                if np.array_equal(self.filled, self.values, equal_nan=True):
+                    self.filled = None  # the filled frames are behind: no second pass needed
             self.base += drop
 
     def _give_frames(self, upto: int, final: bool = False) -> None:

@@ -56,6 +56,8 @@ def _process_one(job: tuple[str, dict]) -> dict:
         calibration = _subject_calibration(
             first.frames(mapping, whole=False), opt["calibration"], mapping, path
         )
+        # Gravity's direction: torque models depend on it (frames come turned into ikid's +Y up).
+        up, up_from = first.lab_up(mapping.up if mapping else None)
         runs = {}
 
         def frames_of_file():
@@ -117,7 +119,8 @@ def _process_one(job: tuple[str, dict]) -> dict:
             rate_hz=data.rate_hz,
             summary="; ".join(
                 [first_run.summary()]
-                + [f"{kind}: {r.model_note()}" for kind, r in list(runs.items())[1:]]
+                + [f"{kind}: {r.summary()}" for kind, r in list(runs.items())[1:]]
+                + ([f"torques with lab up {up} ({up_from})"] if "torques" in runs else [])
                 + [f"{name} not written: {why}" for name, why in undetermined.items()]
                 + [
                     f"{n} {kind} rows without a standard deviation (the first frames after the window "

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 
 from ikid.io._atomic import WriteError, atomic_outputs
+from ikid.io._common import UP_AXES, to_ikid_lab
 from ikid.io.c3d import read_c3d, write_c3d
 from ikid.io.csv import open_csv_markers, read_csv_markers, write_csv, write_csv_markers
 from ikid.io.mapping import MarkerMap
@@ -88,4 +89,6 @@ __all__ = [
     "write_storage",
     "write_sto",
     "write_trc",
+    "to_ikid_lab",
+    "UP_AXES",
 ]

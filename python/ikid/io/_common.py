@@ -139,3 +139,47 @@ def unit_scale(units: str, source: str) -> float:
 
 def ikid_marker_names() -> list[str]:
     return [m[0] for m in _native.MARKERS]
+
+
+#: The axes a lab may name as its vertical (pointing up, against gravity). ikid's own lab — its
+#: simulator, body model and torque networks — has +Y up, as OpenSim's; a lab with another up
+#: axis is turned into it before frames reach the core (:func:`to_ikid_lab`). Angles do not
+#: depend on it (they are relative between segments); torques do, through gravity.
+UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
+
+#: ikid's lab axes in the coordinates of a lab whose up axis is the key: ``p_ikid = R @ p_lab``,
+#: each a proper rotation (a right arm stays a right arm) taking that axis to +Y.
+_TO_IKID_LAB = {
+    "+y": np.eye(3),
+    "-y": np.diag([1.0, -1.0, -1.0]),
+    "+z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
+    "-z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),
+    "+x": np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+    "-x": np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+}
+
+
+def parse_up(value: object, source: str) -> str:
+    """A lab's up axis as one of :data:`UP_AXES` from ``"z"``, ``"+Z"``, ``"-y"``…; an error
+    naming ``source`` otherwise."""
+    text = str(value).strip().lower() if isinstance(value, str) else ""
+    text = text if text[:1] in "+-" else "+" + text
+    if text not in UP_AXES:
+        raise FileFormatError(
+            f"{source}: up = {value!r}; expected the lab axis pointing up, one of {', '.join(UP_AXES)} "
+            '(Vicon and Qualisys labs are usually "+z", OpenSim\'s "+y")'
+        )
+    return text
+
+
+def to_ikid_lab(positions: np.ndarray, up: str) -> np.ndarray:
+    """``positions`` of a lab whose ``up`` axis (one of :data:`UP_AXES`) points up, in ikid's
+    lab (+Y up): points ``(..., 3)`` or ikid's marker frames ``(..., 18)``. What ``ikid.Tracker``
+    and the torque models take (the readers turn a file's frames themselves, :meth:`MarkerData.lab_up`)."""
+    positions = np.asarray(positions, np.float64)
+    if up == "+y":
+        return positions
+    rotation = _TO_IKID_LAB[parse_up(up, "up")]
+    if positions.shape[-1] == 18:
+        return (positions.reshape(*positions.shape[:-1], 6, 3) @ rotation.T).reshape(positions.shape)
+    return positions @ rotation.T

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ikid.io._atomic import Incomplete, atomic_output
+from ikid.io._common import parse_up
 from ikid.io.markers import FileFormatError, MarkerData, check_readable, unit_scale
 
 #: Wall-clock limit of the child that parses one file, seconds (a corrupt header can make a
@@ -51,6 +52,8 @@ def _parse_into(path: str, out: str) -> None:
         labels += list(point[f"LABELS{k}"]["value"])
         k += 1
     units = point["UNITS"]["value"][0] if "UNITS" in point and len(point["UNITS"]["value"]) else ""
+    # The axis the lab displays upwards (Vicon and Qualisys write "+Z", OpenSim's exports "+Y").
+    screen = point.get("Y_SCREEN", {}).get("value", [])
     np.savez(
         out,
         points=np.asarray(c["data"]["points"], np.float64),
@@ -61,6 +64,7 @@ def _parse_into(path: str, out: str) -> None:
             float(point["RATE"]["value"][0]) if len(point["RATE"]["value"]) else float(header["frame_rate"])
         ),
         first_frame=np.array(int(header["first_frame"])),
+        y_screen=np.array(str(screen[0]).strip() if len(screen) else ""),
     )
 
 
@@ -127,6 +131,7 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
             labels = tuple(str(s).strip() for s in z["labels"])
             units, rate = str(z["units"]), float(z["rate"])
             first_frame = int(z["first_frame"])
+            y_screen = str(z["y_screen"]) if "y_screen" in z else ""
     n_frames = points.shape[2]
     announced = _header_frame_count(path)
     if announced is not None:
@@ -145,9 +150,12 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
     scale = unit_scale(units, src)
     positions = np.transpose(points[:3], (2, 1, 0)) * scale
     positions[(residuals[0].T < 0) | ~np.isfinite(positions).all(axis=2)] = np.nan
-    return MarkerData(
-        labels, np.arange(n_frames) / rate, positions, rate, src, units, {"first_frame": first_frame}
-    )
+    metadata: dict = {"first_frame": first_frame}
+    try:
+        metadata |= {"up": parse_up(y_screen, src), "up_from": f"the C3D's POINT:Y_SCREEN = {y_screen!r}"}
+    except FileFormatError:
+        pass  # none, or not an axis: the file does not say which way is up
+    return MarkerData(labels, np.arange(n_frames) / rate, positions, rate, src, units, metadata)
 
 
 def write_c3d(path: str | os.PathLike[str], data: MarkerData, units: str = "mm") -> Path:
@@ -163,6 +171,8 @@ def write_c3d(path: str | os.PathLike[str], data: MarkerData, units: str = "mm")
     c["parameters"]["POINT"]["RATE"]["value"] = [float(data.rate_hz)]
     c["parameters"]["POINT"]["LABELS"]["value"] = tuple(data.labels)
     c["parameters"]["POINT"]["UNITS"]["value"] = [units]
+    if data.metadata.get("up"):  # the lab's up axis, declared as Vicon and Qualisys declare it
+        c.add_parameter("POINT", "Y_SCREEN", [str(data.metadata["up"]).upper()])
     pts = np.ones((4, len(data.labels), len(data)))
     pts[:3] = np.transpose(data.positions / scale, (2, 1, 0))
     c["data"]["points"] = pts

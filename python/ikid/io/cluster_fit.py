@@ -47,7 +47,7 @@ def fit_clusters(mapping: MarkerMap, data: MarkerData, columns: np.ndarray, shap
                 f"{', '.join(data.labels)}"
             )
         cluster = np.concatenate(
-            [columns[:, first : first + 9]] + [data.marker(lab) for lab in extra], axis=1
+            [columns[:, first : first + 9]] + [data.marker(lab, mapping.up) for lab in extra], axis=1
         )
         key = (source, segment)
         named = (

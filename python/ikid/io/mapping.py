@@ -54,7 +54,7 @@ import numpy as np
 
 from ikid import _native
 from ikid.io import cluster_fit, marker_checks
-from ikid.io._common import FileFormatError, ikid_marker_names, read_text
+from ikid.io._common import FileFormatError, ikid_marker_names, parse_up, read_text
 from ikid.io._common import MarkerMapWarning as MarkerMapWarning  # its old home, re-exported
 
 if sys.version_info >= (3, 11):
@@ -86,6 +86,9 @@ class MarkerMap:
     #: metres, in the technical frame of RSP, USP, FAP (core ``cluster::technical_frame``), as a
     #: calibration measured them (``ikid.calibration.map_with_calibration``).
     forearm_landmarks: np.ndarray | None = field(default=None, compare=False, repr=False)
+    #: The lab axis pointing up (one of ``UP_AXES``), if the map says: it decides over the
+    #: file's declaration (``MarkerData.lab_up``). Torques depend on it, angles do not.
+    up: str | None = None
 
     @staticmethod
     def identity() -> MarkerMap:
@@ -147,6 +150,7 @@ class MarkerMap:
                     f"{source}: label {markers[m]!r} is given to both {seen[markers[m]]} and {m}"
                 )
             seen[markers[m]] = m
+        up = parse_up(table["up"], source) if "up" in table else None
         side = table.get("side", "right")
         if side not in ("right", "left"):
             raise FileFormatError(f'{source}: side = {side!r}; expected "right" or "left"')
@@ -247,6 +251,7 @@ class MarkerMap:
             side,
             clusters,
             forearm_cluster=forearm_cluster,
+            up=up,
         )
 
     @staticmethod
@@ -380,7 +385,9 @@ class MarkerMap:
     def forearm_landmark_points(self, data: MarkerData) -> np.ndarray:
         """``(n, 9)``: the radial styloid, the ulnar styloid and the mid-epicondyles from the
         map's landmark labels in ``data`` (metres, NaN where one is missing)."""
-        lateral, medial, radial, ulnar = (data.marker(lab) for lab in self.landmark_labels_in_order(data))
+        lateral, medial, radial, ulnar = (
+            data.marker(lab, self.up) for lab in self.landmark_labels_in_order(data)
+        )
         return np.concatenate([radial, ulnar, (lateral + medial) / 2.0], axis=1)
 
     def with_forearm_landmarks(self, local: np.ndarray) -> MarkerMap:
@@ -464,6 +471,9 @@ class MarkerMap:
             "# ikid marker = the label in your C3D/TRC files",
             f'side = "{self.side}"  # "right" or "left": the arm these markers are on (check it: a wrong '
             "side mirrors every flexion and supination, and markers cannot show it)",
+            (f'up = "{self.up}"' if self.up else '# up = "+z"')
+            + "  # the lab axis pointing up (torques depend on it): a C3D's POINT:Y_SCREEN says it; for a "
+            "TRC, CSV or live source that does not, +y (OpenSim's) is assumed",
             "[markers]",
         ]
         lines += [f'{m} = "{lab}"  # {descr[m]}' for m, lab in self.labels.items()]

@@ -19,6 +19,7 @@ from ikid import _native
 from ikid.io._common import (
     MAX_FILE_BYTES,
     UNITS,
+    UP_AXES,
     FileFormatError,
     check_readable,
     ikid_marker_names,
@@ -26,6 +27,7 @@ from ikid.io._common import (
     read_bytes,
     read_text,
     read_text_lines,
+    to_ikid_lab,
     unit_scale,
 )
 from ikid.io.mapping import MarkerMap
@@ -48,6 +50,7 @@ __all__ = [
     "read_text",
     "read_text_lines",
     "unit_scale",
+    "UP_AXES",
 ]
 
 
@@ -80,14 +83,27 @@ class MarkerData:
     def __len__(self) -> int:
         return len(self.time)
 
-    def marker(self, label: str) -> np.ndarray:
-        """``(n, 3)`` trajectory of one label."""
+    def marker(self, label: str, up: str | None = None) -> np.ndarray:
+        """``(n, 3)`` trajectory of one label in ikid's lab (+Y up): turned from the file's lab,
+        whose up axis is ``up`` (a map's), else the one the file declares, else +Y (:meth:`lab_up`)."""
         try:
-            return self.positions[:, self.labels.index(label)]
+            positions = self.positions[:, self.labels.index(label)]
         except ValueError:
             raise _native.InputError(
                 f"{self.source}: no marker {label!r}; the file has {', '.join(self.labels)}"
             ) from None
+        return to_ikid_lab(positions, self.lab_up(up)[0])
+
+    def lab_up(self, up: str | None = None) -> tuple[str, str]:
+        """The lab axis pointing up (one of :data:`UP_AXES`) and where that comes from: ``up``
+        (a map's ``up``), else the file's own declaration (a C3D's ``POINT:Y_SCREEN``), else
+        ikid's +Y, assumed."""
+        if up:
+            return up, "the map's up"
+        declared = self.metadata.get("up")
+        if declared:
+            return declared, self.metadata.get("up_from", "the file")
+        return "+y", "assumed: neither the file nor the map says; set up in the map"
 
     def frames(self, mapping: MarkerMap | None = None, *, whole: bool = True) -> np.ndarray:
         """ikid's ``(n, 18)`` frames (metres, float64, NaN = missing). ``mapping`` says which
@@ -96,7 +112,9 @@ class MarkerData:
         error there (:func:`check_markers_seen` checks the file once every block is read), and
         the units are checked only if the block has a complete frame."""
         mapping = mapping or MarkerMap.identity()
-        columns = np.concatenate([self.marker(label) for label in mapping.labels_in_ikid_order(self)], axis=1)
+        columns = np.concatenate(
+            [self.marker(label, mapping.up) for label in mapping.labels_in_ikid_order(self)], axis=1
+        )
         source = self.source or "markers"
         if whole:
             check_markers_seen(seen_markers(columns), mapping, source)

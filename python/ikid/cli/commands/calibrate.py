@@ -223,20 +223,20 @@ def run(args: argparse.Namespace) -> int:
         source = read_markers(args.landmarks) if args.landmarks else static
         where = chosen if (chosen is not None and not args.landmarks) else slice(None)
         points = np.concatenate(
-            [source.marker(lab) for lab in mapping.landmark_labels_in_order(source)], axis=1
+            [source.marker(lab, mapping.up) for lab in mapping.landmark_labels_in_order(source)], axis=1
         )[where]
         beside = neutral if source is static else source.frames(mapping)[where]
         hand_labels = mapping.hand_landmark_labels_in_order(source)
         hand_points = (
             None
             if hand_labels is None
-            else np.concatenate([source.marker(lab) for lab in hand_labels], axis=1)[where]
+            else np.concatenate([source.marker(lab, mapping.up) for lab in hand_labels], axis=1)[where]
         )
         if hand_points is None and mapping.one_hand_marker:
             # A one-marker hand's frame is its marker and the styloid line (as Plug-in Gait's):
             # the landmarks it stands for make the calibration read its direction, not zero.
             columns = np.concatenate(
-                [source.marker(lab) for lab in mapping.labels_in_ikid_order(source)], axis=1
+                [source.marker(lab, mapping.up) for lab in mapping.labels_in_ikid_order(source)], axis=1
             )
             columns = mapping.anatomical_forearm(mapping.fit_clusters(source, columns))
             hand_points = ikid._native.one_marker_hand_landmarks(columns)[where]
@@ -259,7 +259,7 @@ def run(args: argparse.Namespace) -> int:
             )
         nan = np.full((len(source), 3), np.nan)
         points = np.concatenate(
-            [source.marker(named[k]) if k in named else nan for k in landmark_names()], axis=1
+            [source.marker(named[k], mapping.up) if k in named else nan for k in landmark_names()], axis=1
         )[where]
         beside = neutral if source is static else source.frames(mapping)[where]
         seen = np.isfinite(points).any()
@@ -379,7 +379,9 @@ def _forearm_landmarks(mapping, source, where) -> dict:
     Refused with fewer than the neutral frames a calibration needs."""
     from ikid.io.mapping import landmark_names
 
-    columns = np.concatenate([source.marker(lab) for lab in mapping.labels_in_ikid_order(source)], axis=1)
+    columns = np.concatenate(
+        [source.marker(lab, mapping.up) for lab in mapping.labels_in_ikid_order(source)], axis=1
+    )
     three = mapping.fit_clusters(source, columns)[:, :9]
     local = ikid._native.points_in_technical_frame(three, mapping.forearm_landmark_points(source), 3)[where]
     local = local[np.isfinite(local).all(axis=1)]

@@ -31,7 +31,8 @@ def run(args: argparse.Namespace) -> int:
     text = MarkerMap.identity().to_toml()
     if args.input:
         _refuse_over_inputs([_stdout_fd()], [args.input])
-        labels = read_markers(args.input).labels
+        data = read_markers(args.input)
+        labels = data.labels
         known = MarkerMap.recognise(labels, args.side)
         head = f"# labels in {args.input}: {', '.join(labels)}\n"
         if known is not None:
@@ -46,6 +47,8 @@ def run(args: argparse.Namespace) -> int:
             raise SystemExit(
                 f"ikid: error: --side: {args.input} has no Plug-in Gait labels of the {args.side} arm"
             )
+        up, up_from = data.lab_up()
+        head += f"# up: {up} ({up_from})\n"
         text = head + text
     print(text, end="")
     return 0

@@ -14,6 +14,7 @@ import numpy as np
 import ikid
 from ikid.cli.common import _model_file, _model_for, _refuse_over_inputs, _stdout_fd
 from ikid.cli.options import PORT, POSITIVE, POSITIVE_INT, unchecked_option
+from ikid.io._common import to_ikid_lab
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -49,6 +50,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="run ikid.Tracker (the extended Kalman filter over the body model) instead of the networks: "
         "angles and torques (<coordinate>_moment), each followed by its standard deviation (<name>_sd, "
         "from the filter's covariance; see docs/live.md for how far to trust it)",
+    )
+    p.add_argument(
+        "--up",
+        default=None,
+        metavar="AXIS",
+        help="the lab axis pointing up (+x, -x, +y, -y, +z, -z): torques depend on it (default: the --map's "
+        "up, else +y, OpenSim's; Vicon and Qualisys labs are usually +z)",
     )
     p.add_argument(
         "--sd",
@@ -390,6 +398,12 @@ def run(args: argparse.Namespace) -> int:
         [_stdout_fd()],
         [stdin, args.calibration, args.map, _model_file(args.model), _model_file(args.torque_model)],
     )
+    from ikid.io._common import parse_up
+
+    if args.up is not None:
+        args.up = parse_up(args.up, "--up")
+    elif args.map:
+        args.up = MarkerMap.load(args.map).up
     source = None
     rate_hz = args.rate
     if args.source is not None:
@@ -545,6 +559,8 @@ def _run_with(
 
         sink = LslSink(args.sink[4:], names, units, rate)
     live = source is not None
+    # Frames in ikid's lab (+Y up): torques depend on which way is up, angles do not.
+    up = args.up or "+y"
     out = sys.stdout
     out.write("frame," + ("time," if live else "") + "status," + ",".join(names) + "\n")
     notes: Counter = Counter()
@@ -603,9 +619,14 @@ def _run_with(
                     raise _Refused(f.error, "unreadable frame" if live else "unreadable line")
                 if f.number is not None:
                     try:
-                        reanchors = losses.reanchors
+                        reanchors, lost = losses.reanchors, losses.lost
                         losses.number(f.number)
                         resynced |= losses.reanchors != reanchors
+                        if losses.lost > lost and f.time is None:
+                            # Frames were lost: what follows does not continue what the window
+                            # holds (with time stamps the stream sees the gap and restarts itself).
+                            for s in streams:
+                                s.reset()
                     except ikid.InputError as e:
                         key = (
                             "frame number too far ahead"
@@ -614,7 +635,12 @@ def _run_with(
                         )
                         raise _Refused(str(e), key) from None
                 try:
-                    results = [s.push(f.values, time=f.time) for s in streams]
+                    frame_values = f.values
+                    if up != "+y" and frame_len == 18:  # marker frames, from a lab of its own
+                        frame_values = to_ikid_lab(
+                            np.asarray(f.values, np.float64).reshape(6, 3), up
+                        ).reshape(18)
+                    results = [s.push(frame_values, time=f.time) for s in streams]
                 except ikid.InputError as e:
                     if _CLOCK_GLITCH in str(e):
                         if f.number is None:
@@ -663,6 +689,8 @@ def _run_with(
     parts = [f"{counts[k]} {k}" for k in ("ok", "filled", "filling", "refused") if counts[k]]
     if numbered or timed:
         parts.append(f"{losses.lost} lost (by {'frame number' if numbered else 'time'})")
+    else:
+        parts.append("lost not counted (no frame numbers or times: --frame-number, --time)")
     if timed and (other := losses.other_rate()) is not None:
         if abs(other * 1e3 / rate - 1.0) <= 0.2:
             parts.append(
@@ -674,8 +702,6 @@ def _run_with(
                 f"the time stamps come {1e3 / other:.3g} ms apart, a {other:.4g} Hz source read at "
                 f"{rate:g} Hz: give --rate {other:.4g} (the family's member at that rate)"
             )
-    else:
-        parts.append("lost not counted (no frame numbers or times: --frame-number, --time)")
     skipped = notes["skipped"]
     if live:
         parts.append(f"{skipped} skipped (read too late: newest taken)")
@@ -689,6 +715,11 @@ def _run_with(
         parts.append(f"{source.ended} end-of-data from QTM")
     if sink is not None:
         parts.append(f"{sink.published} published on lsl:{args.sink[4:]}")
+    if args.tracker or args.torque_model:
+        parts.append(
+            f"lab up {up}"
+            + ("" if args.up else " (assumed: give --up, or up in the --map, if yours is another)")
+        )
     print(f"ikid stream: {frame} frames received at {rate:g} Hz: " + ", ".join(parts), file=sys.stderr)
     if refused:
         print(

@@ -21,7 +21,7 @@ from ikid.cli.common import (
 )
 from ikid.cli.options import SUBJECT_LENGTH, SUBJECT_MASS, _number, unchecked_option
 from ikid.io._atomic import atomic_outputs
-from ikid.pipeline import TURNED_OVER_REASON
+from ikid.pipeline import TURNED_OVER_REASON, fill_leading_gaps
 
 
 def _is_shipped_refiner(refiner: ikid.Model) -> bool:
@@ -135,6 +135,8 @@ def run(args: argparse.Namespace) -> int:
     calibration = _subject_calibration(
         first.frames(mapping, whole=False), args.calibration, mapping, args.input
     )
+    # Gravity's direction: the torques depend on it (the frames come turned into ikid's +Y up).
+    up, up_from = first.lab_up(mapping.up if mapping else None)
     length_scale, mass_scale, size_from = _subject_size(args)
     try:
         tracker = ikid.Tracker(
@@ -165,9 +167,28 @@ def run(args: argparse.Namespace) -> int:
         with_sd = refiner is None or _is_shipped_refiner(refiner)
         write_q = files.enter_context(mot_writer(mot, undetermined=undetermined, with_sd=with_sd))
         write_tau = files.enter_context(sto_writer(sto, undetermined=undetermined, with_sd=with_sd))
-        for block in data.blocks():
-            frames = block.frames(mapping, whole=False)
-            seen |= seen_markers(frames)
+
+        def mapped_blocks():
+            for block in data.blocks():
+                frames = block.frames(mapping, whole=False)
+                np.logical_or(seen, seen_markers(frames), out=seen)
+                yield block.time, frames
+
+        # A file is whole: the gaps before its first complete frame are filled from the motion
+        # after them (fill_leading_gaps), so the tracker starts on the first frame; once it has
+        # started it carries through gaps itself.
+        complete_seen = False
+        for time, frames, filled in fill_leading_gaps(mapped_blocks(), data.rate_hz):
+            prefilled = np.zeros(len(frames), bool)
+            if not complete_seen:
+                complete = np.flatnonzero(~np.isnan(frames).any(axis=1))
+                before = int(complete[0]) if len(complete) else len(frames)
+                complete_seen = len(complete) > 0
+                if filled is not None and before:
+                    prefilled[:before] = np.isnan(frames[:before]).any(axis=1) & ~np.isnan(
+                        filled[:before]
+                    ).any(axis=1)
+                    frames = np.where(prefilled[:, None], filled, frames)
             try:
                 out = tracker.run(frames, sd=with_sd)
             except ikid.InputError as e:
@@ -177,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
                 raise type(e)(_naming(args.input, e)) from None
             except ikid.IkidError as e:
                 raise type(e)(_naming(args.input, e)) from None
-            status = out["status"]
+            status = out["status"] | np.where(prefilled, bits["filled"], 0).astype(out["status"].dtype)
             start = out["start"] if k is None else 0
             if k is None:
                 k = n_frames + start
@@ -186,8 +207,8 @@ def run(args: argparse.Namespace) -> int:
             keep &= ~implausible  # nothing no wrist can do is written as a number
             turned_over += int(np.count_nonzero(implausible & (status & bits["turned_over"] != 0)))
             q_sd, tau_sd = (out["q_sd"][keep], out["tau_sd"][keep]) if with_sd else (None, None)
-            write_q(block.time[keep], out["q"][keep], status[keep], q_sd)
-            write_tau(block.time[keep], out["tau"][keep], status[keep], tau_sd)
+            write_q(time[keep], out["q"][keep], status[keep], q_sd)
+            write_tau(time[keep], out["tau"][keep], status[keep], tau_sd)
             for name, bit in bits.items():
                 counts[name] += int(np.count_nonzero(status[keep] & bit))
             flagged_after_start |= bool(status[start:].any())
@@ -226,7 +247,8 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"{args.input}: {kept}/{n_frames} frames tracked from frame {k} "
         f"at {data.rate_hz:g} Hz, subject ×{length_scale:.3g} length, ×{mass_scale:.3g} mass ({size_from}), "
-        f"{placed}, {how}; flagged: {', '.join(notes) or 'none'}; hand marker noise learned (mm): {noise_mm}"
+        f"{placed}, {how}, lab up {up} ({up_from}); flagged: {', '.join(notes) or 'none'}; "
+        f"hand marker noise learned (mm): {noise_mm}"
         + "".join(f"; {name} not written: {why}" for name, why in undetermined.items())
         + (
             "; each value followed by its standard deviation (_sd)"
