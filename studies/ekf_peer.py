@@ -330,7 +330,9 @@ def run_tracker(
     rec: D.Recording, jerk_noise: float, refiner: ikid.Model | None = None
 ) -> dict[str, np.ndarray]:
     """ikid.Tracker over the trial (missing markers NaN: it leaves them out, like the EKF)."""
-    out = ikid.Tracker(**subject(rec), jerk_noise=jerk_noise, refiner=refiner).run(rec.markers)
+    out = ikid.Tracker(
+        **subject(rec), rate_hz=rec.meta["rate_hz"], jerk_noise=jerk_noise, refiner=refiner
+    ).run(rec.markers)
     if out["start"] != 0:
         raise RuntimeError(f"{rec.name}: the tracker started on frame {out['start']}, not the first")
     return out
@@ -484,7 +486,9 @@ def python_latency(
         # ikid.Tracker: one push gives angles, velocities, accelerations and torques; bare and
         # with the shipped refiner (warm: the refiner's window is full after ik.window frames).
         for key, refine_with in (("tracker", None), ("tracker_refined", refiner)):
-            tracker = ikid.Tracker(**subject(rec), jerk_noise=jerk_noise, refiner=refine_with)
+            tracker = ikid.Tracker(
+                **subject(rec), rate_hz=rec.meta["rate_hz"], jerk_noise=jerk_noise, refiner=refine_with
+            )
             t = np.empty(len(frames64), np.int64)
             for i, f in enumerate(frames64):
                 t0 = clock()
@@ -492,7 +496,9 @@ def python_latency(
                 t[i] = clock() - t0
             del out
             ikid_ns[key] = t[ik.window :]
-            tracker = ikid.Tracker(**subject(rec), jerk_noise=jerk_noise, refiner=refine_with)
+            tracker = ikid.Tracker(
+                **subject(rec), rate_hz=rec.meta["rate_hz"], jerk_noise=jerk_noise, refiner=refine_with
+            )
             tracker.run(frames64[: ik.window])
             t0 = clock()
             tracker.run(frames64[ik.window :])
@@ -875,7 +881,7 @@ def markdown(res: dict[str, Any]) -> str:
         "(shipped, markers → torques).",
         "- **wrist-ik → RNEA**: wrist-ik's angles → causal backward differences → `ikid.reference_id` with "
         "the subject's true parameters (`classical_chain` of the evaluation report).",
-        "- **ikid Tracker**: `ikid.Tracker(length_scale, mass_scale, "
+        "- **ikid Tracker**: `ikid.Tracker(length_scale, mass_scale, rate_hz=1000.0, "
         f"jerk_noise={res['tracker_tuning']['chosen']:g})` — the core's extended Kalman filter over the same "
         "body model (state q, q̇, q̈; white-jerk motion model), which estimates each marker coordinate's "
         "noise variance online from its third differences and weighs each coordinate by it; a missing marker "

@@ -41,9 +41,9 @@ def trial(tmp_path_factory):
     refiner = ikid.load(d / "wrist-track.safetensors")
     make_model().save(d / "ik.safetensors")  # a model that cannot refine a tracker
 
-    plain = ikid.Tracker(**SUBJECT)
+    plain = ikid.Tracker(**SUBJECT, rate_hz=1000.0)
     out = plain.run(frames)
-    refined = ikid.Tracker(**SUBJECT, refiner=refiner).run(frames)
+    refined = ikid.Tracker(**SUBJECT, rate_hz=1000.0, refiner=refiner).run(frames)
     assert out["start"] == 3 and refined["start"] == 3
     assert (out["missing"][800:950] == 1 << 4).all() and refined["refined"][1000:].all()
     for name, o in (("expected", out), ("expected_refined", refined)):
@@ -130,7 +130,7 @@ def test_host_example_reports_a_refused_frame(trial):
 def test_python_run_equals_python_push(trial):
     """The C tests compare with ``run``; ``push`` gives the same (the core's run is push one by one)."""
     frames, out = trial[1][:600], trial[2][None]
-    tracker = ikid.Tracker(**SUBJECT)
+    tracker = ikid.Tracker(**SUBJECT, rate_hz=1000.0)
     pushed = [tracker.push(f) for f in frames]
     assert all(p is None for p in pushed[:3])
     stacked = np.stack([p.values for p in pushed[3:] if p is not None])

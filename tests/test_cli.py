@@ -667,7 +667,9 @@ def test_demo_prints_the_errors_and_latency_of_what_it_streamed(capsys, tmp_path
     assert np.isfinite([p50, p99]).all() and 0 < p50 <= p99, m.group(0)
     # The Tracker + wrist-track path on the same frames (issue #31): its printed errors are
     # those of the tracker run over the frames the demo pushed (float32), on the same rows.
-    est = ikid.Tracker(refiner=ikid.load("wrist-track")).run(np.ascontiguousarray(trial.markers, np.float32))
+    est = ikid.Tracker(rate_hz=1000.0, refiner=ikid.load("wrist-track")).run(
+        np.ascontiguousarray(trial.markers, np.float32)
+    )
     assert est["start"] <= ok
     trk = np.degrees(est["q"][ok:] - trial.q[ok:])
     trk_tau = est["tau"][ok:] - trial.tau[ok:]
@@ -733,9 +735,9 @@ def test_track_writes_the_trackers_angles_and_torques(
     # The same frames through the Python API (read back from the file, as the CLI did).
     from ikid.io import read_markers
 
-    expected = ikid.Tracker(length_scale=1.1, mass_scale=1.3, refiner=ikid.load("wrist-track")).run(
-        read_markers(tmp_path / "t.trc").frames(None), sd=True
-    )
+    expected = ikid.Tracker(
+        rate_hz=1000.0, length_scale=1.1, mass_scale=1.3, refiner=ikid.load("wrist-track")
+    ).run(read_markers(tmp_path / "t.trc").frames(None), sd=True)
     assert expected["start"] == 1
     np.testing.assert_allclose(time_mot, t.time[1:], atol=1e-9)
     np.testing.assert_allclose(time_sto, t.time[1:], atol=1e-9)
@@ -767,7 +769,7 @@ def test_track_writes_the_trackers_angles_and_torques(
         )
         == 0
     )
-    bare = ikid.Tracker(length_scale=1.1, mass_scale=1.3).run(
+    bare = ikid.Tracker(rate_hz=1000.0, length_scale=1.1, mass_scale=1.3).run(
         read_markers(tmp_path / "t.trc").frames(None), sd=True
     )
     np.testing.assert_allclose(read_mot(tmp_path / "bare.mot")[1], bare["q"][1:], atol=1e-8)

@@ -446,7 +446,7 @@ def test_the_tracker_path_writes_each_value_with_its_standard_deviation():
     frames = trial_frames(n)
     frames[200:230, 12:15] = np.nan  # MC5 hidden: the tracker goes on without it
     r = subprocess.run(
-        [*IKID, "stream", "--tracker", "--time"],
+        [*IKID, "stream", "--tracker", "--time", "--rate", "1000"],
         input=_stamped_lines(frames, np.arange(n) * 1e-3).replace("nan", ""),
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
@@ -456,7 +456,7 @@ def test_the_tracker_path_writes_each_value_with_its_standard_deviation():
     values = names + [f"{c}_moment" for c in names]
     assert header[2:] == [h for v in values for h in (v, f"{v}_sd")]
     # The oracle: ikid.Tracker on the same frames in this process.
-    tracker = ikid.Tracker()
+    tracker = ikid.Tracker(rate_hz=1000.0)
     for k, row in enumerate(rows):
         out = tracker.push(frames[k])
         sd = tracker.output_sd

@@ -86,7 +86,7 @@ def test_markers_in_the_wrong_units_are_named(scale, cause):
         _native.check_marker_units(frames)
     _native.check_marker_units(frames / scale)  # the right units pass
     with pytest.raises(ikid.InputError, match=cause):
-        ikid.Tracker().run(frames)
+        ikid.Tracker(rate_hz=1000.0).run(frames)
     stream = ikid.load("wrist-ik").stream()
     with pytest.raises(ikid.InputError) as e:
         stream.push(frames[0])

@@ -97,9 +97,15 @@ def test_help_shows_real_defaults():
     assert not bad, bad
     sig = inspect.signature(ikid.Tracker)
     assert sig.parameters["jerk_noise"].default == ikid.DEFAULT_JERK_NOISE
-    assert sig.parameters["rate_hz"].default == ikid.Tracker().settings["rate_hz"]
-    assert sig.parameters["noise_memory_s"].default == ikid.Tracker().settings["noise_memory_s"]
-    assert sig.parameters["initial_marker_noise"].default == ikid.Tracker().settings["initial_marker_noise"]
+    # No default rate: tracked at another rate than the frames', every velocity and torque is wrong.
+    assert sig.parameters["rate_hz"].default is None
+    with pytest.raises(ikid.ArgumentError, match="rate_hz.*required.*the rate the frames come at"):
+        ikid.Tracker()
+    assert sig.parameters["noise_memory_s"].default == ikid.Tracker(rate_hz=1000.0).settings["noise_memory_s"]
+    assert (
+        sig.parameters["initial_marker_noise"].default
+        == ikid.Tracker(rate_hz=1000.0).settings["initial_marker_noise"]
+    )
     text = pydoc.render_doc(ikid.Tracker, renderer=pydoc.plaintext)
     assert "Ellipsis" not in text and f"jerk_noise={ikid.DEFAULT_JERK_NOISE!r}" in text
     # Every constructor argument is explained in the class's docstring.
@@ -111,8 +117,8 @@ def test_tracker_push_gives_the_status_with_the_estimate():
     frames = marker_frames(400, seed=5).astype(np.float64)
     frames[200:230, 3] += 0.05  # a hand marker that jumped: rejected (a status bit)
     frames[300:310, 12:15] = np.nan  # MC5 missing
-    batch = ikid.Tracker().run(frames)
-    tracker = ikid.Tracker()
+    batch = ikid.Tracker(rate_hz=1000.0).run(frames)
+    tracker = ikid.Tracker(rate_hz=1000.0)
     pushed = [tracker.push(f) for f in frames]
     start = batch["start"]
     assert all(p is None for p in pushed[:start]) and all(p is not None for p in pushed[start:])
@@ -150,7 +156,7 @@ def test_a_short_frame_names_a_marker_frame_for_a_model_that_reads_markers():
         assert "marker frame" in str(e.value) and "18" in str(e.value) and "17" in str(e.value), str(e.value)
         assert f"{model.feature_set!r}" not in str(e.value) or model.feature_set == "markers", str(e.value)
     with pytest.raises(ikid.InputError, match="marker frame"):
-        ikid.Tracker().push(np.zeros(17))
+        ikid.Tracker(rate_hz=1000.0).push(np.zeros(17))
 
 
 def test_forward_markers_refuses_angles_beyond_a_half_turn_as_degrees_given():

@@ -32,7 +32,7 @@ def subject(rec: D.Recording) -> dict[str, float]:
 
 
 def test_clean_markers_give_the_true_state_and_torques(trial: D.Recording) -> None:
-    out = ikid.Tracker(**subject(trial)).run(trial.markers)
+    out = ikid.Tracker(**subject(trial), rate_hz=trial.meta["rate_hz"]).run(trial.markers)
     assert out["start"] == 0 and not out["missing"].any()
     late = slice(500, None)  # after the filter's start-up (velocity and acceleration unknown at first)
     # The noise estimate starts from a 1 mm guess that fades as 1/frames: a little lag remains
@@ -50,7 +50,7 @@ def test_clean_markers_give_the_true_state_and_torques(trial: D.Recording) -> No
 
 def test_noisy_markers_beat_the_per_frame_solution_and_the_noise_is_learned(trial: D.Recording) -> None:
     noisy = D.add_noise(trial, "uniform", 0.05, 5)
-    tracker = ikid.Tracker(**subject(trial))
+    tracker = ikid.Tracker(**subject(trial), rate_hz=trial.meta["rate_hz"])
     out = tracker.run(noisy.markers)
     per_frame = ikid.reference_ik(noisy.markers, **subject(trial))
     late = slice(500, None)
@@ -80,8 +80,8 @@ def test_a_forearm_marker_gap_in_noisy_markers_costs_little_and_no_torque_is_lef
     gappy = noisy.markers.copy()
     gap = slice(2000, 2300)
     gappy[gap, 3 * marker : 3 * marker + 3] = np.nan
-    complete = ikid.Tracker(**subject(trial)).run(noisy.markers)
-    out = ikid.Tracker(**subject(trial)).run(gappy)
+    complete = ikid.Tracker(**subject(trial), rate_hz=trial.meta["rate_hz"]).run(noisy.markers)
+    out = ikid.Tracker(**subject(trial), rate_hz=trial.meta["rate_hz"]).run(gappy)
     after = slice(2000, 2800)  # the gap and 500 ms after it
 
     def rms(a: np.ndarray, b: np.ndarray) -> float:
@@ -106,7 +106,7 @@ def test_a_torque_no_wrist_gives_is_flagged_implausible(trial: D.Recording) -> N
     frames[1000:1020] = ikid.forward_markers(
         q[1000:1020], trial.meta["shoulder_flexion_rad"], trial.meta["length_scale"], trial.meta["mass_scale"]
     )
-    out = ikid.Tracker(**subject(trial)).run(frames)
+    out = ikid.Tracker(**subject(trial), rate_hz=trial.meta["rate_hz"]).run(frames)
     beyond = np.abs(out["tau"]).max(axis=1) > TORQUE_LIMIT_NM * trial.meta["mass_scale"]
     assert beyond.any()
     assert (out["status"][beyond] & ikid.FRAME_STATUS["implausible"] != 0).all()
@@ -114,16 +114,18 @@ def test_a_torque_no_wrist_gives_is_flagged_implausible(trial: D.Recording) -> N
 
 def test_push_equals_run_and_accepts_float32_and_lists(trial: D.Recording) -> None:
     frames = D.add_noise(trial, "uniform", 0.01, 6).markers[:300]
-    batch = ikid.Tracker(**subject(trial)).run(frames)
-    one = ikid.Tracker(**subject(trial))
+    batch = ikid.Tracker(**subject(trial), rate_hz=trial.meta["rate_hz"]).run(frames)
+    one = ikid.Tracker(**subject(trial), rate_hz=trial.meta["rate_hz"])
     rows = [one.push(f) for f in frames]
     assert all(r is not None and r.values.shape == (4, 3) for r in rows)
     stacked = np.stack([r.values for r in rows if r is not None])
     for k, name in enumerate(("q", "qd", "qdd", "tau")):
         np.testing.assert_array_equal(stacked[:, k], batch[name])
-    f32 = ikid.Tracker(**subject(trial))
+    f32 = ikid.Tracker(**subject(trial), rate_hz=trial.meta["rate_hz"])
     a = f32.push(frames[0].astype(np.float32))
-    b = ikid.Tracker(**subject(trial)).push(frames[0].astype(np.float32).astype(np.float64).tolist())
+    b = ikid.Tracker(**subject(trial), rate_hz=trial.meta["rate_hz"]).push(
+        frames[0].astype(np.float32).astype(np.float64).tolist()
+    )
     assert a is not None and b is not None
     np.testing.assert_array_equal(a.values, b.values)
 
@@ -132,7 +134,7 @@ def test_missing_markers_are_left_out_and_reported(trial: D.Recording) -> None:
     frames = trial.markers.copy()
     frames[:2, 12] = np.nan  # MC5 missing on the first two frames: the filter waits for a complete one
     frames[1000:1300, 12:15] = np.nan  # MC5 gone for 300 ms later on
-    out = ikid.Tracker(**subject(trial)).run(frames)
+    out = ikid.Tracker(**subject(trial), rate_hz=trial.meta["rate_hz"]).run(frames)
     assert out["start"] == 2
     assert np.isnan(out["q"][:2]).all() and np.isfinite(out["q"][2:]).all()
     assert (out["missing"][1000:1300] == 1 << 4).all() and out["missing"][:2].tolist() == [1 << 4] * 2
@@ -142,7 +144,7 @@ def test_missing_markers_are_left_out_and_reported(trial: D.Recording) -> None:
 
 
 def test_bad_input_is_refused_with_its_name(trial: D.Recording) -> None:
-    tracker = ikid.Tracker()
+    tracker = ikid.Tracker(rate_hz=1000.0)
     with pytest.raises(ikid.InputError, match="18"):
         tracker.push(np.zeros(17))
     bad = trial.markers[0].copy()
@@ -152,25 +154,25 @@ def test_bad_input_is_refused_with_its_name(trial: D.Recording) -> None:
     frames = trial.markers[:10].copy()
     frames[4, 0] = np.inf
     with pytest.raises(ikid.InputError, match="frame 4"):
-        ikid.Tracker().run(frames)
+        ikid.Tracker(rate_hz=1000.0).run(frames)
     with pytest.raises(ikid.InputError, match="none of the 3 frames"):
-        ikid.Tracker().run(np.full((3, 18), np.nan))
+        ikid.Tracker(rate_hz=1000.0).run(np.full((3, 18), np.nan))
     for kw in ({"jerk_noise": 0.0}, {"rate_hz": -1.0}, {"noise_memory_s": np.nan}, {"length_scale": 0.0}):
         with pytest.raises(ikid.InputError, match=next(iter(kw))):
-            ikid.Tracker(**kw)  # type: ignore[arg-type]
+            ikid.Tracker(**{"rate_hz": 1000.0, **kw})  # type: ignore[arg-type]
     with pytest.raises(ikid.InputError, match="frames"):
-        ikid.Tracker().run(np.zeros((4, 5)))
+        ikid.Tracker(rate_hz=1000.0).run(np.zeros((4, 5)))
 
 
 def test_reset_forgets_and_settings_are_reported() -> None:
-    t = ikid.Tracker(jerk_noise=500.0)
+    t = ikid.Tracker(rate_hz=1000.0, jerk_noise=500.0)
     assert t.settings == {
         "rate_hz": 1000.0,
         "jerk_noise": 500.0,
         "noise_memory_s": 10.0,
         "initial_marker_noise": 1e-3,
     }
-    assert ikid.Tracker().settings["jerk_noise"] == ikid.DEFAULT_JERK_NOISE
+    assert ikid.Tracker(rate_hz=1000.0).settings["jerk_noise"] == ikid.DEFAULT_JERK_NOISE
     frame = ikid.forward_markers(np.zeros((1, 3)))[0]
     assert t.push(frame) is not None
     t.reset()
@@ -184,8 +186,10 @@ def test_the_shipped_refiner_improves_noisy_and_leaves_clean_alone(trial: D.Reco
     late = slice(1000, None)
     for level, bound in ((0.0, 1.0 + 1e-3), (0.05, 0.9)):
         noisy = D.add_noise(trial, "uniform", level, 8)
-        bare = ikid.Tracker(**subject(trial)).run(noisy.markers)
-        refined = ikid.Tracker(**subject(trial), refiner=refiner).run(noisy.markers)
+        bare = ikid.Tracker(**subject(trial), rate_hz=trial.meta["rate_hz"]).run(noisy.markers)
+        refined = ikid.Tracker(**subject(trial), rate_hz=trial.meta["rate_hz"], refiner=refiner).run(
+            noisy.markers
+        )
         assert refined["refined"][late].all() and not bare["refined"].any()
         mse = lambda out: np.mean((out["q"][late] - trial.q[late]) ** 2)  # noqa: E731
         ratio = mse(refined) / mse(bare)
@@ -196,8 +200,8 @@ def test_the_shipped_refiner_improves_noisy_and_leaves_clean_alone(trial: D.Reco
 
 def test_a_model_that_is_not_a_refiner_is_refused() -> None:
     with pytest.raises(ikid.InputError, match='refiner: model "wrist-ik" cannot refine a tracker: it reads'):
-        ikid.Tracker(refiner=ikid.load("wrist-ik"))
-    assert ikid.Tracker(refiner=ikid.load("wrist-track")).refiner is not None
+        ikid.Tracker(rate_hz=1000.0, refiner=ikid.load("wrist-ik"))
+    assert ikid.Tracker(rate_hz=1000.0, refiner=ikid.load("wrist-track")).refiner is not None
 
 
 @pytest.fixture(scope="module")

@@ -22,7 +22,7 @@ def test_the_study_tunes_and_scores_on_disjoint_seeds_and_this_test_on_neither()
 
 def test_sd_is_none_before_the_start_and_push_and_run_agree():
     trial = ikid.simulate(seed=SEED, duration=1.0).with_noise("gaussian", SEED + 1, sigma=1e-3)
-    tracker = ikid.Tracker()
+    tracker = ikid.Tracker(rate_hz=1000.0)
     assert tracker.output_sd is None
     pushed = []
     for frame in trial.markers:
@@ -34,8 +34,10 @@ def test_sd_is_none_before_the_start_and_push_and_run_agree():
             continue
         assert sd is not None and sd.shape == (2, 3) and np.all(np.isfinite(sd)) and np.all(sd > 0)
         pushed.append(sd)
-    run = ikid.Tracker().run(np.asarray(trial.markers), sd=True)
-    assert "q_sd" not in ikid.Tracker().run(np.asarray(trial.markers))  # only when asked: it costs
+    run = ikid.Tracker(rate_hz=1000.0).run(np.asarray(trial.markers), sd=True)
+    assert "q_sd" not in ikid.Tracker(rate_hz=1000.0).run(
+        np.asarray(trial.markers)
+    )  # only when asked: it costs
     np.testing.assert_array_equal(run["q_sd"], np.array([p[0] for p in pushed]))
     np.testing.assert_array_equal(run["tau_sd"], np.array([p[1] for p in pushed]))
     assert np.all(np.isnan(run["q_sd"][: run["start"]]))
@@ -51,7 +53,7 @@ def test_sd_covers_about_68_percent_of_the_true_errors(noise):
     # does not count, is most of the angles' error (without it, 0.50 of frames were covered).
     trial = ikid.simulate(seed=SEED, duration=4.0, shoulder_flexion=0.2)
     noisy = trial.with_noise(noise[0], SEED + 1, **noise[1])
-    out = ikid.Tracker().run(np.asarray(noisy.markers), sd=True)
+    out = ikid.Tracker(rate_hz=1000.0).run(np.asarray(noisy.markers), sd=True)
     keep = np.arange(len(trial.time)) >= max(out["start"], 500)
     q_cover = np.mean((np.abs(out["q"] - trial.q) <= out["q_sd"])[keep])
     tau_cover = np.mean((np.abs(out["tau"] - trial.tau) <= out["tau_sd"])[keep])
@@ -91,7 +93,9 @@ def test_a_refined_estimates_sd_covers_about_68_percent_too(noise):
     for k, seed in enumerate(REFINED_SEEDS):
         trial = ikid.simulate(seed=seed, duration=4.0, shoulder_flexion=[0.2, -0.3, 0.5][k])
         noisy = trial.with_noise(noise[0], seed + 1, **noise[1])
-        out = ikid.Tracker(refiner=ikid.load("wrist-track")).run(np.asarray(noisy.markers), sd=True)
+        out = ikid.Tracker(rate_hz=1000.0, refiner=ikid.load("wrist-track")).run(
+            np.asarray(noisy.markers), sd=True
+        )
         keep = (np.arange(len(trial.time)) >= max(out["start"], 500)) & out["refined"]
         assert keep.mean() > 0.8
         q_hits.append((np.abs(out["q"] - trial.q) <= out["q_sd"])[keep])

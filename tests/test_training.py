@@ -331,7 +331,7 @@ def test_wrist_track_matches_torch():
         ],
         0.02,
     )[0]
-    out = ikid.Tracker().run(rec.markers)
+    out = ikid.Tracker(rate_hz=1000.0).run(rec.markers)
     frames = np.column_stack([out["q"], out["qd"], out["qdd"], np.log10(out["noise"])])
     features = ikid.compute_features(frames, "tracker_state")
     idx = D.window_index(len(features), model.window)
@@ -370,7 +370,7 @@ def test_the_refiner_trainer_writes_a_refiner_the_tracker_takes(tmp_path):
     assert model.feature_set == "tracker_state" and model.card["task"] == "refine" and model.window == 8
     assert len(set(prov["seeds"])) == 3 and "+-+" not in prov["octants"]
     rec = D.simulate_one({"name": "r", "protocol": "random", "seed": 9602, "duration": 0.5})
-    out = ikid.Tracker(refiner=model).run(noisy([rec], 0.02)[0].markers)
+    out = ikid.Tracker(rate_hz=1000.0, refiner=model).run(noisy([rec], 0.02)[0].markers)
     assert out["refined"][-1] and np.isfinite(out["tau"]).all()
 
 

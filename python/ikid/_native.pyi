@@ -245,7 +245,7 @@ class Tracker:
         length_scale: float = 1.0,
         mass_scale: float = 1.0,
         marker_shift: _Floats | None = None,
-        rate_hz: float = 1000.0,
+        rate_hz: float | None = None,
         jerk_noise: float = 3000.0,
         noise_memory_s: float = 10.0,
         initial_marker_noise: float = 1e-3,

@@ -153,7 +153,7 @@ def clean(corpus_root: str, what: str):
     import ikid
 
     refiner = None if what == "tracker-bare" else load("wrist-track")
-    return ikid.Tracker(refiner=refiner).run(frames)["q"]
+    return ikid.Tracker(rate_hz=1000.0, refiner=refiner).run(frames)["q"]
 
 
 def stream_probe(corpus: Corpus, name: str, fault: Fault) -> Api:
@@ -237,7 +237,7 @@ def tracker_probe(corpus: Corpus, name: str, fault: Fault, refined: bool) -> Api
         frames, _, index, end = fault(corpus.long["markers"], corpus.long["time"])
         ref = clean(str(corpus.root), "tracker" if refined else "tracker-bare")
         q, flagged, tracker = _tracker_with_skips(
-            lambda: ikid.Tracker(refiner=load("wrist-track") if refined else None), frames
+            lambda: ikid.Tracker(rate_hz=1000.0, refiner=load("wrist-track") if refined else None), frames
         )
         if isinstance(tracker, BaseException):
             if judge_error(v, tracker, [], "Tracker.run: "):
@@ -287,7 +287,7 @@ def setting_probe(setting: str, value: float) -> Api:
     def fn(v: Verdict) -> None:
         import ikid
 
-        t, e = call(ikid.Tracker, **{setting: value})
+        t, e = call(ikid.Tracker, **{"rate_hz": 1000.0, setting: value})
         if e is None:
             v.silent(f"Tracker({setting}={value}) accepted")
         else:

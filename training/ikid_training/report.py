@@ -264,7 +264,10 @@ def occlusion_section(rep: Report, model: ikid.Model, recs: list[D.Recording]) -
         # The shipped Kalman path, which leaves a missing marker out instead of filling it: how
         # much losing each marker costs an estimator that uses the exact body model.
         return ikid.Tracker(
-            length_scale=r.meta["length_scale"], mass_scale=r.meta["mass_scale"], refiner=refiner
+            length_scale=r.meta["length_scale"],
+            mass_scale=r.meta["mass_scale"],
+            rate_hz=r.meta["rate_hz"],
+            refiner=refiner,
         ).run(r.markers)["q"]
 
     for label, level in NOISE_LEVELS.items():

@@ -42,7 +42,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 ///   masses relative to the default subject (1.0).
 /// - ``marker_shift``: ``(6, 3)`` metres added to each marker's offset in its segment's frame
 ///   (frame order), or None.
-/// - ``rate_hz``: the rate frames are pushed at, Hz.
+/// - ``rate_hz``: the rate frames are pushed at, Hz. Required: velocities, accelerations and
+///   torques scale with it, and nothing in the markers can tell a wrong one.
 /// - ``jerk_noise``: spectral density of the joint jerk the motion model allows, rad²/s⁵
 ///   (``ikid.DEFAULT_JERK_NOISE``): larger follows faster moves with less lag and passes
 ///   more noise.
@@ -67,18 +68,18 @@ fn rows(out: &TrackerOutput) -> [[f64; N_COORDINATES]; 4] {
 #[pymethods]
 impl Tracker {
     #[new]
-    #[pyo3(signature = (length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=1000.0, jerk_noise=DEFAULT_JERK_NOISE, noise_memory_s=10.0, initial_marker_noise=1e-3, refiner=None, calibration=None, relative_hand=false))]
+    #[pyo3(signature = (length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=None, jerk_noise=DEFAULT_JERK_NOISE, noise_memory_s=10.0, initial_marker_noise=1e-3, refiner=None, calibration=None, relative_hand=false))]
     // jerk_noise's default written out for help() (pyo3 shows a constant as `...`); a test
     // checks it is DEFAULT_JERK_NOISE.
     #[pyo3(
-        text_signature = "(length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=1000.0, jerk_noise=3000.0, noise_memory_s=10.0, initial_marker_noise=0.001, refiner=None, calibration=None, relative_hand=False)"
+        text_signature = "(length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=None, jerk_noise=3000.0, noise_memory_s=10.0, initial_marker_noise=0.001, refiner=None, calibration=None, relative_hand=False)"
     )]
     #[allow(clippy::too_many_arguments)]
     fn new(
         length_scale: f64,
         mass_scale: f64,
         marker_shift: Option<&Bound<'_, PyAny>>,
-        rate_hz: f64,
+        rate_hz: Option<f64>,
         jerk_noise: f64,
         noise_memory_s: f64,
         initial_marker_noise: f64,
@@ -86,6 +87,18 @@ impl Tracker {
         calibration: Option<PyRef<'_, Calibration>>,
         relative_hand: bool,
     ) -> PyResult<Self> {
+        // No default: a 100 Hz recording tracked as 1 kHz gave velocities 9x and torques 5x too
+        // large with every status 0 (a new-user review); the rate is an input, never a guess.
+        let Some(rate_hz) = rate_hz else {
+            return Err(ikid::Error::BadArgument {
+                what: "rate_hz",
+                detail: "is required: the rate the frames come at, in Hz (a recording's rate_hz); tracked at \
+                         another rate, every velocity, acceleration and torque is wrong and nothing in the \
+                         markers can say so"
+                    .into(),
+            })
+            .py_err();
+        };
         let body = subject(length_scale, mass_scale, marker_shift)?;
         let settings = TrackerSettings { rate_hz, jerk_noise, noise_memory_s, initial_marker_noise, relative_hand };
         let mut inner = CoreTracker::new(body, settings).py_err()?;

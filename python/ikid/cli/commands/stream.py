@@ -499,8 +499,13 @@ def _tracker_streams(args: argparse.Namespace, rate_hz: float | None):
         raise ikid.InputError(
             "--tracker gives angles and torques itself: no --model, --torque-model or --missing-markers"
         )
+    if rate_hz is None:
+        # Its velocities and torques scale with the rate: time stamps alone do not give it.
+        raise ikid.InputError(
+            "--tracker needs the frames' rate: give --rate HZ (or a live source that declares it)"
+        )
     calibration = _stream_calibration(args)
-    stream = _TrackerStream(rate_hz or 1000.0, calibration)
+    stream = _TrackerStream(rate_hz, calibration)
     # The tracker reads marker frames: the 18 values every source gives.
     return [stream], stream.output_names, stream.output_units, stream.rate_hz, len(ikid.marker_names()) * 3
 
