@@ -24,7 +24,7 @@ import ikid
 from conftest import make_card
 from ikid import _native
 from ikid.cli import main as cli
-from ikid.io import MarkerMap, read_mot, read_sto, write_mot, write_trc
+from ikid.io import MarkerMap, read_markers, read_mot, read_sto, write_mot, write_trc
 
 IKID = shutil.which("ikid", path=str(Path(sys.executable).parent)) or "ikid"
 
@@ -76,7 +76,9 @@ def test_stream_from_stdin_gives_one_line_per_frame_equal_to_stream_push(trial, 
     assert cli(["stream", "--rate", "1000", "--model", "wrist-ik", "--torque-model", "wrist-chain"]) == 0
     captured = capsys.readouterr()
     header, status, values = parse_output(captured.out, 6)
-    assert header == ["frame", "status", *ikid.coordinate_names(), *ikid.coordinate_names()]
+    # The torque model's columns are moments, never a second set under the angles' names.
+    names = ikid.coordinate_names()
+    assert header == ["frame", "status", *names, *[f"{n}_moment" for n in names]]
     assert len(status) == len(frames)
     want = np.hstack(
         [stream_reference(ikid.load("wrist-ik"), frames), stream_reference(ikid.load("wrist-chain"), frames)]
@@ -706,6 +708,25 @@ def test_import_ikid_and_the_cli_do_not_import_torch():
     )
 
 
+def test_track_starts_again_after_a_time_gap_in_the_file(tmp_path, capsys) -> None:
+    # 0.1 s of rows missing from a TRC: the rows after it are those of a fresh Tracker over the
+    # frames after it (the oracle); tracked across it, the torques were 3.8 N·m off.
+    t = ikid.simulate("random", seed=9904, duration=2.0)
+    keep = np.ones(len(t.time), bool)
+    keep[1000:1100] = False
+    write_trc(tmp_path / "g.trc", t.time[keep], t.markers[keep], 1000.0)
+    assert cli(["track", str(tmp_path / "g.trc"), "-o", str(tmp_path / "g")]) == 0
+    out = capsys.readouterr().out
+    assert "1 restarts after time gaps" in out, out
+    time_sto, tau = read_sto(tmp_path / "g.sto")
+    fresh = ikid.Tracker(rate_hz=1000.0, refiner=ikid.load("wrist-track")).run(
+        read_markers(tmp_path / "g.trc").frames(None)[1000:]
+    )
+    after = time_sto >= t.time[1100] - 1e-9
+    np.testing.assert_allclose(tau[after], fresh["tau"][fresh["start"] :], rtol=1e-6, atol=1e-8)
+    assert exit_status(["track", str(tmp_path / "g.trc"), "-o", str(tmp_path / "s"), "--strict"]) == 3
+
+
 def test_track_writes_the_trackers_angles_and_torques(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -1095,6 +1116,25 @@ def test_stream_restarts_the_window_after_frames_lost_by_number(trial, monkeypat
     assert "10 lost (by frame number)" in captured.err and "lost not counted" not in captured.err, (
         captured.err
     )
+
+
+def test_stream_tracker_starts_again_after_frames_lost_by_time(trial, monkeypatch, capsys):
+    # Frames 200-299 never arrive: across the gap the filter's motion model would take 0.1 s for
+    # one period (torques 4 N·m off). It starts again: the rows after the gap are those of a
+    # fresh Tracker over the frames after it (the oracle).
+    keep = np.ones(600, bool)
+    keep[200:300] = False
+    frames, t = trial.markers[:600][keep], trial.time[:600][keep]
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames, with_time=t)))
+    assert cli(["stream", "--tracker", "--time", "--rate", "1000"]) == 3
+    captured = capsys.readouterr()
+    _, status, values = parse_output(captured.out, 12)
+    assert "1 restarts after time gaps" in captured.err, captured.err
+    fresh = ikid.Tracker(rate_hz=1000.0).run(np.asarray(trial.markers[300:600], np.float64))
+    after = values[200:][:, 0::2]  # the values, not their σ
+    ok = np.array([s == "ok" for s in status[200:]])
+    np.testing.assert_allclose(after[ok, :3], fresh["q"][ok], rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(after[ok, 3:], fresh["tau"][ok], rtol=1e-5, atol=1e-6)
 
 
 def test_stream_counts_frames_lost_from_their_times(trial, monkeypatch, capsys):

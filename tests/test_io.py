@@ -129,6 +129,24 @@ def test_leading_gaps_are_filled_from_the_motion_after_them_and_nothing_else_is_
     assert np.abs(filled[changed][:, 9:15] - markers[changed][:, 9:15]).max() < 1e-3
 
 
+def test_a_leading_gap_that_lasts_most_of_the_first_seconds_is_filled_from_the_seconds_after():
+    # MC2 unseen for the first 9 s: the start held runs on LEARN_AFTER_S past the gap's end, so
+    # the filler has motion to learn the wrist from (the first LEADING_FILL_S alone left 1 s).
+    from ikid.pipeline import LEADING_FILL_S, LEARN_AFTER_S, fill_leading_gaps
+
+    trial = ikid.simulate("random", seed=7004, duration=16.0)
+    rate, markers = trial.rate_hz, trial.markers.astype(np.float64)
+    gap_end = int((LEADING_FILL_S - 1.0) * rate)
+    gappy = markers.copy()
+    gappy[:gap_end, 9:12] = np.nan
+    got = list(fill_leading_gaps([(trial.time, gappy)], rate))
+    filled = np.concatenate([f if g is None else g for _, f, g in got])
+    assert not np.isnan(filled[:gap_end]).any()
+    assert np.abs(filled[:gap_end, 9:12] - markers[:gap_end, 9:12]).max() < 2e-3
+    held = sum(len(t) for t, _, g in got if g is not None)
+    assert held <= gap_end + LEARN_AFTER_S * rate  # nothing held past the motion it needed
+
+
 @pytest.mark.parametrize("rate", [200.0, 100.0])
 def test_a_leading_gap_is_filled_at_a_rate_with_or_without_a_model_of_its_own(rate, tmp_path, capsys):
     # 200 Hz runs the 1 kHz model on its grid between the recording's frames, 100 Hz a model of

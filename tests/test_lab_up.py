@@ -136,3 +136,14 @@ def test_each_up_axis_is_turned_to_ikids_up_by_a_proper_rotation(up):
     rotation = io.to_ikid_lab(np.eye(3), up).T  # columns: where each lab axis goes
     np.testing.assert_allclose(rotation.T @ rotation, np.eye(3), atol=1e-12)
     assert np.linalg.det(rotation) == pytest.approx(1.0)
+
+
+def test_a_map_that_overrides_the_files_declared_up_says_so(trial, tmp_path, capsys):
+    positions = _z_up(trial.markers).reshape(len(trial.markers), 6, 3)
+    z_c3d = tmp_path / "z.c3d"
+    data = io.MarkerData(
+        tuple(ikid.marker_names()), trial.time, positions, trial.rate_hz, "z", "m", {"up": "+z"}
+    )
+    io.write_c3d(z_c3d, data)
+    _, _, out = _track(tmp_path, capsys, z_c3d, "over", "--map", _map(tmp_path, "+y"))
+    assert "lab up +y (the map's up, over the C3D's POINT:Y_SCREEN = '+Z')" in out, out

@@ -159,7 +159,7 @@ def test_stream_sd_follows_each_output_by_its_sd(monkeypatch, capsys):
         cli(["stream", "--rate", "1000", "--model", "wrist-ik", "--torque-model", "wrist-chain", "--sd"]) == 0
     )
     lines = capsys.readouterr().out.strip().splitlines()
-    names = [*coordinate_names(), *coordinate_names()]
+    names = [*coordinate_names(), *[f"{n}_moment" for n in coordinate_names()]]  # angles, then moments
     assert lines[0].split(",") == ["frame", "status", *[x for n in names for x in (n, f"{n}_sd")]]
     # The oracle: both models' streams in this process; a row once both have a value and a σ.
     streams = [ikid.load("wrist-ik").stream(), ikid.load("wrist-chain").stream()]

@@ -343,6 +343,10 @@ def pick_model(
 #: motion to locate the wrist (about ±10° about every axis), which a session's first seconds
 #: may not have.
 LEADING_FILL_S = 10.0
+#: Motion after a leading gap's last frame held for the filler to learn the wrist from, s.
+LEARN_AFTER_S = 5.0
+#: The longest start :func:`fill_leading_gaps` holds, s (8.6 MB at 1 kHz).
+MAX_HOLD_S = 60.0
 
 
 def fill_leading_gaps(
@@ -350,35 +354,51 @@ def fill_leading_gaps(
 ) -> Iterable[tuple[np.ndarray, np.ndarray, np.ndarray | None]]:
     """``(time, frames, filled)`` for each ``(time, frames)`` block of a recording of marker
     frames (18 values), in order (a block may come in parts). ``filled`` is ``frames`` with the
-    missing markers of the recording's first :data:`LEADING_FILL_S` filled from the motion after
-    them — :func:`ikid.fill_gaps` run backwards in time, from the end of those seconds to their
-    first gap —, or ``None`` where a part has nothing filled. A gap it cannot fill (two markers
-    of a segment) stays missing. Where to use them is the caller's: :func:`run_blocks` pushes a
-    filled frame only where its stream refuses the frame as it is (live, a gap before the filler
-    has learned the wrist from the motion has no output); ``ikid track`` only before its
-    tracker starts. Memory: the frames from the first gap to :data:`LEADING_FILL_S` are held (cut
-    by content and time, so the result does not depend on how the recording is blocked); a
+    missing markers of the recording's start filled from the motion after them —
+    :func:`ikid.fill_gaps` run backwards in time —, or ``None`` where a part has nothing filled.
+    The start runs from the first gap of the first :data:`LEADING_FILL_S` to
+    :data:`LEADING_FILL_S`, or to :data:`LEARN_AFTER_S` after its last gap if that is later
+    (never past :data:`MAX_HOLD_S`): the filler needs wrist motion after a gap to fill it. A gap
+    it cannot fill (two markers of a segment) stays missing. Where to use them is the caller's:
+    :func:`run_blocks` pushes a filled frame only where its stream refuses the frame as it is
+    (live, a gap before the filler has learned the wrist from the motion has no output);
+    ``ikid track`` only before its tracker starts. Those frames are held in memory (cut by
+    content and time, so the result does not depend on how the recording is blocked); a
     recording whose first seconds are whole passes through."""
     it = iter(blocks)
     held: list[tuple[np.ndarray, np.ndarray]] = []
     rest: tuple[np.ndarray, np.ndarray] | None = None
     t0: float | None = None
+    last_gap = -np.inf
     for time, frames in it:
         time, frames = np.asarray(time, np.float64), np.asarray(frames, np.float64)
         if len(time) == 0:
             continue
         t0 = float(time[0]) if t0 is None else t0
-        end = int(np.searchsorted(time - t0, LEADING_FILL_S, side="left"))  # frames inside
         start = 0
         if not held:
-            gaps = np.flatnonzero(np.isnan(frames[:end]).any(axis=1))
-            start = int(gaps[0]) if len(gaps) else end
+            first = int(np.searchsorted(time - t0, LEADING_FILL_S, side="left"))
+            gaps = np.flatnonzero(np.isnan(frames[:first]).any(axis=1))
+            start = int(gaps[0]) if len(gaps) else first
             if start:
                 yield time[:start], frames[:start], None
-        if start < end:
-            held.append((time[start:end], frames[start:end]))
+            if not len(gaps):
+                if first < len(time):
+                    rest = (time[first:], frames[first:])
+                    break
+                continue
+        gap = np.isnan(frames).any(axis=1)
+        end = start
+        while end < len(time):
+            limit = min(max(t0 + LEADING_FILL_S, last_gap + LEARN_AFTER_S), t0 + MAX_HOLD_S)
+            if time[end] >= limit:
+                break
+            if gap[end]:
+                last_gap = float(time[end])
+            end += 1
+        held.append((time[start:end], frames[start:end]))
         if end < len(time):
-            rest = (time[max(start, end) :], frames[max(start, end) :])
+            rest = (time[end:], frames[end:])
             break
     if held:
         frames = np.concatenate([f for _, f in held])

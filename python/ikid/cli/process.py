@@ -327,7 +327,8 @@ def processing_options(p: argparse.ArgumentParser, model_help: str) -> None:
     p.add_argument(
         "--resample",
         action="store_true",
-        help="resample markers to the model's rate (cubic Hermite; output rows at the model's rate)",
+        help="resample markers to the model's rate (cubic Hermite; output rows at the model's rate; a gap at "
+        "the file's start is not filled from the motion after it on this path)",
     )
     p.add_argument(
         "--missing-markers", choices=["fill", "refuse"], default=None, help="override the model's policy"

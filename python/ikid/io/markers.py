@@ -98,9 +98,11 @@ class MarkerData:
         """The lab axis pointing up (one of :data:`UP_AXES`) and where that comes from: ``up``
         (a map's ``up``), else the file's own declaration (a C3D's ``POINT:Y_SCREEN``), else
         ikid's +Y, assumed."""
-        if up:
-            return up, "the map's up"
         declared = self.metadata.get("up")
+        if up:
+            if declared and declared != up:  # the map decides, and says what it overrode
+                return up, f"the map's up, over {self.metadata.get('up_from', 'the file')}"
+            return up, "the map's up"
         if declared:
             return declared, self.metadata.get("up_from", "the file")
         return "+y", "assumed: neither the file nor the map says; set up in the map"

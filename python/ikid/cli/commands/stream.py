@@ -55,8 +55,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--up",
         default=None,
         metavar="AXIS",
-        help="the lab axis pointing up (+x, -x, +y, -y, +z, -z): torques depend on it (default: the --map's "
-        "up, else +y, OpenSim's; Vicon and Qualisys labs are usually +z)",
+        help="the lab axis pointing up (+x, -x, +y, -y, +z, -z): torques depend on it (default: a live "
+        "source's --map's up, else +y, OpenSim's; Vicon and Qualisys labs are usually +z)",
     )
     p.add_argument(
         "--sd",
@@ -446,7 +446,7 @@ def run(args: argparse.Namespace) -> int:
 class _TrackerStream:
     """ikid.Tracker behind the stream's interface: per frame, each angle and torque followed by
     its standard deviation (``Tracker.output_sd``); None until the filter has started. The
-    tracker takes no time stamps (it runs at its rate) and gives no per-frame status bits here."""
+    tracker runs at its rate: a time stamp more than 1.5 periods after the last restarts it."""
 
     def __init__(self, rate_hz: float, calibration) -> None:
         from ikid.io.storage import coordinate_names, moment_names
@@ -460,8 +460,18 @@ class _TrackerStream:
         self.filled_markers: list[str] = []
         self.status = math.nan
         self.time_reanchors = 0
+        self.last_time: float | None = None
+        self.gap_restarts = 0
 
     def push(self, frame: np.ndarray, time: float | None = None) -> np.ndarray | None:
+        if time is not None:
+            # Frames lost (or a slower source): the filter's motion model would bridge the gap
+            # as one period — torques 4 N·m off after 0.1 s lost. It starts again instead, as a
+            # network's window does.
+            if self.last_time is not None and time - self.last_time > 1.5 / self.rate_hz:
+                self.reset()
+                self.gap_restarts += 1
+            self.last_time = time
         out = self.tracker.push(frame)
         sd = self.tracker.output_sd
         if out is None or sd is None:
@@ -472,6 +482,7 @@ class _TrackerStream:
 
     def reset(self) -> None:
         self.tracker = ikid.Tracker(rate_hz=self.rate_hz, calibration=self.calibration)
+        self.last_time = None
 
 
 def _run(args: argparse.Namespace, source, rate_hz: float | None, refusal_reason) -> int:
@@ -528,6 +539,14 @@ class _WithSd:
         return getattr(self.stream, name)
 
 
+def _column_names(model: ikid.Model) -> list[str]:
+    """A model's output columns: its own names, a torque's (N·m) as ``<name>_moment``."""
+    return [
+        f"{n}_moment" if unit == "N*m" and not n.endswith("_moment") else n
+        for n, unit in zip(model.output_names, model.output_units, strict=True)
+    ]
+
+
 def _model_streams(args: argparse.Namespace, rate_hz: float | None):
     unchecked = args.allow_unchecked_model
     models = [_model_for(args.model, "ikid stream --model", ("ik", "chain"), rate_hz, unchecked)]
@@ -542,7 +561,9 @@ def _model_streams(args: argparse.Namespace, rate_hz: float | None):
     calibration = _stream_calibration(args)
     plain = [m.stream(missing_markers=args.missing_markers, calibration=calibration) for m in models]
     streams: list[ikid.Stream | _WithSd] = list(plain)
-    names = [n for m in models for n in m.output_names]
+    # A torque model names its outputs after the coordinates too: its columns are the moments
+    # (`<coordinate>_moment`, as run's .sto), never a second set under the angles' names.
+    names = [n for m in models for n in _column_names(m)]
     units = [u for m in models for u in m.output_units]
     if args.sd:
         from ikid.cli.process import _check_uncertainty
@@ -713,6 +734,9 @@ def _run_with(
         parts.append(f"{notes['reconnected']} reconnected")
         if notes["not reconnected"]:
             parts.append("the source was lost and did not come back")
+    gap_restarts = getattr(streams[0], "gap_restarts", 0)
+    if gap_restarts:
+        parts.append(f"{gap_restarts} restarts after time gaps (the window or filter started again)")
     reanchors = streams[0].time_reanchors + losses.reanchors
     if reanchors:
         parts.append(f"{reanchors} re-anchored (the source's clock or numbering restarted)")
