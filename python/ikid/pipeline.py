@@ -53,7 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ikid import _native
-from ikid.io.resample import resample_stretches
+from ikid.io.resample import GAP_STEPS, resample_stretches
 
 #: Relative difference between a file's frame rate and the model's that still counts as equal.
 RATE_TOLERANCE = 1e-3
@@ -759,7 +759,7 @@ class _ModelGrid:
         #: Global indices of frames whose labels were put right (their rows flagged swapped).
         self.swapped: set[int] = set()
         self.period = 1.0 / model.frame_rate_hz
-        self.gap = 1.5 / rate_hz
+        self.gap = GAP_STEPS / rate_hz
         self.t0: float | None = None
         self.time = np.empty(0)
         self.values = np.empty((0, model.frame_len))

@@ -15,6 +15,7 @@ import ikid
 from ikid.cli.common import _model_file, _model_for, _refuse_over_inputs, _stdout_fd
 from ikid.cli.options import PORT, POSITIVE, POSITIVE_INT, unchecked_option
 from ikid.io._common import to_ikid_lab
+from ikid.io.resample import GAP_STEPS
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -400,16 +401,14 @@ def run(args: argparse.Namespace) -> int:
     )
     from ikid.io._common import parse_up
 
-    if args.up is not None:
-        args.up = parse_up(args.up, "--up")
-    elif args.map:
-        args.up = MarkerMap.load(args.map).up
+    # --map is a live source's (refused above otherwise): loaded once, for its labels and its up.
+    marker_map = MarkerMap.load(args.map) if args.map else MarkerMap.identity()
+    args.up = parse_up(args.up, "--up") if args.up is not None else marker_map.up
     source = None
     rate_hz = args.rate
     if args.source is not None:
         from ikid.live import open_source
 
-        marker_map = MarkerMap.load(args.map) if args.map else MarkerMap.identity()
         source = open_source(args.source, marker_map, args.idle)
         declared = f"{source.rate_hz:g} Hz" if source.rate_hz else "no declared rate"
         print(
@@ -468,7 +467,7 @@ class _TrackerStream:
             # Frames lost (or a slower source): the filter's motion model would bridge the gap
             # as one period — torques 4 N·m off after 0.1 s lost. It starts again instead, as a
             # network's window does.
-            if self.last_time is not None and time - self.last_time > 1.5 / self.rate_hz:
+            if self.last_time is not None and time - self.last_time > GAP_STEPS / self.rate_hz:
                 self.reset()
                 self.gap_restarts += 1
             self.last_time = time

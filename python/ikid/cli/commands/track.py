@@ -21,6 +21,7 @@ from ikid.cli.common import (
 )
 from ikid.cli.options import SUBJECT_LENGTH, SUBJECT_MASS, _number, unchecked_option
 from ikid.io._atomic import atomic_outputs
+from ikid.io.resample import GAP_STEPS
 from ikid.pipeline import TURNED_OVER_REASON, fill_leading_gaps
 
 
@@ -196,12 +197,12 @@ def run(args: argparse.Namespace) -> int:
                     ).any(axis=1)
                     frames = np.where(prefilled[:, None], filled, frames)
             steps = np.diff(np.concatenate([[time[0] if last_time is None else last_time], time]))
-            cuts = [0, *np.flatnonzero(steps > 1.5 / data.rate_hz).tolist(), len(time)]
+            cuts = [0, *np.flatnonzero(steps > GAP_STEPS / data.rate_hz).tolist(), len(time)]
             last_time = float(time[-1]) if len(time) else last_time
             for a, b in zip(cuts[:-1], cuts[1:], strict=True):
                 if a == b:
                     continue
-                if steps[a] > 1.5 / data.rate_hz:
+                if steps[a] > GAP_STEPS / data.rate_hz:
                     hand_restarts += tracker.restarts  # reset() forgets its count
                     tracker.reset()
                     gap_restarts += 1
