@@ -128,7 +128,9 @@ typedef struct ikid_tracker_settings {
   double length_scale;
   // Subject's segment masses relative to the default subject.
   double mass_scale;
-  // Frame rate of the markers, Hz: push frames at this rate.
+  // Frame rate of the markers, Hz: push frames at this rate. No default (NaN in
+  // `ikid_tracker_settings_default()`): `ikid_tracker_new` refuses settings without it, since
+  // tracked at another rate every velocity, acceleration and torque is wrong by the ratio.
   double rate_hz;
   // Spectral density of the joint jerk the motion model allows, rad²/s⁵: larger follows
   // faster moves with less lag and passes more noise.
@@ -141,6 +143,10 @@ typedef struct ikid_tracker_settings {
   // by its position relative to the forearm: for real subjects, whose wrist centre the body
   // model does not know. Always on with a calibration (`ikid_tracker_set_calibration`).
   bool relative_hand;
+  // The lab's up direction (against gravity) in the markers' coordinates, any non-zero
+  // length: {0, 1, 0} by default (the body model's lab), {0, 0, 1} for a Z-up lab (Vicon,
+  // Qualisys). Only the torques depend on it, and silently: set it.
+  double up[3];
 } ikid_tracker_settings;
 
 // Per-frame flags of a tracker's estimate.
@@ -429,8 +435,9 @@ enum ikid_status ikid_stream_reset(struct ikid_stream *stream);
 // `stream` must be NULL or a handle from `ikid_stream_new` not yet freed.
 void ikid_stream_free(struct ikid_stream *stream);
 
-// The default subject and settings: both scales 1, 1000 Hz, the core's default jerk noise
-// (chosen against biorbd's EKF, see docs/ekf.md), a 10 s noise memory, 1 mm initial noise.
+// The default subject and settings: both scales 1, the core's default jerk noise (chosen
+// against biorbd's EKF, see docs/ekf.md), a 10 s noise memory, 1 mm initial noise, +Y up;
+// `rate_hz` NaN, to be set to the markers' frame rate (`ikid_tracker_new` refuses it unset).
 struct ikid_tracker_settings ikid_tracker_settings_default(void);
 
 // Creates a tracker for the subject and settings in `*settings`, refined by `refiner` (a
@@ -468,6 +475,32 @@ enum ikid_status ikid_tracker_push(struct ikid_tracker *tracker,
                                    double *out,
                                    size_t out_len,
                                    struct ikid_tracker_flags *flags);
+
+// `ikid_tracker_push` for a frame stamped with its acquisition time (seconds, any origin),
+// for a source that can lose frames: a stamp more than 1.5 periods of `rate_hz` after the
+// last one (frames lost), or not after it (the source's clock restarted), restarts the
+// filter instead of bridging the gap as one step (0.1 s lost gave torques 3.8 N·m off);
+// what was learned of the subject is kept, and the first frames after are flagged
+// `IKID_FRAME_RESTARTED` while the velocities settle. `ikid_tracker_gap_restarts` counts
+// them. A stamp less than half a period after the last one, or not finite, is refused
+// (`IKID_STATUS_INVALID_ARGUMENT`) and changes nothing.
+//
+// # Safety
+// As `ikid_tracker_push`.
+enum ikid_status ikid_tracker_push_at(struct ikid_tracker *tracker,
+                                      double time_s,
+                                      const double *frame,
+                                      size_t frame_len,
+                                      double *out,
+                                      size_t out_len,
+                                      struct ikid_tracker_flags *flags);
+
+// Writes into `*restarts` how many times `ikid_tracker_push_at` restarted the filter after a
+// time gap since the tracker was made or reset.
+//
+// # Safety
+// `tracker` must be a live handle; `restarts` must point to writable storage.
+enum ikid_status ikid_tracker_gap_restarts(const struct ikid_tracker *tracker, size_t *restarts);
 
 // Pushes a block of frames in order, exactly as `ikid_tracker_push` one at a time: `frames`
 // holds `n_values` doubles, a whole number of 18-value frames back to back. For frame `i`,

@@ -87,7 +87,7 @@ LATENCY = re.compile(
 def test_host_example_equals_python_bit_for_bit(trial, refiner):
     d, frames, outs = trial
     py = outs[refiner]
-    cmd = [built("track_csv"), d / "frames.csv", "--every", "1"]
+    cmd = [built("track_csv"), d / "frames.csv", "--rate", "1000", "--every", "1"]
     cmd += ["--length-scale", str(SUBJECT["length_scale"]), "--mass-scale", str(SUBJECT["mass_scale"])]
     if refiner:
         cmd += ["--refiner", d / f"{refiner}.safetensors"]
@@ -120,11 +120,14 @@ def test_host_example_reports_a_refused_frame(trial):
     d, frames = trial[0], trial[1].copy()
     frames[9, 0] = np.inf
     np.savetxt(d / "inf.csv", frames, fmt="%.17g", delimiter=",")
-    result = run([built("track_csv"), d / "inf.csv"])
+    result = run([built("track_csv"), d / "inf.csv", "--rate", "1000"])
     assert result.returncode == 1 and "frame 9" in result.stderr and "RSP.x" in result.stderr, result.stderr
     # A model that cannot refine a tracker is refused with the reason.
-    result = run([built("track_csv"), d / "frames.csv", "--refiner", d / "ik.safetensors"])
+    result = run([built("track_csv"), d / "frames.csv", "--rate", "1000", "--refiner", d / "ik.safetensors"])
     assert result.returncode == 1 and "cannot refine" in result.stderr, result.stderr
+    # Without its rate the tracker is refused, saying so.
+    result = run([built("track_csv"), d / "frames.csv"])
+    assert result.returncode == 1 and "rate_hz: is not set" in result.stderr, result.stderr
 
 
 def test_python_run_equals_python_push(trial):
@@ -200,6 +203,7 @@ def test_the_c_tracker_calibrated_for_either_arm_equals_python(side):
     from faults.capi import f64p, last_error, lib
 
     settings = lib().ikid_tracker_settings_default()
+    settings.rate_hz = 1000.0
     tracker = C.c_void_p()
     assert lib().ikid_tracker_new(C.byref(settings), None, C.byref(tracker)) == 0
     identity = np.eye(3)  # kept alive while C reads it

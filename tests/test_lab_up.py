@@ -147,3 +147,22 @@ def test_a_map_that_overrides_the_files_declared_up_says_so(trial, tmp_path, cap
     io.write_c3d(z_c3d, data)
     _, _, out = _track(tmp_path, capsys, z_c3d, "over", "--map", _map(tmp_path, "+y"))
     assert "lab up +y (the map's up, over the C3D's POINT:Y_SCREEN = '+Z')" in out, out
+
+
+def test_the_trackers_up_gives_a_z_up_labs_frames_the_torques_of_ikids_lab(trial):
+    """The API, not the CLI: ``ikid.Tracker(up=...)`` on a Z-up lab's raw frames. Oracle: the
+    simulator's torques (and the same trial in ikid's own lab)."""
+    frames, truth = trial.markers, trial.tau
+    own = ikid.Tracker(rate_hz=trial.rate_hz).run(frames)["tau"]
+    raw = _z_up(frames)
+    told = ikid.Tracker(rate_hz=trial.rate_hz, up="+z").run(raw)["tau"]
+    as_vector = ikid.Tracker(rate_hz=trial.rate_hz, up=[0.0, 0.0, 2.0]).run(raw)["tau"]
+    untold = ikid.Tracker(rate_hz=trial.rate_hz).run(raw)["tau"]
+    scored = slice(500, None)
+    err = lambda tau: float(np.sqrt(np.mean((tau[scored] - truth[scored]) ** 2)))  # noqa: E731
+    np.testing.assert_allclose(told, own, atol=1e-9)
+    np.testing.assert_allclose(as_vector, own, atol=1e-9)
+    assert err(told) < 0.01 and err(untold) > 10 * err(told), (err(told), err(untold))
+    for bad in ("up", "+w", [0.0, 0.0, 0.0], [1.0, 2.0]):
+        with pytest.raises(ikid.IkidError, match="up"):
+            ikid.Tracker(rate_hz=trial.rate_hz, up=bad)  # type: ignore[arg-type]

@@ -171,7 +171,9 @@ def test_reset_forgets_and_settings_are_reported() -> None:
         "jerk_noise": 500.0,
         "noise_memory_s": 10.0,
         "initial_marker_noise": 1e-3,
+        "up": [0.0, 1.0, 0.0],
     }
+    assert ikid.Tracker(rate_hz=1000.0, up="-Z").settings["up"] == [0.0, 0.0, -1.0]
     assert ikid.Tracker(rate_hz=1000.0).settings["jerk_noise"] == ikid.DEFAULT_JERK_NOISE
     frame = ikid.forward_markers(np.zeros((1, 3)))[0]
     assert t.push(frame) is not None
@@ -276,3 +278,44 @@ def test_a_calibrated_tracker_bridges_200_ms_gaps_of_each_marker_of_a_real_wrist
         err = geodesic_deg(out["q"], q)
         assert err[in_gap].max() < 3.0, (marker, err[in_gap].max())
         assert np.sqrt(np.mean(err[in_gap] ** 2)) < 1.0, marker
+
+
+def test_stamped_frames_restart_the_filter_after_lost_frames(trial: D.Recording) -> None:
+    """0.1 s of frames lost while the wrist moves: unstamped, the filter bridges the gap as one
+    period and its torques after it are newtons-metres off with status 0; stamped
+    (``run(times=)`` or ``push(time=)``), it restarts, and every row whose torques are off is
+    flagged ``restarted``. Oracle: the simulator's torques."""
+    rate = trial.meta["rate_hz"]
+    g = 2500  # mid-trial, the wrist moving (measured: bridged rows 10 N·m off, unflagged)
+    keep = np.r_[0:g, g + 100 : len(trial.q)]
+    frames, times, truth = trial.markers[keep], keep / rate, trial.tau[keep]
+    stamped_tracker = ikid.Tracker(**subject(trial), rate_hz=rate)
+    stamped = stamped_tracker.run(frames, times=times)
+    bridged = ikid.Tracker(**subject(trial), rate_hz=rate).run(frames)
+    assert stamped_tracker.gap_restarts == 1
+    after = slice(g, g + 120)
+    error = {
+        k: np.abs(o["tau"][after] - truth[after]).max(axis=1) for k, o in (("s", stamped), ("b", bridged))
+    }
+    restarted = stamped["status"][after] & ikid.FRAME_STATUS["restarted"] != 0
+    assert restarted[0] and not restarted[100:].any()
+    assert error["s"][~restarted].max() < 0.05, error["s"][~restarted].max()
+    unflagged = bridged["status"][after] == 0
+    assert error["b"][unflagged].max() > 1.0, error["b"][unflagged].max()
+    # push(time=) one by one is run(times=).
+    pushed = ikid.Tracker(**subject(trial), rate_hz=rate)
+    taus = [pushed.push(f, time=t) for f, t in zip(frames[: g + 200], times[: g + 200], strict=True)]
+    np.testing.assert_array_equal(np.array([o.tau for o in taus[1:]]), stamped["tau"][1 : g + 200])
+    assert pushed.gap_restarts == 1
+    # Stamps closer than the rate allows are refused, naming the row.
+    with pytest.raises(ikid.IkidError, match=r"row 1: .*1000 Hz"):
+        ikid.Tracker(rate_hz=rate).run(frames[:3], times=[0.0, 0.0002, 0.001])
+    with pytest.raises(ikid.IkidError, match="times"):
+        ikid.Tracker(rate_hz=rate).run(frames[:3], times=[0.0, 0.001])
+
+
+def test_the_rate_is_a_number_not_a_flag() -> None:
+    with pytest.raises(ikid.IkidError, match="rate_hz"):
+        ikid.Tracker(rate_hz=True)  # type: ignore[arg-type]
+    with pytest.raises(ikid.IkidError, match="rate_hz.*required"):
+        ikid.Tracker()

@@ -30,6 +30,7 @@ enum { N = 1000, ROUNDS = 200, SINGLES = 200000 };
  * 18 doubles), after one pass to warm up; refiner may be NULL. Fails on a refused push. */
 static int tracker_latency(const double *frames, const ikid_model *refiner, double *lat, double *p50, double *p99) {
     ikid_tracker_settings settings = ikid_tracker_settings_default();
+    settings.rate_hz = 1000.0; /* the frames' rate */
     ikid_tracker *tracker = NULL;
     if (ikid_tracker_new(&settings, refiner, &tracker) != IKID_STATUS_OK) { fprintf(stderr, "%s\n", ikid_last_error()); return 1; }
     double out[12];

@@ -3,8 +3,11 @@
  * ikid_tracker_push and print each estimated frame's wrist angles q (rad) and torques tau
  * (N·m), then the per-frame latency.
  *
- *   track_csv TRIAL.csv [--refiner MODEL.safetensors] [--length-scale X] [--mass-scale X]
- *             [--rate HZ] [--every N]
+ *   track_csv TRIAL.csv --rate HZ [--refiner MODEL.safetensors] [--length-scale X]
+ *             [--mass-scale X] [--up X,Y,Z] [--every N]
+ *
+ * --rate is the frames' rate (required: the tracker has none of its own); --up the lab's up
+ * direction (default 0,1,0; 0,0,1 for a Z-up lab), which the torques depend on.
  *
  * Values are printed with %.17g, so they read back as exactly the doubles computed.
  * Build: cc -O2 track_csv.c $(pkg-config --cflags --libs ikid) -o track_csv
@@ -35,7 +38,7 @@ static int by_value(const void *a, const void *b) {
 
 int main(int argc, char **argv) {
     if (argc < 2 || argc % 2 != 0) {
-        fprintf(stderr, "usage: %s TRIAL.csv [--refiner MODEL.safetensors] [--length-scale X] [--mass-scale X] [--rate HZ] [--every N]\n", argv[0]);
+        fprintf(stderr, "usage: %s TRIAL.csv --rate HZ [--refiner MODEL.safetensors] [--length-scale X] [--mass-scale X] [--up X,Y,Z] [--every N]\n", argv[0]);
         return 2;
     }
     ikid_tracker_settings settings = ikid_tracker_settings_default();
@@ -47,7 +50,12 @@ int main(int argc, char **argv) {
         else if (strcmp(opt, "--length-scale") == 0) settings.length_scale = strtod(value, NULL);
         else if (strcmp(opt, "--mass-scale") == 0) settings.mass_scale = strtod(value, NULL);
         else if (strcmp(opt, "--rate") == 0) settings.rate_hz = strtod(value, NULL);
-        else if (strcmp(opt, "--every") == 0) every = strtol(value, NULL, 10);
+        else if (strcmp(opt, "--up") == 0) {
+            if (sscanf(value, "%lf,%lf,%lf", &settings.up[0], &settings.up[1], &settings.up[2]) != 3) {
+                fprintf(stderr, "--up %s: expected three numbers X,Y,Z\n", value);
+                return 2;
+            }
+        } else if (strcmp(opt, "--every") == 0) every = strtol(value, NULL, 10);
         else {
             fprintf(stderr, "unknown option %s\n", opt);
             return 2;

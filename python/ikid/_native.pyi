@@ -1,7 +1,7 @@
 """Type stubs of the Rust extension (checked against it by ``python -m mypy.stubtest``)."""
 
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import Any, final
 
 import numpy as np
@@ -28,6 +28,7 @@ __all__ = [
     "Tracker",
     "TrackerEstimate",
     "DEFAULT_JERK_NOISE",
+    "GAP_PERIODS",
     "REFINER_OUTPUTS",
     "REFINER_GATE_NOISE",
     "REFINED_SD_SCALE_Q",
@@ -230,6 +231,7 @@ class Stream:
     def sd_terms(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None: ...
 
 DEFAULT_JERK_NOISE: float
+GAP_PERIODS: float
 SD_SCALE_TAU: float
 REFINER_OUTPUTS: list[str]
 REFINER_GATE_NOISE: float
@@ -252,20 +254,23 @@ class Tracker:
         refiner: Model | None = None,
         calibration: Calibration | None = None,
         relative_hand: bool = False,
+        up: str | Sequence[float] | None = None,
     ) -> Tracker: ...
     @property
     def refiner(self) -> Model | None: ...
     @property
     def output_sd(self) -> npt.NDArray[np.float64] | None: ...
-    def push(self, frame: _Floats) -> TrackerEstimate | None: ...
-    def run(self, frames: _Floats, sd: bool = False) -> dict[str, Any]: ...
+    def push(self, frame: _Floats, time: float | None = None) -> TrackerEstimate | None: ...
+    def run(self, frames: _Floats, sd: bool = False, times: _Floats | None = None) -> dict[str, Any]: ...
     def reset(self) -> None: ...
     @property
     def restarts(self) -> int: ...
     @property
+    def gap_restarts(self) -> int: ...
+    @property
     def marker_noise(self) -> npt.NDArray[np.float64]: ...
     @property
-    def settings(self) -> dict[str, float]: ...
+    def settings(self) -> dict[str, Any]: ...
 
 @final
 class TrackerEstimate:

@@ -134,6 +134,12 @@ int main(int argc, char **argv) {
     ikid_tracker_flags *block_flags = malloc(block * sizeof *block_flags);
     CHECK(ikid_tracker_run(tracker, frames64, block * 18, block_out, block * 12, block_flags, block, &start) == IKID_STATUS_OK && start == 0, "ikid_tracker_run");
     CHECK(ikid_tracker_set_calibration(tracker, identity, identity, "right") == IKID_STATUS_OK, "ikid_tracker_set_calibration");
+    /* Stamped frames: three periods apart is a gap, which restarts the filter. */
+    size_t gap_restarts = 99;
+    CHECK(ikid_tracker_push_at(tracker, 0.0, frames64, 18, estimate, 12, &flags) == IKID_STATUS_OK, "ikid_tracker_push_at");
+    CHECK(ikid_tracker_push_at(tracker, 3.0 * period, frames64 + 18, 18, estimate, 12, &flags) == IKID_STATUS_OK, "push_at after a gap");
+    CHECK(ikid_tracker_gap_restarts(tracker, &gap_restarts) == IKID_STATUS_OK && gap_restarts == 1, "ikid_tracker_gap_restarts");
+    CHECK(ikid_tracker_push_at(tracker, 3.1 * period, frames64 + 36, 18, estimate, 12, &flags) == IKID_STATUS_INVALID_ARGUMENT, "a stamp too soon");
     ikid_tracker_free(tracker);
 
     /* The NULL-safe frees and a failure's message. */

@@ -80,6 +80,7 @@ static int run_in_blocks(ikid_tracker *tracker, const double *frames, const doub
 
 static ikid_tracker_settings subject(void) {
     ikid_tracker_settings s = ikid_tracker_settings_default();
+    s.rate_hz = 1000.0;
     s.length_scale = 1.1;
     s.mass_scale = 1.2;
     return s;
@@ -97,10 +98,10 @@ int main(int argc, char **argv) {
     double *expected_refined = read_csv(argv[5], EXPECTED_COLS, &n_refined);
     CHECK(n > 100 && n_expected == n && n_refined == n && n_noise == 1, "fixture sizes %zu %zu %zu %zu", n, n_expected, n_refined, n_noise);
 
-    /* Settings: the core's defaults. */
+    /* Settings: the core's defaults; no rate (it has to be given) and +Y up. */
     ikid_tracker_settings d = ikid_tracker_settings_default();
-    CHECK(d.length_scale == 1.0 && d.mass_scale == 1.0 && d.rate_hz == 1000.0 && d.jerk_noise == 3e3 && d.noise_memory_s == 10.0
-          && d.initial_marker_noise == 1e-3, "default settings");
+    CHECK(d.length_scale == 1.0 && d.mass_scale == 1.0 && isnan(d.rate_hz) && d.jerk_noise == 3e3 && d.noise_memory_s == 10.0
+          && d.initial_marker_noise == 1e-3 && d.up[0] == 0.0 && d.up[1] == 1.0 && d.up[2] == 0.0, "default settings");
 
     /* Creation: every failure has its status and a message naming the problem, and no handle. */
     ikid_model *refiner = NULL, *not_refiner = NULL;
@@ -115,6 +116,12 @@ int main(int argc, char **argv) {
     bad = s;
     bad.length_scale = NAN;
     CHECK(ikid_tracker_new(&bad, NULL, &tracker) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "length_scale") && !tracker, "NaN length scale");
+    ikid_tracker *unrated = NULL;
+    CHECK(ikid_tracker_new(&d, NULL, &unrated) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "rate_hz: is not set") && !unrated,
+          "no rate: %s", ikid_last_error());
+    bad = s;
+    bad.up[0] = 0.0; bad.up[1] = 0.0; bad.up[2] = 0.0;
+    CHECK(ikid_tracker_new(&bad, NULL, &tracker) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "up") && !tracker, "zero up");
     bad = s;
     bad.rate_hz = 500.0;
     CHECK(ikid_tracker_new(&bad, refiner, &tracker) == IKID_STATUS_INVALID_ARGUMENT && contains(ikid_last_error(), "500 Hz") && !tracker, "refiner at another rate");

@@ -52,9 +52,10 @@ def header_struct(name: str) -> type[C.Structure]:
     fields = []
     for line in body.splitlines():
         line = line.split("//")[0].strip()
-        m = re.fullmatch(r"(\w+)\s+(\w+);", line)
+        m = re.fullmatch(r"(\w+)\s+(\w+)(?:\[(\d+)\])?;", line)
         if m:
-            fields.append((m.group(2), C_TYPES[m.group(1)]))
+            ctype = C_TYPES[m.group(1)]
+            fields.append((m.group(2), ctype * int(m.group(3)) if m.group(3) else ctype))
     return type(name, (C.Structure,), {"_fields_": fields})
 
 
@@ -93,6 +94,8 @@ SIGNATURES = {
     "ikid_tracker_settings_default": ([], Settings),
     "ikid_tracker_new": ([C.POINTER(Settings), vp, C.POINTER(vp)], C.c_int),
     "ikid_tracker_push": ([vp, f64p, sz, f64p, sz, C.POINTER(Flags)], C.c_int),
+    "ikid_tracker_push_at": ([vp, C.c_double, f64p, sz, f64p, sz, C.POINTER(Flags)], C.c_int),
+    "ikid_tracker_gap_restarts": ([vp, C.POINTER(sz)], C.c_int),
     "ikid_tracker_run": ([vp, f64p, sz, f64p, sz, C.POINTER(Flags), sz, C.POINTER(sz)], C.c_int),
     "ikid_tracker_reset": ([vp], C.c_int),
     "ikid_tracker_marker_noise": ([vp, f64p, sz], C.c_int),
@@ -161,6 +164,7 @@ class Handles:
     def tracker(self, refiner: vp | None = None) -> vp:
         h = vp()
         settings = lib().ikid_tracker_settings_default()
+        settings.rate_hz = 1000.0
         assert lib().ikid_tracker_new(C.byref(settings), refiner, C.byref(h)) == OK, last_error()
         self.trackers.append(h)
         return h
@@ -595,6 +599,7 @@ def tracker_probes(corpus: Corpus) -> list[Api]:
 
             def body(v, h, field=field, value=value):
                 settings = lib().ikid_tracker_settings_default()
+                settings.rate_hz = 1000.0
                 setattr(settings, field, value)
                 t = vp(4321)
                 status = lib().ikid_tracker_new(C.byref(settings), None, C.byref(t))
@@ -607,6 +612,7 @@ def tracker_probes(corpus: Corpus) -> list[Api]:
 
     def new_nulls(v, h):
         settings = lib().ikid_tracker_settings_default()
+        settings.rate_hz = 1000.0
         expect(
             v, "ikid_tracker_new(NULL settings)", lib().ikid_tracker_new(None, None, C.byref(vp())), {NULL}
         )
@@ -658,6 +664,33 @@ def tracker_probes(corpus: Corpus) -> list[Api]:
         push_case("inf-value", 18, 12, {INPUT}, change=inf),
         push_case("value-1e300", 18, 12, {INPUT, OK}, change=huge),
     ]
+
+    def stamped(v, h):
+        # Stamps that cannot be a frame at the tracker's rate are refused, write nothing and
+        # restart nothing.
+        t = h.tracker()
+        fr = frames64(corpus, 2)
+        buf = np.full(12, SENTINEL, np.float64)
+        flags = Flags(missing=999)
+        assert (
+            lib().ikid_tracker_push_at(t, 1.0, ptr(fr[0], f64p), 18, ptr(buf, f64p), 12, C.byref(flags)) == OK
+        )
+        buf[:] = SENTINEL
+        flags.missing = 999
+        for when, what in ((1.0002, "too soon"), (math.nan, "NaN"), (math.inf, "inf"), (-math.inf, "-inf")):
+            status = lib().ikid_tracker_push_at(
+                t, when, ptr(fr[1], f64p), 18, ptr(buf, f64p), 12, C.byref(flags)
+            )
+            if expect(v, f"ikid_tracker_push_at(time {what})", status, {ARG}, "time"):
+                unchanged(v, "ikid_tracker_push_at", buf)
+                if flags.missing != 999:
+                    v.silent("ikid_tracker_push_at wrote *flags although it failed")
+        restarts = sz(7)
+        expect(v, "ikid_tracker_gap_restarts(NULL)", lib().ikid_tracker_gap_restarts(t, None), {NULL})
+        if lib().ikid_tracker_gap_restarts(t, C.byref(restarts)) != OK or restarts.value != 0:
+            v.silent(f"refused stamps restarted the filter ({restarts.value} restarts)")
+
+    out.append(probe(corpus, "ikid_tracker_push_at/bad-stamps", stamped))
 
     def run_case(
         name: str,

@@ -28,7 +28,9 @@ pub struct ikid_tracker_settings {
     pub length_scale: f64,
     /// Subject's segment masses relative to the default subject.
     pub mass_scale: f64,
-    /// Frame rate of the markers, Hz: push frames at this rate.
+    /// Frame rate of the markers, Hz: push frames at this rate. No default (NaN in
+    /// `ikid_tracker_settings_default()`): `ikid_tracker_new` refuses settings without it, since
+    /// tracked at another rate every velocity, acceleration and torque is wrong by the ratio.
     pub rate_hz: f64,
     /// Spectral density of the joint jerk the motion model allows, rad²/s⁵: larger follows
     /// faster moves with less lag and passes more noise.
@@ -41,6 +43,10 @@ pub struct ikid_tracker_settings {
     /// by its position relative to the forearm: for real subjects, whose wrist centre the body
     /// model does not know. Always on with a calibration (`ikid_tracker_set_calibration`).
     pub relative_hand: bool,
+    /// The lab's up direction (against gravity) in the markers' coordinates, any non-zero
+    /// length: {0, 1, 0} by default (the body model's lab), {0, 0, 1} for a Z-up lab (Vicon,
+    /// Qualisys). Only the torques depend on it, and silently: set it.
+    pub up: [f64; 3],
 }
 
 /// Per-frame flags of a tracker's estimate.
@@ -76,11 +82,12 @@ impl ikid_tracker_flags {
     }
 }
 
-/// The default subject and settings: both scales 1, 1000 Hz, the core's default jerk noise
-/// (chosen against biorbd's EKF, see docs/ekf.md), a 10 s noise memory, 1 mm initial noise.
+/// The default subject and settings: both scales 1, the core's default jerk noise (chosen
+/// against biorbd's EKF, see docs/ekf.md), a 10 s noise memory, 1 mm initial noise, +Y up;
+/// `rate_hz` NaN, to be set to the markers' frame rate (`ikid_tracker_new` refuses it unset).
 #[unsafe(no_mangle)]
 pub extern "C" fn ikid_tracker_settings_default() -> ikid_tracker_settings {
-    let s = TrackerSettings::default();
+    let s = TrackerSettings::new(f64::NAN);
     ikid_tracker_settings {
         length_scale: 1.0,
         mass_scale: 1.0,
@@ -89,6 +96,7 @@ pub extern "C" fn ikid_tracker_settings_default() -> ikid_tracker_settings {
         noise_memory_s: s.noise_memory_s,
         initial_marker_noise: s.initial_marker_noise,
         relative_hand: s.relative_hand,
+        up: s.up,
     }
 }
 
@@ -122,6 +130,7 @@ pub unsafe extern "C" fn ikid_tracker_new(
             noise_memory_s: s.noise_memory_s,
             initial_marker_noise: s.initial_marker_noise,
             relative_hand: s.relative_hand,
+            up: s.up,
         };
         let mut tracker = Tracker::new(body, settings)?;
         tracker.set_refiner(refiner)?;
@@ -163,6 +172,56 @@ pub unsafe extern "C" fn ikid_tracker_push(
         };
         out.copy_from_slice(&estimate.values());
         *flags = ikid_tracker_flags::new(&estimate, ready);
+        Ok(())
+    })
+}
+
+/// `ikid_tracker_push` for a frame stamped with its acquisition time (seconds, any origin),
+/// for a source that can lose frames: a stamp more than 1.5 periods of `rate_hz` after the
+/// last one (frames lost), or not after it (the source's clock restarted), restarts the
+/// filter instead of bridging the gap as one step (0.1 s lost gave torques 3.8 N·m off);
+/// what was learned of the subject is kept, and the first frames after are flagged
+/// `IKID_FRAME_RESTARTED` while the velocities settle. `ikid_tracker_gap_restarts` counts
+/// them. A stamp less than half a period after the last one, or not finite, is refused
+/// (`IKID_STATUS_INVALID_ARGUMENT`) and changes nothing.
+///
+/// # Safety
+/// As `ikid_tracker_push`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_tracker_push_at(
+    tracker: *mut ikid_tracker,
+    time_s: f64,
+    frame: *const f64,
+    frame_len: usize,
+    out: *mut f64,
+    out_len: usize,
+    flags: *mut ikid_tracker_flags,
+) -> ikid_status {
+    guard(|| {
+        let t = &mut unsafe { non_null_mut(tracker, "tracker") }?.tracker;
+        let frame = unsafe { slice(frame, frame_len, "frame") }?;
+        let flags = unsafe { non_null_mut(flags, "flags") }?;
+        let out = unsafe { slice_mut(out, room(out_len, 1)?, "out") }?;
+        let (estimate, ready) = match t.push_at(time_s, frame)? {
+            Some(o) => (o, true),
+            None => (TrackerOutput::waiting(ikid_core::tracker::missing_markers(frame)), false),
+        };
+        out.copy_from_slice(&estimate.values());
+        *flags = ikid_tracker_flags::new(&estimate, ready);
+        Ok(())
+    })
+}
+
+/// Writes into `*restarts` how many times `ikid_tracker_push_at` restarted the filter after a
+/// time gap since the tracker was made or reset.
+///
+/// # Safety
+/// `tracker` must be a live handle; `restarts` must point to writable storage.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_tracker_gap_restarts(tracker: *const ikid_tracker, restarts: *mut usize) -> ikid_status {
+    guard(|| {
+        let t = &unsafe { non_null(tracker, "tracker") }?.tracker;
+        *unsafe { non_null_mut(restarts, "restarts") }? = t.gap_restarts();
         Ok(())
     })
 }

@@ -14,12 +14,13 @@ use ikid::tracker::{
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use pyo3::types::PyTuple;
+use pyo3::types::{PyBool, PyString, PyTuple};
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Tracker>()?;
     m.add_class::<TrackerEstimate>()?;
     m.add("DEFAULT_JERK_NOISE", DEFAULT_JERK_NOISE)?;
+    m.add("GAP_PERIODS", ikid::stream::GAP_PERIODS)?;
     m.add("SD_SCALE_TAU", SD_SCALE_TAU)?;
     m.add("REFINER_OUTPUTS", refiner_outputs())?;
     m.add("REFINER_GATE_NOISE", REFINER_GATE_NOISE)?;
@@ -56,6 +57,9 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 ///   ``ikid.calibrate`` or ``ikid.load_calibration``); turns ``relative_hand`` on.
 /// - ``relative_hand``: measure the hand by its orientation only (for real subjects, whose
 ///   wrist centre the body model does not know).
+/// - ``up``: the lab's up direction in the markers' coordinates: an axis (``"+y"``, the
+///   default and ikid's lab; ``"+z"`` for Vicon and Qualisys labs) or three numbers. Only the
+///   torques depend on it (gravity), and they are wrong by it silently.
 #[pyclass(module = "ikid")]
 pub struct Tracker {
     inner: CoreTracker,
@@ -68,27 +72,37 @@ fn rows(out: &TrackerOutput) -> [[f64; N_COORDINATES]; 4] {
 #[pymethods]
 impl Tracker {
     #[new]
-    #[pyo3(signature = (length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=None, jerk_noise=DEFAULT_JERK_NOISE, noise_memory_s=10.0, initial_marker_noise=1e-3, refiner=None, calibration=None, relative_hand=false))]
+    #[pyo3(signature = (length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=None, jerk_noise=DEFAULT_JERK_NOISE, noise_memory_s=10.0, initial_marker_noise=1e-3, refiner=None, calibration=None, relative_hand=false, up=None))]
     // jerk_noise's default written out for help() (pyo3 shows a constant as `...`); a test
     // checks it is DEFAULT_JERK_NOISE.
     #[pyo3(
-        text_signature = "(length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=None, jerk_noise=3000.0, noise_memory_s=10.0, initial_marker_noise=0.001, refiner=None, calibration=None, relative_hand=False)"
+        text_signature = "(length_scale=1.0, mass_scale=1.0, marker_shift=None, rate_hz=None, jerk_noise=3000.0, noise_memory_s=10.0, initial_marker_noise=0.001, refiner=None, calibration=None, relative_hand=False, up=None)"
     )]
     #[allow(clippy::too_many_arguments)]
     fn new(
         length_scale: f64,
         mass_scale: f64,
         marker_shift: Option<&Bound<'_, PyAny>>,
-        rate_hz: Option<f64>,
+        rate_hz: Option<&Bound<'_, PyAny>>,
         jerk_noise: f64,
         noise_memory_s: f64,
         initial_marker_noise: f64,
         refiner: Option<&Bound<'_, Model>>,
         calibration: Option<PyRef<'_, Calibration>>,
         relative_hand: bool,
+        up: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         // No default: a 100 Hz recording tracked as 1 kHz gave velocities 9x and torques 5x too
         // large with every status 0 (a new-user review); the rate is an input, never a guess.
+        // `True` is a number to Python: refused, not taken as 1 Hz.
+        if rate_hz.is_some_and(|r| r.is_instance_of::<PyBool>()) {
+            return Err(ikid::Error::BadArgument {
+                what: "rate_hz",
+                detail: "is a bool, expected the frames' rate in Hz".into(),
+            })
+            .py_err();
+        }
+        let rate_hz = rate_hz.map(|r| r.extract::<f64>()).transpose()?;
         let Some(rate_hz) = rate_hz else {
             return Err(ikid::Error::BadArgument {
                 what: "rate_hz",
@@ -100,7 +114,17 @@ impl Tracker {
             .py_err();
         };
         let body = subject(length_scale, mass_scale, marker_shift)?;
-        let settings = TrackerSettings { rate_hz, jerk_noise, noise_memory_s, initial_marker_noise, relative_hand };
+        let up = match up {
+            None => TrackerSettings::new(rate_hz).up,
+            Some(u) if u.is_instance_of::<PyString>() => TrackerSettings::up_axis(&u.extract::<String>()?).py_err()?,
+            Some(u) => u.extract::<[f64; 3]>().map_err(|_| {
+                input(format!(
+                    "up: expected an axis such as \"+z\" or three numbers, got {}",
+                    u.repr().map_or_else(|_| "?".into(), |r| r.to_string())
+                ))
+            })?,
+        };
+        let settings = TrackerSettings { rate_hz, jerk_noise, noise_memory_s, initial_marker_noise, relative_hand, up };
         let mut inner = CoreTracker::new(body, settings).py_err()?;
         inner.set_calibration(calibration.map(|c| c.inner));
         inner.set_refiner(refiner.map(|m| m.get().inner.clone())).py_err()?;
@@ -119,9 +143,21 @@ impl Tracker {
     /// ``ikid.FRAME_STATUS``, ``missing``, ``noise``, ``refined``; ``numpy.asarray`` of it is the
     /// ``(4, 3)`` array of the four rows), or None until a frame with every marker started
     /// the filter. Holds the GIL (a push takes microseconds).
-    fn push<'py>(&mut self, frame: &Bound<'py, PyAny>) -> PyResult<Option<TrackerEstimate>> {
+    ///
+    /// ``time``: the frame's acquisition time, seconds (any origin), for a source that can lose
+    /// frames: a stamp more than 1.5 periods after the last one, or not after it, restarts the
+    /// filter (keeping what it learned of the subject; ``gap_restarts`` counts it) instead of
+    /// bridging the gap as one step; one less than half a period after it is refused.
+    #[pyo3(signature = (frame, time=None))]
+    fn push<'py>(&mut self, frame: &Bound<'py, PyAny>, time: Option<f64>) -> PyResult<Option<TrackerEstimate>> {
         let tracker = &mut self.inner;
-        with_frame_f64(frame, |values| Ok(tracker.push(values).py_err()?.map(|out| TrackerEstimate::from(&out))))
+        with_frame_f64(frame, |values| {
+            let out = match time {
+                Some(t) => tracker.push_at(t, values),
+                None => tracker.push(values),
+            };
+            Ok(out.py_err()?.map(|out| TrackerEstimate::from(&out)))
+        })
     }
 
     /// Standard deviations of the last estimate from the filter's covariance: a `(2, 3)`
@@ -140,10 +176,19 @@ impl Tracker {
     /// `status` (uint16 bits, ``ikid.FRAME_STATUS``: markers rejected, poses held, restarts,
     /// implausible angles), and `start`,
     /// the first frame with an estimate (rows before it are NaN: the filter waits for a frame
-    /// with every marker). Continues from the tracker's state. Releases the GIL.
-    #[pyo3(signature = (frames, sd=false))]
-    fn run<'py>(&mut self, py: Python<'py>, frames: &Bound<'py, PyAny>, sd: bool) -> PyResult<Bound<'py, PyDict>> {
+    /// with every marker). Continues from the tracker's state. ``times``: each frame's time,
+    /// seconds, as ``push``'s ``time`` (lost frames restart the filter). Releases the GIL.
+    #[pyo3(signature = (frames, sd=false, times=None))]
+    fn run<'py>(
+        &mut self,
+        py: Python<'py>,
+        frames: &Bound<'py, PyAny>,
+        sd: bool,
+        times: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let with_sd = sd;
+        let times: Option<Vec<f64>> =
+            times.map(|t| t.extract()).transpose().map_err(|e| input(format!("times: {e}")))?;
         let tracker = &mut self.inner;
         let (out, sd, missing, noise, refined, status, start, n) =
             with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |values, n| {
@@ -157,7 +202,7 @@ impl Tracker {
                 let mut status = vec![0u16; n];
                 let start = py
                     .detach(|| {
-                        tracker.run_with_sd(values, with_sd, |i, o, s, _| {
+                        tracker.run_with_sd(values, times.as_deref(), with_sd, |i, o, s, _| {
                             for (k, row) in rows(o).iter().enumerate() {
                                 out[(k * n + i) * N_COORDINATES..(k * n + i + 1) * N_COORDINATES].copy_from_slice(row);
                             }
@@ -209,6 +254,13 @@ impl Tracker {
         self.inner.restarts()
     }
 
+    /// How many times ``push(..., time=)`` or ``run(..., times=)`` restarted the filter after a
+    /// time gap (frames lost, or the source's clock restarted).
+    #[getter]
+    fn gap_restarts(&self) -> usize {
+        self.inner.gap_restarts()
+    }
+
     /// Forget everything seen (state, forearm pose, noise estimates).
     fn reset(&mut self) {
         self.inner.reset();
@@ -221,7 +273,8 @@ impl Tracker {
         PyArray1::from_slice(py, &self.inner.marker_noise())
     }
 
-    /// The settings in use: `rate_hz`, `jerk_noise`, `noise_memory_s`, `initial_marker_noise`.
+    /// The settings in use: `rate_hz`, `jerk_noise`, `noise_memory_s`, `initial_marker_noise`,
+    /// `up`.
     #[getter]
     fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let s = self.inner.settings();
@@ -230,6 +283,7 @@ impl Tracker {
         d.set_item("jerk_noise", s.jerk_noise)?;
         d.set_item("noise_memory_s", s.noise_memory_s)?;
         d.set_item("initial_marker_noise", s.initial_marker_noise)?;
+        d.set_item("up", s.up.to_vec())?;
         Ok(d)
     }
 

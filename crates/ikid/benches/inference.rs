@@ -78,7 +78,7 @@ fn tracker(c: &mut Criterion) {
         .collect();
     let frames = body.marker_frames(&q, 0.3).expect("a valid trajectory");
     for (label, relative_hand) in [("push", false), ("push_relative_hand", true)] {
-        let settings = TrackerSettings { relative_hand, ..Default::default() };
+        let settings = TrackerSettings { relative_hand, ..TrackerSettings::new(1000.0) };
         let mut tracker = Tracker::new(body.clone(), settings).expect("valid settings");
         let mut i = 0;
         group.bench_function(label, |b| {

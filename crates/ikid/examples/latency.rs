@@ -83,7 +83,7 @@ fn tracker_latency(pushes: usize, refiner: Option<Model>) -> Result<(), Box<dyn 
         .collect();
     let mut frames = body.marker_frames(&q, 0.3)?;
     ikid::noise::uniform_range(&mut frames, 0.01, 7)?;
-    let mut tracker = ikid::Tracker::new(body, ikid::TrackerSettings::default())?;
+    let mut tracker = ikid::Tracker::new(body, ikid::TrackerSettings::new(1000.0))?;
     let label = if refiner.is_some() { "tracker+refiner" } else { "tracker" };
     tracker.set_refiner(refiner)?;
     let mut ns = Vec::with_capacity(pushes);

@@ -53,7 +53,7 @@
 //! use ikid::body::BodyModel;
 //! use ikid::{Tracker, TrackerSettings};
 //!
-//! let settings = TrackerSettings { rate_hz: 1000.0, ..TrackerSettings::default() };
+//! let settings = TrackerSettings::new(1000.0);
 //! let mut tracker = Tracker::new(BodyModel::default(), settings)?;
 //! tracker.set_refiner(Some(ikid::shipped::load("wrist-track")?))?; // optional
 //! let q: Vec<f64> = (0..500).flat_map(|i| [0.3, -0.2 * (i as f64 / 200.0).sin(), 0.1]).collect();

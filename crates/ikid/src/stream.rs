@@ -9,6 +9,14 @@ use crate::model::{Model, SdState};
 use crate::net::Scratch;
 use crate::status;
 
+/// A stamp more than this many periods after the last one means frames were lost: the filter
+/// restarts ([`Tracker::push_at`](crate::Tracker::push_at)), a stream's window too ([`Stream::push_at`]).
+/// Python's `ikid.io.resample.GAP_STEPS` is this constant.
+pub const GAP_PERIODS: f64 = 1.5;
+/// A stamp less than this many periods after the last one is refused: the source runs faster
+/// than the tracker's or the model's rate, and every velocity and torque would be wrong by the ratio.
+pub const FOLLOWS_PERIODS: f64 = 0.5;
+
 /// Largest gap in time stamps taken as frames lost, s: a stamp further ahead of the last
 /// accepted frame (or behind it) is a clock glitch until [`TIME_REANCHOR_FRAMES`] stamps in a
 /// row continue from it; one bad stamp is refused alone and the stream goes on.
@@ -443,7 +451,7 @@ impl Stream {
         let rate = self.model.card().frame_rate_hz;
         let periods = (time_s - last) * rate;
         if time_s > last && time_s - last <= MAX_TIME_GAP_S {
-            if periods < 0.5 {
+            if periods < FOLLOWS_PERIODS {
                 return Err(Error::BadArgument {
                     what: "time",
                     detail: format!(
@@ -454,10 +462,11 @@ impl Stream {
                     ),
                 });
             }
-            return Ok(if periods > 1.5 { TimeStep::Gap } else { TimeStep::Follows });
+            return Ok(if periods > GAP_PERIODS { TimeStep::Gap } else { TimeStep::Follows });
         }
         // A jump: the source's new clock only if it continues the jumped stamps before it.
-        let continues = self.time_candidate.is_some_and(|c| (0.5..=1.5).contains(&((time_s - c) * rate)));
+        let continues =
+            self.time_candidate.is_some_and(|c| (FOLLOWS_PERIODS..=GAP_PERIODS).contains(&((time_s - c) * rate)));
         if continues && self.time_candidate_frames + 1 >= TIME_REANCHOR_FRAMES {
             return Ok(TimeStep::Reanchor);
         }
@@ -468,7 +477,8 @@ impl Stream {
     /// it was refused.
     fn refuse_jump(&mut self, time_s: f64) -> Error {
         let rate = self.model.card().frame_rate_hz;
-        let continues = self.time_candidate.is_some_and(|c| (0.5..=1.5).contains(&((time_s - c) * rate)));
+        let continues =
+            self.time_candidate.is_some_and(|c| (FOLLOWS_PERIODS..=GAP_PERIODS).contains(&((time_s - c) * rate)));
         self.time_candidate_frames = if continues { self.time_candidate_frames + 1 } else { 1 };
         self.time_candidate = Some(time_s);
         let last = self.last_time.unwrap_or(f64::NAN);

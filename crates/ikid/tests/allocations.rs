@@ -126,7 +126,7 @@ fn tracker_push_never_allocates_even_refined() {
         frames[i * 18 + 3 * (3 + i % 3)..i * 18 + 3 * (3 + i % 3) + 3].fill(f64::NAN);
     }
     frames[300 * 18] = f64::NAN;
-    let mut tracker = ikid::Tracker::new(body, ikid::TrackerSettings::default()).expect("default settings");
+    let mut tracker = ikid::Tracker::new(body, ikid::TrackerSettings::new(1000.0)).expect("default settings");
     tracker.set_refiner(Some(ikid::testing::random_refiner(16, &[32, 32], 9))).expect("a refiner");
     let mut torques = 0;
     let n = allocations_in(|| {

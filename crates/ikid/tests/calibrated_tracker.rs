@@ -66,7 +66,7 @@ fn a_calibrated_tracker_follows_a_subject_the_body_model_does_not_fit() {
         }
         let neutral32: Vec<f32> = neutral.iter().map(|&v| v as f32).collect();
         let (calibration, _) = Calibration::from_neutral(&neutral32, None, side).unwrap();
-        let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+        let settings = TrackerSettings::new(rate);
         let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
         tracker.set_calibration(Some(calibration));
         let worst = worst_deg(&mut tracker, &frames, &q, 50);
@@ -83,8 +83,7 @@ fn a_calibrated_tracker_follows_a_subject_the_body_model_does_not_fit() {
     }
     // The same right-arm frames without a calibration: the model's placement is wrong for them.
     let frames = body.marker_frames(&q.concat(), 0.4).unwrap();
-    let mut plain =
-        Tracker::new(BodyModel::default(), TrackerSettings { rate_hz: rate, ..Default::default() }).unwrap();
+    let mut plain = Tracker::new(BodyModel::default(), TrackerSettings::new(rate)).unwrap();
     assert!(worst_deg(&mut plain, &frames, &q, 50) > 10.0);
 }
 
@@ -139,7 +138,7 @@ fn a_calibrated_tracker_follows_fast_pushes_at_70_hz_through_gimbal_lock_region(
     let neutral32: Vec<f32> = neutral.iter().map(|&v| v as f32).collect();
     let (calibration, _) = Calibration::from_neutral(&neutral32, None, Side::Right).unwrap();
     for jerk_noise in [ikid::tracker::DEFAULT_JERK_NOISE, 1e5, 1e7] {
-        let settings = TrackerSettings { rate_hz: rate, jerk_noise, ..Default::default() };
+        let settings = TrackerSettings { jerk_noise, ..TrackerSettings::new(rate) };
         let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
         tracker.set_calibration(Some(calibration));
         let (mut worst_ok, mut worst, mut se, mut n) = (0.0f64, 0.0f64, 0.0, 0);
@@ -193,7 +192,7 @@ fn a_calibrated_tracker_keeps_a_moving_forearm_through_a_200_ms_gap_of_any_of_it
                 gappy[f * MARKER_FRAME_LEN + 3 * marker..f * MARKER_FRAME_LEN + 3 * marker + 3].fill(f64::NAN);
             }
         }
-        let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+        let settings = TrackerSettings::new(rate);
         let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
         tracker.set_calibration(Some(calibration));
         let worst = worst_deg(&mut tracker, &gappy, &q, 100);
@@ -333,7 +332,7 @@ fn a_calibrated_tracker_filters_noise_through_rests_drifts_and_bursts() {
                 fraction * (hi - lo) / 3f64.sqrt()
             });
             let rms_true = (true_std.iter().map(|s| s * s).sum::<f64>() / 9.0).sqrt();
-            let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+            let settings = TrackerSettings::new(rate);
             let skip = rate as usize; // the first second: templates, noise and centre learned
             let mut calibrated = Tracker::new(BodyModel::default(), settings).unwrap();
             calibrated.set_calibration(Some(calibration));

@@ -110,7 +110,7 @@ fn streams_refuse_and_trackers_reject_markers_no_arm_can_hold() {
     let frame: Vec<f32> = scaled_frame(10.0).iter().map(|&v| v as f32).collect();
     let err = s.push(&frame).unwrap_err();
     assert_eq!(err.code(), "implausible_markers");
-    let mut tracker = ikid::Tracker::new(BodyModel::default(), Default::default()).unwrap();
+    let mut tracker = ikid::Tracker::new(BodyModel::default(), ikid::TrackerSettings::new(1000.0)).unwrap();
     for _ in 0..50 {
         assert_eq!(tracker.push(&scaled_frame(10.0)).unwrap(), None, "a tracker must not start on them");
     }
@@ -307,7 +307,7 @@ fn stream_statuses(frames: &[f64]) -> Vec<u16> {
 }
 
 fn tracker_statuses(frames: &[f64]) -> Vec<u16> {
-    let mut tracker = ikid::Tracker::new(BodyModel::default(), ikid::TrackerSettings::default()).unwrap();
+    let mut tracker = ikid::Tracker::new(BodyModel::default(), ikid::TrackerSettings::new(1000.0)).unwrap();
     let mut bits = Vec::new();
     tracker.run(frames, |_, out, _| bits.push(out.status)).unwrap();
     bits

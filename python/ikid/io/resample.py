@@ -58,8 +58,9 @@ def _hermite(time: np.ndarray, values: np.ndarray, slopes: np.ndarray, new_time:
 
 
 #: A step longer than this many frame steps is a time gap between stretches (here and in
-#: :mod:`ikid.kinematics`, whose low-pass treats each stretch alone).
-GAP_STEPS = 1.5
+#: :mod:`ikid.kinematics`, whose low-pass treats each stretch alone): the core's, at which a
+#: stamped tracker or stream restarts.
+GAP_STEPS: float = _native.GAP_PERIODS
 
 
 def resample_stretches(

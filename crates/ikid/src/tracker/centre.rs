@@ -333,7 +333,7 @@ mod tests {
         // moves the centre, per coordinate, plus the learned centre's own variance. The formula
         // takes the turn's effect as isotropic (the fit's turn is stiffer about the markers'
         // normal): 18% under the Monte Carlo here (NumPy: 0.82), within 25%.
-        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::new(1000.0)).unwrap();
         let sigma = 1e-3;
         tracker.noise_variance = [sigma * sigma; N_HAND];
         let places =

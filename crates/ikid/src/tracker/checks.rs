@@ -275,7 +275,7 @@ mod tests {
         // Five frames keep the forearm's shape; then FAP sits 10 cm farther from RSP and USP
         // (two distances broken: FAP rejected) for good. The new shape is taken on its fifth
         // frame (max(LOST, 5)), not before.
-        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::new(1000.0)).unwrap();
         let rest = moved(0, Vector3::zeros());
         for _ in 0..5 {
             assert_eq!(tracker.check_rigid(Segment::Forearm, &rest, 3), (0, false));
@@ -308,7 +308,7 @@ mod tests {
         // At 10 Hz FAP 1 mm farther out each frame (within the tolerance): the distances learned
         // are the plain mean of the frames so far while there are fewer than ten (weight
         // 1/(n+1)), then follow by a tenth of each new frame's difference (a one-second memory).
-        let settings = TrackerSettings { rate_hz: 10.0, ..Default::default() };
+        let settings = TrackerSettings::new(10.0);
         let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
         let rest = moved(0, Vector3::zeros());
         let point = |m: usize| Vector3::new(rest[3 * m], rest[3 * m + 1], rest[3 * m + 2]);
@@ -336,7 +336,7 @@ mod tests {
     fn a_new_shape_must_hold_from_frame_to_frame_to_be_taken() {
         // FAP jumping between two places 10 cm off either way: each frame another candidate
         // shape, so none is ever taken, however long it lasts.
-        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::new(1000.0)).unwrap();
         let rest = moved(0, Vector3::zeros());
         for _ in 0..5 {
             tracker.check_rigid(Segment::Forearm, &rest, 3);
@@ -357,7 +357,7 @@ mod tests {
         // rest; FAP slides 10 cm out (two distances now off the template's), then snaps back,
         // twice. Each time the template's shape is taken back on its first frame, the first time
         // as the second: relearning the shape keeps which one the template was taken from.
-        let settings = TrackerSettings { rate_hz: 10.0, ..Default::default() };
+        let settings = TrackerSettings::new(10.0);
         let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
         tracker.set_calibration(Some(crate::calibration::Calibration::body_model()));
         let rest = moved(0, Vector3::zeros());
@@ -385,7 +385,7 @@ mod tests {
         let point = |m: usize| Vector3::new(rest[3 * m], rest[3 * m + 1], rest[3 * m + 2]);
         let axis = nalgebra::Unit::new_normalize((point(1) - point(0)).cross(&(point(2) - point(0))));
         let turned = point(2) + nalgebra::Rotation3::from_axis_angle(&axis, 1.0) * (point(0) - point(2));
-        let mut tracker = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
         assert_eq!(tracker.check_rigid(Segment::Forearm, &rest, 3), (0, false));
         let f = moved(0, turned - point(0));
         assert_eq!(tracker.check_rigid(Segment::Forearm, &f, 3), (0b001, false));
@@ -407,7 +407,7 @@ mod tests {
         for (m, deg) in [(1, 70.0), (2, -25.0)] {
             f[3 * m..3 * m + 3].copy_from_slice(turn(m, deg).as_slice());
         }
-        let mut tracker = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
         assert_eq!(tracker.check_rigid(Segment::Forearm, &rest, 3), (0, false));
         assert_eq!(tracker.check_rigid(Segment::Forearm, &f, 3), (0b110, false));
     }

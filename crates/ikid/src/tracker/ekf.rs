@@ -492,7 +492,7 @@ mod tests {
         for v in &mut f[150 * MARKER_FRAME_LEN..160 * MARKER_FRAME_LEN] {
             *v += 1000.0;
         }
-        let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+        let settings = TrackerSettings::new(rate);
         let mut tracker = Tracker::new(body, settings).unwrap();
         let out: Vec<TrackerOutput> =
             f.chunks_exact(MARKER_FRAME_LEN).map(|frame| tracker.push(frame).unwrap().unwrap()).collect();
@@ -531,7 +531,7 @@ mod tests {
         // (q, q̇, q̈): Q = s ∫₀^dt g gᵀ dτ, here by the midpoint rule over 10⁴ slices; and the
         // transition is exp(A dt) for A the chain q̈ → q̇ → q.
         let (rate, s) = (50.0, 3.0);
-        let settings = TrackerSettings { rate_hz: rate, jerk_noise: s, ..Default::default() };
+        let settings = TrackerSettings { jerk_noise: s, ..TrackerSettings::new(rate) };
         let (transition, process_noise) = motion_model(&settings);
         let (dt, n) = (1.0 / rate, 10_000);
         let mut expected = nalgebra::Matrix3::zeros();
@@ -557,7 +557,7 @@ mod tests {
     fn lost_s_is_counted_in_frames_at_the_trackers_rate_and_at_least_three() {
         // LOST_S = 30 ms: 1.5 frames at 50 Hz (held to 3), 4.5 at 150 Hz (5), 30 at 1 kHz.
         for (rate, frames) in [(50.0, 3), (150.0, 5), (1000.0, 30)] {
-            let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+            let settings = TrackerSettings::new(rate);
             let tracker = Tracker::new(BodyModel::default(), settings).unwrap();
             assert_eq!(tracker.lost_frames(), frames, "{rate} Hz");
         }
@@ -610,7 +610,7 @@ mod tests {
         let q = [0.3, -0.2, 0.1];
         let frame = body.marker_frame(&q, &forearm);
         let at_rest: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i]);
-        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(body, TrackerSettings::new(1000.0)).unwrap();
         tracker.noise_variance = [1e-6; N_HAND];
         tracker.noise_variance[3] = 0.05 * 0.05;
         let mut x = StateVector::zeros();
@@ -640,7 +640,7 @@ mod tests {
         let frame = body.marker_frame(&q, &forearm);
         let mut hand: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i] + 1e-3 * (i as f64).sin());
         hand[3..6].fill(f64::NAN);
-        let settings = TrackerSettings { relative_hand: true, ..Default::default() };
+        let settings = TrackerSettings { relative_hand: true, ..TrackerSettings::new(1000.0) };
         let mut tracker = Tracker::new(body, settings).unwrap();
         tracker.noise_variance = [1e-6; N_HAND];
         let mut x0 = StateVector::zeros();
@@ -668,7 +668,7 @@ mod tests {
         let q = [0.3, -0.2, 0.1];
         let frame = body.marker_frame(&q, &forearm);
         let hand: [f64; N_HAND] = std::array::from_fn(|i| frame[HAND_START + i]);
-        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(body, TrackerSettings::new(1000.0)).unwrap();
         tracker.noise_variance = [1e-12; N_HAND];
         let mut x = StateVector::zeros();
         x.fixed_rows_mut::<3>(0).copy_from(&Vector3::new(q[0] - 0.3, q[1] + 0.4, q[2] - 0.2));
@@ -682,7 +682,7 @@ mod tests {
     fn the_initial_covariance_is_as_wide_as_documented_and_uncorrelated() {
         // Standard deviations 0.1 rad, ~30 rad/s and ~300 rad/s² for every coordinate, nothing
         // correlated (a velocity or acceleration known a priori would slow the start).
-        let tracker = Tracker::new(BodyModel::default(), TrackerSettings::default()).unwrap();
+        let tracker = Tracker::new(BodyModel::default(), TrackerSettings::new(1000.0)).unwrap();
         let p = tracker.initial_covariance();
         for i in 0..N_STATE {
             for j in 0..N_STATE {
@@ -737,7 +737,7 @@ mod tests {
         let body = BodyModel::default();
         let q = trajectory(3000, 1000.0);
         let f = frames(&body, &q, 0.3);
-        let mut tracker = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
         let mut last = None;
         for frame in f.chunks_exact(MARKER_FRAME_LEN) {
             last = tracker.push(frame).unwrap();
@@ -768,7 +768,7 @@ mod tests {
             f[i * MARKER_FRAME_LEN + 12..i * MARKER_FRAME_LEN + 15].fill(f64::NAN);
         }
         f[1500 * MARKER_FRAME_LEN + 6] = f64::NAN;
-        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(body, TrackerSettings::new(1000.0)).unwrap();
         for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
             let out = tracker.push(frame).unwrap().unwrap();
             let expect = if (1000..1200).contains(&i) {
@@ -797,7 +797,7 @@ mod tests {
         let v = [1.5, -1.0, 2.0];
         let q: Vec<[f64; 3]> = (0..40).map(|i| std::array::from_fn(|c| 0.1 + v[c] * i as f64 * 1e-3)).collect();
         let f = frames(&body, &q, 0.2);
-        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(body, TrackerSettings::new(1000.0)).unwrap();
         tracker.push(&f[..MARKER_FRAME_LEN]).unwrap().unwrap();
         assert_eq!(tracker.state_std().1, [1e5f64.sqrt(); 3]);
         let mut last = None;
@@ -832,7 +832,7 @@ mod tests {
             f.extend(body.marker_frames(qi, 0.0).unwrap());
         }
         crate::noise::uniform_range(&mut f, 0.01, 5).unwrap();
-        let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+        let settings = TrackerSettings::new(rate);
         let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
         tracker.set_calibration(Some(crate::calibration::Calibration::body_model()));
         let (mut se, mut n) = (0.0, 0.0);

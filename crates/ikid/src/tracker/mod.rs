@@ -85,7 +85,7 @@
 //! `placement` the calibration's templates and each marker's recent place; `forearm` the
 //! forearm's pose from three or two markers; `centre` the wrist centre; `ekf` the filter's
 //! prediction, gate, correction and restarts; `variance` the noise it learns; `refiner` the
-//! learned refiner.
+//! learned refiner; `timing` time-stamped frames ([`Tracker::push_at`]: lost frames restart it).
 
 mod centre;
 mod checks;
@@ -95,6 +95,7 @@ mod output;
 mod placement;
 mod refiner;
 mod settings;
+mod timing;
 mod variance;
 
 pub use centre::{CENTRE_MEMORY_S, CENTRE_MIN_S, CENTRE_MIN_STD_M, CENTRE_WEIGHT, POSTURE_RIDGE};
@@ -110,7 +111,7 @@ pub use refiner::{
 };
 pub use settings::{DEFAULT_JERK_NOISE, TrackerSettings};
 
-use nalgebra::{Isometry3, SMatrix, SVector, Vector3};
+use nalgebra::{Isometry3, Rotation3, SMatrix, SVector, Vector3};
 
 use crate::body::{self, BodyModel, MARKER_FRAME_LEN, MARKERS, N_COORDINATES};
 use crate::calibration::{Calibration, Side};
@@ -213,6 +214,14 @@ pub struct Tracker {
     refined: bool,
     /// Whether the estimate reads the hand turned over on the forearm ([`status::TURNED_OVER`]).
     turned_over: status::TurnedOverWatch,
+    /// The turn from the markers' lab into the body model's (+Y up), `None` when it is that
+    /// lab ([`TrackerSettings::up`]).
+    lab: Option<Rotation3<f64>>,
+    /// The last stamped frame's time, s ([`push_at`](Tracker::push_at)); an unstamped push
+    /// moves it on by a period.
+    last_time: Option<f64>,
+    /// Restarts after time gaps ([`push_at`](Tracker::push_at)) since the start.
+    gap_restarts: usize,
 }
 
 /// What one frame's steps share ([`Tracker::push`]), on the stack: the frame as checked, its
@@ -246,6 +255,7 @@ impl Tracker {
     /// A tracker for the subject `body` (segment parameters and marker placement).
     pub fn new(body: BodyModel, settings: TrackerSettings) -> Result<Self> {
         settings.check()?;
+        let lab = settings.lab_turn()?;
         let (transition, process_noise) = ekf::motion_model(&settings);
         let mut tracker = Tracker {
             body,
@@ -286,6 +296,9 @@ impl Tracker {
             torque_limit: 0.0,
             refined: false,
             turned_over: status::TurnedOverWatch::new(),
+            lab,
+            last_time: None,
+            gap_restarts: 0,
         };
         // The subject's mass scale: its hand's mass over the default subject's.
         tracker.torque_limit = status::torque_limit(tracker.body.hand.mass / BodyModel::default().hand.mass);
@@ -325,6 +338,8 @@ impl Tracker {
         self.roll = Roll::idle();
         self.refined = false;
         self.turned_over = status::TurnedOverWatch::new();
+        self.last_time = None;
+        self.gap_restarts = 0;
         if let Some(r) = self.refiner.as_mut() {
             r.reset();
         }
@@ -376,6 +391,16 @@ impl Tracker {
     /// The frame's values are `f32` (as [`Stream::push`](crate::Stream::push) takes them) or
     /// `f64`; `f32` values are widened exactly.
     pub fn push<V: Copy + Into<f64>>(&mut self, frame: &[V]) -> Result<Option<TrackerOutput>> {
+        let out = self.push_frame(frame)?;
+        // An unstamped frame comes one period after the one before.
+        if let Some(t) = self.last_time.as_mut() {
+            *t += 1.0 / self.settings.rate_hz;
+        }
+        Ok(out)
+    }
+
+    /// [`push`](Self::push)'s steps, leaving the clock of [`push_at`](Self::push_at) alone.
+    fn push_frame<V: Copy + Into<f64>>(&mut self, frame: &[V]) -> Result<Option<TrackerOutput>> {
         if frame.len() != MARKER_FRAME_LEN {
             return Err(Error::FrameLength { feature_set: "markers", found: frame.len(), expected: MARKER_FRAME_LEN });
         }
@@ -441,6 +466,14 @@ impl Tracker {
         } else {
             step.flags |= status::REJECTED_MARKER;
         }
+        // Into the body model's lab (gravity along -Y), before a left arm's mirror (which
+        // keeps the vertical).
+        if let Some(turn) = self.lab {
+            for m in step.frame.chunks_exact_mut(3) {
+                let v = turn * Vector3::new(m[0], m[1], m[2]);
+                m.copy_from_slice(v.as_slice());
+            }
+        }
         if self.calibration.is_some_and(|c| c.side == Side::Left) {
             for z in step.frame.iter_mut().skip(2).step_by(3) {
                 *z = -*z;
@@ -471,7 +504,19 @@ impl Tracker {
     /// numbered by its index in `frames`; the frames before it stay pushed (and were handed to
     /// `each`). Does not allocate (beyond what `each` does).
     pub fn run(&mut self, frames: &[f64], mut each: impl FnMut(usize, &TrackerOutput, bool)) -> Result<Option<usize>> {
-        self.run_observed(frames, |_, i, out, estimated| each(i, out, estimated))
+        self.run_observed(frames, None, |_, i, out, estimated| each(i, out, estimated))
+    }
+
+    /// [`run`](Self::run) with each frame stamped by its time in `times` (one per frame,
+    /// seconds), pushed by [`push_at`](Self::push_at): lost frames restart the filter. A
+    /// `times` of another length than the frames is refused before anything is pushed.
+    pub fn run_at(
+        &mut self,
+        times: &[f64],
+        frames: &[f64],
+        mut each: impl FnMut(usize, &TrackerOutput, bool),
+    ) -> Result<Option<usize>> {
+        self.run_observed(frames, Some(times), |_, i, out, estimated| each(i, out, estimated))
     }
 
     /// [`run`](Self::run), with the tracker itself handed to `each` after every frame (what
@@ -479,6 +524,7 @@ impl Tracker {
     pub(super) fn run_observed(
         &mut self,
         frames: &[f64],
+        times: Option<&[f64]>,
         mut each: impl FnMut(&Self, usize, &TrackerOutput, bool),
     ) -> Result<Option<usize>> {
         if !frames.len().is_multiple_of(MARKER_FRAME_LEN) {
@@ -487,9 +533,27 @@ impl Tracker {
                 detail: format!("{} values is not a whole number of {MARKER_FRAME_LEN}-value frames", frames.len()),
             });
         }
+        if let Some(times) = times
+            && times.len() != frames.len() / MARKER_FRAME_LEN
+        {
+            return Err(Error::BadArgument {
+                what: "times",
+                detail: format!("has {} values for {} frames", times.len(), frames.len() / MARKER_FRAME_LEN),
+            });
+        }
         let mut start = None;
         for (i, frame) in frames.chunks_exact(MARKER_FRAME_LEN).enumerate() {
-            match self.push(frame).map_err(|e| e.renumbered(i))? {
+            let pushed = match times {
+                // A refused stamp is named by its row, as a refused frame is.
+                Some(times) => self.push_at(times[i], frame).map_err(|e| match e {
+                    Error::BadArgument { what: "time", detail } => {
+                        Error::BadArgument { what: "times", detail: format!("row {i}: {detail}") }
+                    }
+                    other => other,
+                }),
+                None => self.push(frame),
+            };
+            match pushed.map_err(|e| e.renumbered(i))? {
                 Some(out) => {
                     start.get_or_insert(i);
                     each(self, i, &out, true);
@@ -526,8 +590,8 @@ mod tests {
         let q = trajectory(300, 1000.0);
         let narrow: Vec<f32> = frames(&body, &q, 0.2).iter().map(|&v| v as f32).collect();
         let wide: Vec<f64> = narrow.iter().map(|&v| f64::from(v)).collect();
-        let mut a = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
-        let mut b = Tracker::new(body, TrackerSettings::default()).unwrap();
+        let mut a = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
+        let mut b = Tracker::new(body, TrackerSettings::new(1000.0)).unwrap();
         for (x, y) in narrow.chunks_exact(MARKER_FRAME_LEN).zip(wide.chunks_exact(MARKER_FRAME_LEN)) {
             let (x, y) = (a.push(x).unwrap().unwrap(), b.push(y).unwrap().unwrap());
             assert_eq!((bits(&x), x.status), (bits(&y), y.status));
@@ -554,7 +618,8 @@ mod tests {
         for refiner in [None, Some(random_refiner(8, &[16], 4))] {
             let new = || {
                 let mut t =
-                    Tracker::new(body.clone(), TrackerSettings { jerk_noise: 800.0, ..Default::default() }).unwrap();
+                    Tracker::new(body.clone(), TrackerSettings { jerk_noise: 800.0, ..TrackerSettings::new(1000.0) })
+                        .unwrap();
                 t.set_refiner(refiner.clone()).unwrap();
                 t
             };
@@ -594,7 +659,7 @@ mod tests {
         let body = BodyModel::default();
         let q = trajectory(20, 1000.0);
         let mut f = frames(&body, &q, 0.0);
-        let mut tracker = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
         let mut calls = 0;
         let err = tracker.run(&f[..MARKER_FRAME_LEN * 2 + 5], |_, _, _| calls += 1).unwrap_err();
         assert!(matches!(err, Error::BadArgument { what: "frames", .. }), "{err}");
@@ -612,7 +677,7 @@ mod tests {
         // An infinite value in frame 4 of the block (frame 14 of the tracker): named frame 4,
         // the four frames before it pushed, as by push.
         f[14 * MARKER_FRAME_LEN + 7] = f64::INFINITY;
-        let mut twin = Tracker::new(body, TrackerSettings::default()).unwrap();
+        let mut twin = Tracker::new(body, TrackerSettings::new(1000.0)).unwrap();
         for frame in f[..14 * MARKER_FRAME_LEN].chunks_exact(MARKER_FRAME_LEN) {
             twin.push(frame).unwrap();
         }
@@ -631,7 +696,7 @@ mod tests {
         let q = trajectory(10, 1000.0);
         let mut f = frames(&body, &q, 0.0);
         f[9] = f64::NAN; // MC2.x on frame 0
-        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(body, TrackerSettings::new(1000.0)).unwrap();
         assert_eq!(tracker.push(&f[..MARKER_FRAME_LEN]).unwrap(), None);
         assert!(tracker.push(&f[MARKER_FRAME_LEN..2 * MARKER_FRAME_LEN]).unwrap().is_some());
         let err = tracker.push(&f[..5]).unwrap_err().to_string();
@@ -642,19 +707,23 @@ mod tests {
         // Two frames were taken before it (the first waited for MC2): this one is frame 2.
         assert!(err.contains("MC5.y") && err.starts_with("frame 2:"), "{err}");
         let err =
-            Tracker::new(BodyModel::default(), TrackerSettings { jerk_noise: -1.0, ..Default::default() }).unwrap_err();
+            Tracker::new(BodyModel::default(), TrackerSettings { jerk_noise: -1.0, ..TrackerSettings::new(1000.0) })
+                .unwrap_err();
         assert!(err.to_string().contains("jerk_noise"), "{err}");
         // Absurdly large settings are typos, refused by name, not an overflow later.
         for (settings, name) in [
-            (TrackerSettings { rate_hz: 1e308, ..Default::default() }, "rate_hz"),
-            (TrackerSettings { jerk_noise: 1e13, ..Default::default() }, "jerk_noise"),
-            (TrackerSettings { noise_memory_s: 1e9, ..Default::default() }, "noise_memory_s"),
-            (TrackerSettings { initial_marker_noise: 2.0, ..Default::default() }, "initial_marker_noise"),
+            (TrackerSettings::new(1e308), "rate_hz"),
+            (TrackerSettings { jerk_noise: 1e13, ..TrackerSettings::new(1000.0) }, "jerk_noise"),
+            (TrackerSettings { noise_memory_s: 1e9, ..TrackerSettings::new(1000.0) }, "noise_memory_s"),
+            (TrackerSettings { initial_marker_noise: 2.0, ..TrackerSettings::new(1000.0) }, "initial_marker_noise"),
         ] {
             let err = Tracker::new(BodyModel::default(), settings).unwrap_err().to_string();
             assert!(err.contains(name) && err.contains("up to"), "{err}");
         }
-        assert!(Tracker::new(BodyModel::default(), TrackerSettings { jerk_noise: 1e12, ..Default::default() }).is_ok());
+        assert!(
+            Tracker::new(BodyModel::default(), TrackerSettings { jerk_noise: 1e12, ..TrackerSettings::new(1000.0) })
+                .is_ok()
+        );
         tracker.reset();
         assert!(tracker.push(&f[..MARKER_FRAME_LEN]).unwrap().is_none());
     }

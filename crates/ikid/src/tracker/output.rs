@@ -188,16 +188,18 @@ impl Tracker {
         (e_forearm.iter().chain(e_all.iter()).all(|v| v.is_finite())).then_some((e_forearm, e_all))
     }
 
-    /// [`run`](Self::run), handing `each` every frame's standard deviations too when `sd`
-    /// ([`output_sd`](Self::output_sd) after that frame; `None` without an estimate or
-    /// without `sd`: it costs several times the filter's own step).
+    /// [`run`](Self::run) (or [`run_at`](Self::run_at) with `times`), handing `each` every
+    /// frame's standard deviations too when `sd` ([`output_sd`](Self::output_sd) after that
+    /// frame; `None` without an estimate or without `sd`: it costs several times the filter's
+    /// own step).
     pub fn run_with_sd(
         &mut self,
         frames: &[f64],
+        times: Option<&[f64]>,
         sd: bool,
         mut each: impl FnMut(usize, &TrackerOutput, Option<TrackerSd>, bool),
     ) -> Result<Option<usize>> {
-        self.run_observed(frames, |tracker, i, out, estimated| {
+        self.run_observed(frames, times, |tracker, i, out, estimated| {
             each(i, out, if estimated && sd { tracker.output_sd() } else { None }, estimated)
         })
     }
@@ -237,7 +239,8 @@ mod tests {
                 *v += sigma * gauss();
             }
         }
-        let settings = crate::tracker::TrackerSettings { relative_hand: relative, ..Default::default() };
+        let settings =
+            crate::tracker::TrackerSettings { relative_hand: relative, ..crate::tracker::TrackerSettings::new(1000.0) };
         let mut tracker = Tracker::new(body, settings).unwrap();
         let (mut covered, mut counted) = (0.0, 0.0);
         for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
@@ -290,7 +293,10 @@ mod tests {
         let moved: Vec<f64> = f.iter().enumerate().map(|(i, v)| v + 1.0 + (i % 3) as f64).collect();
         for relative in [false, true] {
             let sd = |frames: &[f64]| {
-                let settings = crate::tracker::TrackerSettings { relative_hand: relative, ..Default::default() };
+                let settings = crate::tracker::TrackerSettings {
+                    relative_hand: relative,
+                    ..crate::tracker::TrackerSettings::new(1000.0)
+                };
                 let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
                 tracker.run(frames, |_, _, _| {}).unwrap();
                 tracker.output_sd().unwrap()
@@ -311,7 +317,8 @@ mod tests {
         use super::super::testkit::{frames, trajectory};
         let q = trajectory(500, 1000.0);
         let f = frames(&crate::body::BodyModel::default(), &q, 0.3);
-        let mut tracker = Tracker::new(crate::body::BodyModel::default(), Default::default()).unwrap();
+        let mut tracker =
+            Tracker::new(crate::body::BodyModel::default(), crate::tracker::TrackerSettings::new(1000.0)).unwrap();
         tracker.run(&f, |_, _, _| {}).unwrap();
         let sd = tracker.output_sd().unwrap();
         let ((x, p), pose) = (tracker.state.unwrap(), tracker.forearm.unwrap());
@@ -351,7 +358,7 @@ mod tests {
         use crate::body::{BodyModel, MARKER_FRAME_LEN};
         let f = frames(&BodyModel::default(), &trajectory(500, 1000.0), 0.3);
         for (limit, flagged) in [(None, false), (Some(1e-6), true)] {
-            let mut tracker = Tracker::new(BodyModel::default(), Default::default()).unwrap();
+            let mut tracker = Tracker::new(BodyModel::default(), crate::tracker::TrackerSettings::new(1000.0)).unwrap();
             if let Some(limit) = limit {
                 tracker.torque_limit = limit;
             }

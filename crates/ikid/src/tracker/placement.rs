@@ -125,7 +125,7 @@ mod tests {
         // frame here is complete and rigid, so each segment's template takes the first ones.
         for (rate, n) in [(10.0, 5usize), (100.0, 50)] {
             let f = frames(&BodyModel::default(), &trajectory(n + 10, rate), 0.2);
-            let settings = super::super::TrackerSettings { rate_hz: rate, ..Default::default() };
+            let settings = super::super::TrackerSettings::new(rate);
             let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
             tracker.set_calibration(Some(crate::calibration::Calibration::body_model()));
             for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {

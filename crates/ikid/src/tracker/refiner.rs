@@ -137,8 +137,8 @@ mod tests {
         let mut f = frames(&body, &q, 0.1);
         uniform_range(&mut f, 0.02, 5).unwrap();
         let refiner = random_refiner(8, &[16], 3);
-        let mut bare = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
-        let mut refined = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut bare = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
+        let mut refined = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
         refined.set_refiner(Some(refiner.clone())).unwrap();
         let mut stream = refiner.stream();
         for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
@@ -177,7 +177,7 @@ mod tests {
         let err =
             refined.set_refiner(Some(random_model(FeatureSet::TrackerState, 5, &[8], 3, 1))).unwrap_err().to_string();
         assert!(err.contains("its outputs are"), "{err}");
-        let mut slow = Tracker::new(body, TrackerSettings { rate_hz: 500.0, ..Default::default() }).unwrap();
+        let mut slow = Tracker::new(body, TrackerSettings::new(500.0)).unwrap();
         let err = slow.set_refiner(Some(refiner)).unwrap_err().to_string();
         assert!(err.contains("1000 Hz") && err.contains("500 Hz"), "{err}");
         refined.set_refiner(None).unwrap();
@@ -194,8 +194,8 @@ mod tests {
         let q = trajectory(300, 1000.0);
         let mut f = frames(&body, &q, 0.1);
         uniform_range(&mut f, 0.02, 5).unwrap();
-        let mut bare = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
-        let mut refined = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut bare = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
+        let mut refined = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
         refined.set_refiner(Some(random_refiner(8, &[16], 3))).unwrap();
         let mut seen = [false; 2];
         for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
@@ -231,8 +231,8 @@ mod tests {
         let body = BodyModel::default();
         let mut f = frames(&body, &trajectory(300, 1000.0), 0.1);
         uniform_range(&mut f, 0.02, 8).unwrap();
-        let mut bare = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
-        let mut refined = Tracker::new(body, TrackerSettings::default()).unwrap();
+        let mut bare = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
+        let mut refined = Tracker::new(body, TrackerSettings::new(1000.0)).unwrap();
         refined.set_refiner(Some(refiner)).unwrap();
         let mut clamped = 0;
         for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
@@ -262,8 +262,8 @@ mod tests {
         let body = BodyModel::default();
         let mut f = frames(&body, &trajectory(300, 1000.0), 0.1);
         uniform_range(&mut f, 0.002, 3).unwrap();
-        let mut bare = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
-        let mut refined = Tracker::new(body, TrackerSettings::default()).unwrap();
+        let mut bare = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
+        let mut refined = Tracker::new(body, TrackerSettings::new(1000.0)).unwrap();
         refined.set_refiner(Some(refiner.clone())).unwrap();
         let mut stream = refiner.stream();
         let mut checked = 0;
@@ -295,8 +295,7 @@ mod tests {
         use crate::testing::random_refiner;
         let refiner = random_refiner(4, &[8], 2); // 1000 Hz
         for (rate, ok) in [(1000.0005, true), (999.9995, true), (1000.002, false), (999.998, false)] {
-            let mut t =
-                Tracker::new(BodyModel::default(), TrackerSettings { rate_hz: rate, ..Default::default() }).unwrap();
+            let mut t = Tracker::new(BodyModel::default(), TrackerSettings::new(rate)).unwrap();
             assert_eq!(t.set_refiner(Some(refiner.clone())).is_ok(), ok, "{rate} Hz");
         }
     }

@@ -1,8 +1,15 @@
 //! How the tracker models motion and noise: [`TrackerSettings`], checked before a tracker is made.
 
+use nalgebra::{Rotation3, Unit, Vector3};
+
 use crate::error::{Error, Result};
 
-/// How the tracker models motion and noise.
+/// How the tracker models motion and noise, and the lab it is measured in.
+///
+/// Made by [`TrackerSettings::new`] from the markers' frame rate: the rate has no default,
+/// since a recording tracked at another rate has every velocity, acceleration and torque wrong
+/// by the ratio (a 100 Hz recording tracked as 1 kHz: torques 5× too large) and nothing in the
+/// markers can say so.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrackerSettings {
     /// Frame rate of the markers, Hz.
@@ -20,18 +27,26 @@ pub struct TrackerSettings {
     /// is read as degrees of wrist angle. On with a calibration ([`Tracker::set_calibration`](super::Tracker::set_calibration));
     /// needs two hand markers per frame to correct.
     pub relative_hand: bool,
+    /// The lab's up direction (against gravity) in the markers' coordinates: `[0, 1, 0]`, the
+    /// body model's lab, by default; `[0, 0, 1]` for a Z-up lab (Vicon, Qualisys). Only the
+    /// torques depend on it (gravity's moment), and they are wrong by it silently: a Z-up
+    /// recording tracked as Y-up gave torques 0.2-0.3 N·m off with every status 0. Any
+    /// non-zero length; it is normalised.
+    pub up: [f64; 3],
 }
 
-impl Default for TrackerSettings {
-    /// 1 kHz; [`DEFAULT_JERK_NOISE`]; a 10 s noise memory; 1 mm noise assumed at first (a
-    /// guess too small makes the filter trust its first noisy frames and can throw it off).
-    fn default() -> Self {
+impl TrackerSettings {
+    /// Settings for markers at `rate_hz`: [`DEFAULT_JERK_NOISE`]; a 10 s noise memory; 1 mm
+    /// noise assumed at first (a guess too small makes the filter trust its first noisy frames
+    /// and can throw it off); the hand measured by its position unless calibrated; +Y up.
+    pub fn new(rate_hz: f64) -> Self {
         TrackerSettings {
-            rate_hz: 1000.0,
+            rate_hz,
             jerk_noise: DEFAULT_JERK_NOISE,
             noise_memory_s: 10.0,
             initial_marker_noise: 1e-3,
             relative_hand: false,
+            up: [0.0, 1.0, 0.0],
         }
     }
 }
@@ -45,6 +60,15 @@ impl TrackerSettings {
     /// Each setting must be positive and at most what any recording needs: a value beyond is a
     /// typo (or a unit slip) that would make the filter's arithmetic overflow, not a setting.
     pub(super) fn check(&self) -> Result<()> {
+        if self.rate_hz.is_nan() {
+            // The C API's default settings leave the rate NaN: it has to be given.
+            return Err(Error::BadArgument {
+                what: "rate_hz",
+                detail: "is not set: give the rate the frames come at, in Hz (tracked at another rate, every \
+                         velocity, acceleration and torque is wrong and nothing in the markers can say so)"
+                    .into(),
+            });
+        }
         for (what, v, max, unit) in [
             ("rate_hz", self.rate_hz, 100_000.0, "Hz"),
             ("jerk_noise", self.jerk_noise, 1e12, "rad²/s⁵"),
@@ -58,6 +82,76 @@ impl TrackerSettings {
                 });
             }
         }
-        Ok(())
+        self.lab_turn().map(|_| ())
+    }
+}
+
+impl TrackerSettings {
+    /// The up direction of a lab named by its axis: `"+z"`, `"z"`, `"-Y"`, ... (the names a
+    /// marker map's `up` takes); an error naming the six otherwise.
+    pub fn up_axis(name: &str) -> Result<[f64; 3]> {
+        let text = name.trim().to_ascii_lowercase();
+        let (sign, axis) = match text.as_bytes() {
+            [b'+', a] | [a] => (1.0, *a),
+            [b'-', a] => (-1.0, *a),
+            _ => (0.0, b'?'),
+        };
+        let Some(i) = [b'x', b'y', b'z'].iter().position(|&c| c == axis).filter(|_| sign != 0.0) else {
+            return Err(Error::BadArgument {
+                what: "up",
+                detail: format!("is {name:?}, expected the lab axis pointing up, one of +x, -x, +y, -y, +z, -z"),
+            });
+        };
+        let mut up = [0.0; 3];
+        up[i] = sign;
+        Ok(up)
+    }
+
+    /// The rotation that turns the markers' lab into the body model's (up = +Y), or `None`
+    /// when it already is: the shortest turn taking [`up`](Self::up) onto +Y (which way the
+    /// lab faces about the vertical changes no angle and no torque). An `up` that is not a
+    /// finite, non-zero vector is an error.
+    pub(super) fn lab_turn(&self) -> Result<Option<Rotation3<f64>>> {
+        let up = Vector3::from(self.up);
+        let norm = up.norm();
+        if !(norm.is_finite() && norm > 1e-9) {
+            return Err(Error::BadArgument {
+                what: "up",
+                detail: format!(
+                    "is {:?}, expected the lab's up direction as a finite non-zero vector (e.g. [0, 0, 1] for a \
+                     Z-up lab)",
+                    self.up
+                ),
+            });
+        }
+        let up = up / norm;
+        let y = Vector3::y();
+        if (up - y).norm() < 1e-12 {
+            return Ok(None);
+        }
+        // Antiparallel (Y down): half a turn about x; otherwise the shortest arc.
+        Ok(Some(
+            Rotation3::rotation_between(&up, &y).unwrap_or_else(|| {
+                Rotation3::from_axis_angle(&Unit::new_unchecked(Vector3::x()), std::f64::consts::PI)
+            }),
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_up_axis_is_named_as_a_marker_map_names_it() {
+        for (name, up) in
+            [("+z", [0.0, 0.0, 1.0]), ("Z", [0.0, 0.0, 1.0]), (" -y ", [0.0, -1.0, 0.0]), ("+X", [1.0, 0.0, 0.0])]
+        {
+            assert_eq!(TrackerSettings::up_axis(name).unwrap(), up, "{name}");
+        }
+        for bad in ["", "w", "+", "zz", "++z", "1"] {
+            let e = TrackerSettings::up_axis(bad).unwrap_err().to_string();
+            assert!(e.contains("+x, -x, +y, -y, +z, -z"), "{bad}: {e}");
+        }
     }
 }

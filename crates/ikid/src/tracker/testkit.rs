@@ -19,7 +19,7 @@ pub(super) fn frames(body: &BodyModel, q: &[[f64; 3]], shoulder: f64) -> Vec<f64
 
 /// Runs `f` through a fresh tracker; per frame, the angles (NaN before the start) and status.
 pub(super) fn track(f: &[f64], rate: f64) -> (Vec<[f64; 3]>, Vec<u16>, Tracker) {
-    let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+    let settings = TrackerSettings::new(rate);
     let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
     let (mut q, mut st) = (vec![], vec![]);
     tracker
@@ -39,7 +39,7 @@ pub(super) fn worst_deg(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
 /// (so: the hand measured by its orientation, the wrist centre learned); per frame, the
 /// angles (NaN before the start) and status.
 pub(super) fn track_calibrated(f: &[f64], rate: f64) -> (Vec<[f64; 3]>, Vec<u16>, Tracker) {
-    let settings = TrackerSettings { rate_hz: rate, ..Default::default() };
+    let settings = TrackerSettings::new(rate);
     let mut tracker = Tracker::new(BodyModel::default(), settings).unwrap();
     tracker.set_calibration(Some(Calibration::body_model()));
     let (mut q, mut st) = (vec![], vec![]);

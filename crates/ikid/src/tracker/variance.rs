@@ -162,7 +162,7 @@ mod tests {
     fn the_templates_misfit_is_its_residuals_mean_square_per_coordinate_beyond_the_noise() {
         // Documented: the residual's mean square × 9 / FIT_RESIDUAL_DOF, less the white noise,
         // never below 0; nothing before a first residual; from the first one on.
-        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::new(1000.0)).unwrap();
         assert_eq!(tracker.template_misfit_variance(0.0), 0.0);
         for samples in [1.0, 50.0] {
             (tracker.fit_residual_ms, tracker.fit_residual_samples) = (1e-4, samples);
@@ -177,7 +177,7 @@ mod tests {
         // 1e-6 m² learned over 2000 samples, then one sample 1 km² (a frame a kilometre off):
         // capped at 25× the variance, it raises it by 24·w at most (w, the sample's weight, here
         // 1/2010), not to metres.
-        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::new(1000.0)).unwrap();
         for _ in 0..2000 {
             tracker.add_noise_sample(0, 1e-6);
         }
@@ -211,7 +211,7 @@ mod tests {
         let clean = frames(&body, &q, 0.0);
         let mut noisy = clean.clone();
         uniform_range(&mut noisy, 0.05, 11).unwrap();
-        let mut tracker = Tracker::new(body.clone(), TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
         let (mut se_tracker, mut se_frame) = (0.0, 0.0);
         for (i, frame) in noisy.chunks_exact(MARKER_FRAME_LEN).enumerate() {
             let out = tracker.push(frame).unwrap().unwrap();
@@ -279,8 +279,8 @@ mod tests {
             f[i * MARKER_FRAME_LEN + 12..i * MARKER_FRAME_LEN + 15].fill(f64::NAN);
         }
         for settings in [
-            TrackerSettings::default(),
-            TrackerSettings { noise_memory_s: 0.05, initial_marker_noise: 3e-3, ..Default::default() },
+            TrackerSettings::new(1000.0),
+            TrackerSettings { noise_memory_s: 0.05, initial_marker_noise: 3e-3, ..TrackerSettings::new(1000.0) },
         ] {
             let (data, guessed) = third_difference_noise(&f, &settings);
             let mut tracker = Tracker::new(body.clone(), settings).unwrap();
@@ -312,7 +312,8 @@ mod tests {
         uniform_range(&mut f[..2000 * MARKER_FRAME_LEN], 0.05, 3).unwrap();
         let last_noise = |memory: f64| {
             let mut tracker =
-                Tracker::new(body.clone(), TrackerSettings { noise_memory_s: memory, ..Default::default() }).unwrap();
+                Tracker::new(body.clone(), TrackerSettings { noise_memory_s: memory, ..TrackerSettings::new(1000.0) })
+                    .unwrap();
             let mut noisy_end = 0.0;
             let mut out = None;
             for (i, frame) in f.chunks_exact(MARKER_FRAME_LEN).enumerate() {
@@ -345,7 +346,7 @@ mod tests {
         for (i, v) in f.iter_mut().enumerate() {
             *v += sigma[i % 3] * gauss();
         }
-        let mut tracker = Tracker::new(body, TrackerSettings::default()).unwrap();
+        let mut tracker = Tracker::new(body, TrackerSettings::new(1000.0)).unwrap();
         tracker.set_calibration(Some(crate::calibration::Calibration::body_model()));
         tracker.run(&f, |_, _, _| {}).unwrap();
         // The residual alone learns every coordinate alike (0.27 mm here); z's own third

@@ -15,7 +15,6 @@ import ikid
 from ikid.cli.common import _model_file, _model_for, _refuse_over_inputs, _stdout_fd
 from ikid.cli.options import PORT, POSITIVE, POSITIVE_INT, unchecked_option
 from ikid.io._common import to_ikid_lab
-from ikid.io.resample import GAP_STEPS
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -445,7 +444,8 @@ def run(args: argparse.Namespace) -> int:
 class _TrackerStream:
     """ikid.Tracker behind the stream's interface: per frame, each angle and torque followed by
     its standard deviation (``Tracker.output_sd``); None until the filter has started. The
-    tracker runs at its rate: a time stamp more than 1.5 periods after the last restarts it."""
+    tracker runs at its rate: a time stamp more than 1.5 periods after the last restarts it
+    (the core's ``Tracker.push(frame, time=)``)."""
 
     def __init__(self, rate_hz: float, calibration) -> None:
         from ikid.io.storage import coordinate_names, moment_names
@@ -459,19 +459,16 @@ class _TrackerStream:
         self.filled_markers: list[str] = []
         self.status = math.nan
         self.time_reanchors = 0
-        self.last_time: float | None = None
-        self.gap_restarts = 0
+        self.restarts_before = 0  # gap restarts of the trackers a reset replaced
+
+    @property
+    def gap_restarts(self) -> int:
+        return self.restarts_before + self.tracker.gap_restarts
 
     def push(self, frame: np.ndarray, time: float | None = None) -> np.ndarray | None:
-        if time is not None:
-            # Frames lost (or a slower source): the filter's motion model would bridge the gap
-            # as one period — torques 4 N·m off after 0.1 s lost. It starts again instead, as a
-            # network's window does.
-            if self.last_time is not None and time - self.last_time > GAP_STEPS / self.rate_hz:
-                self.reset()
-                self.gap_restarts += 1
-            self.last_time = time
-        out = self.tracker.push(frame)
+        # Frames lost (or a slower source): the filter's motion model would bridge the gap as
+        # one period (torques 4 N·m off after 0.1 s lost); stamped, the core restarts it.
+        out = self.tracker.push(frame, time=time)
         sd = self.tracker.output_sd
         if out is None or sd is None:
             return None
@@ -480,8 +477,8 @@ class _TrackerStream:
         return np.column_stack([values, np.concatenate([sd[0], sd[1]])]).ravel()
 
     def reset(self) -> None:
+        self.restarts_before = self.gap_restarts
         self.tracker = ikid.Tracker(rate_hz=self.rate_hz, calibration=self.calibration)
-        self.last_time = None
 
 
 def _run(args: argparse.Namespace, source, rate_hz: float | None, refusal_reason) -> int:

@@ -21,7 +21,6 @@ from ikid.cli.common import (
 )
 from ikid.cli.options import SUBJECT_LENGTH, SUBJECT_MASS, _number, unchecked_option
 from ikid.io._atomic import atomic_outputs
-from ikid.io.resample import GAP_STEPS
 from ikid.pipeline import TURNED_OVER_REASON, fill_leading_gaps
 
 
@@ -151,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
     except ikid.IkidError as e:
         raise type(e)(_naming(args.input, e)) from None
     bits = ikid.FRAME_STATUS
-    gap_restarts = hand_restarts = 0
+    gap_restarts = 0
     k: int | None = None  # the first frame with an estimate
     n_frames = kept = lost = turned_over = 0
     counts = dict.fromkeys(bits, 0)
@@ -180,11 +179,10 @@ def run(args: argparse.Namespace) -> int:
         # after them (fill_leading_gaps), so the tracker starts on the first frame; once it has
         # started it carries through gaps itself.
         complete_seen = False
-        # The filter runs at the file's rate: across a time gap (frames lost) its motion model
-        # would bridge the gap as one period (torques 4 N·m off after 0.1 s). It starts again
-        # after one, as a network's window does (`waiting`: not started since the last start).
-        last_time: float | None = None
-        waiting = True
+        # The filter runs at the file's rate, each frame stamped with its time: across a time
+        # gap (frames lost) its motion model would bridge the gap as one period (torques 4 N·m
+        # off after 0.1 s), so the core restarts it there (Tracker.gap_restarts), keeping what
+        # it learned of the subject; its rows wait for the next complete frame.
         for time, frames, filled in fill_leading_gaps(mapped_blocks(), data.rate_hz):
             prefilled = np.zeros(len(frames), bool)
             if not complete_seen:
@@ -196,45 +194,33 @@ def run(args: argparse.Namespace) -> int:
                         filled[:before]
                     ).any(axis=1)
                     frames = np.where(prefilled[:, None], filled, frames)
-            steps = np.diff(np.concatenate([[time[0] if last_time is None else last_time], time]))
-            cuts = [0, *np.flatnonzero(steps > GAP_STEPS / data.rate_hz).tolist(), len(time)]
-            last_time = float(time[-1]) if len(time) else last_time
-            for a, b in zip(cuts[:-1], cuts[1:], strict=True):
-                if a == b:
+            try:
+                out = tracker.run(frames, sd=with_sd, times=time)
+            except ikid.InputError as e:
+                if "tracker never started" in str(e):
+                    n_frames += len(frames)  # not (re)started yet: a later block may start it
                     continue
-                if steps[a] > GAP_STEPS / data.rate_hz:
-                    hand_restarts += tracker.restarts  # reset() forgets its count
-                    tracker.reset()
-                    gap_restarts += 1
-                    waiting = True
-                part_frames, part_status = frames[a:b], prefilled[a:b]
-                try:
-                    out = tracker.run(part_frames, sd=with_sd)
-                except ikid.InputError as e:
-                    if waiting and "tracker never started" in str(e):
-                        n_frames += b - a  # not started yet: a later block may start it
-                        continue
-                    raise type(e)(_naming(args.input, e)) from None
-                except ikid.IkidError as e:
-                    raise type(e)(_naming(args.input, e)) from None
-                status = out["status"] | np.where(part_status, bits["filled"], 0).astype(out["status"].dtype)
-                start = out["start"] if waiting else 0
-                waiting = False
-                if k is None:
-                    k = n_frames + start
-                keep = np.arange(b - a) >= start
-                implausible = keep & (status & bits["implausible"] != 0)
-                keep &= ~implausible  # nothing no wrist can do is written as a number
-                turned_over += int(np.count_nonzero(implausible & (status & bits["turned_over"] != 0)))
-                q_sd, tau_sd = (out["q_sd"][keep], out["tau_sd"][keep]) if with_sd else (None, None)
-                write_q(time[a:b][keep], out["q"][keep], status[keep], q_sd)
-                write_tau(time[a:b][keep], out["tau"][keep], status[keep], tau_sd)
-                for name, bit in bits.items():
-                    counts[name] += int(np.count_nonzero(status[keep] & bit))
-                flagged_after_start |= bool(status[start:].any())
-                n_frames += b - a
-                kept += int(keep.sum())
-                lost += int(implausible.sum())
+                raise type(e)(_naming(args.input, e)) from None
+            except ikid.IkidError as e:
+                raise type(e)(_naming(args.input, e)) from None
+            status = out["status"] | np.where(prefilled, bits["filled"], 0).astype(out["status"].dtype)
+            # Rows with an estimate: from the start on, but for those waiting after a time gap.
+            keep = ~np.isnan(out["q"]).any(axis=1)
+            if k is None:
+                k = n_frames + int(out["start"])
+            implausible = keep & (status & bits["implausible"] != 0)
+            keep &= ~implausible  # nothing no wrist can do is written as a number
+            turned_over += int(np.count_nonzero(implausible & (status & bits["turned_over"] != 0)))
+            q_sd, tau_sd = (out["q_sd"][keep], out["tau_sd"][keep]) if with_sd else (None, None)
+            write_q(time[keep], out["q"][keep], status[keep], q_sd)
+            write_tau(time[keep], out["tau"][keep], status[keep], tau_sd)
+            for name, bit in bits.items():
+                counts[name] += int(np.count_nonzero(status[keep] & bit))
+            flagged_after_start |= bool(status[int(out["start"]) :].any())
+            n_frames += len(frames)
+            kept += int(keep.sum())
+            lost += int(implausible.sum())
+        gap_restarts = tracker.gap_restarts
         check_markers_seen(seen, mapping or MarkerMap.identity(), args.input)
         if k is None:
             raise ikid.InputError(
@@ -262,8 +248,8 @@ def run(args: argparse.Namespace) -> int:
         notes.append(f"{lost} implausible (not written)")
     if turned_over:
         notes.append(f"{turned_over} of them because {TURNED_OVER_REASON}")
-    if hand_restarts + tracker.restarts:
-        notes.append(f"{hand_restarts + tracker.restarts} restarts after losing the hand")
+    if tracker.restarts:
+        notes.append(f"{tracker.restarts} restarts after losing the hand")
     if gap_restarts:
         notes.append(f"{gap_restarts} restarts after time gaps (frames lost: the filter started again)")
     print(
