@@ -144,6 +144,38 @@ fn tracker_push_never_allocates_even_refined() {
 }
 
 #[test]
+fn a_stamped_tracker_in_a_turned_lab_never_allocates() {
+    // push_at's gap restarts and the lab's turn (a Z-up lab) run on the stack too.
+    let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let body = ikid::body::BodyModel::default();
+    let q: Vec<f64> = (0..300)
+        .flat_map(|i| {
+            let t = i as f64 / 1000.0;
+            [0.5 * (3.0 * t).sin(), -0.4 * (2.0 * t).sin(), 0.2 * (5.0 * t).cos()]
+        })
+        .collect();
+    let frames = body.marker_frames(&q, 0.2).expect("valid angles");
+    let settings = ikid::TrackerSettings { up: [0.0, 0.0, 1.0], ..ikid::TrackerSettings::new(1000.0) };
+    let mut tracker = ikid::Tracker::new(body, settings).expect("valid settings");
+    let mut estimates = 0;
+    let n = allocations_in(|| {
+        for (i, frame) in frames.chunks_exact(18).enumerate() {
+            // 50 ms lost after frame 150, and the clock restarted at frame 250.
+            let time = match i {
+                0..150 => i as f64 / 1000.0,
+                150..250 => 0.05 + i as f64 / 1000.0,
+                _ => (i - 250) as f64 / 1000.0,
+            };
+            let out = tracker.push_at(time, frame).expect("valid frame");
+            estimates += usize::from(out.is_some_and(|o| o.tau[1].is_finite()));
+        }
+    });
+    assert_eq!(n, 0, "{n} allocations in 300 stamped pushes");
+    assert_eq!(tracker.gap_restarts(), 2);
+    assert_eq!(estimates, 300, "every frame complete: each restart starts on its frame");
+}
+
+#[test]
 fn the_counter_sees_this_threads_allocations() {
     let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let n = allocations_in(|| {
