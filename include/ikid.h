@@ -323,7 +323,10 @@ enum ikid_status ikid_stream_push(struct ikid_stream *stream,
 // ahead, or not after the last accepted frame's: a glitch of the source's clock, 1e300) is
 // refused alone (`IKID_STATUS_INVALID_ARGUMENT`) and the frames after it go on as if it had
 // not come; three jumped stamps in a row, each one period after the one before, are taken as
-// the source's new clock (the third is accepted and the window restarts).
+// the source's new clock (the third is accepted and the window restarts). A source slower
+// than the model's rate (three stamps in a row each more than 1.5 periods after the one
+// before: every frame would restart the window, which would never fill) is refused from the
+// third on, the message naming its rate, until a stamp comes one period after the one before.
 //
 // # Safety
 // As `ikid_stream_push`.
@@ -483,7 +486,9 @@ enum ikid_status ikid_tracker_push(struct ikid_tracker *tracker,
 // what was learned of the subject is kept, and the first frames after are flagged
 // `IKID_FRAME_RESTARTED` while the velocities settle. `ikid_tracker_gap_restarts` counts
 // them. A stamp less than half a period after the last one, or not finite, is refused
-// (`IKID_STATUS_INVALID_ARGUMENT`) and changes nothing.
+// (`IKID_STATUS_INVALID_ARGUMENT`) and changes nothing. A source slower than `rate_hz` (three
+// stamps in a row each more than 1.5 periods after the one before) is refused from the third
+// on, the message naming its rate, until a stamp comes one period after the one before.
 //
 // # Safety
 // As `ikid_tracker_push`.

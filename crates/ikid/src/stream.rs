@@ -16,6 +16,54 @@ pub const GAP_PERIODS: f64 = 1.5;
 /// A stamp less than this many periods after the last one is refused: the source runs faster
 /// than the tracker's or the model's rate, and every velocity and torque would be wrong by the ratio.
 pub const FOLLOWS_PERIODS: f64 = 0.5;
+/// Stamps in a row, each more than [`GAP_PERIODS`] after the stamp before it, that mean the
+/// source is slower than the rate, not losing frames now and then: the last of them and each
+/// such stamp after it is refused, saying so. Accepted, every one would restart the window (a
+/// stream that never gives an output, and says nothing) or the filter (estimates that never
+/// settle). A stamp one period after the one before ends the run.
+pub const SLOW_SOURCE_FRAMES: u32 = 3;
+
+/// How the stamps a stream or a tracker is given follow each other, accepted or not: a run of
+/// [`SLOW_SOURCE_FRAMES`] late ones is a source slower than the rate.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct SourcePace {
+    last_seen: Option<f64>,
+    late: u32,
+}
+
+impl SourcePace {
+    /// An unstamped frame: one `period` after the stamp before it.
+    pub(crate) fn advance(&mut self, period: f64) {
+        if let Some(t) = self.last_seen.as_mut() {
+            *t += period;
+        }
+        self.late = 0;
+    }
+
+    /// Notes the finite stamp `time_s`; the error to give when it ends a run of late stamps at
+    /// `rate_hz` (`what`: whose rate it is, `fix`: what to do).
+    pub(crate) fn note(&mut self, time_s: f64, rate_hz: f64, what: &str, fix: &str) -> Result<()> {
+        let periods = self.last_seen.map(|t| (time_s - t) * rate_hz);
+        self.last_seen = Some(time_s);
+        match periods {
+            Some(p) if p > GAP_PERIODS => self.late += 1,
+            _ => self.late = 0,
+        }
+        if self.late < SLOW_SOURCE_FRAMES {
+            return Ok(());
+        }
+        let p = periods.unwrap_or(f64::NAN);
+        let source_hz = (10.0 * rate_hz / p).round() / 10.0;
+        Err(Error::BadArgument {
+            what: "time",
+            detail: format!(
+                "{time_s} s is {p:.1} periods after the stamp before it, as were the {} before: the source runs \
+                 at about {source_hz} Hz (or loses most frames), {what} at {rate_hz} Hz; {fix}",
+                SLOW_SOURCE_FRAMES - 1
+            ),
+        })
+    }
+}
 
 /// Largest gap in time stamps taken as frames lost, s: a stamp further ahead of the last
 /// accepted frame (or behind it) is a clock glitch until [`TIME_REANCHOR_FRAMES`] stamps in a
@@ -79,6 +127,8 @@ pub struct Stream {
     /// Time of the last frame accepted by [`push_at`](Stream::push_at), seconds.
     last_time: Option<f64>,
     gap_restarts: u64,
+    /// How the stamps follow each other (a source slower than the model's rate).
+    pace: SourcePace,
     /// The last time stamp refused for jumping ([`MAX_TIME_GAP_S`] ahead, or behind), and how
     /// many refused stamps in a row continue from each other at the model's rate.
     time_candidate: Option<f64>,
@@ -134,6 +184,7 @@ impl Stream {
             marker_status: 0,
             last_time: None,
             gap_restarts: 0,
+            pace: SourcePace::default(),
             time_candidate: None,
             time_candidate_frames: 0,
             time_reanchors: 0,
@@ -399,6 +450,10 @@ impl Stream {
     /// half a period after the previous one is refused (a source at a faster rate than the
     /// model's would be silently mis-timed; resample it).
     ///
+    /// A source slower than the model's rate ([`SLOW_SOURCE_FRAMES`] stamps in a row more than
+    /// [`GAP_PERIODS`] apart) is refused from the last of them on, saying so, until a stamp
+    /// comes one period after the one before.
+    ///
     /// A stamp that jumps (more than [`MAX_TIME_GAP_S`] ahead, or not after the last accepted
     /// frame's) is refused alone and changes nothing the next good frame sees: one glitch of
     /// the source's clock never ends the stream. Only [`TIME_REANCHOR_FRAMES`] jumped stamps in
@@ -409,6 +464,8 @@ impl Stream {
         let index = self.pushed;
         self.pushed += 1;
         let step = self.check_time(time_s)?;
+        let rate = self.model.card().frame_rate_hz;
+        self.pace.note(time_s, rate, "the model was trained", &format!("resample it to {rate} Hz"))?;
         if step == TimeStep::Jump {
             return Err(self.refuse_jump(time_s));
         }
@@ -599,6 +656,7 @@ impl Stream {
     pub fn reset(&mut self) {
         self.filler.forget_last_frame();
         self.last_time = None;
+        self.pace = SourcePace::default();
         self.time_candidate = None;
         self.time_candidate_frames = 0;
         self.head = 0;

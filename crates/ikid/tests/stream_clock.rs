@@ -129,3 +129,29 @@ fn the_first_output_on_a_new_clock_and_only_it_is_flagged_resynced() {
         }
     }
 }
+
+#[test]
+fn a_source_slower_than_the_models_rate_is_refused_saying_so_until_it_keeps_the_rate() {
+    // A 100 Hz source stamped into a 1 kHz model: accepted, every frame would restart the
+    // window, which would never fill (no output, no error). The third late stamp in a row and
+    // those after it are refused, naming the source's rate; once the stamps come at the
+    // model's rate again, frames are taken (after one gap restart) and outputs resume.
+    use ikid::stream::SLOW_SOURCE_FRAMES;
+    let slow = 20;
+    let stamps: Vec<_> =
+        (0..N).map(|i| Some(if i < slow { i as f64 * 1e-2 } else { 0.2 + (i - slow) as f64 * 1e-3 })).collect();
+    let (out, stream) = run(&stamps);
+    let refused: Vec<usize> = (0..N).filter(|&i| out[i].is_err()).collect();
+    // The first stamp at the model's rate is still late (after the last slow one): refused too.
+    assert_eq!(refused, (SLOW_SOURCE_FRAMES as usize..=slow).collect::<Vec<_>>());
+    let err = out[slow - 1].as_ref().unwrap_err();
+    assert!(err.contains("about 100 Hz") && err.contains("resample it to 1000 Hz"), "{err}");
+    assert!(out[slow + 1..].iter().all(Result::is_ok));
+    assert!(matches!(out[slow + 5], Ok(Some(_))), "the window refilled at the model's rate");
+    // Two late stamps taken (two restarts), and the first after the refused ones (a third).
+    assert_eq!(stream.gap_restarts(), 3);
+    // Frames lost now and then, even many, are not a slow source.
+    let lossy: Vec<_> = (0..N).map(|i| (i % 3 != 1).then_some(i as f64 * 1e-3)).collect();
+    let (out, _) = run(&lossy);
+    assert!(out.iter().all(Result::is_ok));
+}

@@ -222,6 +222,8 @@ pub struct Tracker {
     last_time: Option<f64>,
     /// Restarts after time gaps ([`push_at`](Tracker::push_at)) since the start.
     gap_restarts: usize,
+    /// How the stamps follow each other (a source slower than the rate).
+    pace: crate::stream::SourcePace,
 }
 
 /// What one frame's steps share ([`Tracker::push`]), on the stack: the frame as checked, its
@@ -299,6 +301,7 @@ impl Tracker {
             lab,
             last_time: None,
             gap_restarts: 0,
+            pace: crate::stream::SourcePace::default(),
         };
         // The subject's mass scale: its hand's mass over the default subject's.
         tracker.torque_limit = status::torque_limit(tracker.body.hand.mass / BodyModel::default().hand.mass);
@@ -340,6 +343,7 @@ impl Tracker {
         self.turned_over = status::TurnedOverWatch::new();
         self.last_time = None;
         self.gap_restarts = 0;
+        self.pace = crate::stream::SourcePace::default();
         if let Some(r) = self.refiner.as_mut() {
             r.reset();
         }
@@ -396,6 +400,7 @@ impl Tracker {
         if let Some(t) = self.last_time.as_mut() {
             *t += 1.0 / self.settings.rate_hz;
         }
+        self.pace.advance(1.0 / self.settings.rate_hz);
         Ok(out)
     }
 

@@ -20,7 +20,10 @@ impl Tracker {
     /// [`gap_restarts`](Self::gap_restarts) counts these restarts.
     ///
     /// A stamp less than [`FOLLOWS_PERIODS`] after the last one, or not finite, is an error
-    /// and changes nothing; so is a frame [`push`](Self::push) refuses.
+    /// and changes nothing; so is a frame [`push`](Self::push) refuses. A source slower than
+    /// the rate ([`SLOW_SOURCE_FRAMES`](crate::stream::SLOW_SOURCE_FRAMES) stamps in a row more than [`GAP_PERIODS`] apart: every
+    /// frame would restart the filter, whose estimates would never settle) is refused from the
+    /// last of them on, saying so, until a stamp comes one period after the one before.
     pub fn push_at<V: Copy + Into<f64>>(&mut self, time_s: f64, frame: &[V]) -> Result<Option<super::TrackerOutput>> {
         if !time_s.is_finite() {
             return Err(Error::BadArgument {
@@ -29,6 +32,7 @@ impl Tracker {
             });
         }
         let rate = self.settings.rate_hz;
+        self.pace.note(time_s, rate, "the tracker runs", "give the tracker the source's rate")?;
         let lost = match self.last_time {
             None => None,
             Some(last) => {
@@ -216,6 +220,33 @@ mod tests {
         assert_eq!(t.gap_restarts(), 0);
         t.push_at(7.0, frame(6)).unwrap();
         assert_eq!(t.gap_restarts(), 0);
+    }
+
+    #[test]
+    fn a_source_slower_than_the_rate_is_refused_saying_so_until_it_keeps_the_rate() {
+        // 100 Hz stamps into a 1 kHz tracker: each would restart the filter, whose estimates
+        // would never settle (every row flagged restarted, velocities from zero).
+        let body = BodyModel::default();
+        let f = frames(&body, &trajectory(200, RATE), SHOULDER);
+        let frame = |i: usize| &f[i * MARKER_FRAME_LEN..(i + 1) * MARKER_FRAME_LEN];
+        let mut t = Tracker::new(body, TrackerSettings::new(RATE)).unwrap();
+        let results: Vec<_> = (0..10).map(|i| t.push_at(i as f64 * 0.01, frame(i)).map(|_| ())).collect();
+        // The first stamp is not late; the third late one is refused.
+        assert!(results[..3].iter().all(Result::is_ok));
+        for r in &results[3..] {
+            let e = r.as_ref().unwrap_err().to_string();
+            assert!(e.contains("about 100 Hz") && e.contains("give the tracker the source's rate"), "{e}");
+        }
+        // At the tracker's rate again: taken from the first stamp a period after the one before
+        // (the first new one is still late), settled after one restart.
+        assert!(t.push_at(0.1, frame(10)).is_err());
+        for i in 11..200 {
+            let out = t.push_at(0.1 + (i - 10) as f64 / RATE, frame(i)).unwrap().unwrap();
+            if i > 11 + t.lost_frames() {
+                assert_eq!(out.status & status::RESTARTED, 0, "frame {i}");
+            }
+        }
+        assert_eq!(t.gap_restarts(), 3);
     }
 
     /// The trial's frames with each marker turned by `turn`.
