@@ -371,6 +371,18 @@ enum ikid_status ikid_stream_set_calibration_side(struct ikid_stream *stream,
                                                   const double *hand,
                                                   const char *side);
 
+// The lab's up direction (against gravity) in the coordinates of the marker frames pushed
+// from now on: `up` points to 3 doubles, `{0, 1, 0}` (the body model's lab) until set,
+// `{0, 0, 1}` for a Z-up lab (Vicon, Qualisys), any non-zero length. Each frame is turned
+// into the body model's lab first. Only a model that reads gravity's direction (the
+// `wrist-chain` torques) depends on it, and silently. A vector that is not finite and
+// non-zero is refused (`IKID_STATUS_INVALID_ARGUMENT`), nothing changed.
+//
+// # Safety
+// `stream` must be a live handle used by no other thread meanwhile; `up` must point to 3
+// readable doubles.
+enum ikid_status ikid_stream_set_lab_up(struct ikid_stream *stream, const double *up);
+
 // `*rows` receives the rows the last failed `ikid_stream_push_many` wrote into its `out` for
 // the frames before the one it refused (they stay pushed); 0 after a block refused whole
 // (nothing pushed) or pushed whole.

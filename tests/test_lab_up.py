@@ -166,3 +166,21 @@ def test_the_trackers_up_gives_a_z_up_labs_frames_the_torques_of_ikids_lab(trial
     for bad in ("up", "+w", [0.0, 0.0, 0.0], [1.0, 2.0]):
         with pytest.raises(ikid.IkidError, match="up"):
             ikid.Tracker(rate_hz=trial.rate_hz, up=bad)  # type: ignore[arg-type]
+
+
+def test_a_stream_told_its_labs_up_gives_wrist_chain_the_torques_of_ikids_lab(trial):
+    """The API: ``model.stream(up=...)`` on a Z-up lab's raw frames. The shipped torque model
+    reads gravity's direction from the frames; told the lab's up, its torques are those of the
+    same trial in ikid's own lab (the oracle); not told, they are not."""
+    model = ikid.load("wrist-chain")
+
+    def torques(frames, **kw):
+        return model.stream(**kw).push_many(np.asarray(frames, np.float32))
+
+    own = torques(trial.markers)
+    raw = _z_up(trial.markers)
+    np.testing.assert_allclose(torques(raw, up="+z"), own, atol=1e-3)
+    np.testing.assert_allclose(torques(raw, up=(0.0, 0.0, 5.0)), own, atol=1e-3)
+    assert np.abs(torques(raw) - own).max() > 0.05
+    with pytest.raises(ikid.IkidError, match="up"):
+        model.stream(up="w")

@@ -106,6 +106,10 @@ int main(int argc, char **argv) {
     CHECK(ikid_stream_set_calibration(stream, identity, identity) == IKID_STATUS_OK, "ikid_stream_set_calibration");
     CHECK(ikid_stream_set_calibration_side(stream, identity, identity, "left") == IKID_STATUS_OK, "..._side");
     CHECK(ikid_stream_set_calibration_side(stream, NULL, NULL, NULL) == IKID_STATUS_OK, "calibration removed");
+    const double z_up[3] = {0, 0, 1}, y_up[3] = {0, 1, 0}, no_up[3] = {0, 0, 0};
+    CHECK(ikid_stream_set_lab_up(stream, z_up) == IKID_STATUS_OK, "ikid_stream_set_lab_up");
+    CHECK(ikid_stream_set_lab_up(stream, no_up) == IKID_STATUS_INVALID_ARGUMENT && strstr(ikid_last_error(), "up") != NULL, "a zero up");
+    CHECK(ikid_stream_set_lab_up(stream, y_up) == IKID_STATUS_OK, "back to +Y");
     CHECK(ikid_stream_reset(stream) == IKID_STATUS_OK, "reset again");
     size_t packet = 64, packet_rows = 0;
     CHECK(ikid_stream_push_many(stream, frames, packet, 18, out, out_len, &packet_rows) == IKID_STATUS_OK && packet_rows == packet - info.window + 1, "ikid_stream_push_many");

@@ -86,6 +86,7 @@ SIGNATURES = {
     "ikid_stream_set_missing_markers": ([vp, C.c_uint32], C.c_int),
     "ikid_stream_set_calibration": ([vp, f64p, f64p], C.c_int),
     "ikid_stream_set_calibration_side": ([vp, f64p, f64p, C.c_char_p], C.c_int),
+    "ikid_stream_set_lab_up": ([vp, f64p], C.c_int),
     "ikid_stream_status": ([vp, C.POINTER(C.c_uint32)], C.c_int),
     "ikid_stream_filled_markers": ([vp, C.POINTER(C.c_uint32)], C.c_int),
     "ikid_stream_push_many": ([vp, f32p, sz, sz, f32p, sz, C.POINTER(sz)], C.c_int),

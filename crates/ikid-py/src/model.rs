@@ -202,15 +202,21 @@ impl Model {
     /// `"fill"`) overrides the card's policy; `calibration` (a `Calibration`) moves each
     /// frame's markers to the body model's placement before the network sees them;
     /// `early_outputs` (correcting models only): the per-frame solution, flagged `per_frame`,
-    /// for every frame while the window fills.
-    #[pyo3(signature = (missing_markers = None, calibration = None, early_outputs = false))]
+    /// for every frame while the window fills; `up`: the lab's up direction in the frames'
+    /// coordinates, an axis (`"+y"`, ikid's lab, by default; `"+z"` for Vicon and Qualisys
+    /// labs) or three numbers: a model that reads gravity (`wrist-chain`) depends on it.
+    #[pyo3(signature = (missing_markers = None, calibration = None, early_outputs = false, up = None))]
     fn stream(
         &self,
         missing_markers: Option<&str>,
         calibration: Option<PyRef<'_, Calibration>>,
         early_outputs: bool,
+        up: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Stream> {
         let mut inner = self.inner.stream();
+        if let Some(up) = up {
+            inner.set_lab_up(crate::tracker::lab_up(up)?).py_err()?;
+        }
         inner.set_early_outputs(early_outputs).py_err()?;
         if let Some(name) = missing_markers {
             let policy = ikid::MissingMarkers::from_name(name).map_err(|e| input(e.to_string()))?;

@@ -65,6 +65,17 @@ pub struct Tracker {
     inner: CoreTracker,
 }
 
+/// A lab's up direction as Python gives it: an axis (`"+z"`) or three numbers.
+pub fn lab_up(up: &Bound<'_, PyAny>) -> PyResult<[f64; 3]> {
+    if up.is_instance_of::<PyString>() {
+        return ikid::body::up_axis(&up.extract::<String>()?).py_err();
+    }
+    up.extract::<[f64; 3]>().map_err(|_| {
+        let given = up.repr().map_or_else(|_| "?".into(), |r| r.to_string());
+        input(format!("up: expected an axis such as \"+z\" or three numbers, got {given}"))
+    })
+}
+
 fn rows(out: &TrackerOutput) -> [[f64; N_COORDINATES]; 4] {
     [out.state.q, out.state.qd, out.state.qdd, out.tau]
 }
@@ -116,13 +127,7 @@ impl Tracker {
         let body = subject(length_scale, mass_scale, marker_shift)?;
         let up = match up {
             None => TrackerSettings::new(rate_hz).up,
-            Some(u) if u.is_instance_of::<PyString>() => TrackerSettings::up_axis(&u.extract::<String>()?).py_err()?,
-            Some(u) => u.extract::<[f64; 3]>().map_err(|_| {
-                input(format!(
-                    "up: expected an axis such as \"+z\" or three numbers, got {}",
-                    u.repr().map_or_else(|_| "?".into(), |r| r.to_string())
-                ))
-            })?,
+            Some(u) => lab_up(u)?,
         };
         let settings = TrackerSettings { rate_hz, jerk_noise, noise_memory_s, initial_marker_noise, relative_hand, up };
         let mut inner = CoreTracker::new(body, settings).py_err()?;

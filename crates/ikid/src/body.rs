@@ -51,6 +51,56 @@ pub const COORDINATES: [Coordinate; 3] = [
 /// Gravitational acceleration in the lab frame (Y up), m/s².
 pub const GRAVITY: [f64; 3] = [0.0, -9.81, 0.0];
 
+/// The up direction of a lab named by its axis: `"+z"`, `"z"`, `"-Y"`, ... (the names a
+/// marker map's `up` takes); an error naming the six otherwise.
+pub fn up_axis(name: &str) -> crate::Result<[f64; 3]> {
+    let text = name.trim().to_ascii_lowercase();
+    let (sign, axis) = match text.as_bytes() {
+        [b'+', a] | [a] => (1.0, *a),
+        [b'-', a] => (-1.0, *a),
+        _ => (0.0, b'?'),
+    };
+    let Some(i) = [b'x', b'y', b'z'].iter().position(|&c| c == axis).filter(|_| sign != 0.0) else {
+        return Err(crate::Error::BadArgument {
+            what: "up",
+            detail: format!("is {name:?}, expected the lab axis pointing up, one of +x, -x, +y, -y, +z, -z"),
+        });
+    };
+    let mut up = [0.0; 3];
+    up[i] = sign;
+    Ok(up)
+}
+
+/// The rotation that turns a lab whose up direction (against gravity) is `up` into the body
+/// model's (+Y up, [`GRAVITY`]), or `None` when it already is: the shortest turn taking `up`
+/// onto +Y (which way the lab faces about the vertical changes no angle and no torque). An
+/// `up` that is not a finite, non-zero vector is an error.
+pub fn lab_turn(up: [f64; 3]) -> crate::Result<Option<Rotation3<f64>>> {
+    let given = up;
+    let up = Vector3::from(up);
+    let norm = up.norm();
+    if !(norm.is_finite() && norm > 1e-9) {
+        return Err(crate::Error::BadArgument {
+            what: "up",
+            detail: format!(
+                "is {:?}, expected the lab's up direction as a finite non-zero vector (e.g. [0, 0, 1] for a \
+                 Z-up lab)",
+                given
+            ),
+        });
+    }
+    let up = up / norm;
+    let y = Vector3::y();
+    if (up - y).norm() < 1e-12 {
+        return Ok(None);
+    }
+    // Antiparallel (Y down): half a turn about x; otherwise the shortest arc.
+    Ok(Some(
+        Rotation3::rotation_between(&up, &y)
+            .unwrap_or_else(|| Rotation3::from_axis_angle(&Unit::new_unchecked(Vector3::x()), std::f64::consts::PI)),
+    ))
+}
+
 /// Number of wrist coordinates.
 pub const N_COORDINATES: usize = 3;
 

@@ -129,6 +129,8 @@ pub struct Stream {
     gap_restarts: u64,
     /// How the stamps follow each other (a source slower than the model's rate).
     pace: SourcePace,
+    /// The turn from the markers' lab into the body model's ([`set_lab_up`](Stream::set_lab_up)).
+    lab: Option<nalgebra::Rotation3<f64>>,
     /// The last time stamp refused for jumping ([`MAX_TIME_GAP_S`] ahead, or behind), and how
     /// many refused stamps in a row continue from each other at the model's rate.
     time_candidate: Option<f64>,
@@ -185,6 +187,7 @@ impl Stream {
             last_time: None,
             gap_restarts: 0,
             pace: SourcePace::default(),
+            lab: None,
             time_candidate: None,
             time_candidate_frames: 0,
             time_reanchors: 0,
@@ -319,6 +322,18 @@ impl Stream {
     fn prepare(&mut self, frame: &[f32], index: usize) -> Result<()> {
         let set = self.model.feature_set();
         let reanchors = self.filler.reanchors();
+        // Into the body model's lab first ([`set_lab_up`](Self::set_lab_up)), on the stack.
+        let mut turned = [0f32; MARKER_FRAME_LEN];
+        let frame = match self.lab {
+            Some(turn) if set.frame_len() == MARKER_FRAME_LEN && frame.len() == MARKER_FRAME_LEN => {
+                for (dst, m) in turned.chunks_exact_mut(3).zip(frame.chunks_exact(3)) {
+                    let v = turn * nalgebra::Vector3::new(f64::from(m[0]), f64::from(m[1]), f64::from(m[2]));
+                    dst.copy_from_slice(&[v.x as f32, v.y as f32, v.z as f32]);
+                }
+                &turned[..]
+            }
+            _ => frame,
+        };
         if set.frame_len() == MARKER_FRAME_LEN && frame.len() == MARKER_FRAME_LEN {
             // Markers no arm could hold (wrong units, a ghost far away) are refused, not fed
             // to a network that would answer them with a confident number.
@@ -665,6 +680,18 @@ impl Stream {
         if let Some(sd) = &mut self.sd {
             sd.restart();
         }
+    }
+
+    /// The lab's up direction (against gravity) in the coordinates of the marker frames pushed
+    /// from now on: `[0, 1, 0]` (the body model's lab) until set, `[0, 0, 1]` for a Z-up lab
+    /// (Vicon, Qualisys); any non-zero length. Each marker frame is turned into the body
+    /// model's lab before anything else. Only a model that reads gravity's direction (the
+    /// `angles_gravity` and `relative_gravity` feature sets: the `wrist-chain` torques) depends
+    /// on it, and silently; angles do not. An `up` that is not a finite non-zero vector is an
+    /// error and changes nothing.
+    pub fn set_lab_up(&mut self, up: [f64; 3]) -> Result<()> {
+        self.lab = crate::body::lab_turn(up)?;
+        Ok(())
     }
 
     /// The standard deviation of each output of the last frame pushed (output units), or

@@ -1,7 +1,8 @@
 //! How the tracker models motion and noise: [`TrackerSettings`], checked before a tracker is made.
 
-use nalgebra::{Rotation3, Unit, Vector3};
+use nalgebra::Rotation3;
 
+use crate::body;
 use crate::error::{Error, Result};
 
 /// How the tracker models motion and noise, and the lab it is measured in.
@@ -87,54 +88,9 @@ impl TrackerSettings {
 }
 
 impl TrackerSettings {
-    /// The up direction of a lab named by its axis: `"+z"`, `"z"`, `"-Y"`, ... (the names a
-    /// marker map's `up` takes); an error naming the six otherwise.
-    pub fn up_axis(name: &str) -> Result<[f64; 3]> {
-        let text = name.trim().to_ascii_lowercase();
-        let (sign, axis) = match text.as_bytes() {
-            [b'+', a] | [a] => (1.0, *a),
-            [b'-', a] => (-1.0, *a),
-            _ => (0.0, b'?'),
-        };
-        let Some(i) = [b'x', b'y', b'z'].iter().position(|&c| c == axis).filter(|_| sign != 0.0) else {
-            return Err(Error::BadArgument {
-                what: "up",
-                detail: format!("is {name:?}, expected the lab axis pointing up, one of +x, -x, +y, -y, +z, -z"),
-            });
-        };
-        let mut up = [0.0; 3];
-        up[i] = sign;
-        Ok(up)
-    }
-
-    /// The rotation that turns the markers' lab into the body model's (up = +Y), or `None`
-    /// when it already is: the shortest turn taking [`up`](Self::up) onto +Y (which way the
-    /// lab faces about the vertical changes no angle and no torque). An `up` that is not a
-    /// finite, non-zero vector is an error.
+    /// The turn from the markers' lab into the body model's ([`body::lab_turn`]).
     pub(super) fn lab_turn(&self) -> Result<Option<Rotation3<f64>>> {
-        let up = Vector3::from(self.up);
-        let norm = up.norm();
-        if !(norm.is_finite() && norm > 1e-9) {
-            return Err(Error::BadArgument {
-                what: "up",
-                detail: format!(
-                    "is {:?}, expected the lab's up direction as a finite non-zero vector (e.g. [0, 0, 1] for a \
-                     Z-up lab)",
-                    self.up
-                ),
-            });
-        }
-        let up = up / norm;
-        let y = Vector3::y();
-        if (up - y).norm() < 1e-12 {
-            return Ok(None);
-        }
-        // Antiparallel (Y down): half a turn about x; otherwise the shortest arc.
-        Ok(Some(
-            Rotation3::rotation_between(&up, &y).unwrap_or_else(|| {
-                Rotation3::from_axis_angle(&Unit::new_unchecked(Vector3::x()), std::f64::consts::PI)
-            }),
-        ))
+        body::lab_turn(self.up)
     }
 }
 
@@ -147,10 +103,10 @@ mod tests {
         for (name, up) in
             [("+z", [0.0, 0.0, 1.0]), ("Z", [0.0, 0.0, 1.0]), (" -y ", [0.0, -1.0, 0.0]), ("+X", [1.0, 0.0, 0.0])]
         {
-            assert_eq!(TrackerSettings::up_axis(name).unwrap(), up, "{name}");
+            assert_eq!(body::up_axis(name).unwrap(), up, "{name}");
         }
         for bad in ["", "w", "+", "zz", "++z", "1"] {
-            let e = TrackerSettings::up_axis(bad).unwrap_err().to_string();
+            let e = body::up_axis(bad).unwrap_err().to_string();
             assert!(e.contains("+x, -x, +y, -y, +z, -z"), "{bad}: {e}");
         }
     }
