@@ -476,6 +476,33 @@ def stream_probes(corpus: Corpus) -> list[Api]:
 
     out.append(probe(corpus, "ikid_stream_push_at/time-not-increasing", backwards))
 
+    def lab_up(v, h):
+        # A lab's up that is no direction is refused by name; NULLs are NULL errors.
+        s = h.stream(h.model("wrist-chain"))
+        for name, up in (
+            ("zero", (0.0, 0.0, 0.0)),
+            ("NaN", (math.nan, 1.0, 0.0)),
+            ("inf", (0.0, math.inf, 0.0)),
+        ):
+            vec = np.ascontiguousarray(up, np.float64)
+            expect(
+                v,
+                f"ikid_stream_set_lab_up({name})",
+                lib().ikid_stream_set_lab_up(s, ptr(vec, f64p)),
+                {ARG},
+                "up",
+            )
+        vec = np.ascontiguousarray((0.0, 0.0, 1.0), np.float64)
+        expect(
+            v,
+            "ikid_stream_set_lab_up(NULL stream)",
+            lib().ikid_stream_set_lab_up(None, ptr(vec, f64p)),
+            {NULL},
+        )
+        expect(v, "ikid_stream_set_lab_up(NULL up)", lib().ikid_stream_set_lab_up(s, None), {NULL})
+
+    out.append(probe(corpus, "ikid_stream_set_lab_up/not-a-direction", lab_up))
+
     def policy(name: str, value: int, allowed: set[int], null_stream: bool = False):
         def body(v, h):
             s = None if null_stream else h.stream()
