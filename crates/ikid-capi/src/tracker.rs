@@ -182,7 +182,8 @@ pub unsafe extern "C" fn ikid_tracker_push(
 /// filter instead of bridging the gap as one step (0.1 s lost gave torques 3.8 N·m off);
 /// what was learned of the subject is kept, and the first frames after are flagged
 /// `IKID_FRAME_RESTARTED` while the velocities settle. `ikid_tracker_gap_restarts` counts
-/// them. A stamp less than half a period after the last one, or not finite, is refused
+/// them. A stamp less than half a period after the last one, equal to it (a frame sent twice),
+/// or not finite, is refused
 /// (`IKID_STATUS_INVALID_ARGUMENT`) and changes nothing. A source slower than `rate_hz` (three
 /// stamps in a row each more than 1.5 periods after the one before) is refused from the third
 /// on, the message naming its rate, until a stamp comes one period after the one before.

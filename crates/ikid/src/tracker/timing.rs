@@ -17,10 +17,12 @@ impl Tracker {
     /// subject (the markers' noise and shapes, the placement, the wrist centre) is kept; the
     /// state starts again from the next frame with every marker, and its first frames are
     /// flagged [`status::RESTARTED`] while the velocities settle.
-    /// [`gap_restarts`](Self::gap_restarts) counts these restarts.
+    /// [`gap_restarts`](Self::gap_restarts) counts these restarts. Frames are numbered as the
+    /// source's clock counts them, lost ones included: an error names a frame by its place in
+    /// the recording.
     ///
-    /// A stamp less than [`FOLLOWS_PERIODS`] after the last one, or not finite, is an error
-    /// and changes nothing; so is a frame [`push`](Self::push) refuses. A source slower than
+    /// A stamp less than [`FOLLOWS_PERIODS`] after the last one, equal to it (a frame sent
+    /// twice), or not finite, is an error and changes nothing; so is a frame [`push`](Self::push) refuses. A source slower than
     /// the rate ([`SLOW_SOURCE_FRAMES`](crate::stream::SLOW_SOURCE_FRAMES) stamps in a row more than [`GAP_PERIODS`] apart: every
     /// frame would restart the filter, whose estimates would never settle) is refused from the
     /// last of them on, saying so, until a stamp comes one period after the one before.
@@ -37,6 +39,13 @@ impl Tracker {
             None => None,
             Some(last) => {
                 let periods = (time_s - last) * rate;
+                if time_s == last {
+                    // A frame sent twice (a stamp going back is a clock that restarted).
+                    return Err(Error::BadArgument {
+                        what: "time",
+                        detail: format!("{time_s} s is the previous frame's stamp: a frame sent twice"),
+                    });
+                }
                 if periods > 0.0 && periods < FOLLOWS_PERIODS {
                     return Err(Error::BadArgument {
                         what: "time",
@@ -186,6 +195,8 @@ mod tests {
         b.push_at(0.0, frame(0)).unwrap();
         let e = a.push_at(0.0002, frame(1)).unwrap_err().to_string();
         assert!(e.contains("1000 Hz") && e.contains("0.200 ms"), "{e}");
+        let e = a.push_at(0.0, frame(1)).unwrap_err().to_string();
+        assert!(e.contains("sent twice"), "{e}");
         let e = a.push_at(f64::NAN, frame(1)).unwrap_err().to_string();
         assert!(e.contains("time") && e.contains("finite"), "{e}");
         // After a gap, a frame push refuses restarts nothing.
@@ -199,6 +210,22 @@ mod tests {
             assert_eq!(x.map(|o| o.values()), y.map(|o| o.values()), "frame {i}");
         }
         assert_eq!(a.gap_restarts(), 0);
+    }
+
+    #[test]
+    fn frames_after_a_gap_are_numbered_as_the_source_counts_them() {
+        let body = BodyModel::default();
+        let f = frames(&body, &trajectory(20, RATE), SHOULDER);
+        let frame = |i: usize| &f[i * MARKER_FRAME_LEN..(i + 1) * MARKER_FRAME_LEN];
+        let mut t = Tracker::new(body, TrackerSettings::new(RATE)).unwrap();
+        for i in 0..10 {
+            t.push_at(i as f64 / RATE, frame(i)).unwrap();
+        }
+        t.push_at(0.050, frame(10)).unwrap(); // frames 10-49 lost
+        let mut bad = frame(11).to_vec();
+        bad[0] = f64::INFINITY;
+        let e = t.push_at(0.051, &bad).unwrap_err();
+        assert!(matches!(e, Error::NonFiniteInput { frame: 51, .. }), "{e}");
     }
 
     #[test]
