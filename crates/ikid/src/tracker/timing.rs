@@ -231,7 +231,7 @@ mod tests {
     #[test]
     fn unstamped_frames_move_the_clock_on_by_a_period_and_a_reset_forgets_it() {
         let body = BodyModel::default();
-        let f = frames(&body, &trajectory(10, RATE), SHOULDER);
+        let f = frames(&body, &trajectory(14, RATE), SHOULDER);
         let frame = |i: usize| &f[i * MARKER_FRAME_LEN..(i + 1) * MARKER_FRAME_LEN];
         let mut t = Tracker::new(body, TrackerSettings::new(RATE)).unwrap();
         t.push_at(1.0, frame(0)).unwrap();
@@ -247,6 +247,22 @@ mod tests {
         assert_eq!(t.gap_restarts(), 0);
         t.push_at(7.0, frame(6)).unwrap();
         assert_eq!(t.gap_restarts(), 0);
+        // Every other frame stamped, at the rate: never a gap, never a slow source.
+        let mut t = Tracker::new(BodyModel::default(), TrackerSettings::new(RATE)).unwrap();
+        for i in 0..10 {
+            if i % 2 == 0 {
+                t.push_at(i as f64 / RATE, frame(i)).unwrap();
+            } else {
+                t.push(frame(i)).unwrap();
+            }
+        }
+        assert_eq!(t.gap_restarts(), 0);
+        // The unstamped frame 9 counts as 9 ms: 10 ms follows it; from there, stamps two periods
+        // apart are late, and the third of them is refused.
+        for (time, i) in [(0.010, 10), (0.012, 11), (0.014, 12)] {
+            assert!(t.push_at(time, frame(i)).is_ok(), "{time}");
+        }
+        assert!(t.push_at(0.016, frame(13)).is_err());
     }
 
     #[test]
