@@ -161,19 +161,8 @@ pub unsafe extern "C" fn ikid_tracker_push(
     out_len: usize,
     flags: *mut ikid_tracker_flags,
 ) -> ikid_status {
-    guard(|| {
-        let t = &mut unsafe { non_null_mut(tracker, "tracker") }?.tracker;
-        let frame = unsafe { slice(frame, frame_len, "frame") }?;
-        let flags = unsafe { non_null_mut(flags, "flags") }?;
-        let out = unsafe { slice_mut(out, room(out_len, 1)?, "out") }?;
-        let (estimate, ready) = match t.push(frame)? {
-            Some(o) => (o, true),
-            None => (TrackerOutput::waiting(ikid_core::tracker::missing_markers(frame)), false),
-        };
-        out.copy_from_slice(&estimate.values());
-        *flags = ikid_tracker_flags::new(&estimate, ready);
-        Ok(())
-    })
+    // SAFETY: the caller's contract, as `push_one` needs it.
+    unsafe { push_one(tracker, frame, frame_len, out, out_len, flags, |t, frame| t.push(frame)) }
 }
 
 /// `ikid_tracker_push` for a frame stamped with its acquisition time (seconds, any origin),
@@ -200,12 +189,30 @@ pub unsafe extern "C" fn ikid_tracker_push_at(
     out_len: usize,
     flags: *mut ikid_tracker_flags,
 ) -> ikid_status {
+    // SAFETY: the caller's contract, as `push_one` needs it.
+    unsafe { push_one(tracker, frame, frame_len, out, out_len, flags, |t, frame| t.push_at(time_s, frame)) }
+}
+
+/// One frame through `push` (stamped or not): the checks of the pointers and lengths, the
+/// estimate (or the waiting frame's NaN) into `out` and its flags into `*flags`.
+///
+/// # Safety
+/// As `ikid_tracker_push`.
+unsafe fn push_one(
+    tracker: *mut ikid_tracker,
+    frame: *const f64,
+    frame_len: usize,
+    out: *mut f64,
+    out_len: usize,
+    flags: *mut ikid_tracker_flags,
+    push: impl FnOnce(&mut Tracker, &[f64]) -> ikid_core::Result<Option<TrackerOutput>>,
+) -> ikid_status {
     guard(|| {
         let t = &mut unsafe { non_null_mut(tracker, "tracker") }?.tracker;
         let frame = unsafe { slice(frame, frame_len, "frame") }?;
         let flags = unsafe { non_null_mut(flags, "flags") }?;
         let out = unsafe { slice_mut(out, room(out_len, 1)?, "out") }?;
-        let (estimate, ready) = match t.push_at(time_s, frame)? {
+        let (estimate, ready) = match push(t, frame)? {
             Some(o) => (o, true),
             None => (TrackerOutput::waiting(ikid_core::tracker::missing_markers(frame)), false),
         };
