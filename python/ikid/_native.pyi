@@ -60,6 +60,8 @@ __all__ = [
     "fit_cluster",
     "points_in_technical_frame",
     "points_from_technical_frame",
+    "lab_turn",
+    "lab_up_axis",
     "MAX_CLUSTER_FIT_RESIDUAL_M",
     "CLUSTER_SPREAD_FLOOR_M",
     "MIN_NEUTRAL_FRAMES",
@@ -308,6 +310,8 @@ def points_in_technical_frame(
     markers: _Floats, points: _Floats, n_points: int
 ) -> npt.NDArray[np.float64]: ...
 def points_from_technical_frame(markers: _Floats, local: _Floats) -> npt.NDArray[np.float64]: ...
+def lab_turn(up: str | Sequence[float]) -> npt.NDArray[np.float64]: ...
+def lab_up_axis(name: str) -> list[float]: ...
 
 MAX_CLUSTER_FIT_RESIDUAL_M: float
 CLUSTER_SPREAD_FLOOR_M: float

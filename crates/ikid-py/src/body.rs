@@ -22,6 +22,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_cluster, m)?)?;
     m.add_function(wrap_pyfunction!(points_in_technical_frame, m)?)?;
     m.add_function(wrap_pyfunction!(points_from_technical_frame, m)?)?;
+    m.add_function(wrap_pyfunction!(lab_turn, m)?)?;
+    m.add_function(wrap_pyfunction!(lab_up_axis, m)?)?;
     m.add("MAX_CLUSTER_FIT_RESIDUAL_M", ikid::cluster::MAX_FIT_RESIDUAL_M)?;
     m.add("CLUSTER_SPREAD_FLOOR_M", ikid::cluster::SPREAD_FLOOR_M)?;
     m.add("MIN_NEUTRAL_FRAMES", ikid::calibration::MIN_NEUTRAL_FRAMES)?;
@@ -32,6 +34,25 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("LENGTH_SCALE_RANGE", ikid::body::LENGTH_SCALE_RANGE)?;
     m.add("MASS_SCALE_RANGE", ikid::body::MASS_SCALE_RANGE)?;
     Ok(())
+}
+
+/// The unit vector of the lab axis `name` names as up (`"z"`, `"+Z"`, `"-y"`…): the core's
+/// grammar (`body::up_axis`), an `InputError` for anything else.
+#[pyfunction]
+fn lab_up_axis(name: &str) -> PyResult<[f64; 3]> {
+    ikid::body::up_axis(name).py_err()
+}
+
+/// The rotation `(3, 3)` taking a lab whose up direction is `up` (an axis such as `"+z"`, or
+/// three numbers) into ikid's (+Y up): `p_ikid = R @ p_lab`, the turn the tracker and streams
+/// make with their `up` setting (the core's `body::lab_turn`; the identity for +Y).
+#[pyfunction]
+fn lab_turn<'py>(py: Python<'py>, up: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let up = crate::tracker::lab_up(up)?;
+    let turn = ikid::body::lab_turn(up).py_err()?.unwrap_or_else(nalgebra::Rotation3::identity);
+    let m = turn.matrix();
+    let rows: Vec<f64> = (0..3).flat_map(|i| (0..3).map(move |j| m[(i, j)])).collect();
+    rows.into_pyarray(py).reshape([3, 3])
 }
 
 /// Refuses a recording `(n, 18)` (metres) whose markers spread over a distance no forearm and

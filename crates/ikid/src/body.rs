@@ -95,10 +95,12 @@ pub fn lab_turn(up: [f64; 3]) -> crate::Result<Option<Rotation3<f64>>> {
         return Ok(None);
     }
     // Antiparallel (Y down): half a turn about x; otherwise the shortest arc.
-    Ok(Some(
-        Rotation3::rotation_between(&up, &y)
-            .unwrap_or_else(|| Rotation3::from_axis_angle(&Unit::new_unchecked(Vector3::x()), std::f64::consts::PI)),
-    ))
+    let turn = Rotation3::rotation_between(&up, &y)
+        .unwrap_or_else(|| Rotation3::from_axis_angle(&Unit::new_unchecked(Vector3::x()), std::f64::consts::PI));
+    // A lab axis's turn is a signed permutation: rounding cos(90°)'s 6e-17 away makes it exact,
+    // so a lab's coordinates are moved, never perturbed.
+    let snap = |x: f64| if (x - x.round()).abs() < 1e-12 { x.round() } else { x };
+    Ok(Some(Rotation3::from_matrix_unchecked(turn.into_inner().map(snap))))
 }
 
 /// Number of wrist coordinates.

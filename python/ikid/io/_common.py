@@ -147,29 +147,21 @@ def ikid_marker_names() -> list[str]:
 #: depend on it (they are relative between segments); torques do, through gravity.
 UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
 
-#: ikid's lab axes in the coordinates of a lab whose up axis is the key: ``p_ikid = R @ p_lab``,
-#: each a proper rotation (a right arm stays a right arm) taking that axis to +Y.
-_TO_IKID_LAB = {
-    "+y": np.eye(3),
-    "-y": np.diag([1.0, -1.0, -1.0]),
-    "+z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
-    "-z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),
-    "+x": np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
-    "-x": np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
-}
-
 
 def parse_up(value: object, source: str) -> str:
     """A lab's up axis as one of :data:`UP_AXES` from ``"z"``, ``"+Z"``, ``"-y"``…; an error
-    naming ``source`` otherwise."""
-    text = str(value).strip().lower() if isinstance(value, str) else ""
-    text = text if text[:1] in "+-" else "+" + text
-    if text not in UP_AXES:
+    naming ``source`` otherwise. The grammar is the core's (``body::up_axis``, what
+    ``ikid.Tracker(up=)`` and ``model.stream(up=)`` read)."""
+    try:
+        axis = _native.lab_up_axis(value) if isinstance(value, str) else None
+    except _native.InputError:
+        axis = None
+    if axis is None:
         raise FileFormatError(
             f"{source}: up = {value!r}; expected the lab axis pointing up, one of {', '.join(UP_AXES)} "
             '(Vicon and Qualisys labs are usually "+z", OpenSim\'s "+y")'
         )
-    return text
+    return UP_AXES[2 * int(np.argmax(np.abs(axis))) + (1 if min(axis) < 0 else 0)]
 
 
 def to_ikid_lab(positions: np.ndarray, up: str) -> np.ndarray:
@@ -179,7 +171,8 @@ def to_ikid_lab(positions: np.ndarray, up: str) -> np.ndarray:
     positions = np.asarray(positions, np.float64)
     if up == "+y":
         return positions
-    rotation = _TO_IKID_LAB[parse_up(up, "up")]
+    # The core's turn (body::lab_turn), the one ikid.Tracker(up=) and model.stream(up=) make.
+    rotation = _native.lab_turn(parse_up(up, "up"))
     if positions.shape[-1] == 18:
         return (positions.reshape(*positions.shape[:-1], 6, 3) @ rotation.T).reshape(positions.shape)
     return positions @ rotation.T

@@ -110,4 +110,22 @@ mod tests {
             assert!(e.contains("+x, -x, +y, -y, +z, -z"), "{bad}: {e}");
         }
     }
+
+    #[test]
+    fn a_lab_axis_is_turned_onto_up_exactly_by_a_proper_rotation() {
+        // Oracle: the axis lands on +Y, the turn is a signed permutation (every entry exactly
+        // -1, 0 or 1: coordinates moved, never perturbed) with determinant +1 (no mirror).
+        for name in ["+x", "-x", "-y", "+z", "-z"] {
+            let up = body::up_axis(name).unwrap();
+            let m = body::lab_turn(up).unwrap().expect("a turn").into_inner();
+            assert_eq!(m * nalgebra::Vector3::from(up), nalgebra::Vector3::y(), "{name}");
+            assert!(m.iter().all(|x| [-1.0, 0.0, 1.0].contains(x)), "{name}: {m}");
+            assert_eq!(m.determinant(), 1.0, "{name}");
+        }
+        assert!(body::lab_turn([0.0, 1.0, 0.0]).unwrap().is_none());
+        // A tilted lab keeps its exact shortest turn.
+        let tilted = body::lab_turn([0.1, 1.0, 0.2]).unwrap().unwrap();
+        let up = nalgebra::Vector3::new(0.1, 1.0, 0.2).normalize();
+        assert!((tilted * up - nalgebra::Vector3::y()).norm() < 1e-15);
+    }
 }
