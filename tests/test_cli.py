@@ -1146,6 +1146,35 @@ def test_stream_tracker_starts_again_after_frames_lost_by_time(trial, monkeypatc
     assert np.abs(after[settled, 3:] - truth).max() < 0.05, np.abs(after[settled, 3:] - truth).max()
 
 
+def test_stream_tracker_numbered_frames_restart_it_after_a_loss_keeping_what_it_learned(
+    trial, monkeypatch, capsys
+):
+    # Frames 200-299 never arrive and the source numbers its frames but gives no times: the
+    # numbers are the stamps. The filter restarts (as the Python API's tracker stamped with
+    # number / rate: the oracle), it is not replaced by a new one that must learn the subject's
+    # marker noise again, and after the gap the torques are the simulator's once settled.
+    keep = np.ones(600, bool)
+    keep[200:300] = False
+    numbers = np.flatnonzero(keep)
+    frames = trial.markers[:600][keep]
+    lines = [f"{n}," + csv_lines(frames[k : k + 1]).strip() for k, n in enumerate(numbers)]
+    monkeypatch.setattr(sys, "stdin", io.StringIO("\n".join(lines) + "\n"))
+    assert cli(["stream", "--tracker", "--frame-number", "--rate", "1000"]) == 3
+    captured = capsys.readouterr()
+    _, status, values = parse_output(captured.out, 12)
+    assert "100 lost (by frame number)" in captured.err and "1 restarts after time gaps" in captured.err, (
+        captured.err
+    )
+    api = ikid.Tracker(rate_hz=1000.0)
+    expected = api.run(np.asarray(frames, np.float64), times=numbers / 1000.0)
+    assert api.gap_restarts == 1
+    ok = np.array([s == "ok" for s in status])
+    np.testing.assert_allclose(values[ok][:, 0::2][:, 3:], expected["tau"][ok], rtol=1e-5, atol=1e-6)
+    truth = trial.tau[300:600][20:300]
+    after = values[200:][:, 0::2][20:300, 3:]
+    assert np.abs(after - truth).max() < 0.05, np.abs(after - truth).max()
+
+
 def test_stream_counts_frames_lost_from_their_times(trial, monkeypatch, capsys):
     """Time stamps 1 ms apart with 7 and 3 frames missing: 10 lost, exit 3; the same frames
     without a gap: 0 lost, exit 0."""

@@ -624,9 +624,11 @@ def _run_with(
                     pass
             batch = batch[-1:]
             # What follows does not continue what the window holds (and may be further ahead
-            # than a clock glitch's bound): the streams start again from the newest frame.
-            for s in streams:
-                s.reset()
+            # than a clock glitch's bound): the streams start again from the newest frame. A
+            # stamped tracker sees the gap itself and restarts keeping what it learned.
+            if not (args.tracker and (batch[0].time is not None or batch[0].number is not None)):
+                for s in streams:
+                    s.reset()
         for f in batch:
             if args.count is not None and frame >= args.count:
                 break
@@ -644,9 +646,10 @@ def _run_with(
                         reanchors, lost = losses.reanchors, losses.lost
                         losses.number(f.number)
                         resynced |= losses.reanchors != reanchors
-                        if losses.lost > lost and f.time is None:
+                        if losses.lost > lost and f.time is None and not args.tracker:
                             # Frames were lost: what follows does not continue what the window
-                            # holds (with time stamps the stream sees the gap and restarts itself).
+                            # holds (with time stamps the stream sees the gap and restarts itself;
+                            # the tracker is stamped by frame number, below).
                             for s in streams:
                                 s.reset()
                     except ikid.InputError as e:
@@ -662,7 +665,13 @@ def _run_with(
                         frame_values = to_ikid_lab(
                             np.asarray(f.values, np.float64).reshape(6, 3), up
                         ).reshape(18)
-                    results = [s.push(frame_values, time=f.time) for s in streams]
+                    stamp = f.time
+                    if stamp is None and f.number is not None and args.tracker:
+                        # Numbered, not timed: the number is the stamp, so frames lost restart the
+                        # filter and it keeps what it learned of the subject (noise, placement),
+                        # which a new tracker would learn again.
+                        stamp = f.number / rate
+                    results = [s.push(frame_values, time=stamp) for s in streams]
                 except ikid.InputError as e:
                     if _CLOCK_GLITCH in str(e):
                         if f.number is None:
