@@ -19,8 +19,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     processing_options(
         p,
         "angle model, shipped name or file (default wrist-ik: the shipped wrist-ik model whose card rate is "
-        "the file's, e.g. wrist-ik-100hz; another rate runs on the next faster one, resampled, outputs "
-        "at the file's frames)",
+        "the file's, e.g. wrist-ik-100hz; another rate runs on the fastest one (wrist-ik, 1 kHz), resampled, "
+        "outputs at the file's frames)",
     )
     unchecked_option(p)
     p.set_defaults(func=run)
