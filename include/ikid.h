@@ -318,8 +318,9 @@ enum ikid_status ikid_stream_push(struct ikid_stream *stream,
                                   bool *ready);
 
 // `ikid_stream_push` for a frame stamped with its acquisition time `time_s` (seconds, any
-// origin): after a gap of more than 1.5 frame periods of the model's rate, up to 1 s, the
-// window restarts (outputs resume once it has refilled). A stamp that jumps (more than 1 s
+// origin): after a gap of more than 1.5 frame periods of the model's rate (from the last
+// stamp and from the frame grid the stamps before it keep: jitter of up to ±0.35 periods is
+// not a gap), up to 1 s, the window restarts (outputs resume once it has refilled). A stamp that jumps (more than 1 s
 // ahead, or not after the last accepted frame's: a glitch of the source's clock, 1e300) is
 // refused alone (`IKID_STATUS_INVALID_ARGUMENT`) and the frames after it go on as if it had
 // not come; three jumped stamps in a row, each one period after the one before, are taken as
@@ -493,7 +494,8 @@ enum ikid_status ikid_tracker_push(struct ikid_tracker *tracker,
 
 // `ikid_tracker_push` for a frame stamped with its acquisition time (seconds, any origin),
 // for a source that can lose frames: a stamp more than 1.5 periods of `rate_hz` after the
-// last one (frames lost), or not after it (the source's clock restarted), restarts the
+// last one and after the frame grid the stamps before it keep (frames lost: jitter of up to
+// ±0.35 periods is not a gap), or not after the last one (the source's clock restarted), restarts the
 // filter instead of bridging the gap as one step (0.1 s lost gave torques 3.8 N·m off);
 // what was learned of the subject is kept, and the first frames after are flagged
 // `IKID_FRAME_RESTARTED` while the velocities settle. `ikid_tracker_gap_restarts` counts

@@ -50,8 +50,9 @@ pub unsafe extern "C" fn ikid_stream_push(
 }
 
 /// `ikid_stream_push` for a frame stamped with its acquisition time `time_s` (seconds, any
-/// origin): after a gap of more than 1.5 frame periods of the model's rate, up to 1 s, the
-/// window restarts (outputs resume once it has refilled). A stamp that jumps (more than 1 s
+/// origin): after a gap of more than 1.5 frame periods of the model's rate (from the last
+/// stamp and from the frame grid the stamps before it keep: jitter of up to ±0.35 periods is
+/// not a gap), up to 1 s, the window restarts (outputs resume once it has refilled). A stamp that jumps (more than 1 s
 /// ahead, or not after the last accepted frame's: a glitch of the source's clock, 1e300) is
 /// refused alone (`IKID_STATUS_INVALID_ARGUMENT`) and the frames after it go on as if it had
 /// not come; three jumped stamps in a row, each one period after the one before, are taken as

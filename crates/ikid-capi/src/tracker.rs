@@ -167,7 +167,8 @@ pub unsafe extern "C" fn ikid_tracker_push(
 
 /// `ikid_tracker_push` for a frame stamped with its acquisition time (seconds, any origin),
 /// for a source that can lose frames: a stamp more than 1.5 periods of `rate_hz` after the
-/// last one (frames lost), or not after it (the source's clock restarted), restarts the
+/// last one and after the frame grid the stamps before it keep (frames lost: jitter of up to
+/// ±0.35 periods is not a gap), or not after the last one (the source's clock restarted), restarts the
 /// filter instead of bridging the gap as one step (0.1 s lost gave torques 3.8 N·m off);
 /// what was learned of the subject is kept, and the first frames after are flagged
 /// `IKID_FRAME_RESTARTED` while the velocities settle. `ikid_tracker_gap_restarts` counts

@@ -155,3 +155,32 @@ fn a_source_slower_than_the_models_rate_is_refused_saying_so_until_it_keeps_the_
     let (out, _) = run(&lossy);
     assert!(out.iter().all(Result::is_ok));
 }
+
+#[test]
+fn jittered_stamps_are_the_next_frames_and_frames_lost_among_them_restart_the_window() {
+    // Stamps uniform within ±0.35 periods of the frame grid (a bridge's receipt times; seeded):
+    // two in a row can be 0.3 or 1.7 periods apart. The oracle: the same frames unstamped,
+    // each one period on. None is refused and none restarts the window (a source jittering from
+    // its very first frame can have one of its first few misjudged: GRID_SETTLING_FRAMES); 100 frames lost
+    // among them restart it once.
+    let mut seed = 11u64;
+    let mut jitter = move || {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.7
+    };
+    let stamps: Vec<_> = (0..N).map(|i| Some((i as f64 + jitter()) * 1e-3)).collect();
+    let (jittered, stream) = run(&stamps);
+    let model = random_model(FeatureSet::Angles, 5, &[16], 3, 4);
+    let frames = random_frames(FeatureSet::Angles, N, 21);
+    let mut plain = model.stream();
+    for (i, frame) in frames.chunks_exact(18).enumerate() {
+        let expected = plain.push(frame).unwrap().map(<[f32]>::to_vec);
+        assert_eq!(jittered[i], Ok(expected), "frame {i} at {:?}", stamps[i]);
+    }
+    assert_eq!(stream.gap_restarts(), 0);
+    let mut lost = stamps.clone();
+    lost[1000..1100].fill(None);
+    let (out, stream) = run(&lost);
+    assert!(out.iter().all(Result::is_ok));
+    assert_eq!(stream.gap_restarts(), 1);
+}

@@ -217,9 +217,9 @@ pub struct Tracker {
     /// The turn from the markers' lab into the body model's (+Y up), `None` when it is that
     /// lab ([`TrackerSettings::up`]).
     lab: Option<Rotation3<f64>>,
-    /// The last stamped frame's time, s ([`push_at`](Tracker::push_at)); an unstamped push
-    /// moves it on by a period.
-    last_time: Option<f64>,
+    /// Where the stamped frames fall in time ([`push_at`](Tracker::push_at)); an unstamped
+    /// push moves it on by a period.
+    clock: crate::stream::FrameGrid,
     /// Restarts after time gaps ([`push_at`](Tracker::push_at)) since the start.
     gap_restarts: usize,
     /// How the stamps follow each other (a source slower than the rate).
@@ -299,7 +299,7 @@ impl Tracker {
             refined: false,
             turned_over: status::TurnedOverWatch::new(),
             lab,
-            last_time: None,
+            clock: crate::stream::FrameGrid::default(),
             gap_restarts: 0,
             pace: crate::stream::SourcePace::default(),
         };
@@ -341,7 +341,7 @@ impl Tracker {
         self.roll = Roll::idle();
         self.refined = false;
         self.turned_over = status::TurnedOverWatch::new();
-        self.last_time = None;
+        self.clock = crate::stream::FrameGrid::default();
         self.gap_restarts = 0;
         self.pace = crate::stream::SourcePace::default();
         if let Some(r) = self.refiner.as_mut() {
@@ -397,9 +397,7 @@ impl Tracker {
     pub fn push<V: Copy + Into<f64>>(&mut self, frame: &[V]) -> Result<Option<TrackerOutput>> {
         let out = self.push_frame(frame)?;
         // An unstamped frame comes one period after the one before.
-        if let Some(t) = self.last_time.as_mut() {
-            *t += 1.0 / self.settings.rate_hz;
-        }
+        self.clock.advance(1.0 / self.settings.rate_hz);
         self.pace.advance(1.0 / self.settings.rate_hz);
         Ok(out)
     }

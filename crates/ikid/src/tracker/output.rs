@@ -108,7 +108,7 @@ pub struct TrackerSd {
 impl Tracker {
     /// The standard deviations of the last estimate ([`TrackerSd`]), or `None` before it
     /// started (or after a reset). A refined estimate's are the filter's times
-    /// [`REFINED_SD_SCALE_Q`](super::REFINED_SD_SCALE_Q) (and `_TAU`): measured for the shipped
+    /// [`REFINED_SD_SCALE_Q`] (and `_TAU`): measured for the shipped
     /// refiner (it never feeds the filter back, so its error is the filter's, reduced).
     pub fn output_sd(&self) -> Option<TrackerSd> {
         let (x, p) = self.state.as_ref()?;
