@@ -396,7 +396,7 @@ impl GapFiller {
         Ok(mask)
     }
 
-    /// [`status`](crate::status) bits of the last frame [`fill`](Self::fill) accepted:
+    /// [`status`] bits of the last frame [`fill`](Self::fill) accepted:
     /// [`FILLED`](status::FILLED) if a missing marker was filled,
     /// [`REJECTED_MARKER`](status::REJECTED_MARKER) if a marker that jumped was replaced by
     /// a fill, [`SWAPPED`](status::SWAPPED) if markers were found under one another's labels

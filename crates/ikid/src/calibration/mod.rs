@@ -83,7 +83,7 @@ pub const MIN_STATIC_FRAMES: usize = 10;
 /// calibration's error, and its count is no evidence the posture was held.
 pub const MIN_NEUTRAL_FRAMES: usize = 5;
 /// Largest rotation of the hand (relative to the forearm) away from the static trial's mean
-/// allowed within it, degrees, the markers' noise averaged out (see [`HeldPosture`]): more is
+/// allowed within it, degrees, the markers' noise averaged out (see `HeldPosture`): more is
 /// not a static trial.
 pub const MAX_STATIC_SPREAD_DEG: f64 = 5.0;
 /// How far the noise may leave a held posture's smoothed path, degrees: the window over
@@ -272,7 +272,7 @@ pub struct CalibrationReport {
     /// Neutral (or static) frames used: those with all six markers.
     pub neutral_frames: usize,
     /// Largest rotation of the hand (in the forearm) from their mean, degrees, the markers'
-    /// noise averaged out (see [`HeldPosture`]).
+    /// noise averaged out (see `HeldPosture`).
     pub neutral_spread_deg: f64,
     /// The markers' noise as it turns one frame's hand in the forearm, degrees RMS (from the
     /// differences between consecutive neutral frames).
@@ -348,7 +348,7 @@ pub struct HandLandmarkReport {
 }
 
 /// Each segment's marker shape as a trial's first frames show it (its three markers in the
-/// segment's technical frame, averaged over [`TEMPLATE_S`](TEMPLATE_S) of
+/// segment's technical frame, averaged over [`TEMPLATE_S`] of
 /// frames with all of them measured), for [`Calibration::apply_fitted`]: the segment's
 /// orientation is then the rotation that carries that shape onto the frame's markers by least
 /// squares (Kabsch), not the technical frame built from two of them and the third's side.
@@ -368,7 +368,7 @@ pub struct MarkerShapes {
 }
 
 impl MarkerShapes {
-    /// Shapes to learn from the first [`TEMPLATE_S`](TEMPLATE_S) of frames at
+    /// Shapes to learn from the first [`TEMPLATE_S`] of frames at
     /// `rate_hz` (at least one frame).
     pub fn new(rate_hz: f64) -> Self {
         let needed = (TEMPLATE_S * rate_hz).ceil();
