@@ -1175,6 +1175,61 @@ def test_stream_tracker_numbered_frames_restart_it_after_a_loss_keeping_what_it_
     assert np.abs(after - truth).max() < 0.05, np.abs(after - truth).max()
 
 
+def test_stream_refuses_markers_an_uncalibrated_run_cannot_read_before_writing_any(
+    trial, monkeypatch, capsys
+):
+    # FAP moved halfway to RSP: the forearm's markers sit where the body model's placement does
+    # not put them (as a real lab's do), and read uncalibrated every angle would be 50-170°
+    # off. As ik and track refuse such a file, the stream stops on its first frames, names the
+    # markers and what to do, and writes no value.
+    frames = np.array(trial.markers, np.float64)
+    frames[:, 6:9] = 0.5 * (frames[:, 0:3] + frames[:, 6:9])
+    for extra in ([], ["--tracker"]):
+        monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames[:100])))
+        assert exit_status(["stream", "--rate", "1000", *extra]) == 2, extra
+        captured = capsys.readouterr()
+        assert captured.out.strip().count("\n") == 0, captured.out[:300]  # the header alone
+        assert "markers RSP and FAP" in captured.err and "calibrate the subject" in captured.err, captured.err
+
+
+def test_stream_writes_no_value_for_a_hand_read_turned_over_and_flags_the_rest(trial, monkeypatch, capsys):
+    # From frame 150 on the hand's markers are turned 160° about the forearm's long axis: the
+    # hand reads turned over, no wrist's posture. As ik and track, no such value is written:
+    # the lines say why, the summary counts them and the exit status is 3. The oracle for the
+    # other lines' status words: ikid.Stream's status bits for the same frames in this process.
+    frames = np.array(trial.markers[:300], np.float64).reshape(-1, 6, 3)
+    for p in frames[150:]:
+        centre = 0.5 * (p[0] + p[1])  # between the styloids
+        axis = (centre - p[2]) / np.linalg.norm(centre - p[2])
+        k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+        turn = np.eye(3) + np.sin(np.radians(160)) * k + (1 - np.cos(np.radians(160))) * k @ k
+        p[3:] = (p[3:] - centre) @ turn.T + centre
+    frames = frames.reshape(-1, 18)
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames)))
+    assert cli(["stream", "--rate", "1000"]) == 3
+    captured = capsys.readouterr()
+    _, status, values = parse_output(captured.out, 3)
+    stream = ikid.load("wrist-ik").stream()
+    bits = ikid.FRAME_STATUS
+    for k, frame in enumerate(frames):
+        try:
+            out = stream.push(frame.astype(np.float32))
+        except ikid.InputError as e:  # the hand's jump, refused until it stays
+            assert status[k].startswith("refused:marker(s) MC2") and "out of place" in str(e), (k, status[k])
+            continue
+        if out is None:
+            assert status[k] == "filling", (k, status[k])
+        elif stream.status & bits["implausible"]:
+            assert status[k].startswith("refused:the hand reads turned over") and np.isnan(values[k]).all(), k
+        elif stream.status:
+            names = [n for n, b in bits.items() if stream.status & b]
+            assert status[k] == "flagged:" + "+".join(names), (k, status[k])
+        else:
+            assert status[k] == "ok", (k, status[k])
+    assert sum(s.startswith("refused:the hand reads turned over") for s in status) >= 90
+    assert "hand turned over on the forearm (not written)" in captured.err, captured.err
+
+
 def test_stream_counts_frames_lost_from_their_times(trial, monkeypatch, capsys):
     """Time stamps 1 ms apart with 7 and 3 frames missing: 10 lost, exit 3; the same frames
     without a gap: 0 lost, exit 0."""

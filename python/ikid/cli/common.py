@@ -209,11 +209,22 @@ def _naming(path: str, error: BaseException) -> str:
     return f"{path}: {message}"
 
 
-def _subject_calibration(frames: np.ndarray, calibration: str | None, mapping, source: str):
+def _subject_calibration(
+    frames: np.ndarray,
+    calibration: str | None,
+    mapping,
+    source: str,
+    *,
+    whole: bool = True,
+    labelled: bool = True,
+):
     """The calibration a run of ``frames`` (read with ``mapping``) uses: the file given,
     checked against the marker map it was measured with; or, without one, the body model's
     placement, after checking that it can read these markers at all (units, then placement:
-    an uncalibrated real recording reads 50-170° off). Errors name ``source``."""
+    an uncalibrated real recording reads 50-170° off). Errors name ``source``. ``whole``: the
+    frames are a whole trial (a live stream's first frames say nothing of whether the wrist
+    moves, so they are not asked). ``labelled``: the frames were read by their labels, so a
+    calibration measured with another labelling is refused (frames on stdin have none)."""
     from ikid.calibration import (
         check_calibration_map,
         check_marker_distances,
@@ -232,11 +243,12 @@ def _subject_calibration(frames: np.ndarray, calibration: str | None, mapping, s
         swapped = checked.swapped_across_segments(frames)
         if flat or swapped:
             raise ikid.InputError("; ".join(flat + ([swapped] if swapped else [])))
-        held = checked.hand_held_to_forearm(frames)
+        held = checked.hand_held_to_forearm(frames) if whole else None
         for problem in checked.stretched_segments(frames) + ([held] if held else []):
             warnings.warn(f"{source}: {problem}", MarkerMapWarning, stacklevel=2)
         if calibration:
-            check_calibration_map(calibration, mapping)
+            if labelled:
+                check_calibration_map(calibration, mapping)
             check_marker_distances(calibration, frames, source)
             return ikid.load_calibration(calibration)
         # Uncalibrated, the body model's placement; a left arm (the map's side) mirrored into

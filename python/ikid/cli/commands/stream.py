@@ -32,7 +32,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "stamps; a hidden marker is a gap; a bad time stamp is refused alone; a source that goes\n"
         "away is reconnected; frames older than --max-lag when read are skipped (counted). See\n"
         "docs/live.md.\n\n"
-        "At the end, a summary on stderr: frames received, ok, filled, filling, refused (by\n"
+        "Status: ok, filled:<markers>, flagged:<status bits>, filling, or refused:<reason> (an\n"
+        "output no wrist can give is not written). The first 20 frames with every marker are\n"
+        "checked as ik and track check a file (uncalibrated markers the body model cannot read,\n"
+        "another subject's calibration: exit 2), their lines held until then.\n\n"
+        "At the end, a summary on stderr: frames received, ok, filled, flagged, filling, refused (by\n"
         "reason), lost (counted from the source's frame numbers, --frame-number, or its\n"
         "times, --time), skipped, reconnections and time re-anchors. UDP asks for an 8 MiB receive\n"
         "buffer for bursts and says if it got less.\n\n"
@@ -373,10 +377,11 @@ _CLOCK_GLITCH = "glitch of the source's clock"
 def run(args: argparse.Namespace) -> int:
     """Frames from stdin, UDP or a live source -> one CSV line per frame on stdout:
     ``frame,status,<outputs>`` (``frame,time,status,<outputs>`` for a live source); status
-    ``ok``, ``filled:<markers>``, ``filling`` (window not full yet) or ``refused:<reason>``
-    (outputs empty). Nothing is skipped silently: the summary on stderr counts frames received,
-    refused (by reason), lost, skipped and reconnections; exit status 0 if every frame was
-    processed, 3 if frames were lost, skipped or refused, 2 on an error."""
+    ``ok``, ``filled:<markers>``, ``flagged:<status bits>``, ``filling`` (window not full yet) or
+    ``refused:<reason>`` (outputs empty; an output no wrist can give is not written). Nothing is
+    skipped silently: the summary on stderr counts frames received, refused (by reason), lost,
+    skipped and reconnections; exit status 0 if every frame was processed, 3 if frames were lost,
+    skipped or refused, 2 on an error."""
     from ikid.io.mapping import MarkerMap
     from ikid.pipeline import refusal_reason
 
@@ -599,12 +604,14 @@ def _run_with(
     max_backlog = max(1, round(args.max_lag * rate))
     counts: Counter = Counter()
     refused: Counter = Counter()
+    flags: Counter = Counter()  # flagged frames by status bit
     losses = _Losses(rate)
     frame = 0
     flush = args.flush or live
     # The source restarted (reconnected, or its numbering re-anchored): the next output published
     # carries the RESYNCED bit, as ikid.Stream's own after its clock re-anchors.
     resynced = False
+    placement = _PlacementCheck(args) if frame_len == len(ikid.marker_names()) * 3 else None
     for batch in batches:
         if batch is None:  # reconnected: what follows does not continue what came before
             for s in streams:
@@ -659,6 +666,9 @@ def _run_with(
                             else "late or repeated frame number"
                         )
                         raise _Refused(str(e), key) from None
+                if placement is not None and placement.see(f.values):
+                    # Checked (an error here ends the stream, exit 2): what was held goes out.
+                    placement.release(out, sink)
                 try:
                     frame_values = f.values
                     if up != "+y" and frame_len == 18:  # marker frames, from a lab of its own
@@ -692,32 +702,56 @@ def _run_with(
                     status = "filling"
                 else:
                     output = np.concatenate(ready) if len(ready) > 1 else ready[0]
+                    bits = _frame_bits(streams)
+                    if bits & _IMPLAUSIBLE:
+                        # As ik and track: no output no wrist can give is written as a number.
+                        raise _Refused(*_implausible(bits, output, args.tracker))
                     values = ",".join(f"{v:.7g}" for v in output)
                     filled = streams[0].filled_markers
-                    if filled:
+                    if bits & ~_FILLED:
+                        status = "flagged:" + "+".join(n for n, b in ikid.FRAME_STATUS.items() if bits & b)
+                        flags.update(n for n, b in ikid.FRAME_STATUS.items() if bits & b & ~_FILLED)
+                    elif filled:
                         status = "filled:" + "+".join(filled)
                     if sink is not None:
-                        bits = streams[0].status
-                        if resynced and not math.isnan(bits):
-                            bits = float(int(bits) | ikid.FRAME_STATUS["resynced"])
-                        sink.publish(output, bits, f.time if f.time is not None else _lsl_now())
+                        if resynced:
+                            bits |= ikid.FRAME_STATUS["resynced"]
+                        published = (output, bits, f.time if f.time is not None else _lsl_now())
+                        if placement is not None and placement.frames is not None:
+                            placement.held_outputs.append(published)
+                        else:
+                            sink.publish(*published)
                     resynced = False
             except _Refused as e:
                 status = "refused:" + e.detail.replace(",", ";").replace("\n", " ")
                 refused[e.key] += 1
                 if args.strict:
+                    if placement is not None and placement.frames is not None:
+                        placement.check()
+                        placement.release(out, sink)
                     print(f"ikid: error: frame {label}: {e.detail}", file=sys.stderr)
                     return 2
             stamp = ("" if f.time is None else f"{f.time:.6f}") + "," if live else ""
-            out.write(f"{label},{stamp}{status},{values}\n")
-            if flush:
-                out.flush()
+            line = f"{label},{stamp}{status},{values}\n"
+            if placement is not None and placement.frames is not None:
+                # Held until the first frames are checked: nothing is written of a stream whose
+                # markers cannot be read.
+                placement.held_lines.append(line)
+            else:
+                out.write(line)
+                if flush:
+                    out.flush()
             counts[status.split(":")[0]] += 1
             frame += 1
         if args.count is not None and frame >= args.count:
             break
+    if placement is not None and placement.frames is not None:
+        placement.check()  # a stream shorter than the frames checked: its frames, checked
+        placement.release(out, sink)
     out.flush()
-    parts = [f"{counts[k]} {k}" for k in ("ok", "filled", "filling", "refused") if counts[k]]
+    parts = [f"{counts[k]} {k}" for k in ("ok", "filled", "flagged", "filling", "refused") if counts[k]]
+    if flags:
+        parts.append("flagged " + ", ".join(f"{name} {n}" for name, n in flags.most_common()))
     if numbered or timed:
         parts.append(f"{losses.lost} lost (by {'frame number' if numbered else 'time'})")
     else:
@@ -769,6 +803,90 @@ def _lsl_now() -> float:
     import pylsl
 
     return pylsl.local_clock()
+
+
+_IMPLAUSIBLE = ikid.FRAME_STATUS["implausible"]
+_FILLED = ikid.FRAME_STATUS["filled"]
+
+
+def _frame_bits(streams) -> int:
+    """The status bits of the frame just pushed, over every stream (a torque model's too)."""
+    bits = 0
+    for s in streams:
+        b = s.status
+        if not (isinstance(b, float) and math.isnan(b)):
+            bits |= int(b)
+    return bits
+
+
+def _implausible(bits: int, output: np.ndarray, tracker: bool) -> tuple[str, str]:
+    """Why a frame with the ``implausible`` bit has no output written, and the key it is counted
+    by: as ``ik`` and ``track`` say it."""
+    from ikid.pipeline import TURNED_OVER_REASON
+
+    if bits & ikid.FRAME_STATUS["turned_over"]:
+        return TURNED_OVER_REASON, "hand turned over on the forearm (not written)"
+    what = "estimate (a torque or speed no wrist gives)" if tracker else "outputs (far outside training)"
+    values = np.array2string(np.asarray(output, np.float64), precision=3).replace("\n", "")
+    return f"implausible {what}, not written: {values}", "implausible (not written)"
+
+
+class _PlacementCheck:
+    """The checks ``ik`` and ``track`` make of a whole file before any output (units, each
+    segment's markers, and the placement an uncalibrated run assumes or the calibration's own
+    marker distances: ``_subject_calibration``), made live on the first :data:`CHECKED_FRAMES`
+    frames with every marker. Uncalibrated real markers read 50-170° off, and another
+    subject's calibration gave 2-3 rad, every line "ok"; such a stream ends with the reason."""
+
+    CHECKED_FRAMES = 20
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        from ikid.io import MarkerMap
+
+        self.args = args
+        self.mapping = MarkerMap.load(args.map) if args.map else None
+        #: The frames with every marker seen so far; None once checked.
+        self.frames: list[np.ndarray] | None = []
+        #: Output lines and sink publications held until then.
+        self.held_lines: list[str] = []
+        self.held_outputs: list[tuple[np.ndarray, int, float]] = []
+
+    def see(self, values) -> bool:
+        """Notes a frame; True when this one completes the check (passed: an error otherwise)."""
+        if self.frames is None:
+            return False
+        frame = np.asarray(values, np.float64)
+        if frame.shape == (18,) and np.isfinite(frame).all():
+            self.frames.append(frame)
+        if len(self.frames) < self.CHECKED_FRAMES:
+            return False
+        self.check()
+        return True
+
+    def check(self) -> None:
+        from ikid.cli.common import _subject_calibration
+
+        frames, self.frames = np.array(self.frames or np.empty((0, 18))), None
+        if len(frames) == 0:  # no frame with every marker: nothing to judge
+            return
+        source = f"the stream's first {len(frames)} frames with every marker"
+        _subject_calibration(
+            frames,
+            self.args.calibration,
+            self.mapping,
+            source,
+            whole=False,
+            labelled=self.mapping is not None,
+        )
+
+    def release(self, out, sink) -> None:
+        """Writes the lines and publishes the outputs held while the frames were checked."""
+        out.writelines(self.held_lines)
+        out.flush()
+        if sink is not None:
+            for published in self.held_outputs:
+                sink.publish(*published)
+        self.held_lines, self.held_outputs = [], []
 
 
 class _Refused(Exception):
