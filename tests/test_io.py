@@ -343,6 +343,10 @@ def test_missing_label_lists_the_labels_the_file_has(trial, tmp_path):
         (LAB_MAP.replace("R_USTY", "R_RSTY"), r"label 'R_RSTY' is given to both RSP and USP"),
         ("markers = 3", r"expected a \[markers\] table"),
         ("[markers\n", r"not valid TOML"),
+        # A mistyped key is refused, never left at its default (a right arm, no landmarks).
+        ('sid = "left"\n' + LAB_MAP, r"unknown key\(s\) 'sid' \(did you mean 'side'\?\)"),
+        (LAB_MAP + "[landmark]\nradial_styloid = 'R_RSTY'\n", r"'landmark' \(did you mean 'landmarks'\?\)"),
+        ('units = "mm"\n' + LAB_MAP, r"unknown key\(s\) 'units'; a marker map has markers, side, up"),
     ],
 )
 def test_bad_marker_maps_say_what_is_wrong(tmp_path, text, message):

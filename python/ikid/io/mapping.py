@@ -42,6 +42,7 @@ and the three take the places the fit gives them (core ``cluster``)::
 
 from __future__ import annotations
 
+import difflib
 import json
 import os
 import re
@@ -98,6 +99,19 @@ class MarkerMap:
     def from_dict(table: dict, source: str = "marker map") -> MarkerMap:
         six = ikid_marker_names()
         hand_point = _native.HAND_POINT[0]
+        # A mistyped key is an error, never a default: `sid = "left"` read a left arm as a right
+        # one (50-93° off), `[landmark]` sent calibrate to another method.
+        unknown_keys = sorted(set(table) - set(_MAP_KEYS))
+        if unknown_keys:
+            raise FileFormatError(
+                f"{source}: unknown key(s) "
+                + ", ".join(
+                    repr(k)
+                    + "".join(f" (did you mean {m!r}?)" for m in difflib.get_close_matches(k, _MAP_KEYS, 1))
+                    for k in unknown_keys
+                )
+                + f"; a marker map has {', '.join(_MAP_KEYS)}"
+            )
         markers = table.get("markers")
         if not isinstance(markers, dict):
             raise FileFormatError(
@@ -544,6 +558,10 @@ def _check_side_against_labels(source: str, side: str, markers: dict, landmarks:
         f"the {other} arm read as the {side} would give every flexion and supination mirrored; set side = "
         f'"{other}" (or name the {side} arm\'s markers)'
     )
+
+
+#: The keys a marker map may have (tables and values; see the module's docstring).
+_MAP_KEYS = ("markers", "side", "up", "landmarks", "cluster")
 
 
 def _clusters(
