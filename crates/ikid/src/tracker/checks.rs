@@ -260,6 +260,31 @@ mod tests {
     use super::*;
     use crate::body::BodyModel;
 
+    #[test]
+    fn markers_in_millimetres_are_refused_before_the_filter_runs_and_ghosts_after_are_flagged() {
+        // Frames in mm read as metres: every one refused, saying why, and nothing changed (the
+        // same frames in metres then run as on a fresh tracker). Once the filter runs, one
+        // frame with a marker 1 km away is rejected and flagged, not an error.
+        let body = BodyModel::default();
+        let f = frames(&body, &trajectory(60, 1000.0), 0.2);
+        let frame = |i: usize| &f[i * MARKER_FRAME_LEN..(i + 1) * MARKER_FRAME_LEN];
+        let mut t = Tracker::new(body.clone(), TrackerSettings::new(1000.0)).unwrap();
+        for i in 0..5 {
+            let mm: Vec<f64> = frame(i).iter().map(|v| v * 1000.0).collect();
+            let e = t.push(&mm).unwrap_err().to_string();
+            assert!(e.contains("are the units mm"), "{e}");
+        }
+        let mut fresh = Tracker::new(body, TrackerSettings::new(1000.0)).unwrap();
+        for i in 0..50 {
+            let (a, b) = (t.push(frame(i)).unwrap(), fresh.push(frame(i)).unwrap());
+            assert_eq!(a.map(|o| o.values()), b.map(|o| o.values()), "frame {i}");
+        }
+        let mut ghost = frame(50).to_vec();
+        ghost[0] += 1000.0;
+        let out = t.push(&ghost).unwrap().expect("an estimate");
+        assert!(out.status & status::REJECTED_MARKER != 0);
+    }
+
     /// The default body's marker frame at rest, with forearm marker `m` moved by `by` (m).
     fn moved(m: usize, by: Vector3<f64>) -> Vec<f64> {
         let body = BodyModel::default();

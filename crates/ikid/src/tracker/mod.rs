@@ -185,6 +185,9 @@ pub struct Tracker {
     coast_streak: usize,
     /// Frames still to flag [`status::RESTARTED`] after a restart or a long hold.
     settling: usize,
+    /// Frames the state has run since it last started from a frame's own solution (its
+    /// velocities and accelerations unknown then: `output_sd` widens the torques' for a while).
+    state_age: usize,
     restarts: usize,
     /// The subject's placement: each segment's markers in its anatomical frame are taken from
     /// the subject's own markers (their shape as learned, turned by the calibration) instead of
@@ -285,6 +288,7 @@ impl Tracker {
             gated_streak: 0,
             coast_streak: 0,
             settling: 0,
+            state_age: 0,
             restarts: 0,
             calibration: None,
             templated: [false; 2],
@@ -330,6 +334,7 @@ impl Tracker {
         self.gated_streak = 0;
         self.coast_streak = 0;
         self.settling = 0;
+        self.state_age = 0;
         self.restarts = 0;
         self.templated = [false; 2];
         self.template_frames = [0; 2];
@@ -448,6 +453,12 @@ impl Tracker {
                 field: format!("{}.{}", MARKERS[i / 3].name, ["x", "y", "z"][i % 3]),
                 value: frame[i] as f32,
             });
+        }
+        // Before the filter runs there is no motion for a ghost to stray from: markers no arm
+        // could hold are refused, saying why (mm read as metres returned no estimate, ever,
+        // and no error), where a running filter rejects and flags them (below).
+        if self.state.is_none() {
+            body::check_marker_span(frame, index)?;
         }
         self.frames += 1;
         let mut step = Step {
