@@ -120,6 +120,7 @@ impl Tracker {
             && let Some((pose, _)) = own
         {
             (*x, *p) = (self.solution(forearm, &pose), self.initial_covariance());
+            self.state_age = 0;
             step.hand = ungated;
             self.gated_streak = 0;
             self.restarts += 1;
@@ -186,6 +187,7 @@ impl Tracker {
             let value = x.iter().find(|v| !v.is_finite()).copied().unwrap_or(f64::NAN) as f32;
             return Err(Error::NonFiniteOutput { frame: index, value });
         }
+        self.state_age = if self.state.is_none() { 1 } else { self.state_age + 1 };
         self.state = Some((x, p));
         Ok((x, p))
     }
