@@ -150,16 +150,21 @@ def test_stream_of_unknown_rate_is_refused_and_stamps_at_another_rate_say_which(
         captured = capsys.readouterr()
         assert "the source's frame rate is not known" in captured.err and "give --rate HZ" in captured.err
         assert captured.out == ""
-    # Stamped at 100 Hz, read by the 1 kHz model: every frame is 9 lost, and the summary says
-    # what the stamps show and what to give.
+    # Stamped at 100 Hz without --rate, so read by the 1 kHz model: every frame would be refused
+    # as a slow source's. The stream stops on the third late stamp, saying what they show and what to
+    # give, and writes no value.
     frames = trial.markers[::10][:100]
     monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames, with_time=np.arange(100) * 0.01)))
-    assert cli(["stream", "--time"]) == 3
-    err = capsys.readouterr().err
-    assert "the time stamps come 10 ms apart, a 100 Hz source read at 1000 Hz: give --rate 100" in err, err
+    assert cli(["stream", "--time"]) == 2
+    captured = capsys.readouterr()
+    assert (
+        "frame 3: the time stamps come 10 ms apart, a 100 Hz source read at 1000 Hz: give --rate 100 (the "
+        "family's member at that rate) (without --rate the stream runs at the model's rate)" in captured.err
+    ), captured.err
+    assert captured.out.strip().count("\n") == 0, captured.out
     # Stamped in milliseconds: said so.
     monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(trial.markers[:100], with_time=np.arange(100.0))))
-    assert cli(["stream", "--time"]) == 3
+    assert cli(["stream", "--time"]) == 2
     err = capsys.readouterr().err
     assert "the time stamps step by 1, a frame at 1000 Hz: are they in ms? --time reads seconds" in err, err
     # At its own rate, nothing of the kind.

@@ -372,6 +372,8 @@ def _stdin_lines(count: int | None):
 
 #: Substring of ikid.Stream's refusal of a time stamp that jumped (see Stream::push_at).
 _CLOCK_GLITCH = "glitch of the source's clock"
+#: What the core says of stamps steadily further apart than the rate (``SourcePace``).
+_SLOW_SOURCE = "the source runs at about"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -689,6 +691,14 @@ def _run_with(
                         raise _Refused(e.reason or str(e), "time stamp jumped (refused alone)") from e
                     if f.number is None and f.time is not None:
                         losses.time(f.time)
+                    if _SLOW_SOURCE in str(e) and args.rate is None and not live and losses.steps:
+                        # No --rate: the stream runs at the model's, and the stamps say the source
+                        # sends slower. Every frame would be refused: said once, with the --rate.
+                        step = float(np.median(losses.steps))
+                        raise ikid.InputError(
+                            f"frame {label}: {_stamps_hint(1.0 / step, rate)} (without --rate the stream "
+                            "runs at the model's rate)"
+                        ) from None
                     if "resample the source" in str(e):
                         raise _Refused(
                             e.reason or str(e), "time stamp too soon (the source is faster than the model)"
@@ -757,16 +767,7 @@ def _run_with(
     else:
         parts.append("lost not counted (no frame numbers or times: --frame-number, --time)")
     if timed and (other := losses.other_rate()) is not None:
-        if abs(other * 1e3 / rate - 1.0) <= 0.2:
-            parts.append(
-                f"the time stamps step by {1 / other:.3g}, a frame at {rate:g} Hz: are they in ms? "
-                "--time reads seconds"
-            )
-        else:
-            parts.append(
-                f"the time stamps come {1e3 / other:.3g} ms apart, a {other:.4g} Hz source read at "
-                f"{rate:g} Hz: give --rate {other:.4g} (the family's member at that rate)"
-            )
+        parts.append(_stamps_hint(other, rate))
     skipped = notes["skipped"]
     if live:
         parts.append(f"{skipped} skipped (read too late: newest taken)")
@@ -797,6 +798,19 @@ def _run_with(
     if sink is not None:
         sink.close()
     return EXIT_FRAMES_LOST if refused or losses.lost or skipped or notes["not reconnected"] else 0
+
+
+def _stamps_hint(other: float, rate: float) -> str:
+    """What stamps at ``other`` Hz say to a stream at ``rate`` Hz, and what to give."""
+    if abs(other * 1e3 / rate - 1.0) <= 0.2:
+        return (
+            f"the time stamps step by {1 / other:.3g}, a frame at {rate:g} Hz: are they in ms? "
+            "--time reads seconds"
+        )
+    return (
+        f"the time stamps come {1e3 / other:.3g} ms apart, a {other:.4g} Hz source read at {rate:g} Hz: "
+        f"give --rate {other:.4g} (the family's member at that rate)"
+    )
 
 
 def _lsl_now() -> float:
