@@ -246,6 +246,27 @@ def test_c3d_round_trip_keeps_labels_positions_and_gaps(trial, tmp_path):
     np.testing.assert_allclose(back.time, trial.time, atol=1e-9)
 
 
+def test_c3d_writes_a_time_gap_as_frames_without_markers_and_refuses_times_off_its_grid(trial, tmp_path):
+    # Rows 300-899 left out (0.6 s at 1 kHz): a C3D's times are implied by its frames, so
+    # closed up every later row would move 0.6 s earlier. Oracle: the rows kept, at their own
+    # times, and the frames between them without markers.
+    data = lab_data(trial)
+    keep = np.ones(len(data.time), bool)
+    keep[300:900] = False
+    gapped = io.MarkerData(data.labels, data.time[keep], data.positions[keep], data.rate_hz)
+    back = io.read_c3d(io.write_c3d(tmp_path / "gap.c3d", gapped))
+    assert len(back.time) == len(data.time)
+    np.testing.assert_allclose(back.time[keep], data.time[keep], atol=1e-9)
+    assert np.isnan(back.positions[~keep]).all()
+    assert np.nanmax(np.abs(back.positions[keep] - data.positions[keep])) < 1e-7
+    # A row between two frames of the rate: refused, naming it, and nothing written.
+    time = data.time.copy()
+    time[10:] += 0.5 / data.rate_hz
+    with pytest.raises(ikid.InputError, match=r"row 10's time .* is not a frame of 1000 Hz"):
+        io.write_c3d(tmp_path / "off.c3d", io.MarkerData(data.labels, time, data.positions, data.rate_hz))
+    assert not (tmp_path / "off.c3d").exists()
+
+
 def test_mot_and_sto_round_trip(trial, tmp_path):
     t, q = io.read_mot(io.write_mot(tmp_path / "q.mot", trial.time, trial.q))
     np.testing.assert_allclose(q, trial.q, atol=1e-9)

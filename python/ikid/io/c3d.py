@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ikid._native import InputError
 from ikid.io._atomic import Incomplete, atomic_output
 from ikid.io._common import parse_up
 from ikid.io.markers import FileFormatError, MarkerData, check_readable, unit_scale
@@ -173,16 +174,40 @@ def write_c3d(path: str | os.PathLike[str], data: MarkerData, units: str = "mm")
     c["parameters"]["POINT"]["UNITS"]["value"] = [units]
     if data.metadata.get("up"):  # the lab's up axis, declared as Vicon and Qualisys declare it
         c.add_parameter("POINT", "Y_SCREEN", [str(data.metadata["up"]).upper()])
-    pts = np.ones((4, len(data.labels), len(data)))
-    pts[:3] = np.transpose(data.positions / scale, (2, 1, 0))
+    positions = _on_frame_grid(data, path)
+    pts = np.ones((4, len(data.labels), len(positions)))
+    pts[:3] = np.transpose(positions / scale, (2, 1, 0))
     c["data"]["points"] = pts
-    n_frames, n_points = len(data), len(data.labels)
+    n_frames, n_points = len(positions), len(data.labels)
     with atomic_output(path, suffix=".c3d", verify=lambda tmp: check_c3d(tmp, n_frames, n_points)) as tmp:
         try:
             c.write(str(tmp))
         except RuntimeError as e:  # ezc3d's own complaints (it raises few)
             raise Incomplete(f"ezc3d: {e}") from None
     return path
+
+
+def _on_frame_grid(data: MarkerData, path: Path) -> np.ndarray:
+    """``data``'s positions one row per frame of its rate from its first time: a C3D's frames
+    are evenly spaced, its times implied, so frames a gap in ``data.time`` left out are
+    written as frames without markers (NaN), never closed up (every later time would move).
+    Times off that grid are an :class:`ikid.InputError` naming ``path``."""
+    time = np.asarray(data.time, np.float64)
+    if len(time) == 0:
+        return np.asarray(data.positions, np.float64)
+    slots = (time - time[0]) * float(data.rate_hz)
+    index = np.rint(slots).astype(np.int64)
+    off = np.flatnonzero(np.abs(slots - index) > 0.25)
+    if len(off) or np.any(np.diff(index) <= 0):
+        at = int(off[0]) if len(off) else int(np.flatnonzero(np.diff(index) <= 0)[0]) + 1
+        raise InputError(
+            f"{path}: row {at}'s time {time[at]:g} s is not a frame of {float(data.rate_hz):g} Hz after the "
+            "previous rows (a C3D's frames are evenly spaced, their times implied): resample the "
+            "trajectories to the rate first (ikid.io.resample)"
+        )
+    positions = np.full((int(index[-1]) + 1, *np.shape(data.positions)[1:]), np.nan)
+    positions[index] = data.positions
+    return positions
 
 
 def check_c3d(path: Path, n_frames: int, n_points: int) -> None:
