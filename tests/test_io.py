@@ -345,6 +345,15 @@ def test_marker_map_selects_a_labs_labels_in_ikid_order(trial, tmp_path):
     assert np.array_equal(frames, trial.markers)
 
 
+def test_frames_take_a_marker_maps_path_and_refuse_anything_else(trial, tmp_path):
+    (tmp_path / "lab.toml").write_text(LAB_MAP)
+    by_path = lab_data(trial).frames(tmp_path / "lab.toml")
+    np.testing.assert_array_equal(by_path, lab_data(trial).frames(io.MarkerMap.load(tmp_path / "lab.toml")))
+    np.testing.assert_array_equal(by_path, lab_data(trial).frames(str(tmp_path / "lab.toml")))
+    with pytest.raises(ikid.ArgumentError, match="expected a MarkerMap or the path of a marker map, got dict"):
+        lab_data(trial).frames({"RSP": "R_RSTY"})
+
+
 def test_missing_label_lists_the_labels_the_file_has(trial, tmp_path):
     (tmp_path / "lab.toml").write_text(LAB_MAP.replace("R_MCP5", "R_MCP5_typo"))
     with pytest.raises(

@@ -144,6 +144,37 @@ def test_tracker_push_gives_the_status_with_the_estimate():
     assert "TrackerEstimate(" in repr(e) and f"status={e.status}" in repr(e)
 
 
+def test_arguments_of_the_wrong_kind_name_the_argument_and_names_and_paths_are_taken(tmp_path):
+    # As the CLI takes them: a refiner by its name, a calibration by its file; the oracle is the
+    # same run with the loaded objects. Anything else is an ArgumentError naming the argument
+    # and what it got (pyo3's TypeError named neither).
+    frames = marker_frames(300, seed=5).astype(np.float64)
+    calibration = ikid.Calibration.from_neutral(np.repeat(frames[:1], 50, axis=0))  # held still
+    path = tmp_path / "subject.json"
+    ikid.save_calibration(calibration, path)
+    by_name = ikid.Tracker(rate_hz=1000.0, refiner="wrist-track", calibration=path).run(frames)
+    loaded = ikid.Tracker(
+        rate_hz=1000.0, refiner=ikid.load("wrist-track"), calibration=ikid.load_calibration(path)
+    ).run(frames)
+    np.testing.assert_array_equal(by_name["tau"], loaded["tau"])
+    a = ikid.load("wrist-ik").stream(calibration=str(path))
+    b = ikid.load("wrist-ik").stream(calibration=calibration)
+    for f in frames[:80].astype(np.float32):
+        x, y = a.push(f), b.push(f)
+        assert (x is None and y is None) or np.array_equal(x, y)
+    model, time = "expected an ikid.Model or a model's name", "time: expected the frame's time"
+    for call, message in [
+        (lambda: ikid.Tracker(rate_hz="100"), "rate_hz: expected the frames' rate in Hz, got '100'"),
+        (lambda: ikid.Tracker(rate_hz=1000.0, refiner=3), f"refiner: {model}"),
+        (lambda: ikid.Tracker(rate_hz=1000.0, calibration=3.0), "calibration: expected an ikid.Calibration"),
+        (lambda: ikid.load("wrist-ik").stream(calibration=[1]), "calibration: expected an ikid.Calibration"),
+        (lambda: ikid.Tracker(rate_hz=1000.0).push(frames[0], time="a"), time),
+        (lambda: ikid.load("wrist-ik").stream().push(frames[0], time=b"0"), time),
+    ]:
+        with pytest.raises(ikid.ArgumentError, match=re.escape(message)):
+            call()
+
+
 def test_a_short_frame_names_a_marker_frame_for_a_model_that_reads_markers():
     """The error names what the caller must give (a marker frame of 18 values), not the
     model's internal feature set."""

@@ -199,7 +199,7 @@ class Model:
     def stream(
         self,
         missing_markers: str | None = None,
-        calibration: Calibration | None = None,
+        calibration: Calibration | str | os.PathLike[str] | None = None,
         early_outputs: bool = False,
         up: str | Sequence[float] | None = None,
     ) -> Stream: ...
@@ -254,8 +254,8 @@ class Tracker:
         jerk_noise: float = 3000.0,
         noise_memory_s: float = 10.0,
         initial_marker_noise: float = 1e-3,
-        refiner: Model | None = None,
-        calibration: Calibration | None = None,
+        refiner: Model | str | os.PathLike[str] | None = None,
+        calibration: Calibration | str | os.PathLike[str] | None = None,
         relative_hand: bool = False,
         up: str | Sequence[float] | None = None,
     ) -> Tracker: ...

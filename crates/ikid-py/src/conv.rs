@@ -143,3 +143,53 @@ pub fn with_f64_rows<R>(
     };
     f(&values, shape[0])
 }
+
+/// An argument that is not a number: an `ArgumentError` naming it and what was given (pyo3's
+/// own TypeError names neither what the number is nor the value).
+pub fn number_arg(value: &Bound<'_, PyAny>, what: &str, expected: &str) -> PyResult<f64> {
+    if value.is_instance_of::<pyo3::types::PyBool>() {
+        return Err(crate::errors::ArgumentError::new_err(format!("{what}: is a bool, expected {expected}")));
+    }
+    value.extract::<f64>().map_err(|_| {
+        let given = value.repr().map_or_else(|_| "?".into(), |r| r.to_string());
+        crate::errors::ArgumentError::new_err(format!("{what}: expected {expected}, got {given}"))
+    })
+}
+
+/// A model given as an `ikid.Model` or a name or path `ikid.load` takes (`what` names the
+/// argument in errors).
+pub fn model_arg<'py>(value: &Bound<'py, PyAny>, what: &str) -> PyResult<Bound<'py, crate::model::Model>> {
+    let value = if value.is_instance_of::<pyo3::types::PyString>() || is_path(value) {
+        value.py().import("ikid")?.call_method1("load", (value,))?
+    } else {
+        value.clone()
+    };
+    value.cast_into::<crate::model::Model>().map_err(|e| {
+        crate::errors::ArgumentError::new_err(format!(
+            "{what}: expected an ikid.Model or a model's name or file, got {}",
+            e.into_inner().get_type().name().map_or_else(|_| "?".into(), |n| n.to_string())
+        ))
+    })
+}
+
+/// A calibration given as an `ikid.Calibration` or the path of its file (`ikid.load_calibration`).
+pub fn calibration_arg<'py>(
+    value: &Bound<'py, PyAny>,
+    what: &str,
+) -> PyResult<Bound<'py, crate::calibration::Calibration>> {
+    let value = if value.is_instance_of::<pyo3::types::PyString>() || is_path(value) {
+        value.py().import("ikid")?.call_method1("load_calibration", (value,))?
+    } else {
+        value.clone()
+    };
+    value.cast_into::<crate::calibration::Calibration>().map_err(|e| {
+        crate::errors::ArgumentError::new_err(format!(
+            "{what}: expected an ikid.Calibration or the path of its file, got {}",
+            e.into_inner().get_type().name().map_or_else(|_| "?".into(), |n| n.to_string())
+        ))
+    })
+}
+
+fn is_path(value: &Bound<'_, PyAny>) -> bool {
+    value.hasattr("__fspath__").unwrap_or(false)
+}

@@ -1,7 +1,6 @@
 //! `Model` and `Stream`: thin wrappers over the core's, NumPy in and out.
 
-use crate::calibration::Calibration;
-use crate::conv::{with_floats, with_frame};
+use crate::conv::{calibration_arg, number_arg, with_floats, with_frame};
 use crate::errors::{IntoPy, input};
 use ikid::ModelCard;
 use ikid::net::{Affine, Dense, Mlp};
@@ -199,7 +198,7 @@ impl Model {
     }
 
     /// A new frame-by-frame stream over this model; `missing_markers` (`"refuse"` or
-    /// `"fill"`) overrides the card's policy; `calibration` (a `Calibration`) moves each
+    /// `"fill"`) overrides the card's policy; `calibration` (a `Calibration`, or the path of its file) moves each
     /// frame's markers to the body model's placement before the network sees them;
     /// `early_outputs` (correcting models only): the per-frame solution, flagged `per_frame`,
     /// for every frame while the window fills; `up`: the lab's up direction in the frames'
@@ -209,7 +208,7 @@ impl Model {
     fn stream(
         &self,
         missing_markers: Option<&str>,
-        calibration: Option<PyRef<'_, Calibration>>,
+        calibration: Option<&Bound<'_, PyAny>>,
         early_outputs: bool,
         up: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Stream> {
@@ -223,7 +222,7 @@ impl Model {
             inner.set_missing_markers(policy).py_err()?;
         }
         if let Some(c) = calibration {
-            inner.set_calibration(Some(c.inner)).py_err()?;
+            inner.set_calibration(Some(calibration_arg(c, "calibration")?.get().inner)).py_err()?;
         }
         Ok(Stream { inner })
     }
@@ -286,8 +285,9 @@ impl Stream {
         &mut self,
         py: Python<'py>,
         frame: &Bound<'py, PyAny>,
-        time: Option<f64>,
+        time: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Option<Bound<'py, PyArray1<f32>>>> {
+        let time = time.map(|t| number_arg(t, "time", "the frame's time in seconds")).transpose()?;
         let stream = &mut self.inner;
         with_frame(frame, |values| {
             // The GIL stays held: releasing and re-taking it costs more than the few

@@ -2,8 +2,7 @@
 //! torques per frame). Conversion only.
 
 use crate::body::subject;
-use crate::calibration::Calibration;
-use crate::conv::{with_f64_rows, with_frame_f64};
+use crate::conv::{calibration_arg, model_arg, number_arg, with_f64_rows, with_frame_f64};
 use crate::errors::{IntoPy, input};
 use crate::model::Model;
 use ikid::body::{MARKER_FRAME_LEN, N_COORDINATES};
@@ -14,7 +13,7 @@ use ikid::tracker::{
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use pyo3::types::{PyBool, PyString, PyTuple};
+use pyo3::types::{PyString, PyTuple};
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Tracker>()?;
@@ -51,10 +50,11 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 /// - ``noise_memory_s``: how far back the marker-noise estimate looks, seconds.
 /// - ``initial_marker_noise``: marker noise (standard deviation, m) assumed before any has
 ///   been measured.
-/// - ``refiner``: a ``refine`` model (e.g. ``ikid.load("wrist-track")``) whose network over
-///   the tracker's recent states corrects q and q̈; None for the filter alone.
+/// - ``refiner``: a ``refine`` model (``ikid.load("wrist-track")``, or its name or file) whose
+///   network over the tracker's recent states corrects q and q̈; None for the filter alone.
 /// - ``calibration``: an ``ikid.Calibration`` of the subject's marker placement (from
-///   ``ikid.calibrate`` or ``ikid.load_calibration``); turns ``relative_hand`` on.
+///   ``ikid.calibrate`` or ``ikid.load_calibration``), or the path of its file; turns
+///   ``relative_hand`` on.
 /// - ``relative_hand``: measure the hand by its orientation only (for real subjects, whose
 ///   wrist centre the body model does not know).
 /// - ``up``: the lab's up direction in the markers' coordinates: an axis (``"+y"``, the
@@ -98,22 +98,15 @@ impl Tracker {
         jerk_noise: f64,
         noise_memory_s: f64,
         initial_marker_noise: f64,
-        refiner: Option<&Bound<'_, Model>>,
-        calibration: Option<PyRef<'_, Calibration>>,
+        refiner: Option<&Bound<'_, PyAny>>,
+        calibration: Option<&Bound<'_, PyAny>>,
         relative_hand: bool,
         up: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         // No default: a 100 Hz recording tracked as 1 kHz gave velocities 9x and torques 5x too
         // large with every status 0 (a new-user review); the rate is an input, never a guess.
         // `True` is a number to Python: refused, not taken as 1 Hz.
-        if rate_hz.is_some_and(|r| r.is_instance_of::<PyBool>()) {
-            return Err(ikid::Error::BadArgument {
-                what: "rate_hz",
-                detail: "is a bool, expected the frames' rate in Hz".into(),
-            })
-            .py_err();
-        }
-        let rate_hz = rate_hz.map(|r| r.extract::<f64>()).transpose()?;
+        let rate_hz = rate_hz.map(|r| number_arg(r, "rate_hz", "the frames' rate in Hz")).transpose()?;
         let Some(rate_hz) = rate_hz else {
             return Err(ikid::Error::BadArgument {
                 what: "rate_hz",
@@ -131,7 +124,9 @@ impl Tracker {
         };
         let settings = TrackerSettings { rate_hz, jerk_noise, noise_memory_s, initial_marker_noise, relative_hand, up };
         let mut inner = CoreTracker::new(body, settings).py_err()?;
-        inner.set_calibration(calibration.map(|c| c.inner));
+        let calibration = calibration.map(|c| calibration_arg(c, "calibration")).transpose()?;
+        inner.set_calibration(calibration.map(|c| c.get().inner));
+        let refiner = refiner.map(|m| model_arg(m, "refiner")).transpose()?;
         inner.set_refiner(refiner.map(|m| m.get().inner.clone())).py_err()?;
         Ok(Tracker { inner })
     }
@@ -154,7 +149,12 @@ impl Tracker {
     /// filter (keeping what it learned of the subject; ``gap_restarts`` counts it) instead of
     /// bridging the gap as one step; one less than half a period after it is refused.
     #[pyo3(signature = (frame, time=None))]
-    fn push<'py>(&mut self, frame: &Bound<'py, PyAny>, time: Option<f64>) -> PyResult<Option<TrackerEstimate>> {
+    fn push<'py>(
+        &mut self,
+        frame: &Bound<'py, PyAny>,
+        time: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Option<TrackerEstimate>> {
+        let time = time.map(|t| number_arg(t, "time", "the frame's time in seconds")).transpose()?;
         let tracker = &mut self.inner;
         with_frame_f64(frame, |values| {
             let out = match time {

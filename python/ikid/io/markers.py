@@ -107,12 +107,21 @@ class MarkerData:
             return declared, self.metadata.get("up_from", "the file")
         return "+y", "assumed: neither the file nor the map says; set up in the map"
 
-    def frames(self, mapping: MarkerMap | None = None, *, whole: bool = True) -> np.ndarray:
+    def frames(
+        self, mapping: MarkerMap | str | os.PathLike[str] | None = None, *, whole: bool = True
+    ) -> np.ndarray:
         """ikid's ``(n, 18)`` frames (metres, float64, NaN = missing). ``mapping`` says which
-        label is which ikid marker (default: the labels are ikid's own names). ``whole=False``
+        label is which ikid marker (a :class:`MarkerMap` or the path of its TOML file; default:
+        the labels are ikid's own names). ``whole=False``
         for one block of a file read in blocks: a marker missing throughout the block is not an
         error there (:func:`check_markers_seen` checks the file once every block is read), and
         the units are checked only if the block has a complete frame."""
+        if isinstance(mapping, str | os.PathLike):
+            mapping = MarkerMap.load(mapping)
+        elif mapping is not None and not isinstance(mapping, MarkerMap):
+            raise _native.ArgumentError(
+                f"mapping: expected a MarkerMap or the path of a marker map, got {type(mapping).__name__}"
+            )
         mapping = mapping or MarkerMap.identity()
         columns = np.concatenate(
             [self.marker(label, mapping.up) for label in mapping.labels_in_ikid_order(self)], axis=1
