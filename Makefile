@@ -34,12 +34,22 @@ venv: $(VENV)/.created
 # run against the same wheel a user would pip install. Rebuilt only when a tracked source
 # of it changed (the stamp is newer than every one of them); training/ is not one.
 WHEEL_STAMP := $(VENV)/.wheel-installed
+WHEEL_BUILT := $(VENV)/.wheel-built
 WHEEL_SOURCES := $(shell git ls-files crates python Cargo.toml Cargo.lock pyproject.toml README.md 2>/dev/null)
-$(WHEEL_STAMP): $(VENV)/.created $(WHEEL_SOURCES)
+$(WHEEL_BUILT): $(VENV)/.created $(WHEEL_SOURCES)
 	rm -f $(WHEELS)/ikid-*.whl
 	$(VENV)/bin/maturin build --release --quiet -o $(WHEELS)
 	$(PIP) install --quiet --force-reinstall --no-deps $(WHEELS)/ikid-*.whl
+	touch $@
+$(WHEEL_STAMP): $(WHEEL_BUILT)
 	$(PIP) install --quiet "$$(ls $(WHEELS)/ikid-*.whl)[test,eval]"
+	touch $@
+
+# What `make demo` needs and no more: the wheel with its runtime dependencies, and matplotlib
+# for the demo's plot (not torch, not the peers: a first run stays light).
+DEMO_STAMP := $(VENV)/.demo-installed
+$(DEMO_STAMP): $(WHEEL_BUILT)
+	$(PIP) install --quiet "$$(ls $(WHEELS)/ikid-*.whl)" matplotlib
 	touch $@
 
 # The training pipeline (training/, its own distribution ikid-training: torch, ONNX, matplotlib)
@@ -83,7 +93,7 @@ sdist: $(VENV)/.created
 	rm -rf target/sdist
 	$(VENV)/bin/maturin sdist --out target/sdist
 
-demo: wheel
+demo: $(DEMO_STAMP)
 	$(PY) -m ikid demo
 
 # Simulated datasets (gitignored): the thesis-sized set (3 shoulder poses x 42 movements)
