@@ -226,6 +226,19 @@ def test_bad_csv_files_say_what_is_wrong(tmp_path, text, message):
         io.read_markers(tmp_path / "bad.csv")
 
 
+def test_a_csv_in_mm_says_whether_its_unit_was_declared_or_assumed(trial, tmp_path):
+    # The same millimetres, with its '# units=m' line (a wrong declaration) and without one (the
+    # default assumed): each error says which, and the second how to declare the unit.
+    io.write_csv_markers(tmp_path / "said.csv", trial.time, np.asarray(trial.markers) * 1000)
+    text = (tmp_path / "said.csv").read_text()
+    bare = "".join(line for line in text.splitlines(True) if not line.startswith("#"))
+    (tmp_path / "bare.csv").write_text(bare)
+    with pytest.raises(ikid.InputError, match=r"are the units mm.*\(the file says its units are 'm'\)"):
+        io.read_markers(tmp_path / "said.csv").frames()
+    with pytest.raises(ikid.InputError, match=r"no '# units=' line: metres assumed; declare .* '# units=mm'"):
+        io.read_markers(tmp_path / "bare.csv").frames()
+
+
 def test_csv_writer_refuses_non_finite_values_and_writes_nothing(tmp_path):
     with pytest.raises(io.FileFormatError, match="not written"):
         io.write_csv(
@@ -350,7 +363,7 @@ def test_frames_take_a_marker_maps_path_and_refuse_anything_else(trial, tmp_path
     by_path = lab_data(trial).frames(tmp_path / "lab.toml")
     np.testing.assert_array_equal(by_path, lab_data(trial).frames(io.MarkerMap.load(tmp_path / "lab.toml")))
     np.testing.assert_array_equal(by_path, lab_data(trial).frames(str(tmp_path / "lab.toml")))
-    with pytest.raises(ikid.ArgumentError, match="expected a MarkerMap or the path of a marker map, got dict"):
+    with pytest.raises(ikid.ArgumentError, match="expected a MarkerMap or the path of a marker map, got"):
         lab_data(trial).frames({"RSP": "R_RSTY"})
 
 

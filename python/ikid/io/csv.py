@@ -68,11 +68,11 @@ def open_csv_markers(
     lines = numbered_lines(path, _WHAT)
     try:
         first = next(lines, None)
-        units, header_at = "m", first
+        units, header_at, declared = "m", first, False
         if first is not None and first[1].startswith("#"):
             m = re.search(r"units\s*=\s*(\S+)", first[1])
             if m:
-                units = m.group(1)
+                units, declared = m.group(1), True
             header_at = next(lines, None)
     finally:
         lines.close()
@@ -121,6 +121,9 @@ def open_csv_markers(
     _check_time(head_time, head_lines, -np.inf, src)
     step = float(np.median(np.diff(head_time)))
 
+    # Undeclared units are metres by default: a units error says so, and how to declare them.
+    metadata = {} if declared else {"units_assumed": "no '# units=' line: metres assumed"}
+
     def blocks() -> Iterator[MarkerData]:
         last = -np.inf
         for table, linenos in tables():
@@ -134,9 +137,11 @@ def open_csv_markers(
                 )
             last = float(time[-1])
             positions = (table[:, order] * scale).reshape(len(time), len(labels), 3)
-            yield MarkerData(tuple(labels), time, positions, 1.0 / step, src, file_units=units)
+            yield MarkerData(
+                tuple(labels), time, positions, 1.0 / step, src, file_units=units, metadata=metadata
+            )
 
-    return MarkerFile(tuple(labels), 1.0 / step, src, units, {}, n_frames, blocks)
+    return MarkerFile(tuple(labels), 1.0 / step, src, units, metadata, n_frames, blocks)
 
 
 def _csv_rows(block: list[tuple[int, str]], width: int, src: str) -> np.ndarray:

@@ -144,9 +144,13 @@ class MarkerData:
         try:
             _native.check_marker_units(frames)
         except _native.InputError as e:
-            raise _native.InputError(
-                f"{source}: {e.reason or e} (the file says its units are {self.file_units!r})"
-            ) from None
+            said = (
+                f"{self.metadata['units_assumed']}; declare the file's unit with a first line '# units=mm' "
+                "(or cm, m)"
+                if "units_assumed" in self.metadata
+                else f"the file says its units are {self.file_units!r}"
+            )
+            raise _native.InputError(f"{source}: {e.reason or e} ({said})") from None
         return frames
 
 
