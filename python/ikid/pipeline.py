@@ -189,7 +189,14 @@ class Run:
             n = self.grid_refused.total()
             parts.append(f"{n} points of the model's grid refused ({reasons})")
         if self.gap_restarts:
-            after = "time gaps or refused grid points" if self.grid_refused else "time gaps"
+            # A refused frame is never pushed: the next one comes after a gap in time.
+            after = (
+                "time gaps or refused grid points"
+                if self.grid_refused
+                else "time gaps or the frames refused above"
+                if any(reason != "window filling" for reason in self.refused)
+                else "time gaps"
+            )
             parts.append(f"{self.gap_restarts} window restarts after {after}")
         if self.resampled_from_hz:
             parts.append(f"resampled {self.resampled_from_hz:g} -> {self.rate_hz:g} Hz")

@@ -490,6 +490,12 @@ class MarkerMap:
             "TRC, CSV or live source that does not, +y (OpenSim's) is assumed",
             "[markers]",
         ]
+        if not self.one_hand_marker:
+            lines.append(
+                "# the forearm's three turn with the radius: on the distal radius, or a cluster strapped "
+                "to it (a marker on the ulnar styloid stays while the radius turns: name it in "
+                "[landmarks], not as USP)"
+            )
         lines += [f'{m} = "{lab}"  # {descr[m]}' for m, lab in self.labels.items()]
         if self.one_hand_marker:
             lines.append(

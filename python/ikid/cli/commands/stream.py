@@ -21,7 +21,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "stream",
         help="live frames (stdin, UDP on 127.0.0.1, LSL, QTM) -> one CSV line per frame",
-        description="Frames in, one result line out per frame (CSV: frame,status,outputs).\n\n"
+        description="Frames in, one result line out per frame (CSV: frame,status,outputs; angles in rad,\n"
+        "torques in N·m, unlike ik's .mot in degrees).\n\n"
         "  ikid stream --rate 1000 < frames.csv              # 18 numbers per line (m), 1 kHz\n"
         "  ikid stream --time --torque-model wrist-chain < frames.csv   # time first\n"
         "  ikid stream --rate 100 --udp 9870 --idle 5        # datagrams at 100 Hz, 'END' stops\n"
