@@ -164,6 +164,11 @@ impl Model {
     /// Predictions for a whole recording `(n, frame_len)`: `(n - window + 1, n_outputs)`,
     /// row `i` for frame `i + window - 1`. Runs on `threads` threads (default: all cores;
     /// every count gives bit-identical results). Releases the GIL.
+    ///
+    /// The network's raw outputs: no check that the markers sit where the model reads them
+    /// (uncalibrated real markers read 50-170° off) and no status per row. For a recording as
+    /// `ikid ik` runs it — checked, each row flagged, an implausible one not given — use
+    /// `ikid.pipeline.run_model`; `frame_status` gives the envelope bits of these rows.
     #[pyo3(signature = (frames, threads = None))]
     fn predict<'py>(
         &self,
