@@ -5,6 +5,7 @@ a static trial and two single-coordinate movements."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -278,6 +279,26 @@ def test_a_static_trial_short_of_neutral_frames_is_named_with_its_markers_labels
     assert err.startswith(f"ikid: error: {path}: calibration: 2 of the 20 neutral frames"), err
     assert "missing: RSP ('Fa1') in 1, MC5 ('Gl2') in 17)" in err, err
     assert not (tmp_path / "c.json").exists()
+
+
+def test_neutral_frames_that_move_are_refused_with_the_stillest_frames_of_the_trial(tmp_path, capsys):
+    # The wrist moves throughout, except frames 400-519 where it is held (the oracle: where the
+    # trial was made still). Frames 0-99 given as the neutral posture are refused, and the error
+    # names a stretch within the held one to give instead.
+    t = np.arange(1000) / 1000.0
+    q = np.column_stack([0.4 * np.sin(2 * np.pi * 1.3 * t), 0.5 * np.sin(2 * np.pi * t), 0.2 * np.cos(3 * t)])
+    q[400:520] = q[400]
+    path = io.write_trc(tmp_path / "s.trc", np.arange(len(q)) / 1000.0, ikid.forward_markers(q), 1000.0)
+    args = ["calibrate", "--static", str(path), "--method", "neutral", "-o", str(tmp_path / "c.json")]
+    assert cli([*args, "--frames", "0-99"]) == 2
+    err = capsys.readouterr().err
+    found = re.search(
+        r"the stillest 100 frames of this trial: --frames (\d+)-(\d+), the wrist within ([\d.]+)°", err
+    )
+    assert found, err
+    first, last, spread = int(found[1]), int(found[2]), float(found[3])
+    assert 400 <= first and last <= 519 and spread < 0.05, err
+    assert cli([*args, "--frames", f"{first}-{last}"]) == 0
 
 
 def test_a_calibration_is_refused_for_markers_laid_out_otherwise_than_it_was_measured_on(tmp_path, capsys):

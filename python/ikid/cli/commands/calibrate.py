@@ -240,7 +240,7 @@ def run(args: argparse.Namespace) -> int:
             )
             columns = mapping.anatomical_forearm(mapping.fit_clusters(source, columns))
             hand_points = ikid._native.one_marker_hand_landmarks(columns)[where]
-        with _about_the_static_trial(args.static, mapping):
+        with _about_the_static_trial(args.static, mapping, static.frames(mapping), static.rate_hz):
             cal = calibrate_neutral(
                 neutral, points, landmark_frames=beside, side=side, hand_landmarks=hand_points
             )
@@ -281,7 +281,7 @@ def run(args: argparse.Namespace) -> int:
         provenance["motion"] = args.motion
         provenance["motion_frames"] = args.motion_frames
     else:
-        with _about_the_static_trial(args.static, mapping):
+        with _about_the_static_trial(args.static, mapping, static.frames(mapping), static.rate_hz):
             cal = calibrate_neutral(neutral, side=side)
     from ikid.calibration import marker_distances
 
@@ -358,9 +358,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 @contextlib.contextmanager
-def _about_the_static_trial(static: str, mapping) -> Iterator[None]:
+def _about_the_static_trial(static: str, mapping, frames: np.ndarray, rate_hz: float) -> Iterator[None]:
     """A calibration's error from the static trial's frames, in the lab's terms: named after
-    that file, each marker it counts ("missing: MC2 in 697") with the label the map gives it."""
+    that file, each marker it counts ("missing: MC2 in 697") with the label the map gives it;
+    frames that are not held still are answered with the stillest ones the file has."""
     try:
         yield
     except ikid.IkidError as e:
@@ -369,7 +370,35 @@ def _about_the_static_trial(static: str, mapping) -> Iterator[None]:
             lambda m: f"{m[1]} ({mapping.labels.get(m[1], m[1])!r}) in {m[2]}",
             _message(e),
         )
+        if "holds one posture" in labelled and (still := _stillest_frames(frames, rate_hz)) is not None:
+            first, last, spread = still
+            labelled += (
+                f" (the stillest {last - first + 1} frames of this trial: --frames {first}-{last}, the wrist "
+                f"within {spread:.1f}° there; use them if the wrist is in its neutral posture)"
+            )
         raise type(e)(_naming(static, type(e)(labelled))) from None
+
+
+def _stillest_frames(frames: np.ndarray, rate_hz: float) -> tuple[int, int, float] | None:
+    """The 0.1 s (at least 5 frames) of complete ``frames`` over which the wrist's angles (the
+    body model's reading: offsets from another placement are constant, so stillness reads
+    true) move least: ``(first, last, largest distance from their mean, degrees)``; None if the
+    file has no such run."""
+    width = max(5, round(0.1 * rate_hz))
+    whole = np.isfinite(frames).all(axis=1)
+    if whole.sum() < width:
+        return None
+    q = np.full((len(frames), 3), np.nan)
+    try:
+        q[whole] = ikid.reference_ik(frames[whole])
+    except ikid.IkidError:
+        return None
+    windows = np.lib.stride_tricks.sliding_window_view(q, width, axis=0)  # (n - width + 1, 3, width)
+    spread = np.abs(windows - windows.mean(axis=2, keepdims=True)).max(axis=(1, 2))  # NaN: incomplete
+    if not np.isfinite(spread).any():
+        return None
+    first = int(np.nanargmin(spread))
+    return first, first + width - 1, float(np.degrees(spread[first]))
 
 
 def _forearm_landmarks(mapping, source, where) -> dict:
