@@ -647,6 +647,9 @@ def test_mirror_calibration_reads_a_hand_built_left_arms_angles_and_refuses_what
     assert "Calibration(mirror, left arm" in out and "lateral_epicondyle 0 mm (0.0°)" in out, out
     info = ikid.calibration.calibration_info(left)
     assert info["method"] == "mirror" and info["provenance"]["mirror_from"] == str(right)
+    # The other arm's size goes with it (the tracker scales the subject by it, as from landmarks).
+    other_size = ikid.calibration.calibration_info(right)["report"]["landmarks"]["length_scale"]
+    assert info["provenance"]["mirror_length_scale"] == other_size
     # The oracle: the left arm's hand was turned by q.
     frames = io.read_markers(trial).frames(MarkerMap.load(tmp_path / "left.toml"))
     got = _native.compute_features(ikid.load_calibration(left).apply(frames), "angles")

@@ -1235,6 +1235,31 @@ def test_stream_writes_no_value_for_a_hand_read_turned_over_and_flags_the_rest(t
     assert "hand turned over on the forearm (not written)" in captured.err, captured.err
 
 
+def test_stream_tracker_takes_the_subjects_size_from_the_calibration_as_track_does(
+    trial, tmp_path, monkeypatch, capsys
+):
+    # A mirror calibration carrying the other arm's size (0.9 of the default subject's, from its
+    # landmarks): `ikid stream --tracker` scales the subject as `ikid track` does (the torques
+    # of a 0.9 subject are not the default's), the summary saying from where. The oracle: the
+    # Python API's tracker given those scales explicitly.
+    frames = np.asarray(trial.markers[:300], np.float64)
+    calibration = ikid.Calibration.from_neutral(np.repeat(frames[:1], 50, axis=0))
+    path = tmp_path / "left.json"
+    ikid.save_calibration(calibration, path, mirror_from="right.json", mirror_length_scale=0.9)
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames)))
+    assert cli(["stream", "--tracker", "--rate", "1000", "--calibration", str(path)]) == 0
+    captured = capsys.readouterr()
+    assert "subject ×0.9 length, ×0.729 mass (estimated from the other arm's landmarks" in captured.err
+    _, status, values = parse_output(captured.out, 12)
+    api = ikid.Tracker(rate_hz=1000.0, calibration=calibration, length_scale=0.9, mass_scale=0.729).run(
+        frames
+    )
+    ok = np.array([s == "ok" for s in status])
+    np.testing.assert_allclose(values[ok][:, 0::2][:, 3:], api["tau"][ok], rtol=1e-5, atol=1e-6)
+    default = ikid.Tracker(rate_hz=1000.0, calibration=calibration).run(frames)["tau"][ok]
+    assert np.abs(default - api["tau"][ok]).max() > 1e-3
+
+
 def test_stream_counts_frames_lost_from_their_times(trial, monkeypatch, capsys):
     """Time stamps 1 ms apart with 7 and 3 frames missing: 10 lost, exit 3; the same frames
     without a gap: 0 lost, exit 0."""

@@ -283,3 +283,32 @@ def _training_package(what: str):
             f"ikid (not installed: {e}); install it with {TRAINING_HINT}"
         ) from None
     return ikid_training
+
+
+def subject_size(
+    calibration: str | None, length_scale: float | None = None, mass_scale: float | None = None
+) -> tuple[float, float, str]:
+    """The subject's (length, mass) scales for a tracker, and where they came from: those given;
+    else the calibration's size estimate (its landmarks: the forearm's length over the default
+    subject's; a mirror calibration carries the other arm's), mass its cube; else the default
+    subject. One rule for ``ikid track`` and ``ikid stream --tracker``: the same calibration
+    gives the same torques."""
+    from ikid.calibration import calibration_info
+
+    estimate, estimated_from = None, "the calibration's landmarks"
+    if calibration:
+        info = calibration_info(calibration)
+        landmarks = (info.get("report") or {}).get("landmarks") or {}
+        estimate = landmarks.get("length_scale")
+        if estimate is None and (mirrored := (info.get("provenance") or {}).get("mirror_length_scale")):
+            estimate, estimated_from = mirrored, "the other arm's landmarks (mirror calibration)"
+    if length_scale is not None:
+        length, source = length_scale, "given"
+    elif estimate is not None:
+        lo, hi = ikid._native.LENGTH_SCALE_RANGE
+        length = min(max(float(estimate), lo), hi)
+        source = f"estimated from {estimated_from}"
+    else:
+        length, source = 1.0, "the default subject"
+    mass = mass_scale if mass_scale is not None else length**3
+    return length, mass, source

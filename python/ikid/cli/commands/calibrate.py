@@ -108,7 +108,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Landmarks and/or neutral frames, or static + single-coordinate movement files -> a
     calibration JSON recording the method, the side and the marker map."""
-    from ikid.calibration import calibrate_functional, calibrate_mirror, calibrate_neutral
+    from ikid.calibration import calibrate_functional, calibrate_mirror, calibrate_neutral, calibration_info
     from ikid.io import MarkerMap, read_markers
     from ikid.io.mapping import MarkerMapWarning, landmark_names
 
@@ -271,6 +271,10 @@ def run(args: argparse.Namespace) -> int:
             side=side,
         )
         provenance["mirror_from"] = args.mirror_from
+        # The other arm's size (from its landmarks): this arm's torques scale with it.
+        other = (calibration_info(args.mirror_from).get("report") or {}).get("landmarks") or {}
+        if other.get("length_scale") is not None:
+            provenance["mirror_length_scale"] = float(other["length_scale"])
         provenance["landmarks"] = args.landmarks or args.static
     elif method == "functional":
         motion = read_markers(args.motion)

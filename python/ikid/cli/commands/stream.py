@@ -12,7 +12,7 @@ from collections import Counter
 import numpy as np
 
 import ikid
-from ikid.cli.common import _model_file, _model_for, _refuse_over_inputs, _stdout_fd
+from ikid.cli.common import _model_file, _model_for, _refuse_over_inputs, _stdout_fd, subject_size
 from ikid.cli.options import PORT, POSITIVE, POSITIVE_INT, unchecked_option
 from ikid.io._common import to_ikid_lab
 
@@ -455,12 +455,14 @@ class _TrackerStream:
     tracker runs at its rate: a time stamp more than 1.5 periods after the last restarts it
     (the core's ``Tracker.push(frame, time=)``)."""
 
-    def __init__(self, rate_hz: float, calibration) -> None:
+    def __init__(self, rate_hz: float, calibration, calibration_path: str | None) -> None:
         from ikid.io.storage import coordinate_names, moment_names
 
         self.rate_hz = rate_hz
         self.calibration = calibration
-        self.tracker = ikid.Tracker(rate_hz=rate_hz, calibration=calibration)
+        # The subject's size as `ikid track` takes it from the same calibration.
+        self.length_scale, self.mass_scale, self.size_from = subject_size(calibration_path)
+        self.tracker = self._new_tracker()
         values = coordinate_names() + moment_names()
         self.output_names = [n for v in values for n in (v, f"{v}_sd")]
         self.output_units = [u for k in range(len(values)) for u in 2 * ["rad" if k < 3 else "N*m"]]
@@ -484,9 +486,17 @@ class _TrackerStream:
         values = np.concatenate([out.q, out.tau])
         return np.column_stack([values, np.concatenate([sd[0], sd[1]])]).ravel()
 
+    def _new_tracker(self) -> ikid.Tracker:
+        return ikid.Tracker(
+            rate_hz=self.rate_hz,
+            calibration=self.calibration,
+            length_scale=self.length_scale,
+            mass_scale=self.mass_scale,
+        )
+
     def reset(self) -> None:
         self.restarts_before = self.gap_restarts
-        self.tracker = ikid.Tracker(rate_hz=self.rate_hz, calibration=self.calibration)
+        self.tracker = self._new_tracker()
 
 
 def _run(args: argparse.Namespace, source, rate_hz: float | None, refusal_reason) -> int:
@@ -520,7 +530,7 @@ def _tracker_streams(args: argparse.Namespace, rate_hz: float | None):
             "--tracker needs the frames' rate: give --rate HZ (or a live source that declares it)"
         )
     calibration = _stream_calibration(args)
-    stream = _TrackerStream(rate_hz, calibration)
+    stream = _TrackerStream(rate_hz, calibration, args.calibration)
     # The tracker reads marker frames: the 18 values every source gives.
     return [stream], stream.output_names, stream.output_units, stream.rate_hz, len(ikid.marker_names()) * 3
 
@@ -790,6 +800,9 @@ def _run_with(
             f"lab up {up}"
             + ("" if args.up else " (assumed: give --up, or up in the --map, if yours is another)")
         )
+    if args.tracker:
+        s = streams[0]
+        parts.append(f"subject ×{s.length_scale:.3g} length, ×{s.mass_scale:.3g} mass ({s.size_from})")
     print(f"ikid stream: {frame} frames received at {rate:g} Hz: " + ", ".join(parts), file=sys.stderr)
     if refused:
         print(

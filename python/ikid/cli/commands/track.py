@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 
 import ikid
-from ikid import _native
 from ikid.cli.common import (
     _model_file,
     _model_for,
@@ -18,6 +17,7 @@ from ikid.cli.common import (
     _refuse_over_inputs,
     _stem,
     _subject_calibration,
+    subject_size,
 )
 from ikid.cli.options import SUBJECT_LENGTH, SUBJECT_MASS, _number, unchecked_option
 from ikid.io._atomic import atomic_outputs
@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
     )
     # Gravity's direction: the torques depend on it (the frames come turned into ikid's +Y up).
     up, up_from = first.lab_up(mapping.up if mapping else None)
-    length_scale, mass_scale, size_from = _subject_size(args)
+    length_scale, mass_scale, size_from = subject_size(args.calibration, args.length_scale, args.mass_scale)
     try:
         tracker = ikid.Tracker(
             length_scale=length_scale,
@@ -269,24 +269,3 @@ def run(args: argparse.Namespace) -> int:
         print(f"ikid: --strict: {args.input} has frames without an estimate or flagged", file=sys.stderr)
         return 3
     return 0
-
-
-def _subject_size(args: argparse.Namespace) -> tuple[float, float, str]:
-    """The subject's (length, mass) scales for the tracker, and where they came from: the
-    options; else the calibration's size estimate (its landmarks: the forearm's length over
-    the default subject's), mass its cube; else the default subject."""
-    from ikid.calibration import calibration_info
-
-    estimate = None
-    if args.calibration:
-        landmarks = (calibration_info(args.calibration).get("report") or {}).get("landmarks") or {}
-        estimate = landmarks.get("length_scale")
-    if args.length_scale is not None:
-        length, source = args.length_scale, "given"
-    elif estimate is not None:
-        length = min(max(float(estimate), _native.LENGTH_SCALE_RANGE[0]), _native.LENGTH_SCALE_RANGE[1])
-        source = "estimated from the calibration's landmarks"
-    else:
-        length, source = 1.0, "the default subject"
-    mass = args.mass_scale if args.mass_scale is not None else length**3
-    return length, mass, source
