@@ -257,6 +257,24 @@ def test_bad_landmarks_and_neutral_frames_say_what_to_record():
         calibrate_neutral(no_hand)
     with pytest.raises(ikid.InputError, match='side: is "up", expected "right" or "left"'):
         calibrate_neutral(neutral, side="up")
+    # The styloids 60° into pronation about the forearm's long axis (mid-styloids to
+    # mid-epicondyles), as a forearm turns them from the epicondyle line: accepted. Under each
+    # other's labels (turned -120°), or a right arm's landmarks read as a left arm's (mirrored:
+    # -60°): refused, saying which labels.
+    centre = 0.5 * (landmarks[:, 6:9] + landmarks[:, 9:12])
+    axis = 0.5 * (landmarks[0, 0:3] + landmarks[0, 3:6]) - centre[0]
+    k = np.cross(np.eye(3), axis / np.linalg.norm(axis))  # rows: e_i x axis, i.e. -[axis]x
+    pronate = np.eye(3) - np.sin(np.radians(60.0)) * k.T + (1 - np.cos(np.radians(60.0))) * k.T @ k.T
+    turned = landmarks.copy()
+    for j in (6, 9):
+        turned[:, j : j + 3] = centre + (landmarks[:, j : j + 3] - centre) @ pronate.T
+    assert calibrate_neutral(neutral, turned).method == "landmarks"
+    swapped = turned.copy()
+    swapped[:, 6:9], swapped[:, 9:12] = turned[:, 9:12], turned[:, 6:9]
+    with pytest.raises(ikid.InputError, match=r"turned -120° .* the other way than a right forearm turns it"):
+        calibrate_neutral(neutral, swapped)
+    with pytest.raises(ikid.InputError, match=r"turned -60° .* the other way than a left forearm"):
+        calibrate_neutral(neutral, turned, side="left")
     with pytest.raises(ikid.InputError, match="landmarks: 9 columns, a landmark frame has 12"):
         calibrate_neutral(neutral, landmarks[:, :9])
 

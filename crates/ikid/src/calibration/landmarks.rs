@@ -102,6 +102,18 @@ pub(super) fn forearm_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Re
         )));
     }
     let y = long.normalize();
+    if let Some(turn) = forearm_turn_deg(&y, &(le - me), &across)
+        && (MIRRORED_TURN_DEG.0..MIRRORED_TURN_DEG.1).contains(&turn)
+    {
+        return Err(bad(format!(
+            "the styloid line (ulnar to radial) is turned {turn:.0}° from the epicondyle line (medial to \
+             lateral) about the forearm's long axis, the other way than a {side} forearm turns it (0° supinated \
+             to 180° pronated): the radial and ulnar styloids, or the lateral and medial epicondyles, are \
+             under each other's labels, or the arm is not a {side} one; every flexion and deviation would \
+             read mirrored. Check the [landmarks] labels and the map's side",
+            side = side.name()
+        )));
+    }
     let x = y.cross(&across).normalize();
     let z = x.cross(&y);
     // Columns: the anatomical axes in technical coordinates, A; T_f = Aᵀ.
@@ -120,6 +132,16 @@ pub(super) fn forearm_from_landmarks(trial: LandmarkTrial<'_>, side: Side) -> Re
         },
     };
     Ok((Rotation3::from_matrix_unchecked(axes.transpose()), report))
+}
+
+/// The turn of the styloid line `across` (ulnar to radial) from the epicondyle line
+/// `epicondyles` (medial to lateral) about the forearm's long axis `y` (unit, proximal),
+/// degrees in (-180, 180], positive the way a right forearm pronates; `None` when the
+/// epicondyles do not span [`MIN_EPICONDYLE_SPAN_M`] across the axis.
+fn forearm_turn_deg(y: &Vector3<f64>, epicondyles: &Vector3<f64>, across: &Vector3<f64>) -> Option<f64> {
+    let e = epicondyles - y * y.dot(epicondyles);
+    let s = across - y * y.dot(across);
+    (e.norm() >= MIN_EPICONDYLE_SPAN_M).then(|| y.dot(&e.cross(&s)).atan2(e.dot(&s)).to_degrees())
 }
 
 /// The hand's anatomical frame from its landmarks and the styloids (mirrored into a right

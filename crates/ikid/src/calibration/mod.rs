@@ -122,6 +122,20 @@ const MIN_SIGN_SHARE: f64 = 0.5;
 /// four landmarks are too close to one line to say which way is volar.
 pub const MIN_LANDMARK_ANGLE_DEG: f64 = 30.0;
 
+/// Turns of the styloid line from the epicondyle line about the forearm's long axis (degrees,
+/// positive the way a right forearm pronates) that no forearm
+/// makes: a forearm turns it from about 0° (supinated) to about 180° (pronated), and the other
+/// way is two landmarks under each other's labels (the styloids, or the epicondyles) or the
+/// other arm's `side`, which read every flexion and deviation mirrored (measured: a real
+/// recording's styloids swapped, 46° and 57° RMS with every status 0). Read in the landmark
+/// frames: 52° and 137° on the two real recordings, 1° and 54° on the two OpenSim models of the
+/// exam; a swap there reads -128°, -43°, -179° and -126°. Within 25° of either end a swap
+/// cannot be told from a forearm near full supination or pronation: not refused.
+pub const MIRRORED_TURN_DEG: (f64, f64) = (-155.0, -25.0);
+/// Shortest span of the epicondyles across the long axis for [`MIRRORED_TURN_DEG`] to be read,
+/// metres (one label for both when a lab has no medial one: nothing to read).
+pub const MIN_EPICONDYLE_SPAN_M: f64 = 0.02;
+
 /// Which arm. A left arm is mirrored into a right arm (see the module documentation).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Side {
