@@ -162,6 +162,19 @@ def test_stream_of_unknown_rate_is_refused_and_stamps_at_another_rate_say_which(
         "family's member at that rate) (without --rate the stream runs at the model's rate)" in captured.err
     ), captured.err
     assert captured.out.strip().count("\n") == 0, captured.out
+    # The same stamps jittering by ±2 ms (a 110 Hz step among the first): the family's member
+    # nearest is named; and with --rate 1000 given, the stamps stop it just the same.
+    jitter = np.random.default_rng(4).uniform(-0.002, 0.002, 100)
+    monkeypatch.setattr(
+        sys, "stdin", io.StringIO(csv_lines(frames, with_time=np.arange(100) * 0.01 + jitter))
+    )
+    assert cli(["stream", "--time"]) == 2
+    assert "give --rate 100 (the family's member at that rate)" in capsys.readouterr().err
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames, with_time=np.arange(100) * 0.01)))
+    assert cli(["stream", "--time", "--rate", "1000"]) == 2
+    assert "give --rate 100 (the family's member at that rate) (--rate 1000 says otherwise)" in (
+        capsys.readouterr().err
+    )
     # Stamped in milliseconds: said so.
     monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(trial.markers[:100], with_time=np.arange(100.0))))
     assert cli(["stream", "--time"]) == 2
@@ -1109,6 +1122,22 @@ def test_stream_numbers_no_unreadable_line_and_does_not_count_it_lost(trial, mon
     assert rows[50][0] == "" and rows[50][1].startswith("refused:")
     assert [r[0] for r in rows].count("50") == 0 and len(rows) == 117
     assert "3 lost (by frame number)" in captured.err, captured.err
+
+
+def test_stream_frame_numbers_written_as_whole_floats_are_frame_numbers(trial, monkeypatch, capsys):
+    # np.savetxt with one format writes frame 97 as "97.000000": the same frames as "97" (the
+    # oracle: the run with integer numbers), and "3.5" is no frame number.
+    lines = [csv_lines(trial.markers[n : n + 1]).strip() for n in range(80)]
+    outs = []
+    for number in ("{}", "{}.000000"):
+        text = "\n".join(f"{number.format(n)},{line}" for n, line in enumerate(lines)) + "\n"
+        monkeypatch.setattr(sys, "stdin", io.StringIO(text))
+        assert cli(["stream", "--rate", "1000", "--frame-number"]) == 0
+        outs.append(capsys.readouterr().out)
+    assert outs[0] == outs[1]
+    monkeypatch.setattr(sys, "stdin", io.StringIO(f"3.5,{lines[0]}\n"))
+    assert cli(["stream", "--rate", "1000", "--frame-number"]) == 3
+    assert "frame number '3.5' is not an integer" in capsys.readouterr().out
 
 
 def test_stream_restarts_the_window_after_frames_lost_by_number(trial, monkeypatch, capsys):

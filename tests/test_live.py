@@ -452,6 +452,9 @@ def test_the_tracker_path_writes_each_value_with_its_standard_deviation():
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
     header, rows = _header_and_rows(r.stdout)
+    # The frames MC5 was hidden in say so (the tracker fills nothing: it went without it).
+    assert [row[1] for row in rows[200:230]] == ["missing:MC5"] * 30 and rows[199][1] == rows[230][1] == "ok"
+    assert "30 missing" in r.stderr, r.stderr
     names = [c[0] for c in ikid._native.COORDINATES]
     values = names + [f"{c}_moment" for c in names]
     assert header[2:] == [h for v in values for h in (v, f"{v}_sd")]

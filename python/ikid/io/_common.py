@@ -44,9 +44,12 @@ MAX_FILE_BYTES = 2 << 30
 def check_readable(path: Path, what: str, limit: int = MAX_FILE_BYTES) -> int:
     """The size of the regular file at ``path``; a :class:`ikid.ReadError` naming it when it is
     a directory, a pipe or a device (refused before it is opened: a FIFO would block and
-    ``/dev/zero`` never end) or larger than ``limit``. A missing file raises
-    ``FileNotFoundError`` as Python does."""
-    st = os.stat(path)
+    ``/dev/zero`` never end) or larger than ``limit``. A missing file is an
+    :class:`ikid.NotFoundError` (a ``FileNotFoundError`` too) naming it."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise _native.NotFoundError(f"{path}: no such file or directory") from None
     if not stat.S_ISREG(st.st_mode):
         kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file (a pipe, socket or device)"
         raise _native.ReadError(f"{path}: it is {kind}; expected {what}")

@@ -33,10 +33,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "stamps; a hidden marker is a gap; a bad time stamp is refused alone; a source that goes\n"
         "away is reconnected; frames older than --max-lag when read are skipped (counted). See\n"
         "docs/live.md.\n\n"
-        "Status: ok, filled:<markers>, flagged:<status bits>, filling, or refused:<reason> (an\n"
-        "output no wrist can give is not written). The first 20 frames with every marker are\n"
-        "checked as ik and track check a file (uncalibrated markers the body model cannot read,\n"
-        "another subject's calibration: exit 2), their lines held until then.\n\n"
+        "Status: ok, filled:<markers> (--tracker: missing:<markers>, gone without), flagged:<status\n"
+        "bits>, filling, or refused:<reason> (an output no wrist can give is not written). The\n"
+        "first 20 frames with every marker are checked as ik and track check a file (uncalibrated\n"
+        "markers the body model cannot read, another subject's calibration: exit 2), their lines\n"
+        "held until then.\n\n"
         "At the end, a summary on stderr: frames received, ok, filled, flagged, filling, refused (by\n"
         "reason), lost (counted from the source's frame numbers, --frame-number, or its\n"
         "times, --time), skipped, reconnections and time re-anchors. UDP asks for an 8 MiB receive\n"
@@ -163,7 +164,14 @@ def _parse_frame(
         try:
             number = int(fields[0])
         except ValueError:
-            raise ikid.InputError(f"frame number {fields[0]!r} is not an integer") from None
+            # "97.000000" (np.savetxt with one format for every column) is frame 97; "97.5" is no frame.
+            try:
+                whole = float(fields[0])
+            except ValueError:
+                whole = math.nan
+            if not (math.isfinite(whole) and whole == int(whole)):
+                raise ikid.InputError(f"frame number {fields[0]!r} is not an integer") from None
+            number = int(whole)
         fields = fields[1:]
     try:
         values = np.array([float(f) if f else np.nan for f in fields], np.float64)
@@ -467,6 +475,7 @@ class _TrackerStream:
         self.output_names = [n for v in values for n in (v, f"{v}_sd")]
         self.output_units = [u for k in range(len(values)) for u in 2 * ["rad" if k < 3 else "N*m"]]
         self.filled_markers: list[str] = []
+        self.went_without: list[str] = []
         self.status = math.nan
         self.time_reanchors = 0
         self.restarts_before = 0  # gap restarts of the trackers a reset replaced
@@ -483,6 +492,8 @@ class _TrackerStream:
         if out is None or sd is None:
             return None
         self.status = float(out.status)  # the frame's status bits, for the sink's status channel
+        # Markers the filter went without (it fills none): said on the line, as `track` counts them.
+        self.went_without = [m for k, m in enumerate(ikid.marker_names()) if out.missing >> k & 1]
         values = np.concatenate([out.q, out.tau])
         return np.column_stack([values, np.concatenate([sd[0], sd[1]])]).ravel()
 
@@ -702,14 +713,18 @@ def _run_with(
                         raise _Refused(e.reason or str(e), "time stamp jumped (refused alone)") from e
                     if f.number is None and f.time is not None:
                         losses.time(f.time)
-                    if _SLOW_SOURCE in str(e) and args.rate is None and not live and losses.steps:
-                        # No --rate: the stream runs at the model's, and the stamps say the source
-                        # sends slower. Every frame would be refused: said once, with the --rate.
+                    if _SLOW_SOURCE in str(e) and not live and losses.steps:
+                        # The stamps say the source sends slower than the rate the stream runs
+                        # at (the model's, or --rate's): every frame would be refused. Said once,
+                        # with the --rate to give.
                         step = float(np.median(losses.steps))
-                        raise ikid.InputError(
-                            f"frame {label}: {_stamps_hint(1.0 / step, rate)} (without --rate the stream "
-                            "runs at the model's rate)"
-                        ) from None
+                        given = (
+                            "without --rate the stream runs at the model's rate"
+                            if args.rate is None
+                            else f"--rate {args.rate:g} says otherwise"
+                        )
+                        hint = _stamps_hint(1.0 / step, rate, _member_rates(args))
+                        raise ikid.InputError(f"frame {label}: {hint} ({given})") from None
                     if "resample the source" in str(e):
                         raise _Refused(
                             e.reason or str(e), "time stamp too soon (the source is faster than the model)"
@@ -734,6 +749,8 @@ def _run_with(
                         flags.update(n for n, b in ikid.FRAME_STATUS.items() if bits & b & ~_FILLED)
                     elif filled:
                         status = "filled:" + "+".join(filled)
+                    elif missing := getattr(streams[0], "went_without", None):
+                        status = "missing:" + "+".join(missing)
                     if sink is not None:
                         if resynced:
                             bits |= ikid.FRAME_STATUS["resynced"]
@@ -770,7 +787,9 @@ def _run_with(
         placement.check()  # a stream shorter than the frames checked: its frames, checked
         placement.release(out, sink)
     out.flush()
-    parts = [f"{counts[k]} {k}" for k in ("ok", "filled", "flagged", "filling", "refused") if counts[k]]
+    parts = [
+        f"{counts[k]} {k}" for k in ("ok", "filled", "missing", "flagged", "filling", "refused") if counts[k]
+    ]
     if flags:
         parts.append("flagged " + ", ".join(f"{name} {n}" for name, n in flags.most_common()))
     if numbered or timed:
@@ -778,7 +797,7 @@ def _run_with(
     else:
         parts.append("lost not counted (no frame numbers or times: --frame-number, --time)")
     if timed and (other := losses.other_rate()) is not None:
-        parts.append(_stamps_hint(other, rate))
+        parts.append(_stamps_hint(other, rate, _member_rates(args)))
     skipped = notes["skipped"]
     if live:
         parts.append(f"{skipped} skipped (read too late: newest taken)")
@@ -814,17 +833,37 @@ def _run_with(
     return EXIT_FRAMES_LOST if refused or losses.lost or skipped or notes["not reconnected"] else 0
 
 
-def _stamps_hint(other: float, rate: float) -> str:
-    """What stamps at ``other`` Hz say to a stream at ``rate`` Hz, and what to give."""
+def _stamps_hint(other: float, rate: float, members: list[float]) -> str:
+    """What stamps at ``other`` Hz say to a stream at ``rate`` Hz, and what to give: the model
+    family's member nearest the stamps' rate when within a quarter of it (stamps that jitter
+    say it only roughly), else the stamps' own rate (``members`` empty: any rate runs)."""
     if abs(other * 1e3 / rate - 1.0) <= 0.2:
         return (
             f"the time stamps step by {1 / other:.3g}, a frame at {rate:g} Hz: are they in ms? "
             "--time reads seconds"
         )
-    return (
-        f"the time stamps come {1e3 / other:.3g} ms apart, a {other:.4g} Hz source read at {rate:g} Hz: "
-        f"give --rate {other:.4g} (the family's member at that rate)"
+    near = [m for m in members if abs(m / other - 1.0) <= 0.25]
+    give = (
+        f"give --rate {min(near, key=lambda m: abs(m - other)):g} (the family's member at that rate)"
+        if near
+        else f"give --rate {other:.4g}"
+        + (
+            f" (no member of the model's family is near it: {', '.join(f'{m:g}' for m in members)} Hz)"
+            if members
+            else ""
+        )
     )
+    source = f"a {other:.4g} Hz source read at {rate:g} Hz"
+    return f"the time stamps come {1e3 / other:.3g} ms apart, {source}: {give}"
+
+
+def _member_rates(args: argparse.Namespace) -> list[float]:
+    """The rates of the stream's model family (none for the tracker, which runs at any rate)."""
+    if args.tracker:
+        return []
+    from ikid.pipeline import family_members
+
+    return sorted(m.frame_rate_hz for m in family_members(args.model))
 
 
 def _lsl_now() -> float:
