@@ -209,6 +209,8 @@ impl Model {
     /// for every frame while the window fills; `up`: the lab's up direction in the frames'
     /// coordinates, an axis (`"+y"`, ikid's lab, by default; `"+z"` for Vicon and Qualisys
     /// labs) or three numbers: a model that reads gravity (`wrist-chain`) depends on it.
+    /// Without a calibration the markers are read at the body model's placement, unchecked:
+    /// `ikid.check_default_placement(frames)` checks them, as `ikid stream` does first.
     #[pyo3(signature = (missing_markers = None, calibration = None, early_outputs = false, up = None))]
     fn stream(
         &self,

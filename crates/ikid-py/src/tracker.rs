@@ -36,6 +36,11 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 /// torques (N·m) for every frame once a frame with every marker has started it; a missing
 /// marker (NaN) simply corrects nothing.
 ///
+/// Without a ``calibration`` the markers are read at the body model's placement, and nothing
+/// here checks that they sit there: ``ikid.check_default_placement(frames)`` does (what
+/// ``ikid track`` and ``ikid stream`` check first); uncalibrated real markers read 50-170° off,
+/// flagged ``outside_training`` or ``implausible`` at best.
+///
 /// Arguments (all optional):
 ///
 /// - ``length_scale``, ``mass_scale``: the subject's segment lengths (and marker offsets) and
