@@ -1124,6 +1124,22 @@ def test_stream_numbers_no_unreadable_line_and_does_not_count_it_lost(trial, mon
     assert "3 lost (by frame number)" in captured.err, captured.err
 
 
+def test_stream_skips_a_first_line_of_column_names_without_counting_it(trial, monkeypatch, capsys):
+    # A CSV with its column names first: the same lines out as without them (the oracle), the
+    # frames numbered from 0, nothing refused. A line of names later on is an unreadable frame.
+    body = csv_lines(trial.markers[:80])
+    names = ",".join(f"{m}_{a}" for m in ikid.marker_names() for a in "xyz")
+    outs = []
+    for text in (body, names + "\n" + body):
+        monkeypatch.setattr(sys, "stdin", io.StringIO(text))
+        assert cli(["stream", "--rate", "1000"]) == 0
+        outs.append(capsys.readouterr())
+    assert outs[0].out == outs[1].out and "refused" not in outs[1].err
+    monkeypatch.setattr(sys, "stdin", io.StringIO(body + names + "\n"))
+    assert cli(["stream", "--rate", "1000"]) == 3
+    assert "1 refused" in capsys.readouterr().err
+
+
 def test_stream_frame_numbers_written_as_whole_floats_are_frame_numbers(trial, monkeypatch, capsys):
     # np.savetxt with one format writes frame 97 as "97.000000": the same frames as "97" (the
     # oracle: the run with integer numbers), and "3.5" is no frame number.

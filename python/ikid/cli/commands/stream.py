@@ -322,6 +322,7 @@ def _text_frames(lines, frame_len: int, with_time: bool, with_number: bool):
     """Text lines -> LiveFrame (an unreadable or over-long line as its error)."""
     from ikid.live import MAX_LINE_BYTES, LiveFrame
 
+    first = True
     for line in lines:
         if line is None:
             yield [LiveFrame(None, None, None, f"line longer than {MAX_LINE_BYTES} bytes")]
@@ -331,9 +332,21 @@ def _text_frames(lines, frame_len: int, with_time: bool, with_number: bool):
         try:
             number, t, x = _parse_frame(line, frame_len, with_time, with_number)
         except ikid.InputError as e:
+            if first and _is_header(line):
+                # A CSV's column names (RSP_x,RSP_y,...): not a frame, and not counted as one.
+                first = False
+                continue
             yield [LiveFrame(None, None, None, str(e))]
             continue
+        finally:
+            first = False
         yield [LiveFrame(number, t, x)]
+
+
+def _is_header(line: str) -> bool:
+    """A first line of column names: every field a name (starting with a letter), none a number."""
+    fields = [f.strip() for f in line.replace(";", ",").replace("\t", ",").split(",") if f.strip()]
+    return bool(fields) and all(f[0].isalpha() and f.lower() not in ("nan", "inf") for f in fields)
 
 
 def _live_frames(source, idle_s: float, notes: Counter):
