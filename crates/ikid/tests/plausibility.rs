@@ -104,7 +104,10 @@ fn markers_in_the_wrong_units_are_refused_naming_the_likely_cause() {
 }
 
 #[test]
-fn streams_refuse_and_trackers_reject_markers_no_arm_can_hold() {
+fn streams_and_trackers_not_yet_running_refuse_markers_no_arm_can_hold() {
+    // A tracker already running rejects and flags them instead (a ghost frame must not end it:
+    // `tracker/checks.rs`); before it runs there is nothing to stray from, so, as a stream, it
+    // refuses them saying why (it returned no estimate, ever, and no error).
     let m = random_model(FeatureSet::Markers, 2, &[8], 3, 2);
     let mut s = m.stream();
     let frame: Vec<f32> = scaled_frame(10.0).iter().map(|&v| v as f32).collect();
@@ -112,8 +115,10 @@ fn streams_refuse_and_trackers_reject_markers_no_arm_can_hold() {
     assert_eq!(err.code(), "implausible_markers");
     let mut tracker = ikid::Tracker::new(BodyModel::default(), ikid::TrackerSettings::new(1000.0)).unwrap();
     for _ in 0..50 {
-        assert_eq!(tracker.push(&scaled_frame(10.0)).unwrap(), None, "a tracker must not start on them");
+        let err = tracker.push(&scaled_frame(10.0)).unwrap_err();
+        assert_eq!(err.code(), "implausible_markers", "{err}");
     }
+    assert!(tracker.push(&scaled_frame(1.0)).unwrap().is_some(), "the first good frame starts it");
 }
 
 /// Frames of a moving wrist at 1 kHz (the default subject, f32).
