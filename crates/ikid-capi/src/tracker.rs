@@ -144,9 +144,9 @@ pub unsafe extern "C" fn ikid_tracker_new(
 /// error). On success `*flags` is written and `out` (room for `out_len` doubles, at least 12)
 /// receives q, q̇, q̈ and τ (3 each; rad, rad/s, rad/s², N·m, coordinates s_p, e_f, ad_ab) for
 /// this frame, or 12 NaN while `flags->ready` is false. Frames must come at the settings'
-/// `rate_hz`. On failure nothing is written; a NULL pointer, an `out` shorter than 12, or a
-/// frame of the wrong length or with an infinite value (`IKID_STATUS_INPUT`) leaves the
-/// tracker as it was.
+/// `rate_hz`. On failure nothing is written; a NULL pointer, an `out` shorter than 12, a
+/// frame of the wrong length or with an infinite value, or, before the filter has started,
+/// markers no arm could hold (wrong units; `IKID_STATUS_INPUT`) leaves the tracker as it was.
 ///
 /// # Safety
 /// `tracker` must be a live handle used by no other thread meanwhile; `frame` must point to

@@ -394,8 +394,9 @@ impl Tracker {
     /// that frame and learn no noise. When every usable hand marker has been rejected for
     /// [`LOST_S`], the tracker restarts from the frame's own solution; a forearm whose position
     /// is broken that long is re-learned, a segment's shape once a new one has held as long as
-    /// the old one had. An infinite value is an error (NaN means missing); nothing else a frame
-    /// holds stops the tracker.
+    /// the old one had. An infinite value is an error (NaN means missing), and so, before the
+    /// filter has started, are markers no arm could hold (wrong units: there is no motion yet
+    /// for them to stray from); nothing else a frame holds stops the tracker.
     ///
     /// The frame's values are `f32` (as [`Stream::push`](crate::Stream::push) takes them) or
     /// `f64`; `f32` values are widened exactly.
