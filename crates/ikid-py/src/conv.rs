@@ -159,17 +159,7 @@ pub fn number_arg(value: &Bound<'_, PyAny>, what: &str, expected: &str) -> PyRes
 /// A model given as an `ikid.Model` or a name or path `ikid.load` takes (`what` names the
 /// argument in errors).
 pub fn model_arg<'py>(value: &Bound<'py, PyAny>, what: &str) -> PyResult<Bound<'py, crate::model::Model>> {
-    let value = if value.is_instance_of::<pyo3::types::PyString>() || is_path(value) {
-        value.py().import("ikid")?.call_method1("load", (value,))?
-    } else {
-        value.clone()
-    };
-    value.cast_into::<crate::model::Model>().map_err(|e| {
-        crate::errors::ArgumentError::new_err(format!(
-            "{what}: expected an ikid.Model or a model's name or file, got {}",
-            e.into_inner().get_type().name().map_or_else(|_| "?".into(), |n| n.to_string())
-        ))
-    })
+    object_or_loaded(value, "load", what, "an ikid.Model or a model's name or file")
 }
 
 /// A calibration given as an `ikid.Calibration` or the path of its file (`ikid.load_calibration`).
@@ -177,16 +167,25 @@ pub fn calibration_arg<'py>(
     value: &Bound<'py, PyAny>,
     what: &str,
 ) -> PyResult<Bound<'py, crate::calibration::Calibration>> {
+    object_or_loaded(value, "load_calibration", what, "an ikid.Calibration or the path of its file")
+}
+
+/// `value` as a `T`, a string or path given being loaded first by `ikid.<loader>`; an
+/// `ArgumentError` naming `what`, `expected` and the type given otherwise.
+fn object_or_loaded<'py, T: pyo3::PyTypeCheck>(
+    value: &Bound<'py, PyAny>,
+    loader: &str,
+    what: &str,
+    expected: &str,
+) -> PyResult<Bound<'py, T>> {
     let value = if value.is_instance_of::<pyo3::types::PyString>() || is_path(value) {
-        value.py().import("ikid")?.call_method1("load_calibration", (value,))?
+        value.py().import("ikid")?.call_method1(loader, (value,))?
     } else {
         value.clone()
     };
-    value.cast_into::<crate::calibration::Calibration>().map_err(|e| {
-        crate::errors::ArgumentError::new_err(format!(
-            "{what}: expected an ikid.Calibration or the path of its file, got {}",
-            e.into_inner().get_type().name().map_or_else(|_| "?".into(), |n| n.to_string())
-        ))
+    value.cast_into::<T>().map_err(|e| {
+        let given = e.into_inner().get_type().name().map_or_else(|_| "?".into(), |n| n.to_string());
+        crate::errors::ArgumentError::new_err(format!("{what}: expected {expected}, got {given}"))
     })
 }
 

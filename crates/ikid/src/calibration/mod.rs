@@ -1040,6 +1040,58 @@ mod tests {
     }
 
     #[test]
+    fn styloids_turned_the_other_way_than_a_forearm_turns_them_are_refused() {
+        // The styloids turned about the forearm's long axis (the body model's y) from the
+        // epicondyle line: a forearm turns them 0° (supinated) to 180° (pronated) one way. The
+        // oracle is the turn given: 60° and 170° accepted; -60° and -120° (two labels swapped:
+        // a 60° pronation read with the styloids' labels exchanged) refused, naming the turn;
+        // -179° and 10° (within 25° of an end: a swap there cannot be told) accepted.
+        let (markers, _) = neutral_session(6, &[[0.0; 3]; 6], 0.0, [0.0; 3]);
+        let body = body::BodyModel::scaled(1.1, 1.1);
+        let pose = body.forearm_pose(0.5);
+        let at = |turn_deg: f64| -> Vec<f32> {
+            let turn = Rotation3::from_axis_angle(&Vector3::y_axis(), turn_deg.to_radians());
+            let points = landmark_offsets(1.1);
+            let centre = (Vector3::from(points[2]) + Vector3::from(points[3])) / 2.0;
+            (0..6)
+                .flat_map(|_| {
+                    points.into_iter().enumerate().flat_map(|(k, p)| {
+                        let p = Vector3::from(p);
+                        let p = if k >= 2 { centre + turn * (p - centre) } else { p };
+                        let p = pose * nalgebra::Point3::from(p);
+                        [p.x as f32, p.y as f32, p.z as f32]
+                    })
+                })
+                .collect()
+        };
+        for (turn, refused) in
+            [(60.0, false), (170.0, false), (-60.0, true), (-120.0, true), (-179.0, false), (10.0, false)]
+        {
+            let landmarks = at(turn);
+            let trial = LandmarkTrial { markers: &markers, landmarks: &landmarks, hand_landmarks: None };
+            match Calibration::from_neutral(&markers, Some(trial), Side::Right) {
+                Ok(_) => assert!(!refused, "{turn}° accepted"),
+                Err(e) => {
+                    let e = e.to_string();
+                    assert!(refused, "{turn}° refused: {e}");
+                    assert!(
+                        e.contains(&format!("turned {turn:.0}°")) && e.contains("under each other's labels"),
+                        "{e}"
+                    );
+                }
+            }
+        }
+        // One label for both epicondyles (no medial one): nothing to read, nothing refused.
+        let mut one = at(-120.0);
+        for f in one.chunks_exact_mut(12) {
+            let (lateral, rest) = f.split_at_mut(3);
+            rest[..3].copy_from_slice(lateral);
+        }
+        let trial = LandmarkTrial { markers: &markers, landmarks: &one, hand_landmarks: None };
+        assert!(Calibration::from_neutral(&markers, Some(trial), Side::Right).is_ok());
+    }
+
+    #[test]
     fn landmarks_of_another_arm_are_refused_naming_how_far_the_markers_are_from_them() {
         // The landmarks as recorded, then moved 0.7 m across the body (the other arm's, as a
         // map naming one arm's plate and the other's landmarks gives; racing: 706 mm).
