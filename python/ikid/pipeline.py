@@ -17,10 +17,11 @@ card's ``frame_rate_hz`` (the suffix only finds the files). For a recording at r
 2. otherwise the fastest member (``wrist-ik``, 1 kHz: the shortest window in seconds) runs at
    its own rate on the recording *resampled to it*, and the outputs are the ones at the
    recording's own frame times (:func:`run_model`, ``at_recording_frames``). Measured both ways
-   on the one real recording at such a rate (racing, 70 Hz, calibrated): the 1 kHz member 3.97°
-   geodesic RMS with an output on 99.3 % of its valid frames, the next faster (100 Hz, 100 ms
-   window) 6.11° and 95.8 %; on simulated trials at 70 Hz the 100 Hz member is better with noise
-   (1.2e-4 vs 2.0e-4 rad² at 1 %), equal on clean markers — real markers, fast and clean, decide.
+   on the one real recording at such a rate (racing, 70 Hz, calibrated; tools/realdata.py's
+   scoring): the 1 kHz member 1.71° geodesic RMS with an output on every valid frame, the next
+   faster (100 Hz, 100 ms window) 5.70° on 99.9 %; on simulated trials at 71.4 Hz (seeds
+   9830-9832, 10 s) the 100 Hz member is better with noise (1.0e-4 vs 1.8e-4 rad² at 1 %), worse
+   on clean markers (6.9e-6 vs 1.4e-6) — real markers, fast and clean, decide.
    One stream runs over the model's grid once (:class:`_ModelGrid`: 10 s at 70 Hz is 10,000
    pushes of the 1 kHz member, about 0.3 s; the earlier one stream per phase of the frames on
    the grid made 100 streams of the whole trial, 4–30 s), and a frame's output is the outputs
