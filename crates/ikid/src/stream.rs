@@ -813,3 +813,6 @@ impl Stream {
         self.sd.as_ref()?.terms()
     }
 }
+
+#[cfg(test)]
+mod grid_tests;
