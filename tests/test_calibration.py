@@ -352,6 +352,52 @@ def test_a_calibration_is_refused_for_markers_laid_out_otherwise_than_it_was_mea
             assert code == 0, err
 
 
+def test_a_marker_put_back_elsewhere_since_the_calibration_is_refused_and_a_sliding_one_is_not(
+    tmp_path, capsys
+):
+    # A hand marker re-applied 12 mm away between the static trial and the task read every angle
+    # 14° off on the real pyomeca recording with status 0: its distances changed by less than a
+    # rigid segment may stray. A distance that holds steady away from the calibration's is now
+    # refused; one that slides with the posture (skin) is not, even off the calibration's by
+    # more (the exam's skin markers: up to 12 mm, within 2.7 times their spread). The oracle:
+    # MC5 moved along its line to MCB, so that distance is shorter by the shift in every frame:
+    # 8 mm ± 1 mm with the flexion (re-applied), or 9 mm ± 8 mm with it (sliding).
+    q = np.zeros((20, 3))
+    static = io.write_trc(tmp_path / "static.trc", np.arange(20) / 1000.0, ikid.forward_markers(q), 1000.0)
+    cal = tmp_path / "cal.json"
+    assert cli(["calibrate", "--static", str(static), "--method", "neutral", "-o", str(cal)]) == 0
+    trial = ikid.simulate("random", seed=52, duration=1.0)
+    names = list(ikid.marker_names())
+    mc5, mcb = (3 * names.index(m) for m in ("MC5", "MCB"))
+    along = trial.markers[:, mcb : mcb + 3] - trial.markers[:, mc5 : mc5 + 3]
+    along /= np.linalg.norm(along, axis=1, keepdims=True)
+    slide = trial.q[:, 1] - np.median(trial.q[:, 1])  # with the flexion, as much either way
+    slide /= np.abs(slide).max()
+    before = np.linalg.norm(trial.markers[:, mcb : mcb + 3] - trial.markers[:, mc5 : mc5 + 3], axis=1)
+    capsys.readouterr()
+    for name, shift, refused in (
+        ("moved", 0.008 + 0.001 * slide, True),
+        ("sliding", 0.009 + 0.008 * slide, False),
+    ):
+        markers = trial.markers.copy()
+        markers[:, mc5 : mc5 + 3] += shift[:, None] * along
+        after = np.linalg.norm(markers[:, mcb : mcb + 3] - markers[:, mc5 : mc5 + 3], axis=1)
+        np.testing.assert_allclose(before - after, shift, atol=1e-9)
+        path = io.write_trc(tmp_path / f"{name}.trc", trial.time, markers, 1000.0)
+        out = tmp_path / f"{name}.mot"
+        code = cli(["ik", str(path), "--calibration", str(cal), "-o", str(out)])
+        err = capsys.readouterr().err
+        if refused:
+            assert code == 2, err
+            assert (
+                "its hand's markers MC5 and MCB are" in err
+                and "placed elsewhere since the calibration" in err
+            )
+            assert not out.exists()
+        else:
+            assert code == 0, err
+
+
 def test_calibrate_command_from_landmarks_and_neutral_frames_of_a_task_trial(motion, tmp_path, capsys):
     from ikid.calibration import calibration_info, check_calibration_map
 

@@ -188,46 +188,84 @@ def save_calibration(
 _PAIRS = ((0, 1), (0, 2), (1, 2))
 
 
+def _distance_rows(frames: np.ndarray, first: int) -> np.ndarray:
+    """One segment's three marker distances per frame with all three measured, ``(n, 3)``."""
+    f = np.asarray(frames, np.float64).reshape(len(frames), 6, 3)
+    d = np.stack([np.linalg.norm(f[:, first + a] - f[:, first + b], axis=1) for a, b in _PAIRS], axis=1)
+    return d[np.isfinite(d).all(axis=1)]
+
+
 def marker_distances(frames: np.ndarray, one_hand_marker: bool = False) -> dict[str, list[float]]:
     """Each segment's three marker distances (pairs 01, 02, 12; median over the frames, metres)
     in ``frames`` ``(n, 18)``: what a calibration keeps of its markers' layout, for
     :func:`check_marker_distances`. A one-marker hand's (virtual) markers are left out; a
     segment with no frame of all three, too."""
-    f = np.asarray(frames, np.float64).reshape(len(frames), 6, 3)
     out = {}
     for segment, first in (("forearm", 0), ("hand", 3)):
         if segment == "hand" and one_hand_marker:
             continue
-        d = np.stack([np.linalg.norm(f[:, first + a] - f[:, first + b], axis=1) for a, b in _PAIRS], axis=1)
-        d = d[np.isfinite(d).all(axis=1)]
+        d = _distance_rows(frames, first)
         if len(d):
             out[segment] = np.median(d, axis=0).tolist()
     return out
 
 
-def check_marker_distances(path: str | os.PathLike[str], frames: np.ndarray, source: str) -> None:
+#: A distance between two of a segment's markers that holds steady through a trial yet sits
+#: further than this from the calibration's (and :data:`MOVED_MARKER_SPREADS` times its own
+#: spread) is a marker placed elsewhere since the calibration. Measured (median distance against
+#: the calibration's): the real recordings' 0-2.7 mm (pyomeca's skin markers, a task cut from
+#: its static frames too); the exam's skin markers up to 12.4 mm, but within 2.7 times their
+#: spread over the task (the skin slides with the posture, so the distance moves with it); a
+#: pyomeca hand marker moved 12 mm for the whole trial 6.5 mm at 9.9 times its spread, which
+#: read every angle 14° off with status 0.
+MOVED_MARKER_M = 0.005
+#: See :data:`MOVED_MARKER_M`.
+MOVED_MARKER_SPREADS = 4.0
+
+
+def check_marker_distances(
+    path: str | os.PathLike[str], frames: np.ndarray, source: str, whole: bool = True
+) -> None:
     """Refuse (``ikid.InputError``) a trial whose markers are not laid out as those the
     calibration at ``path`` was measured with: a distance between two of a segment's markers
     (median over ``frames``) further from the calibration's than the tracker lets a rigid
     segment stray (``RIGID_TOLERANCE_M`` plus ``RIGID_TOLERANCE_REL`` of it). Such a trial is of
     another session, subject or cluster: the calibration says nothing of where its markers sit
-    (one of another subject's clusters wrote 4 rows of 700, the rest turned over, exit 0). A
-    file written before calibrations kept the distances passes."""
+    (one of another subject's clusters wrote 4 rows of 700, the rest turned over, exit 0).
+    When ``frames`` are a ``whole`` trial, also one that holds steady further from the
+    calibration's than :data:`MOVED_MARKER_M` and :data:`MOVED_MARKER_SPREADS` times its own
+    spread: a marker taken off and put back elsewhere (a live stream's first frames are too few
+    to tell a steady shift from the skin's slide at one posture). A file written before
+    calibrations kept the distances passes."""
     stored = calibration_info(path).get("marker_distances_m") or {}
     names = _native.MARKERS
     now = marker_distances(frames)
+    pairs = []  # (segment, pair, here, then, spread), forearm first
     for segment, first in (("forearm", 0), ("hand", 3)):
-        if segment not in stored or segment not in now:
-            continue
-        for (a, b), then, here in zip(_PAIRS, stored[segment], now[segment], strict=True):
-            if abs(here - then) > _native.RIGID_TOLERANCE_M + _native.RIGID_TOLERANCE_REL * then:
-                raise InputError(
-                    f"{source}: its {segment}'s markers {names[first + a][0]} and {names[first + b][0]} are "
-                    f"{1e3 * here:.0f} mm apart, {1e3 * then:.0f} mm in the calibration ({path}): it was "
-                    "measured on markers laid out otherwise (another session, subject or cluster), so it "
-                    "cannot say where these sit; calibrate this session (`ikid calibrate` on its own static "
-                    "trial)"
-                )
+        if segment in stored and segment in now:
+            spread = _distance_rows(frames, first).std(axis=0)
+            for (a, b), then, here, sd in zip(_PAIRS, stored[segment], now[segment], spread, strict=True):
+                pairs.append((segment, f"{names[first + a][0]} and {names[first + b][0]}", here, then, sd))
+    # Markers laid out otherwise altogether are named as such before a single marker moved.
+    for segment, pair, here, then, _ in pairs:
+        if abs(here - then) > _native.RIGID_TOLERANCE_M + _native.RIGID_TOLERANCE_REL * then:
+            raise InputError(
+                f"{source}: its {segment}'s markers {pair} are "
+                f"{1e3 * here:.0f} mm apart, {1e3 * then:.0f} mm in the calibration ({path}): it was "
+                "measured on markers laid out otherwise (another session, subject or cluster), so it "
+                "cannot say where these sit; calibrate this session (`ikid calibrate` on its own static "
+                "trial)"
+            )
+    for segment, pair, here, then, sd in pairs if whole else ():
+        if abs(here - then) > max(MOVED_MARKER_M, MOVED_MARKER_SPREADS * sd):
+            raise InputError(
+                f"{source}: its {segment}'s markers {pair} are {1e3 * here:.1f} mm apart throughout "
+                f"(within {1e3 * sd:.1f} mm), {1e3 * then:.1f} mm in the calibration ({path}): a marker "
+                "was placed elsewhere since the calibration (taken off and put back, or moved on its "
+                "plate), and the calibration cannot say where it sits now: every angle would be off by "
+                "as much as that turns the segment. Calibrate with a static trial recorded with the "
+                "markers as they are in this one (`ikid calibrate`)"
+            )
 
 
 def calibration_info(path: str | os.PathLike[str]) -> dict[str, Any]:
