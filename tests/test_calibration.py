@@ -398,6 +398,77 @@ def test_a_marker_put_back_elsewhere_since_the_calibration_is_refused_and_a_slid
             assert code == 0, err
 
 
+def test_a_trial_starting_away_from_the_calibrations_posture_is_fitted_to_the_calibrations_shapes(
+    tmp_path, capsys
+):
+    # Review 3: each segment's marker shape was learned from a trial's first 0.5 s, so skin
+    # markers that slid where a trial starts turned every angle of it (a pyomeca task cut from
+    # frame 150: 2.6° instead of 0.9°). The calibration now keeps the shapes of its own neutral
+    # frames, the frames its rotations were measured on, and `ik` and `track` fit to those.
+    # Here MC2 and MC5 slide 8 mm along their lines to MCB as the wrist flexes (none at the
+    # static trial's neutral); the task starts at 29° of flexion. The oracle is the simulator's
+    # angles; the same calibration without its shapes is the old behaviour.
+    names = list(ikid.marker_names())
+
+    def slid(markers: np.ndarray, q: np.ndarray) -> np.ndarray:
+        out = markers.copy()
+        for marker, sign in (("MC5", 1.0), ("MC2", -1.0)):
+            a, b = 3 * names.index(marker), 3 * names.index("MCB")
+            along = out[:, b : b + 3] - out[:, a : a + 3]
+            along /= np.linalg.norm(along, axis=1, keepdims=True)
+            out[:, a : a + 3] += (sign * 0.008 * np.sin(q[:, 1]) / np.sin(1.0))[:, None] * along
+        return out
+
+    rest = np.zeros((50, 3))
+    static = io.write_trc(
+        tmp_path / "static.trc", np.arange(50) / 1000.0, slid(ikid.forward_markers(rest), rest), 1000.0
+    )
+    cal = tmp_path / "cal.json"
+    assert cli(["calibrate", "--static", str(static), "--method", "neutral", "-o", str(cal)]) == 0
+    doc = json.loads(cal.read_text())
+    shapes = np.asarray(doc["marker_shapes_m"])
+    offsets = np.array([m["offset"] for m in ikid.body_model()["markers"]])
+    for first in (0, 3):  # each segment's shape: the body model's markers, centred (rigid at rest)
+        got = shapes[first : first + 3]
+        want = offsets[first : first + 3]
+        np.testing.assert_allclose(got.sum(axis=0), 0.0, atol=1e-9)
+        for a, b in ((0, 1), (0, 2), (1, 2)):
+            assert np.linalg.norm(got[a] - got[b]) == pytest.approx(
+                np.linalg.norm(want[a] - want[b]), abs=1e-7
+            )
+    doc.pop("marker_shapes_m")
+    (tmp_path / "bare.json").write_text(json.dumps(doc))
+    trial = ikid.simulate("random", seed=53, duration=3.0)
+    start = int(np.argmax(np.abs(trial.q[:, 1]) > 0.5))
+    assert 500 < start < 2000
+    task = io.write_trc(
+        tmp_path / "task.trc",
+        trial.time[start:] - trial.time[start],
+        slid(trial.markers, trial.q)[start:],
+        1000.0,
+    )
+    capsys.readouterr()
+    rms = {}
+    for command in ("ik", "track"):
+        for name in ("cal", "bare"):
+            out = tmp_path / f"{command}_{name}"
+            target = out.with_suffix(".mot") if command == "ik" else out
+            assert (
+                cli([command, str(task), "--calibration", str(tmp_path / f"{name}.json"), "-o", str(target)])
+                == 0
+            )
+            t, q = io.read_mot(out.with_suffix(".mot"))
+            err = np.degrees(q - trial.q[start:][np.rint(t * 1000).astype(int)])[60:]
+            rms[command, name] = np.sqrt(np.mean(err**2, axis=0))
+    for command in ("ik", "track"):
+        with_shapes, without = rms[command, "cal"], rms[command, "bare"]
+        assert with_shapes.max() < 3.5 and without.max() > 2.5 * with_shapes.max(), (
+            command,
+            with_shapes,
+            without,
+        )
+
+
 def test_calibrate_command_from_landmarks_and_neutral_frames_of_a_task_trial(motion, tmp_path, capsys):
     from ikid.calibration import calibration_info, check_calibration_map
 

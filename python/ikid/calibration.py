@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ikid import _native
-from ikid._native import Calibration, InputError, fill_gaps
+from ikid._native import Calibration, IkidError, InputError, fill_gaps
 from ikid.io._atomic import write_text_atomic
 from ikid.io.markers import FileFormatError, read_text
 
@@ -59,7 +59,18 @@ def calibrate(static_frames, movements: dict, *, fill: bool = True) -> Calibrati
             frames = fill_gaps(frames)[0]
         return frames
 
-    return Calibration.from_trials(prepared(static_frames), {k: prepared(v) for k, v in movements.items()})
+    static = prepared(static_frames)
+    return _with_shapes(Calibration.from_trials(static, {k: prepared(v) for k, v in movements.items()}), static)
+
+
+def _with_shapes(calibration: Calibration, neutral_frames) -> Calibration:
+    """``calibration`` with its segments' marker shapes from the ``neutral_frames`` it was
+    measured on (``Calibration.with_shapes_of``: streams and the Tracker then fit the segments
+    to them, not to a trial's first frames); as it is when no frame has all six markers."""
+    try:
+        return calibration.with_shapes_of(np.asarray(neutral_frames, np.float64))
+    except IkidError:
+        return calibration
 
 
 def calibrate_neutral(
@@ -72,13 +83,14 @@ def calibrate_neutral(
     (default: the neutral frames). With ``hand_landmarks`` ``(m, 6)`` too (second and fifth
     metacarpal heads, same frames) the hand's frame is its own rather than the forearm's at
     the neutral frames. ``side``: "right" or "left"."""
-    return Calibration.from_neutral(
+    calibration = Calibration.from_neutral(
         np.asarray(neutral_frames, np.float64),
         None if landmarks is None else np.asarray(landmarks, np.float64),
         None if landmark_frames is None else np.asarray(landmark_frames, np.float64),
         side,
         None if hand_landmarks is None else np.asarray(hand_landmarks, np.float64),
     )
+    return _with_shapes(calibration, neutral_frames)
 
 
 def calibrate_functional(neutral_frames, movement_frames, *, side: str = "right") -> Calibration:
@@ -88,9 +100,10 @@ def calibrate_functional(neutral_frames, movement_frames, *, side: str = "right"
     least-squares functional fit (NaN = missing; such frames are skipped). The report's
     ``functional`` entry gives the ranges seen and the fit's residual. ``side``: "right" or
     "left"."""
-    return Calibration.functional(
+    calibration = Calibration.functional(
         np.asarray(neutral_frames, np.float64), np.asarray(movement_frames, np.float64), side
     )
+    return _with_shapes(calibration, neutral_frames)
 
 
 def calibrate_mirror(
@@ -132,7 +145,7 @@ def calibrate_mirror(
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise InputError(f"{path}: the report's landmarks geometry is malformed ({e})") from None
     side = side or ("left" if info["side"] == "right" else "right")
-    return Calibration.mirrored(
+    calibration = Calibration.mirrored(
         load_calibration(path),
         cluster,
         others,
@@ -141,6 +154,7 @@ def calibrate_mirror(
         None if landmark_frames is None else np.asarray(landmark_frames, np.float64),
         side,
     )
+    return _with_shapes(calibration, neutral_frames)
 
 
 def save_calibration(
@@ -181,6 +195,8 @@ def save_calibration(
         doc["forearm_landmarks"] = forearm_landmarks
     if marker_distances:
         doc["marker_distances_m"] = marker_distances
+    if calibration.marker_shapes is not None:
+        doc["marker_shapes_m"] = np.asarray(calibration.marker_shapes).tolist()
     return write_text_atomic(path, json.dumps(doc, indent=1) + "\n")
 
 
@@ -405,7 +421,9 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
     path = Path(path)
     doc = calibration_info(path)
     try:
-        return Calibration.from_matrices(doc["forearm"], doc["hand"], side=doc["side"])
+        calibration = Calibration.from_matrices(doc["forearm"], doc["hand"], side=doc["side"])
+        shapes = doc.get("marker_shapes_m")
+        return calibration if shapes is None else calibration.with_marker_shapes(np.asarray(shapes, np.float64))
     except KeyError as e:
         raise InputError(f"{path}: no {e.args[0]!r} matrix") from None
     except (InputError, TypeError) as e:

@@ -254,6 +254,48 @@ impl Calibration {
         Ok(Calibration { inner, report: None, method: Method::Matrices })
     }
 
+    /// This calibration with each segment's marker shape taken from `frames` `(n, 18)`, the
+    /// neutral frames it was measured on (those with all six markers, averaged): a stream
+    /// fits its segments to them and the Tracker takes them as its template, instead of
+    /// learning them from a trial's first 0.5 s (skin markers slide: a trial that starts in
+    /// another posture than the calibration's would read every angle off by as much).
+    fn with_shapes_of(&self, frames: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let shapes = with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |v, _| {
+            let narrow: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+            ikid::marker_shapes(&narrow, self.inner.side).py_err()
+        })?;
+        Ok(Calibration { inner: self.inner.with_shapes(Some(shapes)), ..self.clone() })
+    }
+
+    /// This calibration with `shapes` as `marker_shapes` gives them (`(6, 3)`, metres), or
+    /// without any (`None`: learned from each trial's first frames).
+    fn with_marker_shapes(&self, shapes: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+        let shapes = match shapes {
+            None => None,
+            Some(obj) => Some(with_f64_rows(obj, "marker_shapes", 3, |v, n| {
+                if n != 6 || !v.iter().all(|x| x.is_finite()) {
+                    return Err(input(format!(
+                        "marker_shapes: expected 6 finite rows (forearm's three markers, then the hand's), got {n}"
+                    )));
+                }
+                Ok(std::array::from_fn(|s| {
+                    std::array::from_fn(|k| Vector3::from_row_slice(&v[9 * s + 3 * k..9 * s + 3 * k + 3]))
+                }))
+            })?),
+        };
+        Ok(Calibration { inner: self.inner.with_shapes(shapes), ..self.clone() })
+    }
+
+    /// Each segment's three markers in its technical frame (origin their centroid), the
+    /// forearm's then the hand's, `(6, 3)` metres, as measured at the calibration's neutral
+    /// frames; `None` when each trial's first frames give them.
+    #[getter]
+    fn marker_shapes<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        let Some(shapes) = self.inner.shapes else { return Ok(None) };
+        let rows: Vec<f64> = shapes.iter().flatten().flat_map(|p| [p.x, p.y, p.z]).collect();
+        Ok(Some(rows.into_pyarray(py).reshape([6, 3])?))
+    }
+
     /// The landmarks `from_neutral` reads, in the order of a landmark frame: (name, where).
     #[classattr]
     #[allow(non_snake_case)]

@@ -134,7 +134,7 @@ pub mod stream;
 pub mod testing;
 pub mod tracker;
 
-pub use calibration::{Calibration, MarkerShapes};
+pub use calibration::{Calibration, MarkerShapes, SegmentShapes, marker_shapes};
 pub use error::{Error, ErrorKind, Result};
 pub use features::{FeatureSet, FrameKind};
 pub use gaps::{GapFiller, MissingMarkers};

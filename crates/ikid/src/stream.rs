@@ -355,7 +355,7 @@ impl Stream {
         self.filler.set_calibration(calibration.as_ref());
         self.calibration = calibration;
         self.turned_over = status::TurnedOverWatch::new(); // the hand is read anew
-        self.shapes = MarkerShapes::new(self.model.card().frame_rate_hz);
+        self.shapes = MarkerShapes::for_calibration(self.calibration.as_ref(), self.model.card().frame_rate_hz);
         Ok(())
     }
 

@@ -76,7 +76,7 @@ impl Calibration {
         let y = y.normalize();
         let forearm = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, x.cross(&y)]).transpose());
         let hand = forearm * posture;
-        let calibration = Calibration { forearm, hand, side };
+        let calibration = Calibration { forearm, hand, side, shapes: None };
         let mut angles: [Vec<f64>; N_COORDINATES] = std::array::from_fn(|_| Vec::with_capacity(moves.len()));
         for m in &moves {
             let q = body::wrist_angles(&(forearm * Rotation3::from_matrix_unchecked(*m) * hand.inverse()));
@@ -147,7 +147,7 @@ impl Calibration {
             method: Method::Functional,
             side,
             movements: Vec::new(),
-            placement_deg: Calibration { forearm, hand, side }.placement_deg(),
+            placement_deg: Calibration { forearm, hand, side, shapes: None }.placement_deg(),
             axis_skew_deg: 0.0,
             neutral_frames: held.frames,
             neutral_spread_deg: held.spread_deg,

@@ -271,7 +271,7 @@ impl Calibration {
         }
         let forearm = other.forearm;
         let hand = forearm * held.mean;
-        let calibration = Calibration { forearm, hand, side };
+        let calibration = Calibration { forearm, hand, side, shapes: None };
         let report = CalibrationReport {
             method: Method::Mirror,
             side,

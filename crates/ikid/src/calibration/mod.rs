@@ -268,6 +268,51 @@ pub struct Calibration {
     pub hand: Rotation3<f64>,
     /// The arm: [`apply`](Self::apply) mirrors a left arm's frames into a right arm's.
     pub side: Side,
+    /// Each segment's marker shape at the calibration's own neutral frames ([`marker_shapes`]),
+    /// forearm then hand: what a stream fits its segments to ([`MarkerShapes`]) and the Tracker
+    /// takes as its template, in place of a trial's first [`TEMPLATE_S`]. `None`: learned from
+    /// the trial. The calibration's rotations were measured on the technical frames of these
+    /// very frames; skin markers slide with the posture, so a shape learned where a trial
+    /// starts (another posture) turns every angle of the trial by as much: a pyomeca task cut
+    /// from frame 150 read 2.6° off instead of 0.9°.
+    pub shapes: Option<SegmentShapes>,
+}
+
+/// Each segment's three markers in its technical frame (origin: their centroid), forearm then
+/// hand; a left arm's as mirrored into a right arm's.
+pub type SegmentShapes = [[Vector3<f64>; 3]; 2];
+
+/// The marker shapes of `frames` (whole marker frames back to back, of the `side` arm): each
+/// segment's markers in its technical frame, averaged over the frames with all six measured.
+/// Refused when no frame has them all, or a segment's markers are degenerate.
+pub fn marker_shapes(frames: &[f32], side: Side) -> Result<SegmentShapes> {
+    if !frames.len().is_multiple_of(MARKER_FRAME_LEN) {
+        return Err(bad(format!("{} values are not whole marker frames of {MARKER_FRAME_LEN}", frames.len())));
+    }
+    let mut sum = [[Vector3::zeros(); 3]; 2];
+    let mut n = 0usize;
+    for (i, f) in frames.chunks_exact(MARKER_FRAME_LEN).enumerate() {
+        if !f.iter().all(|v| v.is_finite()) {
+            continue;
+        }
+        let mut frame = [0f32; MARKER_FRAME_LEN];
+        frame.copy_from_slice(f);
+        side.to_right(&mut frame);
+        for segment in [Segment::Forearm, Segment::Hand] {
+            let (origin, b) = technical_frame(&frame, segment, i)?;
+            let first = body::first_marker(segment);
+            for (k, point) in sum[segment as usize].iter_mut().enumerate() {
+                let j = 3 * (first + k);
+                let p = Vector3::new(f64::from(frame[j]), f64::from(frame[j + 1]), f64::from(frame[j + 2]));
+                *point += b.transpose() * (p - origin);
+            }
+        }
+        n += 1;
+    }
+    if n == 0 {
+        return Err(bad("no frame has all six markers to take their shapes from".into()));
+    }
+    Ok(sum.map(|segment| segment.map(|p| p / n as f64)))
 }
 
 /// What the calibration learned besides the rotations, for the user to judge it by.
@@ -393,6 +438,17 @@ impl MarkerShapes {
         }
     }
 
+    /// [`new`](Self::new), or the calibration's own shapes when it has them (then nothing is
+    /// learned from the trial).
+    pub fn for_calibration(calibration: Option<&Calibration>, rate_hz: f64) -> Self {
+        let mut shapes = Self::new(rate_hz);
+        if let Some(points) = calibration.and_then(|c| c.shapes) {
+            shapes.points = points;
+            shapes.frames = [shapes.needed; 2];
+        }
+        shapes
+    }
+
     /// Frames each segment's shape (forearm, hand) was averaged over so far.
     pub fn frames(&self) -> [usize; 2] {
         self.frames
@@ -444,7 +500,13 @@ impl Calibration {
             forearm: Rotation3::from_matrix_unchecked(*t_f),
             hand: Rotation3::from_matrix_unchecked(*t_h),
             side: Side::Right,
+            shapes: None,
         }
+    }
+
+    /// This calibration with each segment's marker shape ([`shapes`](Self::shapes)).
+    pub fn with_shapes(self, shapes: Option<SegmentShapes>) -> Self {
+        Calibration { shapes, ..self }
     }
 
     /// How far each segment's measured placement lies from the body model's, forearm and hand,
@@ -471,7 +533,12 @@ impl Calibration {
                 )));
             }
         }
-        Ok(Calibration { forearm: Rotation3::from_matrix(&forearm), hand: Rotation3::from_matrix(&hand), side })
+        Ok(Calibration {
+            forearm: Rotation3::from_matrix(&forearm),
+            hand: Rotation3::from_matrix(&hand),
+            side,
+            shapes: None,
+        })
     }
 
     /// [`apply`](Self::apply) to every frame of `frames` (whole marker frames back to back),
@@ -789,6 +856,56 @@ mod tests {
         let fitted = hand_turn(&before, &rigid, Some(&mut shapes));
         let built = hand_turn(&before, &rigid, None);
         assert!((fitted - built).abs().max() < 1e-6, "{fitted} vs {built}");
+    }
+
+    #[test]
+    fn marker_shapes_are_the_calibration_frames_shapes_and_a_preset_one_is_fitted_from_the_first_frame() {
+        // The oracle: the hand turned 0.3 rad with one marker slid 6 mm (as above), its turn by
+        // least squares. The shapes are those of `before` (the calibration's frames: a frame
+        // with a marker missing is left out of the mean, a left arm's taken mirrored), so a
+        // stream given them fits `after` at once, with no frame of the trial learned.
+        let before = frames(&[[0.4, -0.5, 0.2]], &[[0.0; 3]; 6], 1.0, 0.3);
+        let mut gappy = before.clone();
+        gappy.extend(before.iter().enumerate().map(|(i, v)| if i == 4 { f32::NAN } else { v * 1.3 }));
+        let shapes = marker_shapes(&gappy, Side::Right).unwrap();
+        let mut learned = MarkerShapes::new(2.0);
+        let mut probe = before.clone();
+        Calibration::body_model().apply_fitted(&mut probe, 0, &mut learned, true).unwrap();
+        for (s, segment) in shapes.iter().enumerate() {
+            for (k, p) in segment.iter().enumerate() {
+                assert!(
+                    (p - learned.points[s][k]).norm() < 1e-9,
+                    "segment {s} marker {k}: {p} vs {}",
+                    learned.points[s][k]
+                );
+            }
+        }
+        let mut left = before.clone();
+        Side::Left.to_right(&mut left);
+        let mirrored = marker_shapes(&left, Side::Left).unwrap();
+        assert!(mirrored.iter().flatten().zip(shapes.iter().flatten()).all(|(a, b)| (a - b).norm() < 1e-9));
+        let all_gaps = vec![f32::NAN; MARKER_FRAME_LEN];
+        assert!(marker_shapes(&all_gaps, Side::Right).is_err());
+        // Preset from the calibration: nothing left to learn, and the first frame is fitted.
+        let cal = Calibration::body_model().with_shapes(Some(shapes));
+        let preset = MarkerShapes::for_calibration(Some(&cal), 2.0);
+        assert_eq!(preset.frames(), [1, 1]);
+        assert_eq!(MarkerShapes::for_calibration(Some(&Calibration::body_model()), 2.0).frames(), [0, 0]);
+        let mut slid = before.clone();
+        let hand = |f: &[f32], k: usize| Vector3::new(f[9 + 3 * k] as f64, f[10 + 3 * k] as f64, f[11 + 3 * k] as f64);
+        slid[12..15].copy_from_slice(&{
+            let p = hand(&before, 1) + Vector3::new(0.0, 0.0, 0.006);
+            [p.x as f32, p.y as f32, p.z as f32]
+        });
+        let mut from_preset = preset;
+        let mut a = slid.clone();
+        cal.apply_fitted(&mut a, 0, &mut from_preset, true).unwrap();
+        let mut from_before = MarkerShapes::new(2.0);
+        let mut b = before.clone();
+        cal.apply_fitted(&mut b, 0, &mut from_before, true).unwrap();
+        let mut c = slid.clone();
+        cal.apply_fitted(&mut c, 1, &mut from_before, true).unwrap();
+        assert!(a.iter().zip(&c).all(|(x, y)| (x - y).abs() < 1e-6), "preset shapes fit as shapes learned from before");
     }
 
     #[test]

@@ -100,13 +100,13 @@ impl Calibration {
         }
         let forearm = procrustes(&measured);
         let hand = forearm * neutral;
-        report.placement_deg = Calibration { forearm, hand, side: Side::Right }.placement_deg();
+        report.placement_deg = Calibration { forearm, hand, side: Side::Right, shapes: None }.placement_deg();
         if let Some(worst) = report.placement_deg.iter().copied().find(|&a| a > MAX_PLACEMENT_DEG) {
             return Err(bad(format!(
                 "the markers sit {worst:.0}° from the body model's placement (at most {MAX_PLACEMENT_DEG}°): are they labelled right?"
             )));
         }
-        Ok((Calibration { forearm, hand, side: Side::Right }, report))
+        Ok((Calibration { forearm, hand, side: Side::Right, shapes: None }, report))
     }
 }
 

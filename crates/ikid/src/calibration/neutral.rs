@@ -48,7 +48,7 @@ impl Calibration {
             method,
             side,
             movements: Vec::new(),
-            placement_deg: Calibration { forearm, hand, side }.placement_deg(),
+            placement_deg: Calibration { forearm, hand, side, shapes: None }.placement_deg(),
             axis_skew_deg: 0.0,
             neutral_frames: held.frames,
             neutral_spread_deg: held.spread_deg,
@@ -58,7 +58,7 @@ impl Calibration {
             functional: None,
             mirror: None,
         };
-        Ok((Calibration { forearm, hand, side }, report))
+        Ok((Calibration { forearm, hand, side, shapes: None }, report))
     }
 }
 

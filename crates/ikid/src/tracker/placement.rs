@@ -36,12 +36,21 @@ impl Tracker {
         };
         let s = segment as usize;
         let first_take = !self.templated[s];
-        self.template_frames[s] = if first_take { 1 } else { self.template_frames[s] + 1 };
+        // The calibration's own shape, measured with its rotations, once per start (a shape
+        // relearned later, a marker that moved on its segment, is the trial's).
+        let calibrated = calibration.shapes.filter(|_| first_take && self.template_frames[s] == 0);
+        self.template_frames[s] = if calibrated.is_some() {
+            ((TEMPLATE_S * self.settings.rate_hz).ceil() as usize).max(1)
+        } else if first_take {
+            1
+        } else {
+            self.template_frames[s] + 1
+        };
         let weight = 1.0 / self.template_frames[s] as f64;
         let first = body::first_marker(segment);
         for k in first..first + 3 {
             let p = Vector3::new(frame[3 * k], frame[3 * k + 1], frame[3 * k + 2]);
-            let local = t * (technical.transpose() * (p - origin));
+            let local = t * calibrated.map_or_else(|| technical.transpose() * (p - origin), |c| c[s][k - first]);
             let offset = Vector3::from(self.body.marker_offsets[k]);
             let mean = if first_take { local } else { offset + weight * (local - offset) };
             self.body.marker_offsets[k] = [mean.x, mean.y, mean.z];
