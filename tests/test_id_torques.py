@@ -155,3 +155,37 @@ def test_angles_the_markers_did_not_determine_are_named_not_called_a_short_stret
     err = capsys.readouterr().err
     assert "ra_wr_s_p not determined" in err and "needs all three angles" in err and "ikid track" in err
     assert not (tmp_path / "x.sto").exists()
+
+
+@pytest.mark.parametrize("path", ["reference", "network"])
+def test_torques_next_to_a_time_gap_are_flagged_restarted_and_the_rest_are_not(tmp_path, capsys, path):
+    # Review 3: `ikid id` wrote the rows on either side of a gap (rows `ikid track` left out)
+    # with status 0, where the low-pass and the differences see one side only: next to a gap the
+    # torques were off by about the torque itself. Rows within 0.25 s (1.5 periods of the 6 Hz
+    # cut-off) of the gap are now flagged restarted; the oracle for which rows: the gap's times.
+    # The exact Newton-Euler torques of the true angles show the flagged rows are the bad ones.
+    rate = 1000.0
+    t = np.arange(3000) / rate
+    w = 2 * np.pi * np.array([0.7, 1.1, 0.5])
+    amp, phase = np.array([0.5, 0.6, 0.2]), np.array([0.0, 1.0, 2.0])
+    q = amp * np.sin(w * t[:, None] + phase)
+    tau = ikid.reference_id(
+        q, amp * w * np.cos(w * t[:, None] + phase), -amp * w**2 * np.sin(w * t[:, None] + phase)
+    )
+    keep = (t < 1.5) | (t >= 1.52)
+    write_mot(tmp_path / "a.mot", t[keep], q[keep])
+    out = tmp_path / "a.sto"
+    args = ["id", str(tmp_path / "a.mot"), "-o", str(out)] + (["--reference"] if path == "reference" else [])
+    assert cli(args) == 0
+    assert "within 0.25 s of a time gap flagged restarted" in capsys.readouterr().out
+    table = read_storage(out)
+    status = table.column("ikid_status").astype(int)
+    near = ((table.time < 1.5) & (table.time > 1.5 - 0.001 - 0.25)) | (
+        (table.time >= 1.52) & (table.time < 1.52 + 0.25)
+    )
+    restarted = ikid.FRAME_STATUS["restarted"]
+    assert np.array_equal(status & restarted != 0, near)
+    err = np.abs(read_sto(out)[1] - tau[np.rint(table.time * rate).astype(int)])[:, 1]
+    away = ~near & (table.time > 0.5) & (table.time < 2.5)
+    assert err[near].max() > 5 * err[away].max()
+    assert cli([*args, "--strict"]) == 3

@@ -60,7 +60,8 @@ def calibrate(static_frames, movements: dict, *, fill: bool = True) -> Calibrati
         return frames
 
     static = prepared(static_frames)
-    return _with_shapes(Calibration.from_trials(static, {k: prepared(v) for k, v in movements.items()}), static)
+    moves = {k: prepared(v) for k, v in movements.items()}
+    return _with_shapes(Calibration.from_trials(static, moves), static)
 
 
 def _with_shapes(calibration: Calibration, neutral_frames) -> Calibration:
@@ -423,7 +424,9 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
     try:
         calibration = Calibration.from_matrices(doc["forearm"], doc["hand"], side=doc["side"])
         shapes = doc.get("marker_shapes_m")
-        return calibration if shapes is None else calibration.with_marker_shapes(np.asarray(shapes, np.float64))
+        if shapes is not None:
+            calibration = calibration.with_marker_shapes(np.asarray(shapes, np.float64))
+        return calibration
     except KeyError as e:
         raise InputError(f"{path}: no {e.args[0]!r} matrix") from None
     except (InputError, TypeError) as e:

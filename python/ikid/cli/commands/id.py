@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     time: memory does not grow with its length."""
     from ikid.io import mot_blocks, sto_writer
     from ikid.io.resample import resample_stretches
-    from ikid.kinematics import joint_state_blocks, min_stretch_rows
+    from ikid.kinematics import gap_edge_s, joint_state_blocks_near_gaps, min_stretch_rows
     from ikid.pipeline import check_rate, run_blocks
 
     if args.sd and args.reference:
@@ -159,13 +159,17 @@ def run(args: argparse.Namespace) -> int:
             rate = model.frame_rate_hz
     rows = short = implausible_angles = 0
     first_implausible: tuple[float, np.ndarray] | None = None
+    # Times of the rows next to a time gap (their states still settling), flagged restarted.
+    settling: set[float] = set()
+    restarted = ikid.FRAME_STATUS["restarted"]
 
     def states() -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """The joint states of the rows in stretches long enough to filter and difference; the
         rows whose angles no wrist reaches are counted (most of a file: it is refused below)."""
         nonlocal rows, short, implausible_angles, first_implausible
-        for time_s, state in joint_state_blocks(angles, rate, lowpass):
+        for time_s, state, near_gap in joint_state_blocks_near_gaps(angles, rate, lowpass):
             known = np.all(np.isfinite(state), axis=1)
+            settling.update(time_s[known & near_gap].tolist())
             rows += len(time_s)
             short += int((~known).sum())
             if known.any():
@@ -199,6 +203,7 @@ def run(args: argparse.Namespace) -> int:
     # Every .sto ikid writes has its ikid_status column, so one reader takes either path's
     # (the reference's rows are all 0: what no wrist gives is left out, not flagged).
     with sto_writer(output, with_status=True, with_sd=args.sd) as write:
+        flagged_settling = 0
         if model is None:
             implausible = 0
             for time_s, state in states():
@@ -206,8 +211,10 @@ def run(args: argparse.Namespace) -> int:
                 # What no wrist gives is not written as a number (the network's path flags it).
                 ok = _native.joint_status(state[:, :3], tau, args.mass_scale) == 0
                 implausible += int((~ok).sum())
-                write(time_s[ok], tau[ok], np.zeros(int(ok.sum()), np.uint16))
+                flags = np.array([restarted if t in settling else 0 for t in time_s[ok]], np.uint16)
+                write(time_s[ok], tau[ok], flags)
                 written += int(ok.sum())
+                flagged_settling += int(np.count_nonzero(flags))
             summary = (
                 f"{rows - short} frames, exact Newton-Euler (subject ×{args.length_scale:g} length, "
                 f"×{args.mass_scale:g} mass)"
@@ -218,11 +225,13 @@ def run(args: argparse.Namespace) -> int:
                     "range, the hand turned over, or past a wrist's torque for the subject's mass), "
                     "not written"
                 )
-            clean = implausible == 0
+            clean = implausible == 0 and flagged_settling == 0
         else:
 
             def sink(_frame, time_s, tau, status, sd) -> None:
-                nonlocal lacking, written
+                nonlocal lacking, written, flagged_settling
+                near = np.array([t in settling for t in time_s], bool)
+                status = np.where(near, status | restarted, status).astype(np.uint16)
                 if args.sd:
                     # Only rows with a σ: the first frames' (too few to tell the noise) are counted.
                     known = np.all(np.isfinite(sd), axis=1)
@@ -230,9 +239,10 @@ def run(args: argparse.Namespace) -> int:
                     time_s, tau, status, sd = time_s[known], tau[known], status[known], sd[known]
                 write(time_s, tau, status, sd if args.sd else None)
                 written += len(time_s)
+                flagged_settling += int(np.count_nonzero(status & restarted))
 
             run = run_blocks(model, states(), rate_hz=model.frame_rate_hz, source=args.input, on_rows=sink)
-            summary, clean = run.summary(), run.clean
+            summary, clean = run.summary(), run.clean and flagged_settling == 0
         if rows < least:
             raise too_few(rows)
         refuse_if_mostly_implausible()
@@ -240,6 +250,12 @@ def run(args: argparse.Namespace) -> int:
             notes.append(
                 f"{short} rows in stretches between time gaps shorter than {least} rows "
                 "(too short to low-pass and difference), not written"
+            )
+        if flagged_settling:
+            notes.append(
+                f"{flagged_settling} rows within {gap_edge_s(rate, lowpass):g} s of a time gap flagged "
+                "restarted (the low-pass and the differences see the stretch on one side only there: "
+                "their torques are less sure)"
             )
         if lacking:
             notes.append(
