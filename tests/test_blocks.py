@@ -474,3 +474,21 @@ def test_id_refuses_what_it_cannot_read_whole_and_names_where(tmp_path, monkeypa
     )
     assert "leave out --resample" in capsys.readouterr().err
     assert not (tmp_path / "x.sto").exists()
+
+
+@pytest.mark.parametrize("every", [10, 8])  # 100 Hz (its own member), 125 Hz (the 1 kHz grid)
+def test_two_takes_joined_with_a_time_jump_restart_the_window_instead_of_refusing_a_clock(every):
+    # Review 3: a file of two takes joined (its time jumping 4 s) had the frames after the jump
+    # refused as "a glitch of the source's clock", as a live stream's would be. A file's stamps
+    # are its own: the window restarts after the gap. The oracle: the second take run alone.
+    takes = [ikid.simulate("random", seed=s, duration=2.0, output_every=every) for s in (61, 62)]
+    second_time = takes[1].time + takes[0].time[-1] + 4.0
+    frames = np.concatenate([takes[0].markers, takes[1].markers])
+    time = np.concatenate([takes[0].time, second_time])
+    joined = pipeline.run_model("wrist-ik", frames, time)
+    alone = pipeline.run_model("wrist-ik", takes[1].markers, second_time)
+    assert joined.refused.total() == 0 and joined.gap_restarts == 1, joined.summary()
+    n0 = len(takes[0].time)
+    later = joined.frame >= n0
+    np.testing.assert_array_equal(joined.frame[later] - n0, alone.frame)
+    np.testing.assert_allclose(joined.values[later], alone.values, atol=1e-6)

@@ -34,6 +34,7 @@ __all__ = [
     "REFINED_SD_SCALE_Q",
     "REFINED_SD_SCALE_TAU",
     "RIGID_TOLERANCE_M",
+    "MAX_TIME_GAP_S",
     "RIGID_TOLERANCE_REL",
     "SD_SCALE_TAU",
     "build_model",
@@ -245,6 +246,7 @@ REFINER_GATE_NOISE: float
 REFINED_SD_SCALE_Q: float
 REFINED_SD_SCALE_TAU: float
 RIGID_TOLERANCE_M: float
+MAX_TIME_GAP_S: float
 RIGID_TOLERANCE_REL: float
 
 @final

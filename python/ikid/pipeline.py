@@ -542,6 +542,7 @@ def run_blocks(
     )
     bar = _progress(n_frames, source) if progress else None
     resampled_from = None
+    file_gaps = 0
     try:
         if how == "resample":
             # A block at a time, each stretch between time gaps alone: no frame is made in a gap.
@@ -555,11 +556,20 @@ def run_blocks(
                 if bar is not None:
                     bar.update(len(time))
             grid.finish()
+            file_gaps = grid.file_gaps
         else:
+            last_t = None
             for time, frames, filled in with_fills:
                 time = np.asarray(time, np.float64)
                 frames = np.asarray(frames, np.float64)
                 for i, (t, frame) in enumerate(zip(time, frames, strict=True)):
+                    # A file's stamps are its own, never a live clock's glitch: a step longer
+                    # than a live stream takes as frames lost (two takes joined, a pause in a
+                    # recording) is a gap, and the window starts again after it.
+                    if last_t is not None and t - last_t > _native.MAX_TIME_GAP_S:
+                        stream.reset()
+                        file_gaps += 1
+                    last_t = t
                     got = _push(stream, t, frame, model)
                     if filled is not None:
                         got = _retry_filled(stream, t, got, filled[i], model)
@@ -577,7 +587,7 @@ def run_blocks(
         model,
         rate_hz,
         resampled_from,
-        stream.gap_restarts,
+        stream.gap_restarts + file_gaps,
         at_frames=how == "at_frames",
         family_rates=tuple(m.frame_rate_hz for m in family),
     )
@@ -784,6 +794,9 @@ class _ModelGrid:
         self.n_seen = 0
         #: Time of the end of the last interval run: grid points before it have run.
         self.ran_until = -np.inf
+        #: The last grid point pushed, and the stream's restarts after a file's long gaps.
+        self.last_pushed: float | None = None
+        self.file_gaps = 0
 
     def feed(self, time: np.ndarray, values: np.ndarray, filled: np.ndarray | None = None) -> None:
         """The next recording frames; ``filled``: the same with leading gaps filled (a grid point
@@ -859,12 +872,16 @@ class _ModelGrid:
                         )
                         pts_filled[on_a], pts_filled[on_b] = filled[m], filled[m + 1]
                     for i, (k, g, p) in enumerate(zip(range(k_first, k_end), grid_t, pts, strict=True)):
-                        got = _push(self.stream, g, p, self.model)
-                        if pts_filled is not None:
-                            got = _retry_filled(self.stream, g, got, pts_filled[i], self.model)
-                        if got[0] == "none" and got[1] != "window filling":
-                            self.tally.grid_refused[got[1]] += 1
-                        self.outcomes[k] = got
+                        again = None if pts_filled is None else pts_filled[i]
+                        self.outcomes[k] = self._push_point(g, p, again)
+            else:
+                # A gap after this frame: the grid point on it (if it falls on one) is its own
+                # output, as the last frame of a file's is; the points after it are in the gap.
+                pos = (t_a - self.t0) / self.period
+                k = int(round(pos))
+                if abs(pos - k) < self.EPS and k not in self.outcomes:
+                    again = None if filled is None else filled[m]
+                    self.outcomes[k] = self._push_point(float(self.t0 + k * self.period), values[m], again)
             self.next_interval = j + 1
             self.ran_until = float(t_b)
             self._give_frames(upto=j + 1)
@@ -878,6 +895,22 @@ class _ModelGrid:
                 if np.array_equal(self.filled, self.values, equal_nan=True):
                     self.filled = None  # the filled frames are behind: no second pass needed
             self.base += drop
+
+    def _push_point(self, g: float, point: np.ndarray, filled: np.ndarray | None) -> tuple:
+        """One grid point at time ``g`` through the stream (``filled``: the point from the
+        filled frames, pushed again where the stream refused it for a missing marker)."""
+        # A file's gap longer than a live stream's frames lost restarts the window (as
+        # run_model's frames do), not a clock glitch to refuse.
+        if self.last_pushed is not None and g - self.last_pushed > _native.MAX_TIME_GAP_S:
+            self.stream.reset()
+            self.file_gaps += 1
+        self.last_pushed = float(g)
+        got = _push(self.stream, g, point, self.model)
+        if filled is not None:
+            got = _retry_filled(self.stream, g, got, filled, self.model)
+        if got[0] == "none" and got[1] != "window filling":
+            self.tally.grid_refused[got[1]] += 1
+        return got
 
     def _give_frames(self, upto: int, final: bool = False) -> None:
         """Gives the outcomes of frames ``next_frame .. upto - 1`` (global), whose grid points
@@ -961,4 +994,4 @@ def _run_at_recording_frames(
     grid = _ModelGrid(model, stream, rate_hz, tally)
     grid.feed(np.asarray(time, np.float64), np.asarray(frames, np.float64))
     grid.finish()
-    return tally.run(model, rate_hz, None, stream.gap_restarts, at_frames=True)
+    return tally.run(model, rate_hz, None, stream.gap_restarts + grid.file_gaps, at_frames=True)

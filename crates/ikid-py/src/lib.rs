@@ -38,5 +38,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
         bits.set_item(name, bit)?;
     }
     m.add("FRAME_STATUS", bits)?;
+    // A live stream's largest step in time taken as frames lost (a file's longer gaps restart it).
+    m.add("MAX_TIME_GAP_S", ikid::stream::MAX_TIME_GAP_S)?;
     Ok(())
 }
