@@ -492,3 +492,13 @@ def test_two_takes_joined_with_a_time_jump_restart_the_window_instead_of_refusin
     later = joined.frame >= n0
     np.testing.assert_array_equal(joined.frame[later] - n0, alone.frame)
     np.testing.assert_allclose(joined.values[later], alone.values, atol=1e-6)
+
+
+def test_a_time_that_is_not_a_number_is_named_by_its_row_not_read_as_a_rate():
+    # Review 3: one NaN in the time array read as "rate_hz: NaN: expected a rate in Hz greater
+    # than 0", an argument the user never gave.
+    trial = ikid.simulate("random", seed=63, duration=0.5)
+    time = trial.time.copy()
+    time[100] = np.nan
+    with pytest.raises(ikid.InputError, match=r"time: row 100 is nan \(1 rows not finite\)"):
+        pipeline.run_model("wrist-ik", trial.markers, time)

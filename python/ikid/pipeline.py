@@ -479,6 +479,12 @@ def run_model(
         raise _native.InputError(
             f"{source}: expected frames (n, {n_cols}) and time (n,), got {frames.shape} and {time.shape}"
         )
+    bad = np.flatnonzero(~np.isfinite(time))
+    if bad.size:
+        raise _native.InputError(
+            f"{source}: time: row {bad[0]} is {time[bad[0]]} ({bad.size} rows not finite): every frame needs "
+            "its time in seconds"
+        )
     if rate_hz is None and len(time) > 1:
         rate_hz = 1.0 / float(np.median(np.diff(time)))
     blocks = (
