@@ -1242,6 +1242,29 @@ def test_stream_refuses_markers_an_uncalibrated_run_cannot_read_before_writing_a
         assert "markers RSP and FAP" in captured.err and "calibrate the subject" in captured.err, captured.err
 
 
+def test_stream_says_the_hands_columns_came_first_when_each_segment_is_laid_out_as_the_others(
+    trial, tmp_path, monkeypatch, capsys
+):
+    # Review 3: a source sending the hand's three markers before the forearm's was told its
+    # markers were "laid out otherwise (another session, subject or cluster)": calibrate again.
+    # Each segment's distances are the other's as calibrated, so the message now says the
+    # columns are exchanged and gives ikid's order; with the columns in order it runs.
+    static = write_trc(tmp_path / "static.trc", trial.time[:50], trial.markers[:50], 1000.0)
+    cal = tmp_path / "cal.json"
+    assert exit_status(["calibrate", "--static", str(static), "--method", "neutral", "-o", str(cal)]) == 0
+    frames = np.array(trial.markers[:100], np.float64)
+    exchanged = np.concatenate([frames[:, 9:], frames[:, :9]], axis=1)
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(exchanged)))
+    capsys.readouterr()
+    assert exit_status(["stream", "--rate", "1000", "--calibration", str(cal)]) == 2
+    err = capsys.readouterr().err
+    assert "the hand's columns come first?" in err and "RSP, USP, FAP, MC2, MC5, MCB in that order" in err, (
+        err
+    )
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames)))
+    assert exit_status(["stream", "--rate", "1000", "--calibration", str(cal)]) == 0
+
+
 def test_stream_writes_no_value_for_a_hand_read_turned_over_and_flags_the_rest(trial, monkeypatch, capsys):
     # From frame 150 on the hand's markers are turned 160° about the forearm's long axis: the
     # hand reads turned over, no wrist's posture. As ik and track, no such value is written:

@@ -263,16 +263,34 @@ def check_marker_distances(
             spread = _distance_rows(frames, first).std(axis=0)
             for (a, b), then, here, sd in zip(_PAIRS, stored[segment], now[segment], spread, strict=True):
                 pairs.append((segment, f"{names[first + a][0]} and {names[first + b][0]}", here, then, sd))
+
+    def fits(here: float, then: float) -> bool:
+        return abs(here - then) <= _native.RIGID_TOLERANCE_M + _native.RIGID_TOLERANCE_REL * then
+
     # Markers laid out otherwise altogether are named as such before a single marker moved.
     for segment, pair, here, then, _ in pairs:
-        if abs(here - then) > _native.RIGID_TOLERANCE_M + _native.RIGID_TOLERANCE_REL * then:
+        if fits(here, then):
+            continue
+        exchanged = zip(
+            now.get("forearm", []) + now.get("hand", []),
+            stored.get("hand", []) + stored.get("forearm", []),
+            strict=True,
+        )
+        if len(now) == len(stored) == 2 and all(fits(h, t) for h, t in exchanged):
+            # Each segment's markers are the other's as calibrated: columns in the wrong order.
             raise InputError(
-                f"{source}: its {segment}'s markers {pair} are "
-                f"{1e3 * here:.0f} mm apart, {1e3 * then:.0f} mm in the calibration ({path}): it was "
-                "measured on markers laid out otherwise (another session, subject or cluster), so it "
-                "cannot say where these sit; calibrate this session (`ikid calibrate` on its own static "
-                "trial)"
+                f"{source}: the forearm's markers are laid out as the calibration's hand and the hand's as "
+                f"its forearm ({path}): the hand's columns come first? ikid reads "
+                f"{', '.join(m[0] for m in names)} in that order (three on the forearm, then three on "
+                "the hand)"
             )
+        raise InputError(
+            f"{source}: its {segment}'s markers {pair} are "
+            f"{1e3 * here:.0f} mm apart, {1e3 * then:.0f} mm in the calibration ({path}): it was "
+            "measured on markers laid out otherwise (another session, subject or cluster), so it "
+            "cannot say where these sit; calibrate this session (`ikid calibrate` on its own static "
+            "trial)"
+        )
     for segment, pair, here, then, sd in pairs if whole else ():
         if abs(here - then) > max(MOVED_MARKER_M, MOVED_MARKER_SPREADS * sd):
             raise InputError(
