@@ -256,11 +256,14 @@ def check_marker_distances(
     calibrations kept the distances passes."""
     stored = calibration_info(path).get("marker_distances_m") or {}
     names = _native.MARKERS
-    now = marker_distances(frames)
+    now = {}  # each segment's median distances, as marker_distances gives them
     pairs = []  # (segment, pair, here, then, spread), forearm first
     for segment, first in (("forearm", 0), ("hand", 3)):
+        rows = _distance_rows(frames, first)
+        if len(rows):
+            now[segment] = np.median(rows, axis=0).tolist()
         if segment in stored and segment in now:
-            spread = _distance_rows(frames, first).std(axis=0)
+            spread = rows.std(axis=0)
             for (a, b), then, here, sd in zip(_PAIRS, stored[segment], now[segment], spread, strict=True):
                 pairs.append((segment, f"{names[first + a][0]} and {names[first + b][0]}", here, then, sd))
 

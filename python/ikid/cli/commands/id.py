@@ -159,17 +159,25 @@ def run(args: argparse.Namespace) -> int:
             rate = model.frame_rate_hz
     rows = short = implausible_angles = 0
     first_implausible: tuple[float, np.ndarray] | None = None
-    # Times of the rows next to a time gap (their states still settling), flagged restarted.
-    settling: set[float] = set()
+    # Times of the rows next to a time gap (their states still settling), flagged restarted;
+    # the rows come back in time order, so those before the rows asked about are dropped.
+    settling = np.empty(0)
+
+    def near_gap(time_s: np.ndarray) -> np.ndarray:
+        nonlocal settling
+        if len(time_s):
+            settling = settling[settling >= time_s[0]]
+        return np.isin(time_s, settling)
+
     restarted = ikid.FRAME_STATUS["restarted"]
 
     def states() -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """The joint states of the rows in stretches long enough to filter and difference; the
         rows whose angles no wrist reaches are counted (most of a file: it is refused below)."""
-        nonlocal rows, short, implausible_angles, first_implausible
-        for time_s, state, near_gap in joint_state_blocks_near_gaps(angles, rate, lowpass):
+        nonlocal rows, short, implausible_angles, first_implausible, settling
+        for time_s, state, near in joint_state_blocks_near_gaps(angles, rate, lowpass):
             known = np.all(np.isfinite(state), axis=1)
-            settling.update(time_s[known & near_gap].tolist())
+            settling = np.concatenate([settling, time_s[known & near]])
             rows += len(time_s)
             short += int((~known).sum())
             if known.any():
@@ -211,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
                 # What no wrist gives is not written as a number (the network's path flags it).
                 ok = _native.joint_status(state[:, :3], tau, args.mass_scale) == 0
                 implausible += int((~ok).sum())
-                flags = np.array([restarted if t in settling else 0 for t in time_s[ok]], np.uint16)
+                flags = np.where(near_gap(time_s[ok]), restarted, 0).astype(np.uint16)
                 write(time_s[ok], tau[ok], flags)
                 written += int(ok.sum())
                 flagged_settling += int(np.count_nonzero(flags))
@@ -230,8 +238,7 @@ def run(args: argparse.Namespace) -> int:
 
             def sink(_frame, time_s, tau, status, sd) -> None:
                 nonlocal lacking, written, flagged_settling
-                near = np.array([t in settling for t in time_s], bool)
-                status = np.where(near, status | restarted, status).astype(np.uint16)
+                status = np.where(near_gap(time_s), status | restarted, status).astype(np.uint16)
                 if args.sd:
                     # Only rows with a σ: the first frames' (too few to tell the noise) are counted.
                     known = np.all(np.isfinite(sd), axis=1)
