@@ -180,6 +180,16 @@ def test_stream_of_unknown_rate_is_refused_and_stamps_at_another_rate_say_which(
     assert cli(["stream", "--time"]) == 2
     err = capsys.readouterr().err
     assert "the time stamps step by 1, a frame at 1000 Hz: are they in ms? --time reads seconds" in err, err
+    # In milliseconds at another rate than the stream's (review 3: 100 Hz stamped 0, 10, 20 ms
+    # was "a 0.03 Hz source": each 10 s step is refused as a clock glitch, and the step was taken
+    # from the last one kept): the stamps' own step, and the rate they say in ms.
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames, with_time=np.arange(100) * 10.0)))
+    assert cli(["stream", "--time"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        "the time stamps step by 10, a 100 Hz source if they are ms: are they in ms? --time reads seconds: "
+        "divide them by 1000 and give --rate 100 (the family's member at that rate)" in err
+    ), err
     # At its own rate, nothing of the kind.
     monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames, with_time=np.arange(100) * 0.01)))
     assert cli(["stream", "--time", "--rate", "100"]) == 0

@@ -261,6 +261,8 @@ class _Losses:
         self.reanchors = 0
         self.last_number: int | None = None
         self.last_time: float | None = None
+        #: The last stamp as it came (last_time steps over a clock glitch instead).
+        self.last_stamp: float | None = None
         self.candidate: int | None = None
         self.candidate_frames = 0
         #: Time stamps in a row more than MAX_JUMP_S after the last counted one.
@@ -287,9 +289,15 @@ class _Losses:
         self.last_number, self.candidate, self.candidate_frames = n, None, 0
         self.unnumbered = 0
 
+    def stamp(self, t: float) -> None:
+        """Every time stamp as it comes, refused or not: the source's own steps, stamp to
+        stamp, say its rate (stamps in ms step by more than MAX_JUMP_S every frame, and each is
+        refused as a clock glitch until three in a row re-anchor it)."""
+        if self.last_stamp is not None and len(self.steps) < self.RATE_STEPS and t > self.last_stamp:
+            self.steps.append(t - self.last_stamp)
+        self.last_stamp = t
+
     def time(self, t: float) -> None:
-        if self.last_time is not None and len(self.steps) < self.RATE_STEPS and t > self.last_time:
-            self.steps.append(t - self.last_time)
         if self.last_time is not None and t - self.last_time > self.MAX_JUMP_S:
             # A glitch of the source's clock, not frames lost (ikid.Stream refuses it; the
             # tracker, which takes no stamps, runs on): not counted, and the new place only
@@ -314,7 +322,7 @@ class _Losses:
 
     def restart(self) -> None:
         """After a reconnection: the source's numbering and clock may start again."""
-        self.last_number = self.last_time = self.candidate = None
+        self.last_number = self.last_time = self.last_stamp = self.candidate = None
         self.candidate_frames = self.jumps = 0
 
 
@@ -660,6 +668,8 @@ def _run_with(
             notes["skipped"] += len(batch) - 1
             for f in batch[:-1]:  # skipped, not lost: their numbers and times still count
                 try:
+                    if f.time is not None:
+                        losses.stamp(f.time)
                     if f.number is not None:
                         losses.number(f.number)
                     elif f.time is not None:
@@ -706,6 +716,8 @@ def _run_with(
                 if placement is not None and placement.see(f.values):
                     # Checked (an error here ends the stream, exit 2): what was held goes out.
                     placement.release(out, sink)
+                if f.time is not None:
+                    losses.stamp(f.time)
                 try:
                     frame_values = f.values
                     if up != "+y" and frame_len == 18:  # marker frames, from a lab of its own
@@ -849,25 +861,39 @@ def _run_with(
 def _stamps_hint(other: float, rate: float, members: list[float]) -> str:
     """What stamps at ``other`` Hz say to a stream at ``rate`` Hz, and what to give: the model
     family's member nearest the stamps' rate when within a quarter of it (stamps that jitter
-    say it only roughly), else the stamps' own rate (``members`` empty: any rate runs)."""
-    if abs(other * 1e3 / rate - 1.0) <= 0.2:
+    say it only roughly), else the stamps' own rate (``members`` empty: any rate runs). Stamps
+    a second or more apart that read as a motion capture rate in milliseconds are said to be in
+    ms, with the rate they say then."""
+    in_ms = 1e3 * other
+    if abs(in_ms / rate - 1.0) <= 0.2:
         return (
             f"the time stamps step by {1 / other:.3g}, a frame at {rate:g} Hz: are they in ms? "
             "--time reads seconds"
         )
-    near = [m for m in members if abs(m / other - 1.0) <= 0.25]
-    give = (
-        f"give --rate {min(near, key=lambda m: abs(m - other)):g} (the family's member at that rate)"
-        if near
-        else f"give --rate {other:.4g}"
-        + (
-            f" (no member of the model's family is near it: {', '.join(f'{m:g}' for m in members)} Hz)"
-            if members
-            else ""
+    if other <= 1.0 and MS_STAMP_RATES_HZ[0] <= in_ms <= MS_STAMP_RATES_HZ[1]:
+        return (
+            f"the time stamps step by {1 / other:.3g}, a {in_ms:.4g} Hz source if they are ms: are they "
+            f"in ms? --time reads seconds: divide them by 1000 and {_rate_to_give(in_ms, members)}"
         )
-    )
     source = f"a {other:.4g} Hz source read at {rate:g} Hz"
-    return f"the time stamps come {1e3 / other:.3g} ms apart, {source}: {give}"
+    return f"the time stamps come {1e3 / other:.3g} ms apart, {source}: {_rate_to_give(other, members)}"
+
+
+#: The rates, Hz, that stamps a second or more apart are read as if in milliseconds: motion
+#: capture's (30 Hz webcams to 10 kHz high-speed systems); no wrist source sends under 1 Hz.
+MS_STAMP_RATES_HZ = (10.0, 10000.0)
+
+
+def _rate_to_give(hz: float, members: list[float]) -> str:
+    """The --rate to give for a source at ``hz``: the family's member nearest, within a quarter."""
+    near = [m for m in members if abs(m / hz - 1.0) <= 0.25]
+    if near:
+        return f"give --rate {min(near, key=lambda m: abs(m - hz)):g} (the family's member at that rate)"
+    return f"give --rate {hz:.4g}" + (
+        f" (no member of the model's family is near it: {', '.join(f'{m:g}' for m in members)} Hz)"
+        if members
+        else ""
+    )
 
 
 def _member_rates(args: argparse.Namespace) -> list[float]:
