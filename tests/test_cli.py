@@ -246,10 +246,13 @@ def test_id_from_a_mot_file_equals_the_api(trial, tmp_path, capsys):
         cli(["id", str(tmp_path / "t.mot"), "-o", str(tmp_path / "ref.sto"), "--reference", *unfiltered]) == 0
     )
     t, tau = read_sto(tmp_path / "ref.sto")
-    # Its ikid_status column, as the network's .sto has: every row written is plausible (0).
+    # Its ikid_status column, as the network's .sto has: every row written is plausible (0), but
+    # the file's first and last two, whose differences are one-sided (flagged restarted).
     stored = ikid.io.read_storage(tmp_path / "ref.sto")
     assert stored.columns[-1] == "ikid_status" and len(stored.time) == len(t)
-    assert not stored.values[:, -1].any()
+    edges = np.zeros(len(t), int)
+    edges[[0, 1, -2, -1]] = ikid.FRAME_STATUS["restarted"]
+    np.testing.assert_array_equal(stored.values[:, -1], edges)
     t_file, q = read_mot(tmp_path / "t.mot")  # the angles as the file holds them
     qd = np.gradient(q, t_file, axis=0)
     want = ikid.reference_id(q, qd, np.gradient(qd, t_file, axis=0))

@@ -104,42 +104,41 @@ def joint_state_blocks(
     ``(time, states)`` blocks, every input row once, in order. A long stretch is filtered a
     piece at a time with :func:`overlap_rows` of context each side, as it would be whole
     (within rounding): memory is a block's and two overlaps', whatever the length."""
-    for time, states, _ in joint_state_blocks_near_gaps(blocks, rate_hz, lowpass_hz):
+    for time, states, _, _ in joint_state_blocks_near_edges(blocks, rate_hz, lowpass_hz):
         yield time, states
 
 
-def joint_state_blocks_near_gaps(
+def joint_state_blocks_near_edges(
     blocks: Iterable[tuple[np.ndarray, np.ndarray]], rate_hz: float, lowpass_hz: float | None
-) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
     """:func:`joint_state_blocks`, each block with which of its rows lie within
-    :func:`gap_edge_s` of a time gap (before or after it; not the file's own ends), whose
-    states are still settling."""
-    edge = gap_edge_s(rate_hz, lowpass_hz)
-    # The current stretch's first time, whether a gap came before it, and its last time once
-    # it has ended at a gap.
+    :func:`gap_edge_s` of a time gap (before or after it), and which within it of the file's
+    own first or last row: there the states are still settling (the filter and the differences
+    have the stretch on one side only; a file's ends are as far off as a gap's, so a torque
+    there is as unsure)."""
+    # A quarter period less, so a row at the edge itself is not in or out by its time's rounding.
+    edge = gap_edge_s(rate_hz, lowpass_hz) - 0.25 / rate_hz
+    # The current stretch's first time, and whether a gap (not the file's start) came before it.
     first_time, after_gap = None, False
 
-    def near(t: np.ndarray, end: float | None) -> np.ndarray:
-        close = np.zeros(len(t), bool)
-        if after_gap and first_time is not None:
-            close |= t - first_time < edge
-        if end is not None:
-            close |= end - t < edge
-        return close
-
-    for time, states, end in _state_blocks(blocks, rate_hz, lowpass_hz):
+    for time, states, end, last in _state_blocks(blocks, rate_hz, lowpass_hz):
         if first_time is None and len(time):
             first_time = float(time[0])
-        yield time, states, near(time, end)
+        start_near = time - first_time < edge if first_time is not None else np.zeros(len(time), bool)
+        end_near = end - time < edge if end is not None else np.zeros(len(time), bool)
+        near_gap = (start_near if after_gap else False) | (end_near if not last else False)
+        near_file_end = (start_near if not after_gap else False) | (end_near if last else False)
+        yield time, states, np.asarray(near_gap, bool), np.asarray(near_file_end, bool)
         if end is not None:  # the stretch ended at a gap: the next one starts after it
             first_time, after_gap = None, True
 
 
 def _state_blocks(
     blocks: Iterable[tuple[np.ndarray, np.ndarray]], rate_hz: float, lowpass_hz: float | None
-) -> Iterator[tuple[np.ndarray, np.ndarray, float | None]]:
+) -> Iterator[tuple[np.ndarray, np.ndarray, float | None, bool]]:
     """:func:`joint_state_blocks`' blocks, each with the last time of its stretch when the
-    block ends a stretch at a time gap (``None`` otherwise)."""
+    block ends a stretch (``None`` otherwise), and whether that end is the file's (the last
+    block) rather than a time gap's."""
     if lowpass_hz:
         from scipy.signal import sosfiltfilt
 
@@ -177,6 +176,7 @@ def _state_blocks(
                     time[done:end],
                     _stretch(states, time[:end], q[:end], done, given, least),
                     float(time[end - 1]),
+                    False,
                 )
             time, q = time[end:], q[end:]
             start -= end
@@ -184,12 +184,14 @@ def _state_blocks(
         # A stretch going on: give all but the context its last rows need.
         if len(time) - done > 2 * context:
             upto = len(time) - context
-            yield time[done:upto], states(time, q)[done:upto], None
+            yield time[done:upto], states(time, q)[done:upto], None, False
             given += upto - done
             time, q = time[upto - context :], q[upto - context :]
             done = context
     if len(time) > done:
-        yield time[done:], _stretch(states, time, q, done, given, least), None
+        # Its context rows (:func:`overlap_rows`, many periods of the cut-off) were held back
+        # to here, so every row within gap_edge_s of the file's end is in this block.
+        yield time[done:], _stretch(states, time, q, done, given, least), float(time[-1]), True
 
 
 def _stretch(states, time: np.ndarray, q: np.ndarray, done: int, given: int, least: int) -> np.ndarray:

@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     time: memory does not grow with its length."""
     from ikid.io import mot_blocks, sto_writer
     from ikid.io.resample import resample_stretches
-    from ikid.kinematics import gap_edge_s, joint_state_blocks_near_gaps, min_stretch_rows
+    from ikid.kinematics import gap_edge_s, joint_state_blocks_near_edges, min_stretch_rows
     from ikid.pipeline import check_rate, run_blocks
 
     if args.sd and args.reference:
@@ -159,25 +159,28 @@ def run(args: argparse.Namespace) -> int:
             rate = model.frame_rate_hz
     rows = short = implausible_angles = 0
     first_implausible: tuple[float, np.ndarray] | None = None
-    # Times of the rows next to a time gap (their states still settling), flagged restarted;
-    # the rows come back in time order, so those before the rows asked about are dropped.
-    settling = np.empty(0)
+    # Times of the rows next to a time gap, and next to the file's own ends (their states still
+    # settling), flagged restarted; the rows come back in time order, so those before the rows
+    # asked about are dropped.
+    settling, at_ends = np.empty(0), np.empty(0)
 
-    def near_gap(time_s: np.ndarray) -> np.ndarray:
-        nonlocal settling
+    def near_edges(time_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Which of these rows lie next to a time gap, and which next to the file's ends."""
+        nonlocal settling, at_ends
         if len(time_s):
-            settling = settling[settling >= time_s[0]]
-        return np.isin(time_s, settling)
+            settling, at_ends = settling[settling >= time_s[0]], at_ends[at_ends >= time_s[0]]
+        return np.isin(time_s, settling), np.isin(time_s, at_ends)
 
     restarted = ikid.FRAME_STATUS["restarted"]
 
     def states() -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """The joint states of the rows in stretches long enough to filter and difference; the
         rows whose angles no wrist reaches are counted (most of a file: it is refused below)."""
-        nonlocal rows, short, implausible_angles, first_implausible, settling
-        for time_s, state, near in joint_state_blocks_near_gaps(angles, rate, lowpass):
+        nonlocal rows, short, implausible_angles, first_implausible, settling, at_ends
+        for time_s, state, near_gap, near_end in joint_state_blocks_near_edges(angles, rate, lowpass):
             known = np.all(np.isfinite(state), axis=1)
-            settling = np.concatenate([settling, time_s[known & near]])
+            settling = np.concatenate([settling, time_s[known & near_gap]])
+            at_ends = np.concatenate([at_ends, time_s[known & near_end]])
             rows += len(time_s)
             short += int((~known).sum())
             if known.any():
@@ -211,7 +214,9 @@ def run(args: argparse.Namespace) -> int:
     # Every .sto ikid writes has its ikid_status column, so one reader takes either path's
     # (the reference's rows are all 0: what no wrist gives is left out, not flagged).
     with sto_writer(output, with_status=True, with_sd=args.sd) as write:
-        flagged_settling = 0
+        # Rows flagged next to a gap (--strict counts them) and next to the file's ends (every
+        # file has those: said, not counted).
+        flagged_settling = flagged_ends = 0
         if model is None:
             implausible = 0
             for time_s, state in states():
@@ -219,10 +224,11 @@ def run(args: argparse.Namespace) -> int:
                 # What no wrist gives is not written as a number (the network's path flags it).
                 ok = _native.joint_status(state[:, :3], tau, args.mass_scale) == 0
                 implausible += int((~ok).sum())
-                flags = np.where(near_gap(time_s[ok]), restarted, 0).astype(np.uint16)
-                write(time_s[ok], tau[ok], flags)
+                gap, end = near_edges(time_s[ok])
+                write(time_s[ok], tau[ok], np.where(gap | end, restarted, 0).astype(np.uint16))
                 written += int(ok.sum())
-                flagged_settling += int(np.count_nonzero(flags))
+                flagged_settling += int(np.count_nonzero(gap & ~end))
+                flagged_ends += int(np.count_nonzero(end))
             summary = (
                 f"{rows - short} frames, exact Newton-Euler (subject ×{args.length_scale:g} length, "
                 f"×{args.mass_scale:g} mass)"
@@ -237,16 +243,19 @@ def run(args: argparse.Namespace) -> int:
         else:
 
             def sink(_frame, time_s, tau, status, sd) -> None:
-                nonlocal lacking, written, flagged_settling
-                status = np.where(near_gap(time_s), status | restarted, status).astype(np.uint16)
+                nonlocal lacking, written, flagged_settling, flagged_ends
+                gap, end = near_edges(time_s)
+                status = np.where(gap | end, status | restarted, status).astype(np.uint16)
                 if args.sd:
                     # Only rows with a σ: the first frames' (too few to tell the noise) are counted.
                     known = np.all(np.isfinite(sd), axis=1)
                     lacking += int((~known).sum())
                     time_s, tau, status, sd = time_s[known], tau[known], status[known], sd[known]
+                    gap, end = gap[known], end[known]
                 write(time_s, tau, status, sd if args.sd else None)
                 written += len(time_s)
-                flagged_settling += int(np.count_nonzero(status & restarted))
+                flagged_settling += int(np.count_nonzero(gap & ~end))
+                flagged_ends += int(np.count_nonzero(end))
 
             run = run_blocks(model, states(), rate_hz=model.frame_rate_hz, source=args.input, on_rows=sink)
             summary, clean = run.summary(), run.clean and flagged_settling == 0
@@ -263,6 +272,12 @@ def run(args: argparse.Namespace) -> int:
                 f"{flagged_settling} rows within {gap_edge_s(rate, lowpass):g} s of a time gap flagged "
                 "restarted (the low-pass and the differences see the stretch on one side only there: "
                 "their torques are less sure)"
+            )
+        if flagged_ends:
+            notes.append(
+                f"{flagged_ends} rows within {gap_edge_s(rate, lowpass):g} s of the file's first or last "
+                "row flagged restarted (as next to a gap: one side only; every file has them, so "
+                "--strict does not count them)"
             )
         if lacking:
             notes.append(
