@@ -4,6 +4,7 @@ a static trial and two single-coordinate movements."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 
@@ -545,6 +546,27 @@ def test_calibrate_command_from_landmarks_and_neutral_frames_of_a_task_trial(mot
     assert "the hand moves" in capsys.readouterr().err
     with pytest.raises(SystemExit, match="outside frames"):
         cli(base + ["--frames", f"0-{len(frames)}"])
+    # A C3D cut from a longer capture numbers its frames from there (Nexus showed a Plug-in Gait
+    # trial's from 695): a frame given in those numbers is outside, and the message says how
+    # they map to ikid's, which count from 0.
+    cut = dataclasses.replace(io.read_markers(path), metadata={"first_frame": 694})
+    cut_path = io.write_c3d(tmp_path / "cut.c3d", cut)
+    assert io.read_markers(cut_path).metadata["first_frame"] == 694
+    n = len(frames)
+    cut_base = ["calibrate", "--static", str(cut_path), "--map", str(tmp_path / "lab.toml"), "-o", str(out)]
+    with pytest.raises(
+        SystemExit,
+        match=rf"{690 + n}-{694 + n} is outside frames 0-{n - 1} of .*cut.c3d; ikid counts a file's frames "
+        rf"from 0, and this one numbers its own from 695 \(as Nexus shows them\): its frames "
+        rf"695-{694 + n} are --frames 0-{n - 1}",
+    ):
+        cli([*cut_base, "--frames", f"{690 + n}-{694 + n}"])
+    # In range, the frames taken are said in the file's own numbers too.
+    capsys.readouterr()
+    assert cli([*cut_base, "--frames", "0-99"]) == 0
+    assert f"--frames 0-99 counted from 0: {cut_path}'s own frames 695-794" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match=r"outside frames 0-\d+ of .*task.trc$"):
+        cli(base + ["--frames", f"0-{len(frames)}"])  # numbered from 0: nothing more to say
     # A range given backwards, or a frame named twice (it would count twice), says so.
     with pytest.raises(SystemExit, match=r"'9-0': 9-0 runs backwards; give the first frame first \(0-9\)"):
         cli(base + ["--frames", "9-0"])

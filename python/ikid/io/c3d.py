@@ -174,6 +174,8 @@ def write_c3d(path: str | os.PathLike[str], data: MarkerData, units: str = "mm")
     c["parameters"]["POINT"]["UNITS"]["value"] = [units]
     if data.metadata.get("up"):  # the lab's up axis, declared as Vicon and Qualisys declare it
         c.add_parameter("POINT", "Y_SCREEN", [str(data.metadata["up"]).upper()])
+    if data.metadata.get("first_frame"):  # a capture cut from a longer one keeps its numbering
+        c["header"]["points"]["first_frame"] = int(data.metadata["first_frame"])
     positions = _on_frame_grid(data, path)
     pts = np.ones((4, len(data.labels), len(positions)))
     pts[:3] = np.transpose(positions / scale, (2, 1, 0))

@@ -112,8 +112,10 @@ def run(args: argparse.Namespace) -> int:
     from ikid.io import MarkerMap, read_markers
     from ikid.io.mapping import MarkerMapWarning, landmark_names
 
-    def _frame_selection(spec: str, n: int, source: str) -> np.ndarray:
-        """Frame numbers (0-based) from "0-9", "41,76,220" or "0-4,10-14"; each within the file."""
+    def _frame_selection(spec: str, n: int, source: str, own_first: int | None = None) -> np.ndarray:
+        """Frame numbers (0-based) from "0-9", "41,76,220" or "0-4,10-14"; each within the file.
+        ``own_first``: the number the file gives its first frame, when not 0 or 1 (a C3D cut from
+        a longer capture: Nexus shows 695 onward), said when a frame is outside."""
         chosen: list[int] = []
         for part in spec.split(","):
             lo, sep, hi = part.strip().partition("-")
@@ -129,8 +131,16 @@ def run(args: argparse.Namespace) -> int:
                     f"first ({last}-{first})"
                 )
             if not 0 <= first <= last < n:
+                own = (
+                    f"; ikid counts a file's frames from 0, and this one numbers its own from {own_first} "
+                    f"(as Nexus shows them): its frames {own_first}-{own_first + n - 1} are "
+                    f"--frames 0-{n - 1}"
+                    if own_first is not None
+                    else ""
+                )
                 raise SystemExit(
-                    f"ikid: error: --frames {spec!r}: {part.strip()} is outside frames 0-{n - 1} of {source}"
+                    f"ikid: error: --frames {spec!r}: {part.strip()} is outside frames 0-{n - 1} of "
+                    f"{source}{own}"
                 )
             chosen += range(first, last + 1)
         repeated = sorted({f for f in chosen if chosen.count(f) > 1})
@@ -151,7 +161,9 @@ def run(args: argparse.Namespace) -> int:
     mapping = MarkerMap.load(args.map) if args.map else MarkerMap.identity()
     side = args.side or mapping.side
     static = read_markers(args.static)
-    chosen = _frame_selection(args.frames, len(static), args.static) if args.frames else None
+    chosen = (
+        _frame_selection(args.frames, len(static), args.static, _own_first(static)) if args.frames else None
+    )
     forearm_landmarks = None
     if mapping.forearm_cluster:
         # A forearm cluster with one hand marker: its anatomical points, measured in the
@@ -280,7 +292,9 @@ def run(args: argparse.Namespace) -> int:
         motion = read_markers(args.motion)
         moving = motion.frames(mapping)
         if args.motion_frames:
-            moving = moving[_frame_selection(args.motion_frames, len(moving), args.motion)]
+            moving = moving[
+                _frame_selection(args.motion_frames, len(moving), args.motion, _own_first(motion))
+            ]
         cal = calibrate_functional(neutral, moving, side=side)
         provenance["motion"] = args.motion
         provenance["motion_frames"] = args.motion_frames
@@ -306,6 +320,13 @@ def run(args: argparse.Namespace) -> int:
         f"{used} of {len(neutral)} neutral frames used (spread {spread:.1f}°, marker noise "
         f"{noise:.1f}° a frame, neutral posture ± {uncertainty:.2f}°)"
     ]
+    if chosen is not None and (own := _own_first(static)) is not None:
+        # Frames given in the file's own numbers would be other frames: which ones were taken.
+        details.insert(
+            0,
+            f"--frames {args.frames} counted from 0: {args.static}'s own frames "
+            f"{own + int(chosen.min())}-{own + int(chosen.max())}",
+        )
     if r.get("movements"):
         details.append(
             "movements: "
@@ -436,3 +457,10 @@ def _forearm_landmarks(mapping, source, where) -> dict:
         "frames": len(local),
         "spread_mm": 1e3 * spread,
     }
+
+
+def _own_first(data) -> int | None:
+    """The number a C3D gives its first frame (its header's, 1-based) when the capture was cut
+    from a longer one (not 0 or 1), else None."""
+    first = data.metadata.get("first_frame")  # 0-based, as the C3D reader gives it
+    return int(first) + 1 if first else None
