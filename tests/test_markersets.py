@@ -244,6 +244,95 @@ def test_one_hand_marker_gives_flexion_and_deviation_and_says_why_not_s_p(comman
         assert "ra_wr_s_p_moment" not in sto.columns and not_determined(sto) == ["ra_wr_s_p_moment"]
 
 
+@pytest.mark.parametrize(("off_axis_deg", "refused"), [(20.0, False), (50.0, True)])
+def test_a_one_marker_hand_reading_far_from_zero_at_the_neutral_frames_is_refused(
+    off_axis_deg, refused, tmp_path, capsys
+):
+    # Review 4: a wheelchair glove's marker off the hand's axis read the hand 64° from zero at
+    # the neutral frames, "for information", and ik then wrote e_f 49° and ad_ab 40° on average
+    # through propulsion with status 0: a one-marker hand's angles are its direction, not zeroed
+    # at the static posture. Over 30° the calibration is refused, saying what to do; Plug-in
+    # Gait's own statics read 14-15°. The oracle: the marker placed off_axis_deg in flexion on
+    # the hand at a neutral static (the hand at zero).
+    rate = 100.0
+    static, _, _ = one_marker_arm(100, rate, 1, moving=False)
+    p = static.reshape(len(static), 4, 3)
+    wrist, elb = (p[:, 0] + p[:, 1]) / 2, p[:, 2]
+    forearm_y = (elb - wrist) / np.linalg.norm(elb - wrist, axis=1, keepdims=True)
+    z = p[:, 0] - p[:, 1]
+    z -= forearm_y * np.sum(z * forearm_y, axis=1, keepdims=True)
+    z /= np.linalg.norm(z, axis=1, keepdims=True)
+    x = np.cross(forearm_y, z)
+    turn = np.radians(off_axis_deg)  # about the forearm's z at neutral: the marker's direction flexed
+    direction = -forearm_y * np.cos(turn) + x * np.sin(turn)
+    p[:, 3] = wrist + 0.085 * direction
+    write_arm(tmp_path / "static.trc", p.reshape(len(static), 12), rate)
+    (tmp_path / "pig.toml").write_text(MarkerMap.plug_in_gait("right").to_toml())
+    args = ["calibrate", "--static", str(tmp_path / "static.trc"), "-o", str(tmp_path / "cal.json")]
+    args += ["--map", str(tmp_path / "pig.toml")]
+    if refused:
+        assert cli(args) == 2
+        said = capsys.readouterr().err
+        assert f"the hand's one marker 'RFIN' (HND) reads the hand {off_axis_deg:.0f}° from zero" in said, (
+            said
+        )
+        assert "over the third metacarpal" in said and "second_metacarpal_head" in said
+        assert not (tmp_path / "cal.json").exists()
+    else:
+        assert cli(args) == 0
+        said = capsys.readouterr().out
+        assert f"the neutral frames read {off_axis_deg:.1f}° from zero" in said, said
+
+
+def test_an_uncalibrated_one_marker_hand_that_reads_no_wrist_names_its_labels_not_a_calibration(
+    tmp_path, capsys
+):
+    # Review 4: a thigh marker mapped as the hand was refused uncalibrated with "calibrate the
+    # subject"; the calibration then took it. A one-marker hand's frames are built from its
+    # markers, so a calibration changes nothing of what they read: the labels are named.
+    rate = 100.0
+    trial, _, _ = one_marker_arm(300, rate, 2)
+    p = trial.reshape(len(trial), 4, 3)
+    p[:, 3] = p[:, 2] + np.array([0.0, -0.45, 0.15])  # far off, as a thigh marker is
+    write_arm(tmp_path / "trial.trc", p.reshape(len(trial), 12), rate)
+    (tmp_path / "pig.toml").write_text(MarkerMap.plug_in_gait("right").to_toml())
+    code = cli(
+        [
+            "ik",
+            str(tmp_path / "trial.trc"),
+            "-o",
+            str(tmp_path / "o.mot"),
+            "--map",
+            str(tmp_path / "pig.toml"),
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert (
+        "a calibration does not change what they read" in err
+        and "'RFIN' (HND) on the back of the hand" in err
+    )
+    assert "calibrate the subject" not in err
+    assert not (tmp_path / "o.mot").exists()
+
+
+def test_a_wrist_bar_named_one_way_in_markers_and_the_other_in_landmarks_is_refused_as_such(tmp_path):
+    # Review 4: it was refused with the six-marker set's text (a marker on the ulna; name three
+    # markers on the radius), which is not the fix here: the two tables must agree.
+    text = MarkerMap.plug_in_gait("right").to_toml()
+    assert 'radial_styloid = "RWRA"' in text and 'ulnar_styloid = "RWRB"' in text
+    swapped = text.replace('radial_styloid = "RWRA"', 'radial_styloid = "@"')
+    swapped = swapped.replace('ulnar_styloid = "RWRB"', 'ulnar_styloid = "RWRA"').replace('"@"', '"RWRB"')
+    (tmp_path / "map.toml").write_text(swapped)
+    with pytest.raises(ikid.IkidError) as e:
+        MarkerMap.load(tmp_path / "map.toml")
+    said = str(e.value)
+    assert (
+        "RSP 'RWRA' and USP 'RWRB' are the landmarks ulnar_styloid and radial_styloid, the other way" in said
+    )
+    assert "make [markers] and [landmarks] name them alike" in said and "on the ulna" not in said
+
+
 def test_one_hand_marker_frames_are_the_cores_virtual_markers(tmp_path):
     positions, _, _ = one_marker_arm(20, 100.0, 3)
     path = write_arm(tmp_path / "t.trc", positions, 100.0)

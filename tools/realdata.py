@@ -943,6 +943,10 @@ def racing_one_hand(folder: Path, work: Path, log: list[str]) -> dict:
         log,
     )
     out: dict = {"calibrated": done.returncode == 0, "calibrate_out": (done.stdout + done.stderr).strip()}
+    if not out["calibrated"]:
+        # Expected: the glove's marker is off the hand's axis (it reads the hand about 64° from
+        # zero at the reference's neutral frames), and every angle would carry that.
+        return out
     full = read_markers(folder / base.calibration_file)
     lm = {k: full.marker(v) for k, v in base.landmarks.items()}
     wrist = (lm["radial_styloid"] + lm["ulnar_styloid"]) / 2
@@ -985,6 +989,11 @@ def racing_one_hand(folder: Path, work: Path, log: list[str]) -> dict:
 
 
 def one_hand_line(r: dict) -> str:
+    head = "racing right arm, forearm plate + one glove marker (GloveR2)"
+    if not r["calibrated"]:
+        said = r["calibrate_out"].removeprefix("ikid: error: ")
+        reason = said.split(": ", 1)[-1].split(": its angles")[0]
+        return f"{head}: calibration refused, as it should be: {reason} (the marker is off the hand's axis)"
     parts = []
     for path in ("ik", "track"):
         s = r.get(path)
@@ -994,8 +1003,8 @@ def one_hand_line(r: dict) -> str:
             else f"{path} failed"
         )
     return (
-        "racing right arm, forearm plate + one glove marker (GloveR2; RMS against its direction in the "
-        "landmarks' forearm frame): " + "; ".join(parts)
+        f"{head}: calibrated, though the marker reads the hand far from zero at the neutral frames "
+        "(RMS against its direction in the landmarks' forearm frame): " + "; ".join(parts)
     )
 
 

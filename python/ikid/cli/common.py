@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 import ikid
+from ikid import _native
 from ikid.cli.options import UNCHECKED_FLAG
 
 
@@ -253,7 +254,22 @@ def _subject_calibration(
             return ikid.load_calibration(calibration)
         # Uncalibrated, the body model's placement; a left arm (the map's side) mirrored into
         # a right one first, as its calibration would.
-        ikid.check_default_placement(mirrored_to_right(frames, checked.side))
+        try:
+            ikid.check_default_placement(mirrored_to_right(frames, checked.side))
+        except ikid.InputError as e:
+            if not checked.one_hand_marker:
+                raise
+            # A one-marker hand's frames are built from its markers each frame, at the body
+            # model's placement: a calibration changes nothing of what they read, a label does.
+            reading = str(e.reason or e).split(": the markers do not sit")[0].split(": they do not sit")[0]
+            raise ikid.InputError(
+                f"{reading}: with one hand marker both segments' frames are built from the markers "
+                f"themselves (a calibration does not change what they read), so a marker is not where "
+                f"its label says: {checked.label_of(_native.HAND_POINT[0])!r} ({_native.HAND_POINT[0]}) "
+                "on the back of the hand over the third metacarpal (Plug-in Gait's FIN), "
+                f"{checked.label_of('RSP')!r} and {checked.label_of('USP')!r} (RSP, USP) the wrist bar's "
+                f"thumb and little-finger sides, {checked.label_of('FAP')!r} (FAP) the lateral epicondyle"
+            ) from None
     except ikid.IkidError as e:
         raise type(e)(_naming(source, e)) from None
     return uncalibrated(checked.side)

@@ -242,6 +242,18 @@ class MarkerMap:
         # reference). A one-marker hand on a wrist bar builds its forearm anew each frame and is
         # not concerned.
         ulnar = str(landmarks.get("ulnar_styloid", "")).strip()
+        radial = str(landmarks.get("radial_styloid", "")).strip()
+        bar = (str(markers.get("RSP", "")).strip(), str(markers.get("USP", "")).strip())
+        if one_hand and (radial, ulnar) == bar[::-1] and radial != ulnar:
+            # The wrist bar's two markers named one way in [markers] and the other in
+            # [landmarks]: which is right cannot be known, and either way round the other is
+            # read as a forearm cluster with a marker on the ulna.
+            raise FileFormatError(
+                f"{source}: RSP {bar[0]!r} and USP {bar[1]!r} are the landmarks ulnar_styloid and "
+                "radial_styloid, the other way round: with one hand marker RSP and USP are the wrist "
+                "bar on the styloids, RSP the radial one (the thumb side, Plug-in Gait's WRA) and USP "
+                "the ulnar one (WRB); make [markers] and [landmarks] name them alike"
+            )
         if (not one_hand or forearm_cluster) and segment_of.get(seen.get(ulnar, ""), "") == "forearm":
             where = (
                 "in the forearm's [cluster]"
@@ -481,6 +493,11 @@ class MarkerMap:
 
     def to_toml(self) -> str:
         descr = {m[0]: m[2] for m in _native.MARKERS} | {_native.HAND_POINT[0]: _native.HAND_POINT[2]}
+        if self.one_hand_marker and not self.forearm_cluster:
+            # The wrist bar's set puts FAP on the elbow, not on the forearm (Plug-in Gait's ELB).
+            descr["RSP"] = "radial styloid process: the wrist bar's thumb side (Plug-in Gait's WRA)"
+            descr["USP"] = "ulnar styloid process: the wrist bar's little-finger side (Plug-in Gait's WRB)"
+            descr["FAP"] = "lateral epicondyle of the humerus (Plug-in Gait's ELB)"
         lines = [
             "# ikid marker = the label in your C3D/TRC files",
             f'side = "{self.side}"  # "right" or "left": the arm these markers are on (check it: a wrong '

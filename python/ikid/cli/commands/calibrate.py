@@ -256,6 +256,8 @@ def run(args: argparse.Namespace) -> int:
             cal = calibrate_neutral(
                 neutral, points, landmark_frames=beside, side=side, hand_landmarks=hand_points
             )
+        if hand_labels is None and mapping.one_hand_marker:
+            _check_one_marker_neutral(cal, mapping, args.static)
         provenance["landmarks"] = args.landmarks or args.static
     elif method == "mirror":
         source = read_markers(args.landmarks) if args.landmarks else static
@@ -464,3 +466,33 @@ def _own_first(data) -> int | None:
     from a longer one (not 0 or 1), else None."""
     first = data.metadata.get("first_frame")  # 0-based, as the C3D reader gives it
     return int(first) + 1 if first else None
+
+
+#: How far from zero a one-marker hand may read at the neutral frames, degrees. Its angles are
+#: the marker's direction in the forearm (not zeroed at the static posture, as Plug-in Gait's),
+#: so what it reads there every angle carries. Plug-in Gait's FIN over the third metacarpal:
+#: 14-15° on the real recording (both arms; a subject's rest is not the anatomical zero); a
+#: wheelchair glove's marker off the hand's axis 64° (then e_f 49° and ad_ab 40° on average
+#: through propulsion, status 0, before this limit); a thigh marker labelled as the hand 108°.
+ONE_MARKER_NEUTRAL_MAX_DEG = 30.0
+
+
+def _check_one_marker_neutral(cal, mapping, static: str) -> None:
+    """Refuse a one-marker hand that reads far from zero at the neutral frames
+    (:data:`ONE_MARKER_NEUTRAL_MAX_DEG`): the marker is not where its direction is the hand's,
+    or the trial is not neutral, and every angle would carry the offset."""
+    hand = ((cal.report or {}).get("landmarks") or {}).get("hand") or {}
+    offset = hand.get("neutral_offset_deg")
+    if offset is None or offset <= ONE_MARKER_NEUTRAL_MAX_DEG:
+        return
+    label = mapping.label_of(ikid._native.HAND_POINT[0])
+    raise ikid.InputError(
+        f"{static}: the hand's one marker {label!r} ({ikid._native.HAND_POINT[0]}) reads the hand "
+        f"{offset:.0f}° from zero at the neutral frames (over {ONE_MARKER_NEUTRAL_MAX_DEG:g}°): its angles "
+        "are that marker's direction from the wrist, so every one would be off by as much. Either it "
+        "is not on the back of the hand over the third metacarpal (Plug-in Gait's FIN: a glove's "
+        "marker off the hand's axis, or another marker under its label), or these frames are not "
+        "the neutral posture. Place it there, give neutral frames (--frames), or record the hand's "
+        "landmarks in the static trial ([landmarks] second_metacarpal_head and "
+        "fifth_metacarpal_head) so the calibration measures the hand's axis"
+    )
