@@ -157,3 +157,14 @@ fn an_unstamped_frame_moves_the_last_stamp_and_the_grid_a_period_on() {
     empty.advance(MS);
     assert_eq!(empty.last(), None);
 }
+
+#[test]
+fn the_grid_is_settled_from_its_grid_settling_frames_th_frame_on() {
+    // GRID_SETTLING_FRAMES frames on the grid settle it: up to the one before, 1.7 periods on
+    // is the next frame (1.75 while settling); from it, a frame lost (GAP_PERIODS).
+    let n = GRID_SETTLING_FRAMES as usize;
+    let before = on_time(n - 1);
+    assert_eq!(before.step((n - 2) as f64 * MS + 1.7 * MS, RATE), Some(GridStep::Follows));
+    let settled = on_time(n);
+    assert_eq!(settled.step((n - 1) as f64 * MS + 1.7 * MS, RATE), Some(GridStep::Lost(1)));
+}
