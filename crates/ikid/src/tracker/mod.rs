@@ -489,7 +489,7 @@ impl Tracker {
                 m.copy_from_slice(v.as_slice());
             }
         }
-        if self.calibration.is_some_and(|c| c.side == Side::Left) {
+        if self.calibration.as_ref().is_some_and(|c| c.side == Side::Left) {
             for z in step.frame.iter_mut().skip(2).step_by(3) {
                 *z = -*z;
             }

@@ -27,7 +27,7 @@ impl Tracker {
     /// a template millimetres off, and every angle after it by as much as that turns the
     /// segment). Only the first frame resets what was learned in the old placement.
     pub(super) fn take_template(&mut self, segment: Segment, frame: &[f64]) {
-        let Some(calibration) = self.calibration else { return };
+        let Some(calibration) = self.calibration.as_ref() else { return };
         let narrow: [f32; MARKER_FRAME_LEN] = std::array::from_fn(|i| frame[i] as f32);
         let Ok((origin, technical)) = technical_frame(&narrow, segment, 0) else { return };
         let t = match segment {
