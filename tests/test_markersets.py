@@ -333,6 +333,20 @@ def test_a_wrist_bar_named_one_way_in_markers_and_the_other_in_landmarks_is_refu
     assert "make [markers] and [landmarks] name them alike" in said and "on the ulna" not in said
 
 
+def test_a_live_stream_with_a_one_marker_hand_says_it_is_not_streamed(tmp_path, capsys):
+    # Review 4: the live path looked for the virtual markers' labels and said RFIN was missing
+    # while listing it among the source's. Refused before any source is opened.
+    (tmp_path / "pig.toml").write_text(MarkerMap.plug_in_gait("right").to_toml())
+    # A loopback source (nothing listens there): nothing leaves this machine if it were opened.
+    code = cli(
+        ["stream", "--source", "qtm:127.0.0.1:9", "--map", str(tmp_path / "pig.toml"), "--idle", "0.1"]
+    )
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "the map's hand is one marker (HND 'RFIN'): ikid stream reads three on the hand" in err, err
+    assert "not found" not in err
+
+
 def test_one_hand_marker_frames_are_the_cores_virtual_markers(tmp_path):
     positions, _, _ = one_marker_arm(20, 100.0, 3)
     path = write_arm(tmp_path / "t.trc", positions, 100.0)

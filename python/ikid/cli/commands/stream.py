@@ -401,6 +401,8 @@ def _stdin_lines(count: int | None):
 
 
 #: Substring of ikid.Stream's refusal of a time stamp that jumped (see Stream::push_at).
+#: The one-hand-marker set's hand marker name (ikid.io.MarkerMap's labels key).
+_HND = ikid._native.HAND_POINT[0]
 _CLOCK_GLITCH = "glitch of the source's clock"
 #: What the core says of stamps steadily further apart than the rate (``SourcePace``).
 _SLOW_SOURCE = "the source runs at about"
@@ -439,6 +441,14 @@ def run(args: argparse.Namespace) -> int:
 
     # --map is a live source's (refused above otherwise): loaded once, for its labels and its up.
     marker_map = MarkerMap.load(args.map) if args.map else MarkerMap.identity()
+    if marker_map.one_hand_marker:
+        # Its six markers are built from four each frame (ikid.io.MarkerMap.ikid_frames), which
+        # the live path does not do: said, not failed on a label the source has.
+        raise ikid.InputError(
+            f"{args.map}: the map's hand is one marker (HND {marker_map.labels[_HND]!r}): ikid stream "
+            "reads three on the hand (MC2, MC5, MCB); the one-hand-marker set runs on recorded files "
+            "(ikid ik, ikid track), not live"
+        )
     args.up = parse_up(args.up, "--up") if args.up is not None else marker_map.up
     source = None
     rate_hz = args.rate
