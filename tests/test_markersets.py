@@ -347,6 +347,25 @@ def test_a_live_stream_with_a_one_marker_hand_says_it_is_not_streamed(tmp_path, 
     assert "not found" not in err
 
 
+def test_api_frames_of_a_one_marker_hand_warn_that_s_p_is_not_determined_and_the_cli_does_not(
+    tmp_path, capsys
+):
+    # Review 4: through the API (MarkerData.frames, then run_model, Tracker or Stream) s_p came
+    # back as about 0 with status 0, where the CLI leaves its column out: the frames are six
+    # markers all the same, so the warning is given where the map is known.
+    rate = 100.0
+    trial, _, _ = one_marker_arm(300, rate, 2)
+    path = write_arm(tmp_path / "trial.trc", trial, rate)
+    mapping = MarkerMap.plug_in_gait("right")
+    with pytest.warns(io.UndeterminedWarning, match=r"ra_wr_s_p is not determined by these frames"):
+        io.read_markers(path).frames(mapping)
+    (tmp_path / "pig.toml").write_text(mapping.to_toml())
+    assert cli(["ik", str(path), "-o", str(tmp_path / "o.mot"), "--map", str(tmp_path / "pig.toml")]) == 0
+    captured = capsys.readouterr()
+    assert "not determined by these frames" not in captured.err + captured.out
+    assert "ra_wr_s_p not written" in captured.out
+
+
 def test_one_hand_marker_frames_are_the_cores_virtual_markers(tmp_path):
     positions, _, _ = one_marker_arm(20, 100.0, 3)
     path = write_arm(tmp_path / "t.trc", positions, 100.0)

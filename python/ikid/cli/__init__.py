@@ -30,6 +30,7 @@ import warnings
 import ikid
 from ikid.cli import batch
 from ikid.cli.common import _message
+from ikid.io._common import UndeterminedWarning
 
 #: The commands, in the order ``ikid --help`` lists them: name -> module of
 #: :mod:`ikid.cli.commands`, each with ``add_parser(sub)`` (its options, ``func=run``) and
@@ -87,6 +88,8 @@ def main(argv: list[str] | None = None) -> int:
         argv = sys.argv[1:]
     with batch.stop_on_signals(), warnings.catch_warnings():
         warnings.showwarning = _show_warning
+        # The commands leave what the markers do not determine out of their files themselves.
+        warnings.filterwarnings("ignore", category=UndeterminedWarning)
         try:
             args = parser.parse_args(argv)
             args.argv = list(argv)

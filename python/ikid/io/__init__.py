@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 
 from ikid.io._atomic import WriteError, atomic_outputs
-from ikid.io._common import UP_AXES, to_ikid_lab
+from ikid.io._common import UP_AXES, MarkerMapWarning, UndeterminedWarning, to_ikid_lab
 from ikid.io.c3d import read_c3d, write_c3d
 from ikid.io.csv import open_csv_markers, read_csv_markers, write_csv, write_csv_markers
 from ikid.io.mapping import MarkerMap
@@ -62,8 +62,10 @@ __all__ = [
     "MarkerData",
     "MarkerFile",
     "MarkerMap",
+    "MarkerMapWarning",
     "Storage",
     "StorageFile",
+    "UndeterminedWarning",
     "WriteError",
     "atomic_outputs",
     "read_c3d",

@@ -28,6 +28,13 @@ class MarkerMapWarning(UserWarning):
     (:meth:`ikid.io.mapping.MarkerMap.stretched_segments`, a cluster's marker off its shape)."""
 
 
+class UndeterminedWarning(UserWarning):
+    """Frames whose markers do not determine a coordinate (a one-marker hand's ``ra_wr_s_p``,
+    :attr:`ikid.io.mapping.MarkerMap.undetermined`) that the models, the Tracker and streams
+    nevertheless give a value for: leave that coordinate out (the CLI does; this warning is
+    for the Python API)."""
+
+
 def is_float(text: str) -> bool:
     """Whether a text cell reads as a number (the text readers' check before naming a bad cell)."""
     try:

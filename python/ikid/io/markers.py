@@ -9,6 +9,7 @@ coordinates that cannot be in the units the file claims.
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +22,7 @@ from ikid.io._common import (
     UNITS,
     UP_AXES,
     FileFormatError,
+    UndeterminedWarning,
     check_readable,
     ikid_marker_names,
     is_float,
@@ -130,6 +132,16 @@ class MarkerData:
         if whole:
             check_markers_seen(seen_markers(columns), mapping, source)
         frames = mapping.ikid_frames(mapping.fit_clusters(self, columns))
+        if whole and (undetermined := mapping.undetermined):
+            # The frames are six markers all the same; what they do not show is said here, where
+            # the map is known (run_model, Tracker and Stream see frames only).
+            warnings.warn(
+                f"{source}: {', '.join(undetermined)} is not determined by these frames ("
+                f"{' '.join(undetermined.values())}); the models, the Tracker and streams still give "
+                "it a value (about 0, with status 0): leave it out (MarkerMap.undetermined names it)",
+                UndeterminedWarning,
+                stacklevel=2,
+            )
         if whole:
             if mapping.one_hand_marker and not np.isfinite(frames[:, 9:]).all(axis=1).any():
                 raise _native.InputError(
