@@ -186,9 +186,18 @@ class FakeQtm:
     every frame sent at once (stamped at the rate all the same: a reader that cannot keep up)."""
 
     def __init__(
-        self, frames: np.ndarray, rate: float = 1000.0, drop=(), disconnect_at=None, hide=None, burst=False
+        self,
+        frames: np.ndarray,
+        rate: float = 1000.0,
+        drop=(),
+        disconnect_at=None,
+        hide=None,
+        burst=False,
+        declared_rate: float | None = None,
     ) -> None:
         self.frames, self.rate, self.drop, self.hide, self.burst = frames, rate, set(drop), hide, burst
+        # The rate its parameters declare (a QTM set up otherwise than it captures): ``rate``'s.
+        self.declared_rate = rate if declared_rate is None else declared_rate
         self.disconnect_at = disconnect_at
         self.listener = socket.create_server(("127.0.0.1", 0))
         self.listener.settimeout(20)
@@ -234,7 +243,7 @@ class FakeQtm:
             if low.startswith("version"):
                 conn.sendall(packet(COMMAND, f"Version set to {cmd.split()[1]}\0".encode()))
             elif low.startswith("getparameters"):
-                conn.sendall(packet(XML, qtm_parameters(self.rate).encode() + b"\0"))
+                conn.sendall(packet(XML, qtm_parameters(self.declared_rate).encode() + b"\0"))
             elif low.startswith("streamframes"):
                 break
             else:

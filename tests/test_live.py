@@ -243,6 +243,36 @@ def test_qtm_source_with_hidden_markers_dropped_frames_and_a_reconnection(tmp_pa
             np.testing.assert_allclose([float(v) for v in row[3:]], expected[k], rtol=2e-6, atol=1e-6)
 
 
+def test_a_source_declaring_another_rate_than_it_sends_says_so_and_rate_overrides_it(tmp_path):
+    # Review 4: an outlet declaring 250 Hz while sending at 100 Hz had every frame refused as
+    # "bad argument", the summary said "give --rate 100", and --rate 100 was then refused as
+    # "for a source that declares no rate": a dead end. The stamps name the source's rate and
+    # --rate now overrides a declared one, said so.
+    frames = trial_frames(2000)[::10]  # 200 frames, 100 Hz
+    for extra in ((), ("--rate", "100")):
+        server = FakeQtm(frames, rate=100.0, declared_rate=250.0)
+        try:
+            r = _qtm_stream(server, tmp_path, *extra, count=len(frames))
+        finally:
+            server.close()
+        _, rows = _header_and_rows(r.stdout)
+        status = [row[2].split(":")[0] for row in rows]
+        summary = _summary(r.stderr)
+        if not extra:
+            assert r.returncode == 3, r.stderr
+            assert (
+                "the time stamps come 10 ms apart, a 100 Hz source read at 250 Hz: give --rate 100" in summary
+            )
+            assert (
+                _count(summary, "time stamp too late (the source is slower)") == status.count("refused") > 100
+            )
+        else:
+            assert r.returncode == 0, r.stderr
+            assert "--rate 100 Hz overrides the qtm source's declared 250 Hz" in r.stderr
+            filling = ikid.load("wrist-ik-100hz").window - 1  # the 100 Hz member's window filling
+            assert status == ["filling"] * filling + ["ok"] * (len(frames) - filling), summary
+
+
 def test_a_reader_that_falls_behind_takes_the_newest_frame_and_counts_the_rest(tmp_path):
     """QTM sends 3000 frames at once: more than --max-lag's worth waits at each read, so ikid
     takes the newest and counts the others as skipped; every frame is either read or skipped."""

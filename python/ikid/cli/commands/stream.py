@@ -465,12 +465,16 @@ def run(args: argparse.Namespace) -> int:
         )
         if source.rate_hz is not None:
             if args.rate is not None and not math.isclose(args.rate, source.rate_hz, rel_tol=1e-6):
-                source.close()
-                raise ikid.InputError(
-                    f"--rate {args.rate:g} but the {source.kind} source says it sends {source.rate_hz:g} Hz "
-                    "(--rate is for a source that declares no rate)"
+                # A source set up otherwise than it sends (an LSL outlet's nominal rate, a QTM
+                # project's): its stamps say so, and --rate is the way out a lab has.
+                print(
+                    f"ikid stream: --rate {args.rate:g} Hz overrides the {source.kind} source's declared "
+                    f"{source.rate_hz:g} Hz",
+                    file=sys.stderr,
+                    flush=True,
                 )
-            rate_hz = source.rate_hz
+            else:
+                rate_hz = source.rate_hz
     if rate_hz is None and not args.time:
         if source is not None:
             source.close()
@@ -760,6 +764,12 @@ def _run_with(
                         )
                         hint = _stamps_hint(1.0 / step, rate, _member_rates(args))
                         raise ikid.InputError(f"frame {label}: {hint} ({given})") from None
+                    if _SLOW_SOURCE in str(e):
+                        # A live source slower than the stream's rate: each frame refused alone,
+                        # the summary says what its stamps show and what to give.
+                        raise _Refused(
+                            e.reason or str(e), "time stamp too late (the source is slower)"
+                        ) from e
                     if "resample the source" in str(e):
                         raise _Refused(
                             e.reason or str(e), "time stamp too soon (the source is faster than the model)"
@@ -827,11 +837,16 @@ def _run_with(
     ]
     if flags:
         parts.append("flagged " + ", ".join(f"{name} {n}" for name, n in flags.most_common()))
-    if numbered or timed:
+    other = losses.other_rate() if timed else None
+    if not numbered and other is not None:
+        # Counted from stamps at another rate than the stream's, every step reads as frames lost.
+        losses.lost = 0
+        parts.append("lost not counted (the time stamps do not come at the stream's rate)")
+    elif numbered or timed:
         parts.append(f"{losses.lost} lost (by {'frame number' if numbered else 'time'})")
     else:
         parts.append("lost not counted (no frame numbers or times: --frame-number, --time)")
-    if timed and (other := losses.other_rate()) is not None:
+    if other is not None:
         parts.append(_stamps_hint(other, rate, _member_rates(args)))
     skipped = notes["skipped"]
     if live:
