@@ -567,6 +567,20 @@ def test_calibrate_command_from_landmarks_and_neutral_frames_of_a_task_trial(mot
     assert f"--frames 0-99 counted from 0: {cut_path}'s own frames 695-794" in capsys.readouterr().out
     with pytest.raises(SystemExit, match=r"outside frames 0-\d+ of .*task.trc$"):
         cli(base + ["--frames", f"0-{len(frames)}"])  # numbered from 0: nothing more to say
+    # Landmarks probed with the forearm's plate put back turned (its markers' labels a third of a
+    # turn round, review 4: every frame then read turned over, blamed on the labels) put the
+    # wrist far from the hand, proximal of it: refused when calibrating, naming the landmarks.
+    turned = frames.copy()
+    turned[:, 0:9] = frames[:, [3, 4, 5, 6, 7, 8, 0, 1, 2]]
+    other = io.write_trc(
+        tmp_path / "other.trc", np.arange(len(frames)) / 1000.0, turned, 1000.0, lab + lm_labels
+    )
+    capsys.readouterr()
+    assert cli([*base, "--frames", "0-99", "--landmarks", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert "other.trc: the landmarks put the wrist (mid-styloids)" in err and "proximal of it" in err, err
+    assert "record them in this session's static trial" in err
+    assert cli([*base, "--frames", "0-99", "--landmarks", str(path)]) == 0  # this session's: taken
     # A range given backwards, or a frame named twice (it would count twice), says so.
     with pytest.raises(SystemExit, match=r"'9-0': 9-0 runs backwards; give the first frame first \(0-9\)"):
         cli(base + ["--frames", "9-0"])
@@ -847,3 +861,13 @@ def test_mirror_calibration_reads_a_hand_built_left_arms_angles_and_refuses_what
         == 2
     )
     assert "the mirror method takes the other arm's landmarks calibration" in capsys.readouterr().err
+
+
+def test_api_calibrate_neutral_in_mm_names_the_units_not_the_landmarks():
+    # Review 4: frames and landmarks given in mm were refused as landmarks of another arm.
+    from ikid.calibration import calibrate_neutral
+
+    frames = ikid.forward_markers(np.zeros((20, 3)))
+    landmarks = np.tile([0.02, 0.25, 0.03, -0.02, 0.25, -0.03, 0.0, 0.0, 0.03, 0.0, 0.0, -0.03], (20, 1))
+    with pytest.raises(ikid.InputError, match=r"are the units mm, read as metres\?"):
+        calibrate_neutral(frames * 1000.0, landmarks * 1000.0)

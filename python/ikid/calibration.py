@@ -84,6 +84,9 @@ def calibrate_neutral(
     (default: the neutral frames). With ``hand_landmarks`` ``(m, 6)`` too (second and fifth
     metacarpal heads, same frames) the hand's frame is its own rather than the forearm's at
     the neutral frames. ``side``: "right" or "left"."""
+    # Units first: frames in mm read as an arm 1000 times too large, which the landmark checks
+    # below would name as landmarks of another arm.
+    _native.check_marker_units(np.asarray(neutral_frames, np.float64))
     calibration = Calibration.from_neutral(
         np.asarray(neutral_frames, np.float64),
         None if landmarks is None else np.asarray(landmarks, np.float64),
@@ -304,6 +307,66 @@ def check_marker_distances(
                 "as much as that turns the segment. Calibrate with a static trial recorded with the "
                 "markers as they are in this one (`ikid calibrate`)"
             )
+
+
+#: Where the landmarks may put the wrist against the hand's markers at the neutral frames: the
+#: hand's markers' centroid at most this far from the mid-styloids (metres) and not more than
+#: :data:`HAND_PROXIMAL_M` proximal of them along the forearm. Measured: 46-83 mm away and 40-80
+#: mm distal on the real recordings (pyomeca, racing, Plug-in Gait's both arms) and the exam's 18
+#: statics; landmarks probed with racing's forearm plate put back turned a third of a turn
+#: (another session's landmarks) 290 mm away and 245 mm proximal.
+HAND_FROM_WRIST_MAX_M = 0.2
+#: See :data:`HAND_FROM_WRIST_MAX_M`: a hand at neutral lies distal of the wrist.
+HAND_PROXIMAL_M = 0.02
+
+
+def _technical(markers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Three markers per frame ``(n, 3, 3)`` -> an orthonormal frame of theirs (origin the first,
+    ``x`` to the second, ``z`` normal to the three; columns), NaN where degenerate or missing."""
+    a, b, c = markers[:, 0], markers[:, 1], markers[:, 2]
+    x = b - a
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    z = np.cross(x, c - a)
+    z /= np.linalg.norm(z, axis=1, keepdims=True)
+    return a, np.stack([x, np.cross(z, x), z], axis=2)
+
+
+def check_landmarks_place_the_hand(
+    neutral_frames: np.ndarray, landmark_points: np.ndarray, landmark_frames: np.ndarray, source: str
+) -> None:
+    """Refuse (``ikid.InputError``) forearm landmarks that put the wrist where the hand's markers
+    at the neutral frames cannot be: over :data:`HAND_FROM_WRIST_MAX_M` from them, or the hand
+    over :data:`HAND_PROXIMAL_M` proximal of it. The landmarks are kept in the frame of the
+    forearm's markers; measured with those markers placed otherwise (another session's, a plate
+    put back turned) they land elsewhere on the arm, and every angle is turned by as much (the
+    racing plate a third of a turn off read every frame turned over). ``landmark_points``
+    ``(n, 12)``: lateral and medial epicondyle, radial and ulnar styloid, with the forearm's
+    markers of ``landmark_frames`` ``(n, 18)``."""
+    o, r = _technical(np.asarray(landmark_frames, np.float64)[:, :9].reshape(-1, 3, 3))
+    pts = np.asarray(landmark_points, np.float64).reshape(len(o), 4, 3)
+    local = np.einsum("nji,nkj->nki", r, pts - o[:, None])
+    seen = np.isfinite(local).all(axis=(1, 2))
+    f = np.asarray(neutral_frames, np.float64)
+    o2, r2 = _technical(f[:, :9].reshape(-1, 3, 3))
+    hand = np.einsum("nji,nj->ni", r2, f[:, 9:].reshape(-1, 3, 3).mean(axis=1) - o2)
+    held = np.isfinite(hand).all(axis=1)
+    if not seen.any() or not held.any():
+        return  # the calibration itself says what is missing
+    epi, med, rad, uln = np.median(local[seen], axis=0)
+    wrist = (rad + uln) / 2
+    axis = (epi + med) / 2 - wrist
+    axis /= np.linalg.norm(axis)
+    d = np.median(hand[held], axis=0) - wrist
+    away, proximal = float(np.linalg.norm(d)), float(d @ axis)
+    if away > HAND_FROM_WRIST_MAX_M or proximal > HAND_PROXIMAL_M:
+        raise InputError(
+            f"{source}: the landmarks put the wrist (mid-styloids) {1e3 * away:.0f} mm from the hand's "
+            f"markers at the neutral frames, the hand {1e3 * abs(proximal):.0f} mm "
+            f"{'proximal' if proximal > 0 else 'distal'} of it along the forearm: a hand sits within "
+            f"{1e3 * HAND_FROM_WRIST_MAX_M:.0f} mm of the wrist, distal of it. The landmarks were "
+            "measured with the forearm's markers placed otherwise (another session's, a plate put "
+            "back turned) or under other labels: record them in this session's static trial"
+        )
 
 
 def calibration_info(path: str | os.PathLike[str]) -> dict[str, Any]:

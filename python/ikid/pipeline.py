@@ -694,7 +694,9 @@ class _Tally:
 TURNED_OVER_REASON = (
     "the hand reads turned over on the forearm, further from neutral than a wrist turns (two markers of "
     "a segment under each other's labels throughout, e.g. MC2/MC5 or RSP/USP, or a calibration made "
-    "with another labelling): not written; check the labels of the hand's and the forearm's markers"
+    "with another labelling, or from landmarks measured with the markers placed otherwise, in another "
+    "session): not written; check the labels of the hand's and the forearm's markers, and that the "
+    "calibration's static trial is this session's"
 )
 #: The same for a model fed angles (a joint state): the angles themselves turn it over.
 TURNED_OVER_ANGLES_REASON = (

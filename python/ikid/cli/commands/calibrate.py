@@ -108,7 +108,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Landmarks and/or neutral frames, or static + single-coordinate movement files -> a
     calibration JSON recording the method, the side and the marker map."""
-    from ikid.calibration import calibrate_functional, calibrate_mirror, calibrate_neutral, calibration_info
+    from ikid.calibration import (
+        calibrate_functional,
+        calibrate_mirror,
+        calibrate_neutral,
+        calibration_info,
+        check_landmarks_place_the_hand,
+    )
     from ikid.io import MarkerMap, read_markers
     from ikid.io.mapping import MarkerMapWarning, landmark_names
 
@@ -252,6 +258,8 @@ def run(args: argparse.Namespace) -> int:
             )
             columns = mapping.anatomical_forearm(mapping.fit_clusters(source, columns))
             hand_points = ikid._native.one_marker_hand_landmarks(columns)[where]
+        if not mapping.one_hand_marker:  # its forearm's markers are its landmarks
+            check_landmarks_place_the_hand(neutral, points, beside, args.landmarks or args.static)
         with _about_the_static_trial(args.static, mapping, static.frames(mapping), static.rate_hz):
             cal = calibrate_neutral(
                 neutral, points, landmark_frames=beside, side=side, hand_landmarks=hand_points
