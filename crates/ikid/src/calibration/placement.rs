@@ -32,8 +32,8 @@ pub fn check_default_placement(frames: &[f64], body: &body::BodyModel) -> Result
         let mid = v.len() / 2;
         *v.select_nth_unstable_by(mid, f64::total_cmp).1
     };
-    let advice =
-        "calibrate the subject (ikid calibrate: landmarks or neutral frames of this session) and pass --calibration";
+    let advice = "calibrate the subject (ikid calibrate with the styloid and epicondyle landmarks of this session's static \
+         trial; its neutral frames alone only for markers at the body model's anatomical points) and pass --calibration";
     for segment in [Segment::Forearm, Segment::Hand] {
         let first = body::first_marker(segment);
         for (a, b) in [(0, 1), (0, 2), (1, 2)] {

@@ -65,7 +65,7 @@ impl TrackerSettings {
             // The C API's default settings leave the rate NaN: it has to be given.
             return Err(Error::BadArgument {
                 what: "rate_hz",
-                detail: "is not set: give the rate the frames come at, in Hz (tracked at another rate, every \
+                detail: "is not set (NaN): give the rate the frames come at, in Hz (tracked at another rate, every \
                          velocity, acceleration and torque is wrong and nothing in the markers can say so)"
                     .into(),
             });
