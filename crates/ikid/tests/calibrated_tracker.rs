@@ -372,3 +372,63 @@ fn a_calibrated_tracker_filters_noise_through_rests_drifts_and_bursts() {
         }
     }
 }
+
+/// RMS over `q` (after `skip` frames) of each coordinate's error, degrees.
+fn rms_deg(tracker: &mut Tracker, frames: &[f64], q: &[[f64; 3]], skip: usize) -> [f64; 3] {
+    let (mut sum, mut n) = ([0.0f64; 3], 0usize);
+    tracker
+        .run(frames, |i, out, estimated| {
+            if estimated && i >= skip {
+                for c in 0..3 {
+                    sum[c] += (out.state.q[c] - q[i][c]).powi(2);
+                }
+                n += 1;
+            }
+        })
+        .unwrap();
+    sum.map(|s| (s / n.max(1) as f64).sqrt().to_degrees())
+}
+
+#[test]
+fn a_tracker_given_the_calibrations_marker_shapes_fits_a_trial_that_starts_with_the_skin_slid() {
+    // Skin markers slide with the posture: here MC2 and MC5 move 8 mm along their lines to MCB
+    // as the wrist flexes to 29° (none at the static trial's neutral), and the trial starts
+    // flexed. Without shapes, the tracker takes each segment's marker shape from the trial's
+    // first frames, the slid one, and every angle after carries it; with the calibration's
+    // (`calibration::marker_shapes` of the neutral frames) it fits the shape its rotations were
+    // measured with. The oracle: the simulator's angles.
+    let body = subject();
+    let rate = 100.0;
+    let q: Vec<[f64; 3]> = (0..1500)
+        .map(|i| {
+            let t = i as f64 / rate;
+            [0.3 * (1.1 * t).sin(), 0.5 * (0.8 * t).cos(), 0.15 * (1.9 * t).sin()]
+        })
+        .collect();
+    let slide = |frames: &mut [f64], q: &[[f64; 3]]| {
+        for (f, qi) in frames.chunks_exact_mut(MARKER_FRAME_LEN).zip(q) {
+            let mcb = Vector3::new(f[15], f[16], f[17]);
+            for m in [3, 4] {
+                let p = Vector3::new(f[3 * m], f[3 * m + 1], f[3 * m + 2]);
+                let moved = p + (mcb - p).normalize() * (0.008 * qi[1] / 0.5);
+                f[3 * m..3 * m + 3].copy_from_slice(moved.as_slice());
+            }
+        }
+    };
+    let mut frames = body.marker_frames(&q.concat(), 0.4).unwrap();
+    slide(&mut frames, &q);
+    let neutral = body.marker_frames(&[0.0; 3].repeat(10), 0.4).unwrap();
+    let neutral32: Vec<f32> = neutral.iter().map(|&v| v as f32).collect();
+    let (calibration, _) = Calibration::from_neutral(&neutral32, None, Side::Right).unwrap();
+    let shapes = ikid::calibration::marker_shapes(&neutral32, Side::Right).unwrap();
+    let mut errors = Vec::new();
+    for with_shapes in [true, false] {
+        let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::new(rate)).unwrap();
+        tracker.set_calibration(Some(calibration.clone().with_shapes(with_shapes.then_some(shapes))));
+        errors.push(rms_deg(&mut tracker, &frames, &q, 50));
+    }
+    let (shaped, unshaped) = (errors[0], errors[1]);
+    let worst = |e: [f64; 3]| e.iter().cloned().fold(0.0, f64::max);
+    assert!(worst(shaped) < 3.0, "with the calibration's shapes: {shaped:?}° RMS");
+    assert!(worst(unshaped) > 2.0 * worst(shaped), "without: {unshaped:?}° RMS, with: {shaped:?}°");
+}

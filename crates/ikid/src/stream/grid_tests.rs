@@ -168,3 +168,32 @@ fn the_grid_is_settled_from_its_grid_settling_frames_th_frame_on() {
     let settled = on_time(n);
     assert_eq!(settled.step((n - 1) as f64 * MS + 1.7 * MS, RATE), Some(GridStep::Lost(1)));
 }
+
+#[test]
+fn a_settled_grid_half_a_period_off_its_expectation_starts_again_and_settles_anew() {
+    // Fifteen frames on time, the sixteenth 0.2 periods late (still settling: taken into the
+    // phase at 1/16): the grid at 15.0125 ms. The next stamp 1.45 periods on is the next frame,
+    // but 0.6375 periods off where the settled grid expects it (16.0125 ms): a new grid starts
+    // from it, settling again, so a stamp 1.7 periods after it is the next frame (1.75 while
+    // settling; a grid that had kept on, settled, would count one lost).
+    let mut grid = on_time(15);
+    let t = 15.2 * MS;
+    assert_eq!(grid.step(t, RATE), Some(GridStep::Follows));
+    grid.accept(t, RATE, Some(GridStep::Follows));
+    let t = t + 1.45 * MS;
+    assert_eq!(grid.step(t, RATE), Some(GridStep::Follows));
+    grid.accept(t, RATE, Some(GridStep::Follows));
+    assert_eq!(grid.step(t + 1.7 * MS, RATE), Some(GridStep::Follows));
+}
+
+#[test]
+fn the_first_stamps_set_the_grids_phase_as_their_mean() {
+    // Stamps 0.4 periods early, then on time: the phase is their mean, 0.2 periods early, so
+    // the grid stands at 0.8 ms. A stamp at 3.4 ms is 2.6 periods on the grid (2.4 from the
+    // last stamp): 3 periods rounded, 2 frames lost.
+    let mut grid = FrameGrid::default();
+    grid.accept(-0.4 * MS, RATE, None);
+    assert_eq!(grid.step(1.0 * MS, RATE), Some(GridStep::Follows));
+    grid.accept(1.0 * MS, RATE, Some(GridStep::Follows));
+    assert_eq!(grid.step(3.4 * MS, RATE), Some(GridStep::Lost(2)));
+}
