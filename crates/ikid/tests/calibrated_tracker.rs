@@ -424,7 +424,7 @@ fn a_tracker_given_the_calibrations_marker_shapes_fits_a_trial_that_starts_with_
     let mut errors = Vec::new();
     for with_shapes in [true, false] {
         let mut tracker = Tracker::new(BodyModel::default(), TrackerSettings::new(rate)).unwrap();
-        tracker.set_calibration(Some(calibration.clone().with_shapes(with_shapes.then_some(shapes))));
+        tracker.set_calibration(Some(calibration.with_shapes(with_shapes.then_some(shapes))));
         errors.push(rms_deg(&mut tracker, &frames, &q, 50));
     }
     let (shaped, unshaped) = (errors[0], errors[1]);
