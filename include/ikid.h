@@ -372,6 +372,25 @@ enum ikid_status ikid_stream_set_calibration_side(struct ikid_stream *stream,
                                                   const double *hand,
                                                   const char *side);
 
+// As `ikid_stream_set_calibration_side`, with the calibration file's marker shapes too:
+// `shapes` NULL (none, as `ikid_stream_set_calibration_side`) or 18 doubles, the
+// `"marker_shapes_m"` rows of a calibration file written by `ikid calibrate` one after the
+// other (each segment's three markers in its technical frame, the forearm's first, metres).
+// With them each segment is fitted to the shape its rotations were measured with, from the
+// first frame, as `ikid ik` and Python do with that file (bit for bit); without them, to the
+// trial's first frames (skin markers slid there turn every angle: a trial cut 1.5 s into a
+// real recording read 2.6° instead of 0.9°). Refused (nothing changed) as
+// `ikid_stream_set_calibration_side`, or if `shapes` are given without the matrices or are
+// not finite.
+//
+// # Safety
+// As `ikid_stream_set_calibration_side`; `shapes` NULL or 18 readable doubles.
+enum ikid_status ikid_stream_set_calibration_shapes(struct ikid_stream *stream,
+                                                    const double *forearm,
+                                                    const double *hand,
+                                                    const char *side,
+                                                    const double *shapes);
+
 // The lab's up direction (against gravity) in the coordinates of the marker frames pushed
 // from now on: `up` points to 3 doubles, `{0, 1, 0}` (the body model's lab) until set,
 // `{0, 0, 1}` for a Z-up lab (Vicon, Qualisys), any non-zero length. Each frame is turned
@@ -593,6 +612,20 @@ enum ikid_status ikid_tracker_set_calibration(struct ikid_tracker *tracker,
                                               const double *forearm,
                                               const double *hand,
                                               const char *side);
+
+// As `ikid_tracker_set_calibration`, with the calibration file's marker shapes too (as
+// `ikid_stream_set_calibration_shapes`: `shapes` NULL or the 18 doubles of its
+// `"marker_shapes_m"` rows): each segment's markers are placed by the shape the calibration's
+// rotations were measured with, as `ikid track` and `ikid.Tracker` do with that file (bit for
+// bit), not by the trial's first frames. Starts the tracker afresh.
+//
+// # Safety
+// As `ikid_tracker_set_calibration`; `shapes` NULL or 18 readable doubles.
+enum ikid_status ikid_tracker_set_calibration_shapes(struct ikid_tracker *tracker,
+                                                     const double *forearm,
+                                                     const double *hand,
+                                                     const char *side,
+                                                     const double *shapes);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -6,6 +6,7 @@ valgrind, their outputs bit-identical to ``ikid.Tracker(...).run`` on the same s
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -141,9 +142,12 @@ def test_python_run_equals_python_push(trial):
         assert stacked[:, k].tobytes() == out[name][3:600].tobytes()
 
 
-def _c_tracker_run(frames: np.ndarray, calibration, side: bytes | None) -> tuple[np.ndarray, np.ndarray, int]:
-    """The C tracker (default subject, 100 Hz) calibrated through ``ikid_tracker_set_calibration``:
-    its (n, 12) values and (n,) status bits, and the start."""
+def _c_tracker_run(
+    frames: np.ndarray, calibration, side: bytes | None, shapes: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """The C tracker (default subject, 100 Hz) calibrated through ``ikid_tracker_set_calibration``
+    (``ikid_tracker_set_calibration_shapes`` with ``shapes``, a calibration file's
+    ``marker_shapes_m``): its (n, 12) values and (n,) status bits, and the start."""
     import ctypes as C
 
     from faults.capi import Flags, f64p, last_error, lib
@@ -155,9 +159,19 @@ def _c_tracker_run(frames: np.ndarray, calibration, side: bytes | None) -> tuple
     try:
         forearm = np.ascontiguousarray(calibration.forearm, np.float64)
         hand = np.ascontiguousarray(calibration.hand, np.float64)
-        status = lib().ikid_tracker_set_calibration(
-            tracker, forearm.ctypes.data_as(f64p), hand.ctypes.data_as(f64p), side
-        )
+        if shapes is None:
+            status = lib().ikid_tracker_set_calibration(
+                tracker, forearm.ctypes.data_as(f64p), hand.ctypes.data_as(f64p), side
+            )
+        else:
+            rows = np.ascontiguousarray(shapes, np.float64)
+            status = lib().ikid_tracker_set_calibration_shapes(
+                tracker,
+                forearm.ctypes.data_as(f64p),
+                hand.ctypes.data_as(f64p),
+                side,
+                rows.ctypes.data_as(f64p),
+            )
         assert status == 0, last_error()
         values = np.ascontiguousarray(frames, np.float64)
         out = np.full((len(frames), 12), np.nan)
@@ -211,3 +225,87 @@ def test_the_c_tracker_calibrated_for_either_arm_equals_python(side):
     status = lib().ikid_tracker_set_calibration(tracker, eye, eye, b"lft")
     assert status != 0 and "side" in last_error()
     lib().ikid_tracker_free(tracker)
+
+
+def _slid_trial() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A trial at 100 Hz starting flexed whose MC2 and MC5 slide 8 mm along their lines to MCB
+    with the flexion (none at neutral), its neutral frames, and its true angles."""
+    t = np.arange(300) / 100.0
+    q = np.stack([0.3 * np.sin(1.1 * t), 0.5 * np.cos(0.8 * t), 0.15 * np.sin(1.9 * t)], axis=1)
+    frames = ikid.forward_markers(q, 0.4).reshape(len(q), 6, 3)
+    for m in (3, 4):
+        along = frames[:, 5] - frames[:, m]
+        along /= np.linalg.norm(along, axis=1, keepdims=True)
+        frames[:, m] += along * (0.008 * q[:, 1:2] / 0.5)
+    return frames.reshape(len(q), 18), ikid.forward_markers(np.zeros((10, 3)), 0.4), q
+
+
+def test_a_c_host_given_the_calibration_files_marker_shapes_equals_python_bit_for_bit():
+    # Review 5: a calibration file keeps each segment's marker shape ("marker_shapes_m"); ik,
+    # track and Python fit to it, while C could pass only the two matrices, so a C host read
+    # the same file otherwise (a real trial cut 1.5 s in: 2.3° instead of 0.7°).
+    # ikid_tracker_set_calibration_shapes and ikid_stream_set_calibration_shapes take them.
+    import ctypes as C
+
+    from faults.capi import f32p, f64p, last_error, lib
+
+    frames, neutral, q = _slid_trial()
+    measured = ikid.Calibration.from_neutral(neutral).with_shapes_of(neutral)
+    shapes = np.asarray(measured.marker_shapes).reshape(18)
+    calibration = ikid.Calibration.from_matrices(measured.forearm, measured.hand).with_marker_shapes(
+        shapes.reshape(6, 3)
+    )
+    py = ikid.Tracker(rate_hz=100.0, calibration=calibration).run(frames)
+    out, status, _ = _c_tracker_run(frames, measured, None, shapes)
+    assert out.tobytes() == np.hstack([py[k] for k in KEYS]).tobytes()  # bit for bit
+    np.testing.assert_array_equal(status, py["status"])
+    # The shapes matter here: without them C (and Python) fit the trial's slid start.
+    without, _, _ = _c_tracker_run(frames, measured, None)
+    err = {
+        name: np.degrees(np.abs(o[50:, :3] - q[50:])).max()
+        for name, o in (("with", out), ("without", without))
+    }
+    assert err["without"] > 2 * err["with"], err
+    # The stream: C's outputs equal Python's ikid.Model.stream with the same calibration.
+    model = ikid.load("wrist-ik-100hz")
+    stream = model.stream(calibration=calibration)
+    expected = [stream.push(f) for f in frames.astype(np.float32)]
+    handle = C.c_void_p()
+    path = str(
+        Path(__file__).resolve().parents[1] / "python" / "ikid" / "models" / "wrist-ik-100hz.safetensors"
+    )
+    loaded = C.c_void_p()
+    assert lib().ikid_model_load(path.encode(), C.byref(loaded)) == 0, last_error()
+    try:
+        assert lib().ikid_stream_new(loaded, C.byref(handle)) == 0, last_error()
+        fa = np.ascontiguousarray(measured.forearm, np.float64)
+        ha = np.ascontiguousarray(measured.hand, np.float64)
+        rows = np.ascontiguousarray(shapes, np.float64)
+        assert (
+            lib().ikid_stream_set_calibration_shapes(
+                handle, fa.ctypes.data_as(f64p), ha.ctypes.data_as(f64p), None, rows.ctypes.data_as(f64p)
+            )
+            == 0
+        ), last_error()
+        row = np.zeros(model.n_outputs, np.float32)
+        ready = C.c_bool(False)
+        for f, want in zip(frames.astype(np.float32), expected, strict=True):
+            f = np.ascontiguousarray(f)
+            assert (
+                lib().ikid_stream_push(
+                    handle, f.ctypes.data_as(f32p), 18, row.ctypes.data_as(f32p), row.size, C.byref(ready)
+                )
+                == 0
+            ), last_error()
+            if want is None:
+                assert not ready.value
+            else:
+                assert ready.value and row.tobytes() == np.asarray(want, np.float32).tobytes()
+        # Shapes without the matrices, or not finite, are refused by name, nothing changed.
+        assert (
+            lib().ikid_stream_set_calibration_shapes(handle, None, None, None, rows.ctypes.data_as(f64p)) != 0
+        )
+        assert "shapes" in last_error()
+    finally:
+        lib().ikid_stream_free(handle)
+        lib().ikid_model_free(loaded)

@@ -106,6 +106,13 @@ int main(int argc, char **argv) {
     CHECK(ikid_stream_set_calibration(stream, identity, identity) == IKID_STATUS_OK, "ikid_stream_set_calibration");
     CHECK(ikid_stream_set_calibration_side(stream, identity, identity, "left") == IKID_STATUS_OK, "..._side");
     CHECK(ikid_stream_set_calibration_side(stream, NULL, NULL, NULL) == IKID_STATUS_OK, "calibration removed");
+    double shapes[18];
+    for (int k = 0; k < 18; k++) shapes[k] = 0.01 * (k % 7) - 0.03;
+    CHECK(ikid_stream_set_calibration_shapes(stream, identity, identity, "right", shapes) == IKID_STATUS_OK, "ikid_stream_set_calibration_shapes");
+    CHECK(ikid_stream_set_calibration_shapes(stream, NULL, NULL, NULL, shapes) == IKID_STATUS_INVALID_ARGUMENT && strstr(ikid_last_error(), "shapes") != NULL, "shapes without a calibration");
+    shapes[4] = NAN;
+    CHECK(ikid_stream_set_calibration_shapes(stream, identity, identity, NULL, shapes) == IKID_STATUS_INVALID_ARGUMENT && strstr(ikid_last_error(), "not finite") != NULL, "shapes not finite");
+    CHECK(ikid_stream_set_calibration_shapes(stream, NULL, NULL, NULL, NULL) == IKID_STATUS_OK, "calibration and shapes removed");
     const double z_up[3] = {0, 0, 1}, y_up[3] = {0, 1, 0}, no_up[3] = {0, 0, 0};
     CHECK(ikid_stream_set_lab_up(stream, z_up) == IKID_STATUS_OK, "ikid_stream_set_lab_up");
     CHECK(ikid_stream_set_lab_up(stream, no_up) == IKID_STATUS_INVALID_ARGUMENT && strstr(ikid_last_error(), "up") != NULL, "a zero up");
@@ -138,6 +145,10 @@ int main(int argc, char **argv) {
     ikid_tracker_flags *block_flags = malloc(block * sizeof *block_flags);
     CHECK(ikid_tracker_run(tracker, frames64, block * 18, block_out, block * 12, block_flags, block, &start) == IKID_STATUS_OK && start == 0, "ikid_tracker_run");
     CHECK(ikid_tracker_set_calibration(tracker, identity, identity, "right") == IKID_STATUS_OK, "ikid_tracker_set_calibration");
+    shapes[4] = 0.0;
+    CHECK(ikid_tracker_set_calibration_shapes(tracker, identity, identity, "right", shapes) == IKID_STATUS_OK, "ikid_tracker_set_calibration_shapes");
+    CHECK(ikid_tracker_set_calibration_shapes(tracker, NULL, NULL, NULL, shapes) == IKID_STATUS_INVALID_ARGUMENT, "tracker shapes without a calibration");
+    CHECK(ikid_tracker_set_calibration(tracker, identity, identity, "right") == IKID_STATUS_OK, "calibration without shapes again");
     /* Stamped frames: three periods apart is a gap, which restarts the filter. */
     size_t gap_restarts = 99;
     CHECK(ikid_tracker_push_at(tracker, 0.0, frames64, 18, estimate, 12, &flags) == IKID_STATUS_OK, "ikid_tracker_push_at");

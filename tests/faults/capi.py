@@ -86,6 +86,7 @@ SIGNATURES = {
     "ikid_stream_set_missing_markers": ([vp, C.c_uint32], C.c_int),
     "ikid_stream_set_calibration": ([vp, f64p, f64p], C.c_int),
     "ikid_stream_set_calibration_side": ([vp, f64p, f64p, C.c_char_p], C.c_int),
+    "ikid_stream_set_calibration_shapes": ([vp, f64p, f64p, C.c_char_p, f64p], C.c_int),
     "ikid_stream_set_lab_up": ([vp, f64p], C.c_int),
     "ikid_stream_status": ([vp, C.POINTER(C.c_uint32)], C.c_int),
     "ikid_stream_filled_markers": ([vp, C.POINTER(C.c_uint32)], C.c_int),
@@ -102,6 +103,7 @@ SIGNATURES = {
     "ikid_tracker_marker_noise": ([vp, f64p, sz], C.c_int),
     "ikid_tracker_free": ([vp], None),
     "ikid_tracker_set_calibration": ([vp, f64p, f64p, C.c_char_p], C.c_int),
+    "ikid_tracker_set_calibration_shapes": ([vp, f64p, f64p, C.c_char_p, f64p], C.c_int),
 }
 
 

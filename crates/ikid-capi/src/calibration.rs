@@ -39,3 +39,29 @@ pub(crate) unsafe fn calibration_from(
         )),
     }
 }
+
+/// [`calibration_from`] with the calibration file's marker shapes: `shapes` NULL (none: each
+/// trial's first frames give them) or 18 readable doubles (`"marker_shapes_m"`, row by row),
+/// only with both matrices.
+///
+/// # Safety
+/// As [`calibration_from`]; `shapes` NULL or 18 readable doubles.
+pub(crate) unsafe fn calibration_with_shapes(
+    forearm: *const f64,
+    hand: *const f64,
+    side: *const std::ffi::c_char,
+    shapes: *const f64,
+) -> Result<Option<Calibration>, Failure> {
+    let calibration = unsafe { calibration_from(forearm, hand, side) }?;
+    if shapes.is_null() {
+        return Ok(calibration);
+    }
+    let Some(calibration) = calibration else {
+        return Err(Failure::new(
+            ikid_status::InvalidArgument,
+            "shapes: marker shapes belong to a calibration: give its forearm and hand matrices too",
+        ));
+    };
+    let values = unsafe { slice(shapes, ikid_core::calibration::SEGMENT_SHAPES_LEN, "shapes") }?;
+    Ok(Some(calibration.with_shapes(Some(ikid_core::calibration::shapes_from_rows(values)?))))
+}

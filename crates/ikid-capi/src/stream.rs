@@ -3,7 +3,7 @@
 use crate::boundary::{
     Failure, doubles_out, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut,
 };
-use crate::calibration::calibration_from;
+use crate::calibration::{calibration_from, calibration_with_shapes};
 use crate::model::{ikid_model, recording_args};
 use ikid_core::Stream;
 
@@ -186,6 +186,35 @@ pub unsafe extern "C" fn ikid_stream_set_calibration_side(
     guard(|| {
         let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
         let calibration = unsafe { calibration_from(forearm, hand, side) }?;
+        s.set_calibration(calibration)?;
+        Ok(())
+    })
+}
+
+/// As `ikid_stream_set_calibration_side`, with the calibration file's marker shapes too:
+/// `shapes` NULL (none, as `ikid_stream_set_calibration_side`) or 18 doubles, the
+/// `"marker_shapes_m"` rows of a calibration file written by `ikid calibrate` one after the
+/// other (each segment's three markers in its technical frame, the forearm's first, metres).
+/// With them each segment is fitted to the shape its rotations were measured with, from the
+/// first frame, as `ikid ik` and Python do with that file (bit for bit); without them, to the
+/// trial's first frames (skin markers slid there turn every angle: a trial cut 1.5 s into a
+/// real recording read 2.6° instead of 0.9°). Refused (nothing changed) as
+/// `ikid_stream_set_calibration_side`, or if `shapes` are given without the matrices or are
+/// not finite.
+///
+/// # Safety
+/// As `ikid_stream_set_calibration_side`; `shapes` NULL or 18 readable doubles.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_stream_set_calibration_shapes(
+    stream: *mut ikid_stream,
+    forearm: *const f64,
+    hand: *const f64,
+    side: *const std::ffi::c_char,
+    shapes: *const f64,
+) -> ikid_status {
+    guard(|| {
+        let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
+        let calibration = unsafe { calibration_with_shapes(forearm, hand, side, shapes) }?;
         s.set_calibration(calibration)?;
         Ok(())
     })

@@ -5,7 +5,7 @@
 use crate::boundary::{
     Failure, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut, write_doubles,
 };
-use crate::calibration::calibration_from;
+use crate::calibration::{calibration_from, calibration_with_shapes};
 use crate::model::ikid_model;
 use ikid_core::body::{BodyModel, MARKER_FRAME_LEN};
 use ikid_core::tracker::{TRACKER_VALUES, TrackerOutput};
@@ -385,6 +385,30 @@ pub unsafe extern "C" fn ikid_tracker_set_calibration(
     guard(|| {
         let t = &mut unsafe { non_null_mut(tracker, "tracker") }?.tracker;
         let calibration = unsafe { calibration_from(forearm, hand, side) }?;
+        t.set_calibration(calibration);
+        Ok(())
+    })
+}
+
+/// As `ikid_tracker_set_calibration`, with the calibration file's marker shapes too (as
+/// `ikid_stream_set_calibration_shapes`: `shapes` NULL or the 18 doubles of its
+/// `"marker_shapes_m"` rows): each segment's markers are placed by the shape the calibration's
+/// rotations were measured with, as `ikid track` and `ikid.Tracker` do with that file (bit for
+/// bit), not by the trial's first frames. Starts the tracker afresh.
+///
+/// # Safety
+/// As `ikid_tracker_set_calibration`; `shapes` NULL or 18 readable doubles.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_tracker_set_calibration_shapes(
+    tracker: *mut ikid_tracker,
+    forearm: *const f64,
+    hand: *const f64,
+    side: *const std::ffi::c_char,
+    shapes: *const f64,
+) -> ikid_status {
+    guard(|| {
+        let t = &mut unsafe { non_null_mut(tracker, "tracker") }?.tracker;
+        let calibration = unsafe { calibration_with_shapes(forearm, hand, side, shapes) }?;
         t.set_calibration(calibration);
         Ok(())
     })

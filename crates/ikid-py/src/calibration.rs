@@ -273,14 +273,12 @@ impl Calibration {
         let shapes = match shapes {
             None => None,
             Some(obj) => Some(with_f64_rows(obj, "marker_shapes", 3, |v, n| {
-                if n != 6 || !v.iter().all(|x| x.is_finite()) {
+                if n != 6 {
                     return Err(input(format!(
-                        "marker_shapes: expected 6 finite rows (forearm's three markers, then the hand's), got {n}"
+                        "marker_shapes: expected 6 rows (forearm's three markers, then the hand's), got {n}"
                     )));
                 }
-                Ok(std::array::from_fn(|s| {
-                    std::array::from_fn(|k| Vector3::from_row_slice(&v[9 * s + 3 * k..9 * s + 3 * k + 3]))
-                }))
+                ikid::calibration::shapes_from_rows(v).py_err()
             })?),
         };
         Ok(Calibration { inner: self.inner.with_shapes(shapes), ..self.clone() })

@@ -282,6 +282,27 @@ pub struct Calibration {
 /// hand; a left arm's as mirrored into a right arm's.
 pub type SegmentShapes = [[Vector3<f64>; 3]; 2];
 
+/// Number of values of [`SegmentShapes`] as rows: each segment's three markers, `x y z`,
+/// forearm first (a calibration file's `"marker_shapes_m"`, flattened).
+pub const SEGMENT_SHAPES_LEN: usize = 18;
+
+/// [`SegmentShapes`] from their [`SEGMENT_SHAPES_LEN`] values (metres, forearm's three markers
+/// then the hand's, `x y z` each, as a calibration file's `"marker_shapes_m"` rows), refused
+/// unless that many and all finite: what every binding reads a file's shapes with.
+pub fn shapes_from_rows(values: &[f64]) -> Result<SegmentShapes> {
+    if values.len() != SEGMENT_SHAPES_LEN || !values.iter().all(|v| v.is_finite()) {
+        return Err(bad(format!(
+            "marker_shapes: expected {SEGMENT_SHAPES_LEN} finite values (6 rows x y z: the forearm's three \
+             markers, then the hand's), got {} ({} not finite)",
+            values.len(),
+            values.iter().filter(|v| !v.is_finite()).count()
+        )));
+    }
+    Ok(std::array::from_fn(|s| {
+        std::array::from_fn(|k| Vector3::from_row_slice(&values[9 * s + 3 * k..9 * s + 3 * k + 3]))
+    }))
+}
+
 /// The marker shapes of `frames` (whole marker frames back to back, of the `side` arm): each
 /// segment's markers in its technical frame, averaged over the frames with all six measured.
 /// Refused when no frame has them all, or a segment's markers are degenerate.
