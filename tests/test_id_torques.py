@@ -189,6 +189,8 @@ def test_torques_next_to_a_time_gap_or_the_files_ends_are_flagged_restarted_and_
         said = capsys.readouterr().out
         assert ("within 0.25 s of a time gap flagged restarted" in said) == gap, said
         assert "within 0.25 s of the file's first or last row flagged restarted" in said, said
+        # A .mot has no forearm pose: the gravity assumed is said (review 5).
+        assert "gravity as for a still forearm, the elbow straight and the shoulder flexed 0°" in said, said
         table = read_storage(out)
         status = table.column("ikid_status").astype(int)
         first, last = t[keep][0], t[keep][-1]

@@ -112,7 +112,9 @@ class MarkerData:
     def frames(
         self, mapping: MarkerMap | str | os.PathLike[str] | None = None, *, whole: bool = True
     ) -> np.ndarray:
-        """ikid's ``(n, 18)`` frames (metres, float64, NaN = missing). ``mapping`` says which
+        """ikid's ``(n, 18)`` frames (metres, float64, NaN = missing), in ikid's lab (+Y up:
+        turned by the map's ``up``, else the file's declared one, as :meth:`marker`; do not turn
+        them again with :func:`ikid.io.to_ikid_lab`). ``mapping`` says which
         label is which ikid marker (a :class:`MarkerMap` or the path of its TOML file; default:
         the labels are ikid's own names). ``whole=False``
         for one block of a file read in blocks: a marker missing throughout the block is not an

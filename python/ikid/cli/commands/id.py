@@ -273,6 +273,20 @@ def run(args: argparse.Namespace) -> int:
                 "restarted (the low-pass and the differences see the stretch on one side only there: "
                 "their torques are less sure)"
             )
+        # A .mot holds the hand's angles, not the forearm's pose in the lab: gravity's share of
+        # the torques is that of an assumed forearm (review 5: on a real recording id's torques
+        # ran opposite to track's, which measures the forearm, with status 0).
+        notes.append(
+            "gravity as for a still forearm, the elbow straight and the shoulder flexed "
+            + (
+                f"{args.shoulder_deg:g}° (--shoulder-deg)"
+                if model is None
+                else f"{', '.join(f'{d:g}' for d in _trained_shoulders(model))}° (as {model.name} "
+                "was trained)"
+            )
+            + ": the angles do not say how the forearm was held; for a recording's torques, "
+            "`ikid track` measures it from the forearm's markers"
+        )
         if flagged_ends:
             notes.append(
                 f"{flagged_ends} rows within {gap_edge_s(rate, lowpass):g} s of the file's first or last "
@@ -317,3 +331,10 @@ def _at_one_rate(blocks, rate_hz: float, source: str) -> Iterator[tuple[np.ndarr
                 f"{rate_hz:g} Hz: `ikid id` takes a file at one rate (write one file per rate)"
             )
         yield time_s, q
+
+
+def _trained_shoulders(model) -> list[float]:
+    """The shoulder flexions (degrees) a joint-state model's training data held the forearm at
+    (its card's provenance), 0 when it does not say."""
+    data = (model.card.get("provenance") or {}).get("data") or {}
+    return [float(d) for d in data.get("shoulders_deg") or [0.0]]
