@@ -17,9 +17,10 @@ pub const FILLED: u16 = 1;
 /// recording).
 pub const REJECTED_MARKER: u16 = 2;
 /// The tracker lost the wrist (its markers agreed with one another but not with it) and
-/// restarted from its own solution at this frame — or did so, or held through a long gap, within
-/// the last [`LOST_S`](crate::tracker::LOST_S): its velocities and accelerations (so the
-/// torques) are still settling.
+/// restarted from its own solution at this frame — or did so, started, or held through a long
+/// gap, within the last [`LOST_S`](crate::tracker::LOST_S): its velocities and accelerations
+/// (so the torques) are still settling. `ikid id` sets it on the rows next to a time gap or a
+/// file's ends, where its low-pass sees one side only.
 pub const RESTARTED: u16 = 4;
 /// A segment was not measured in this frame (its markers missing or rejected): its last pose
 /// was held, or the estimate was carried forward without a correction.

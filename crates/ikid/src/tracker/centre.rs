@@ -319,7 +319,7 @@ mod tests {
         }
         let (est, status, tracker) = track_calibrated(&f, rate);
         assert_eq!(tracker.restarts(), 1);
-        let restart = status.iter().position(|s| s & status::RESTARTED != 0).unwrap();
+        let restart = first_restart(&status, &tracker).unwrap();
         // At once: not after LOST_S (3 frames here) of gated frames, as without the centre.
         assert_eq!(restart, 300);
         let off = worst_turn_deg(&q[restart + 5..400], &est[restart + 5..400]);

@@ -83,3 +83,10 @@ pub(super) fn lcg_gaussian(seed: u64) -> impl FnMut() -> f64 {
         (-2.0 * u().ln()).sqrt() * (std::f64::consts::TAU * u()).cos()
     }
 }
+
+/// The first frame flagged [`RESTARTED`](crate::status::RESTARTED) after the filter's own start
+/// (whose first [`LOST_S`](super::LOST_S) of frames are flagged too, q̇ and q̈ settling).
+pub(super) fn first_restart(status: &[u16], tracker: &Tracker) -> Option<usize> {
+    let start = tracker.lost_frames();
+    status.iter().skip(start).position(|s| s & crate::status::RESTARTED != 0).map(|i| i + start)
+}
