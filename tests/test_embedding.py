@@ -57,7 +57,11 @@ def expected() -> dict[str, object]:
     frames = ikid.forward_markers(q, 0.3).astype(np.float32)
     predicted = model.predict(frames)
     tracked = ikid.Tracker(rate_hz=model.frame_rate_hz).run(frames.astype(np.float64))
+    stream = model.stream()
+    for f in frames:
+        stream.push(f)
     return {
+        "stream_status": int(stream.status),
         "frames": frames,
         "predicted": len(predicted),
         "last": predicted[-1],
@@ -76,6 +80,10 @@ def check_output(stdout: str, want: dict[str, object]) -> None:
     np.testing.assert_allclose(numbers("last", stdout), want["last"], atol=2e-6)
     np.testing.assert_allclose(numbers("tracked", stdout), want["tracked"], atol=2e-6)
     assert re.search(rf"^tracked .* status {want['status']}$", stdout, re.M), stdout
+    # The C host reads its last row with the row's status bits (review 5: it printed a flagged
+    # row as any other); the other hosts print the angles alone.
+    if re.search(r"^last .* status \d+$", stdout, re.M):
+        assert re.search(rf"^last .* status {want['stream_status']}$", stdout, re.M), stdout
 
 
 @pytest.mark.timeout(1200)  # a first build compiles ikid and nalgebra (~2 min on 2 cores)

@@ -70,16 +70,18 @@ impl TrackerSettings {
                     .into(),
             });
         }
-        for (what, v, max, unit) in [
-            ("rate_hz", self.rate_hz, 100_000.0, "Hz"),
-            ("jerk_noise", self.jerk_noise, 1e12, "rad²/s⁵"),
-            ("noise_memory_s", self.noise_memory_s, 86_400.0, "s"),
-            ("initial_marker_noise", self.initial_marker_noise, 1.0, "m"),
+        // Lower ends too: 1e-300 Hz passed "positive" (review 5), a rate no recording has and
+        // a step no filter survives; each floor is far below any real value.
+        for (what, v, min, max, unit) in [
+            ("rate_hz", self.rate_hz, 1.0, 100_000.0, "Hz"),
+            ("jerk_noise", self.jerk_noise, 1e-6, 1e12, "rad²/s⁵"),
+            ("noise_memory_s", self.noise_memory_s, 1e-3, 86_400.0, "s"),
+            ("initial_marker_noise", self.initial_marker_noise, 1e-9, 1.0, "m"),
         ] {
-            if !(v > 0.0 && v <= max) {
+            if !(v >= min && v <= max) {
                 return Err(Error::BadArgument {
                     what,
-                    detail: format!("is {v}, expected a positive number up to {max:e} {unit}"),
+                    detail: format!("is {v}, expected a number from {min:e} to {max:e} {unit}"),
                 });
             }
         }
@@ -97,6 +99,22 @@ impl TrackerSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn settings_out_of_any_recordings_range_are_refused_by_name_and_the_defaults_pass() {
+        assert!(TrackerSettings::new(1000.0).check().is_ok());
+        assert!(TrackerSettings::new(1.0).check().is_ok(), "1 Hz: the floor itself");
+        for (settings, what) in [
+            (TrackerSettings::new(1e-300), "rate_hz"),
+            (TrackerSettings::new(0.5), "rate_hz"),
+            (TrackerSettings { jerk_noise: 1e-300, ..TrackerSettings::new(100.0) }, "jerk_noise"),
+            (TrackerSettings { initial_marker_noise: 1e-300, ..TrackerSettings::new(100.0) }, "initial_marker_noise"),
+            (TrackerSettings { noise_memory_s: 1e-300, ..TrackerSettings::new(100.0) }, "noise_memory_s"),
+        ] {
+            let err = settings.check().unwrap_err().to_string();
+            assert!(err.contains(what) && err.contains("expected a number from"), "{what}: {err}");
+        }
+    }
 
     #[test]
     fn an_up_axis_is_named_as_a_marker_map_names_it() {
