@@ -733,7 +733,7 @@ mod tests {
             (TrackerSettings { initial_marker_noise: 2.0, ..TrackerSettings::new(1000.0) }, "initial_marker_noise"),
         ] {
             let err = Tracker::new(BodyModel::default(), settings).unwrap_err().to_string();
-            assert!(err.contains(name) && err.contains("up to"), "{err}");
+            assert!(err.contains(name) && err.contains("expected a number from"), "{err}");
         }
         assert!(
             Tracker::new(BodyModel::default(), TrackerSettings { jerk_noise: 1e12, ..TrackerSettings::new(1000.0) })

@@ -79,9 +79,15 @@ impl TrackerSettings {
             ("initial_marker_noise", self.initial_marker_noise, 1e-9, 1.0, "m"),
         ] {
             if !(v >= min && v <= max) {
+                // 1e308 as 1e308, not as its 309 digits.
+                let shown = if v.is_finite() && v != 0.0 && !(1e-3..1e6).contains(&v.abs()) {
+                    format!("{v:e}")
+                } else {
+                    format!("{v}")
+                };
                 return Err(Error::BadArgument {
                     what,
-                    detail: format!("is {v}, expected a number from {min:e} to {max:e} {unit}"),
+                    detail: format!("is {shown}, expected a number from {min:e} to {max:e} {unit}"),
                 });
             }
         }
