@@ -320,17 +320,6 @@ HAND_FROM_WRIST_MAX_M = 0.2
 HAND_PROXIMAL_M = 0.02
 
 
-def _technical(markers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Three markers per frame ``(n, 3, 3)`` -> an orthonormal frame of theirs (origin the first,
-    ``x`` to the second, ``z`` normal to the three; columns), NaN where degenerate or missing."""
-    a, b, c = markers[:, 0], markers[:, 1], markers[:, 2]
-    x = b - a
-    x /= np.linalg.norm(x, axis=1, keepdims=True)
-    z = np.cross(x, c - a)
-    z /= np.linalg.norm(z, axis=1, keepdims=True)
-    return a, np.stack([x, np.cross(z, x), z], axis=2)
-
-
 def check_landmarks_place_the_hand(
     neutral_frames: np.ndarray, landmark_points: np.ndarray, landmark_frames: np.ndarray, source: str
 ) -> None:
@@ -342,13 +331,14 @@ def check_landmarks_place_the_hand(
     racing plate a third of a turn off read every frame turned over). ``landmark_points``
     ``(n, 12)``: lateral and medial epicondyle, radial and ulnar styloid, with the forearm's
     markers of ``landmark_frames`` ``(n, 18)``."""
-    o, r = _technical(np.asarray(landmark_frames, np.float64)[:, :9].reshape(-1, 3, 3))
-    pts = np.asarray(landmark_points, np.float64).reshape(len(o), 4, 3)
-    local = np.einsum("nji,nkj->nki", r, pts - o[:, None])
+    # Everything in the forearm's markers' technical frame (the core's), where the landmarks
+    # are kept: distances and directions there are the lab's.
+    frames = np.asarray(landmark_frames, np.float64)
+    local = _native.points_in_technical_frame(frames[:, :9], np.asarray(landmark_points, np.float64), 4)
+    local = local.reshape(len(frames), 4, 3)
     seen = np.isfinite(local).all(axis=(1, 2))
     f = np.asarray(neutral_frames, np.float64)
-    o2, r2 = _technical(f[:, :9].reshape(-1, 3, 3))
-    hand = np.einsum("nji,nj->ni", r2, f[:, 9:].reshape(-1, 3, 3).mean(axis=1) - o2)
+    hand = _native.points_in_technical_frame(f[:, :9], f[:, 9:], 3).reshape(len(f), 3, 3).mean(axis=1)
     held = np.isfinite(hand).all(axis=1)
     if not seen.any() or not held.any():
         return  # the calibration itself says what is missing

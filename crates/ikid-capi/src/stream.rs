@@ -3,7 +3,7 @@
 use crate::boundary::{
     Failure, doubles_out, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut,
 };
-use crate::calibration::{calibration_from, calibration_with_shapes};
+use crate::calibration::calibration_with_shapes;
 use crate::model::{ikid_model, recording_args};
 use ikid_core::Stream;
 
@@ -183,12 +183,7 @@ pub unsafe extern "C" fn ikid_stream_set_calibration_side(
     hand: *const f64,
     side: *const std::ffi::c_char,
 ) -> ikid_status {
-    guard(|| {
-        let s = &mut unsafe { non_null_mut(stream, "stream") }?.stream;
-        let calibration = unsafe { calibration_from(forearm, hand, side) }?;
-        s.set_calibration(calibration)?;
-        Ok(())
-    })
+    unsafe { ikid_stream_set_calibration_shapes(stream, forearm, hand, side, std::ptr::null()) }
 }
 
 /// As `ikid_stream_set_calibration_side`, with the calibration file's marker shapes too:

@@ -5,7 +5,7 @@
 use crate::boundary::{
     Failure, free_handle, guard, ikid_status, non_null, non_null_mut, slice, slice_mut, write_doubles,
 };
-use crate::calibration::{calibration_from, calibration_with_shapes};
+use crate::calibration::calibration_with_shapes;
 use crate::model::ikid_model;
 use ikid_core::body::{BodyModel, MARKER_FRAME_LEN};
 use ikid_core::tracker::{TRACKER_VALUES, TrackerOutput};
@@ -382,12 +382,7 @@ pub unsafe extern "C" fn ikid_tracker_set_calibration(
     hand: *const f64,
     side: *const std::ffi::c_char,
 ) -> ikid_status {
-    guard(|| {
-        let t = &mut unsafe { non_null_mut(tracker, "tracker") }?.tracker;
-        let calibration = unsafe { calibration_from(forearm, hand, side) }?;
-        t.set_calibration(calibration);
-        Ok(())
-    })
+    unsafe { ikid_tracker_set_calibration_shapes(tracker, forearm, hand, side, std::ptr::null()) }
 }
 
 /// As `ikid_tracker_set_calibration`, with the calibration file's marker shapes too (as
