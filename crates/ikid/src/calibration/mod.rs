@@ -880,6 +880,29 @@ mod tests {
     }
 
     #[test]
+    fn shapes_from_rows_reads_a_files_rows_forearm_first_and_refuses_any_other_count_or_a_nan() {
+        // The oracle: value v = 10 s + 3 k + c + 1 at segment s, marker k, coordinate c, laid
+        // out row by row as "marker_shapes_m" is (forearm's three markers, then the hand's).
+        let rows: Vec<f64> = (0..SEGMENT_SHAPES_LEN).map(|i| (10 * (i / 9) + i % 9 + 1) as f64).collect();
+        let shapes = shapes_from_rows(&rows).unwrap();
+        for (s, segment) in shapes.iter().enumerate() {
+            for (k, marker) in segment.iter().enumerate() {
+                for (c, v) in marker.iter().enumerate() {
+                    assert_eq!(*v, (10 * s + 3 * k + c + 1) as f64, "segment {s} marker {k} axis {c}");
+                }
+            }
+        }
+        assert!(shapes_from_rows(&rows[..17]).is_err());
+        assert!(shapes_from_rows(&[rows.clone(), vec![1.0]].concat()).is_err());
+        for bad in [f64::NAN, f64::INFINITY] {
+            let mut r = rows.clone();
+            r[7] = bad;
+            let err = shapes_from_rows(&r).unwrap_err().to_string();
+            assert!(err.contains("marker_shapes") && err.contains("1 not finite"), "{err}");
+        }
+    }
+
+    #[test]
     fn marker_shapes_are_the_calibration_frames_shapes_and_a_preset_one_is_fitted_from_the_first_frame() {
         // The oracle: the hand turned 0.3 rad with one marker slid 6 mm (as above), its turn by
         // least squares. The shapes are those of `before` (the calibration's frames: a frame
