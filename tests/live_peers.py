@@ -61,14 +61,17 @@ def trial_frames(n: int, seed: int = 5) -> np.ndarray:
 
 
 def source_channels(frame_m: np.ndarray, scale: float) -> np.ndarray:
-    """A source's channels for one ikid frame: the extra marker first, then ikid's markers in
-    reverse order (the source's order is not ikid's), in the source's unit."""
-    markers = frame_m.reshape(6, 3)[::-1]
+    """A source's channels for one frame (ikid's six markers, or as many as its labels): the
+    extra marker first, then the frame's markers in reverse order (the source's order is not
+    ikid's), in the source's unit."""
+    markers = frame_m.reshape(-1, 3)[::-1]
     return np.concatenate([[0.1, 0.2, 1.4], markers.ravel()]) * scale
 
 
-def source_labels() -> list[str]:
-    return [EXTRA_LABEL, *[LAB_LABELS[m] for m in reversed(list(LAB_LABELS))]]
+def source_labels(labels: list[str] | None = None) -> list[str]:
+    """The source's labels: the extra marker's, then ``labels`` (the frame's markers', in its
+    order; the lab's six by default) reversed."""
+    return [EXTRA_LABEL, *reversed(labels if labels is not None else list(LAB_LABELS.values()))]
 
 
 def pace(start: float, k: int, rate: float) -> None:
@@ -167,13 +170,16 @@ def packet(kind: int, payload: bytes) -> bytes:
     return HEADER.pack(HEADER.size + len(payload), kind) + payload
 
 
-def qtm_parameters(rate: float) -> str:
-    labels = "".join(f"<Label><Name>{lab}</Name><RGBColor>255</RGBColor></Label>" for lab in source_labels())
+def qtm_parameters(rate: float, names: list[str] | None = None, up: str = "+Y") -> str:
+    """QTM's General and 3D parameters: ``up`` its AxisUpwards (QTM's default is +Z; the fake's
+    frames are ikid's simulated ones, +Y up, unless it is given frames of another lab)."""
+    names = names if names is not None else source_labels()
+    labels = "".join(f"<Label><Name>{lab}</Name><RGBColor>255</RGBColor></Label>" for lab in names)
     return (
         f"<QTM_Parameters_Ver_1.25><General><Frequency>{rate:g}</Frequency><Capture_Time>60</Capture_Time>"
-        "</General><The_3D><AxisUpwards>+Z</AxisUpwards>"
+        f"</General><The_3D><AxisUpwards>{up}</AxisUpwards>"
         "<CalibrationTime>2026-01-01 12:00:00</CalibrationTime>"
-        f"<Labels>{len(source_labels())}</Labels>{labels}</The_3D></QTM_Parameters_Ver_1.25>"
+        f"<Labels>{len(names)}</Labels>{labels}</The_3D></QTM_Parameters_Ver_1.25>"
     )
 
 
@@ -183,7 +189,9 @@ class FakeQtm:
     time stamps (this machine's monotonic clock, so a reader can time the path). ``drop``: frame
     indices never sent; ``disconnect_at``: the connection is closed before that frame (the
     next connection streams from it); ``hide``: (first, end, ikid marker) hidden; ``burst``:
-    every frame sent at once (stamped at the rate all the same: a reader that cannot keep up)."""
+    every frame sent at once (stamped at the rate all the same: a reader that cannot keep up);
+    ``labels``: the frames' markers' labels in their order (the lab's six by default); ``up``:
+    the AxisUpwards it declares (its frames' lab's)."""
 
     def __init__(
         self,
@@ -194,8 +202,11 @@ class FakeQtm:
         hide=None,
         burst=False,
         declared_rate: float | None = None,
+        labels: list[str] | None = None,
+        up: str = "+Y",
     ) -> None:
         self.frames, self.rate, self.drop, self.hide, self.burst = frames, rate, set(drop), hide, burst
+        self.labels, self.up = source_labels(labels), up
         # The rate its parameters declare (a QTM set up otherwise than it captures): ``rate``'s.
         self.declared_rate = rate if declared_rate is None else declared_rate
         self.disconnect_at = disconnect_at
@@ -243,7 +254,8 @@ class FakeQtm:
             if low.startswith("version"):
                 conn.sendall(packet(COMMAND, f"Version set to {cmd.split()[1]}\0".encode()))
             elif low.startswith("getparameters"):
-                conn.sendall(packet(XML, qtm_parameters(self.declared_rate).encode() + b"\0"))
+                parameters = qtm_parameters(self.declared_rate, self.labels, self.up)
+                conn.sendall(packet(XML, parameters.encode() + b"\0"))
             elif low.startswith("streamframes"):
                 break
             else:
@@ -262,11 +274,11 @@ class FakeQtm:
                 continue
             xyz = source_channels(self.frames[k], 1000.0).astype("<f4")
             if self.hide and self.hide[0] <= k < self.hide[1]:
-                m = 1 + 5 - self.hide[2]
+                m = len(self.labels) - 1 - self.hide[2]
                 xyz[3 * m : 3 * m + 3] = np.nan
             if not self.burst:
                 pace(start, k - first, self.rate)
-            body = THREE_D.pack(len(source_labels()), 0, 0) + xyz.tobytes()
+            body = THREE_D.pack(len(self.labels), 0, 0) + xyz.tobytes()
             component = COMPONENT.pack(COMPONENT.size + len(body), 1) + body
             conn.sendall(
                 packet(FRAME, DATA.pack(clock0 + round((k - first) * 1e6 / self.rate), k + 1, 1) + component)

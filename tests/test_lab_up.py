@@ -10,6 +10,7 @@ simulator's torques.
 from __future__ import annotations
 
 import io as text_io
+import subprocess
 import sys
 
 import numpy as np
@@ -118,6 +119,39 @@ def test_the_live_stream_turns_a_z_up_lab_given_by_up(trial, monkeypatch, capsys
     z, err_z = _stream(monkeypatch, capsys, _z_up(frames), "--up", "+z")
     assert "lab up +z" in err_z and "assumed" not in err_z
     np.testing.assert_allclose(z, y, atol=1e-6, equal_nan=True)
+
+
+def _qtm_tracker(tmp_path, frames: np.ndarray, up: str, *extra: str) -> tuple[np.ndarray, str]:
+    from live_peers import FakeQtm, map_toml
+
+    (tmp_path / "lab.toml").write_text(map_toml())
+    server = FakeQtm(frames, rate=1000.0, up=up, burst=True)
+    try:
+        r = subprocess.run(
+            [sys.executable, "-m", "ikid", "stream", "--source", f"qtm:127.0.0.1:{server.port}",
+             "--map", str(tmp_path / "lab.toml"), "--tracker", "--idle", "3", "--max-lag", "10",
+             "--count", str(len(frames)), *extra],
+            capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+    finally:
+        server.close()
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.strip().splitlines()[1:]
+    return np.array([[float(v) if v else np.nan for v in line.split(",")[3:]] for line in lines]), r.stderr
+
+
+def test_a_qtm_source_is_turned_by_the_axis_upwards_it_declares(trial, tmp_path):
+    # QTM's 3D data is +Z up by default and its parameters say so (AxisUpwards); read as +Y,
+    # gravity pulled the hand sideways and every torque line was "ok".
+    frames = np.asarray(trial.markers[:600], np.float64)
+    y, _ = _qtm_tracker(tmp_path, frames, "+Y")
+    z, err = _qtm_tracker(tmp_path, _z_up(frames), "+Z")
+    assert "lab up +z (QTM's AxisUpwards)" in err, err
+    # Sent as float32 millimetres: equal to what the same frames in ikid's lab give.
+    np.testing.assert_allclose(z, y, atol=2e-4, equal_nan=True)
+    # An --up of the lab's own is taken over QTM's word, and the difference said.
+    _, err = _qtm_tracker(tmp_path, _z_up(frames), "+Z", "--up", "+y")
+    assert "taken as +y (--up), where QTM says its AxisUpwards is +z" in err, err
 
 
 def test_up_must_name_a_lab_axis(tmp_path):

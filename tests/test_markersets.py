@@ -4,6 +4,9 @@ summary say so, flexion and deviation are the hand's direction in the forearm.""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -13,6 +16,7 @@ from ikid.cli import main as cli
 from ikid.io import MarkerMap, read_storage
 from ikid.io.markers import FileFormatError
 from ikid.io.storage import not_determined
+from live_peers import FakeQtm
 
 
 def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
@@ -333,18 +337,78 @@ def test_a_wrist_bar_named_one_way_in_markers_and_the_other_in_landmarks_is_refu
     assert "make [markers] and [landmarks] name them alike" in said and "on the ulna" not in said
 
 
-def test_a_live_stream_with_a_one_marker_hand_says_it_is_not_streamed(tmp_path, capsys):
-    # Review 4: the live path looked for the virtual markers' labels and said RFIN was missing
-    # while listing it among the source's. Refused before any source is opened.
+PIG_LABELS = ["RWRA", "RWRB", "RELB", "RFIN"]  # RSP, USP, FAP, HND: Plug-in Gait's right arm
+
+
+def _stream_from_qtm(frames: np.ndarray, rate: float, tmp_path, *args: str, hide=None):
+    """``ikid stream`` reading ``frames`` (metres, RSP USP FAP HND) from a fake QTM server on
+    127.0.0.1 under Plug-in Gait's labels, bounded in count and time."""
+    server = FakeQtm(frames, rate=rate, labels=PIG_LABELS, hide=hide)
+    try:
+        return subprocess.run(
+            [sys.executable, "-m", "ikid", "stream", "--source", f"qtm:127.0.0.1:{server.port}",
+             "--idle", "3", "--count", str(len(frames)), *args],
+            capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+    finally:
+        server.close()
+
+
+@pytest.mark.parametrize("path", ["network", "tracker"])
+def test_a_one_marker_hand_streams_live_flexion_and_deviation_without_s_p(path, tmp_path, capsys):
+    # Plug-in Gait's set from a live source (review 4 found it refused): its four markers made
+    # six each frame as a file's are; s_p has no column; a hidden finger marker is said by its
+    # label, not as the three virtual markers the core is given. The truth: the arm's own posing.
+    rate = 100.0
+    static, _, _ = one_marker_arm(100, rate, 1, moving=False)
+    trial, e, a = one_marker_arm(400, rate, 2)
+    write_arm(tmp_path / "static.trc", static, rate)
     (tmp_path / "pig.toml").write_text(MarkerMap.plug_in_gait("right").to_toml())
-    # A loopback source (nothing listens there): nothing leaves this machine if it were opened.
-    code = cli(
-        ["stream", "--source", "qtm:127.0.0.1:9", "--map", str(tmp_path / "pig.toml"), "--idle", "0.1"]
+    cal = tmp_path / "cal.json"
+    common = ["--map", str(tmp_path / "pig.toml"), "--calibration", str(cal)]
+    assert (
+        cli(["calibrate", "--static", str(tmp_path / "static.trc"), "-o", str(cal), common[0], common[1]])
+        == 0
     )
-    err = capsys.readouterr().err
-    assert code == 2, err
-    assert "the map's hand is one marker (HND 'RFIN'): ikid stream reads three on the hand" in err, err
-    assert "not found" not in err
+    capsys.readouterr()
+    hidden = range(250, 260)
+    extra = ["--tracker"] if path == "tracker" else []
+    r = _stream_from_qtm(trial, rate, tmp_path, *common, *extra, hide=(hidden.start, hidden.stop, 3))
+    assert "ra_wr_s_p not written: the hand is one marker (HND = 'RFIN')" in r.stderr, r.stderr
+    assert "ikid's 4 mapped" in r.stderr, r.stderr
+    lines = r.stdout.strip().splitlines()
+    header, rows = lines[0].split(","), [line.split(",") for line in lines[1:]]
+    assert len(rows) == len(trial), r.stderr
+    assert not [h for h in header if h.startswith("ra_wr_s_p")], header
+    status = [row[2] for row in rows]
+    if path == "network":
+        assert r.returncode == 3, r.stderr  # the hidden frames are refused
+        assert all(status[k].startswith("refused:missing HND 'RFIN'") for k in hidden), status[hidden.start]
+    else:
+        assert r.returncode == 0, r.stderr  # the filter carries through, holding the hand
+        assert all(status[k].startswith("flagged:") and "held" in status[k] for k in hidden), status[250]
+    angles = [header.index(n) for n in ("ra_wr_e_f", "ra_wr_ad_ab")]
+    done = [k for k, s in enumerate(status) if k >= 60 and k not in hidden and s == "ok"]
+    assert len(done) > 300, status
+    got = np.array([[float(rows[k][c]) for c in angles] for k in done])
+    err = np.degrees(got - np.stack([e, a], axis=1)[done])
+    rms = np.sqrt(np.mean(err**2, axis=0))
+    assert (rms < 1.5).all(), rms
+
+
+def test_a_live_one_marker_hand_whose_wrist_bar_is_not_at_the_wrist_ends_before_any_line(tmp_path):
+    # The map's FAP and USP exchanged: the "wrist bar" spans the forearm. A file's whole columns
+    # are checked for it; a live stream's first frames are, and nothing is written before.
+    rate = 100.0
+    trial, _, _ = one_marker_arm(60, rate, 2)
+    swapped = MarkerMap.plug_in_gait("right").to_toml().replace('"RWRB"', '"TMP"')
+    swapped = swapped.replace('"RELB"', '"RWRB"').replace('"TMP"', '"RELB"')
+    (tmp_path / "pig.toml").write_text(swapped)
+    r = _stream_from_qtm(trial, rate, tmp_path, "--map", str(tmp_path / "pig.toml"))
+    assert r.returncode == 2, r.stderr
+    assert "the stream's first 20 frames with every marker" in r.stderr, r.stderr
+    assert "they do not sit there" in r.stderr, r.stderr
+    assert r.stdout.strip().count("\n") == 0  # the header alone
 
 
 def test_api_frames_of_a_one_marker_hand_warn_that_s_p_is_not_determined_and_the_cli_does_not(

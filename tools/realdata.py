@@ -791,19 +791,13 @@ def pig(folder: Path, work: Path, log: list[str]) -> dict:
             q = np.full((len(vicon), 3), np.nan)
             q[rows, 1] = table.column("ra_wr_e_f")
             q[rows, 2] = table.column("ra_wr_ad_ab")
-            has = np.isfinite(q[:, 1:]).all(axis=1)
-            rms_by = []
-            for k in (1, 2):
-                a, b = q[has, k] - q[has, k].mean(), vicon[has, k] - vicon[has, k].mean()
-                rms_by.append(float(np.sqrt(np.mean((a - b) ** 2))))
-            arm[path] = {
-                "rms": rms_by,
-                "r": [float(np.corrcoef(q[has, k], vicon[has, k])[0, 1]) for k in (1, 2)],
-                "rows": int(has.sum()),
-                "frames": len(vicon),
-                "columns": list(table.columns),
-                "not_determined": not_determined(table),
-            }
+            arm[path] = _pig_score(q, vicon, list(table.columns), not_determined(table))
+        done, q, columns = _pig_live(trial, side, mapping, cal, log)
+        arm["stream_out"] = done.stderr.strip()
+        ok = done.returncode == 0 and arm["calibrated"]
+        written = [c for c in ("ra_wr_s_p", "ra_wr_e_f", "ra_wr_ad_ab") if c in columns]
+        not_written = [c for c in ("ra_wr_s_p", "ra_wr_e_f", "ra_wr_ad_ab") if c not in written]
+        arm["stream"] = _pig_score(q, vicon, columns, not_written) if ok else None
         out["arms"][side] = arm
     for path in ("ik", "track"):
         scores = [a[path] for a in out["arms"].values()]
@@ -811,10 +805,61 @@ def pig(folder: Path, work: Path, log: list[str]) -> dict:
     return out
 
 
+def _pig_score(q: np.ndarray, vicon: np.ndarray, columns: list[str], not_written: list[str]) -> dict:
+    """e_f and ad_ab of ``q`` (``(n, 3)`` degrees at the trial's frames, NaN where no row)
+    against Vicon's, each mean removed."""
+    has = np.isfinite(q[:, 1:]).all(axis=1)
+    rms_by = []
+    for k in (1, 2):
+        a, b = q[has, k] - q[has, k].mean(), vicon[has, k] - vicon[has, k].mean()
+        rms_by.append(float(np.sqrt(np.mean((a - b) ** 2))))
+    return {
+        "rms": rms_by,
+        "r": [float(np.corrcoef(q[has, k], vicon[has, k])[0, 1]) for k in (1, 2)],
+        "rows": int(has.sum()),
+        "frames": len(vicon),
+        "columns": columns,
+        "not_determined": not_written,
+    }
+
+
+def _pig_live(trial: Path, side: str, mapping: Path, cal: Path, log: list[str]):
+    """The trial's four markers of ``side`` sent live by a fake Qualisys QTM server on
+    127.0.0.1 (the tests' ``live_peers.FakeQtm``: QTM's protocol, float32 mm, the C3D's own up
+    as its AxisUpwards), read by ``ikid stream --tracker``: its exit, the ``(n, 3)`` angles in
+    degrees of its ``ok`` lines (NaN elsewhere) and its CSV columns."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    from ikid.io import MarkerMap, read_markers
+    from live_peers import FakeQtm
+
+    data = read_markers(trial)
+    plug_in_gait = MarkerMap.plug_in_gait(side)
+    labels = [plug_in_gait.labels[m] for m in plug_in_gait.marker_names()]
+    up = data.lab_up()[0]
+    raw = np.concatenate([data.marker(label, "+y") for label in labels], axis=1)  # the file's lab
+    server = FakeQtm(raw, rate=data.rate_hz, labels=labels, up=up.upper(), burst=True)
+    args = ["stream", "--source", "qtm:127.0.0.1:PORT", "--map", str(mapping), "--calibration", str(cal),
+            "--tracker", "--idle", "3", "--max-lag", "1000", "--count", str(len(raw))]  # fmt: skip
+    try:
+        done = run([a.replace("PORT", str(server.port)) for a in args], [])
+    finally:
+        server.close()
+    said = done.stderr.strip()
+    log.append(f"$ ikid {' '.join(args)}  # a fake QTM on the loopback sends {trial.name}\n{said}")
+    lines = done.stdout.strip().splitlines()
+    columns = lines[0].split(",") if lines else []
+    q = np.full((len(raw), 3), np.nan)
+    for k, line in enumerate(lines[1:]):
+        row = line.split(",")
+        if row[2] == "ok":
+            q[k, 1:] = np.degrees([float(row[columns.index(c)]) for c in ("ra_wr_e_f", "ra_wr_ad_ab")])
+    return done, q, columns
+
+
 def pig_summary(p: dict) -> list[str]:
     lines = []
     for side, arm in p["arms"].items():
-        for path in ("ik", "track"):
+        for path in ("ik", "track", "stream"):
             s = arm[path]
             if s is None:
                 why = arm[f"{path}_out"].splitlines()[-1] if arm[f"{path}_out"] else ""
@@ -1334,13 +1379,16 @@ def write_report(
         "as RSP/USP and the styloid landmarks, `ELB` as FAP and the elbow landmark, `FIN` as HND; calibrated "
         "from `pycgm_static.c3d`. ikid writes e_f and ad_ab and not s_p (the hand's roll is not observed); "
         "Vicon's angles converted as the data's README says, each trial's mean removed (the two models place "
-        "their axes differently). `pig_ik`/`pig_track` on the last line: the worst of these.",
+        "their axes differently). `pig_ik`/`pig_track` on the last line: the worst of these. `stream`: "
+        "`ikid stream --tracker` reading the trial live from a fake Qualisys QTM server on the loopback "
+        "(QTM's protocol, float32 mm, the C3D's +Z up as QTM's AxisUpwards); rows: its `ok` lines (the "
+        "filter's first ones are flagged `restarted`).",
         "",
         "| arm | path | e_f RMS, ° | ad_ab RMS, ° | r e_f / ad_ab | rows | columns not written |",
         "|---|---|---|---|---|---|---|",
     ]
     for side, arm in plug_in_gait["arms"].items():
-        for key in ("ik", "track"):
+        for key in ("ik", "track", "stream"):
             sc = arm[key]
             if sc is None:
                 lines.append(f"| {side} | {key} | failed | | | | |")

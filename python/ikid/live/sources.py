@@ -20,7 +20,7 @@ from typing import Any, BinaryIO, NamedTuple
 import numpy as np
 
 from ikid import _native
-from ikid.io._common import ikid_marker_names
+from ikid.io._common import parse_up
 from ikid.io.mapping import MarkerMap, MarkerMapWarning
 
 #: Longest text line read from stdin or a datagram, bytes: a frame of 18 numbers with a frame
@@ -31,8 +31,8 @@ MAX_LINE_BYTES = 1 << 16
 
 class LiveFrame(NamedTuple):
     """One frame from a source: its frame number and time stamp (s) when the source gives
-    them, the 18 marker values in ikid's order in metres (NaN for a marker the source marks
-    missing), or ``error`` (why it could not be read)."""
+    them, the map's marker values in ikid's order in metres (:func:`marker_columns`; NaN for a
+    marker the source marks missing), or ``error`` (why it could not be read)."""
 
     number: int | None
     time: float | None
@@ -62,8 +62,10 @@ def bounded_lines(stream: BinaryIO, limit: int = MAX_LINE_BYTES) -> Iterator[str
 def marker_columns(
     positions: dict[str, tuple[int, int, int]], marker_map: MarkerMap, source: str
 ) -> np.ndarray:
-    """Indices into a source's channels of ikid's 18 marker values (ikid's marker order, x y z
-    each), from the source's marker label -> its three channels and the marker map."""
+    """Indices into a source's channels of the map's markers' values, x y z each, in ikid's
+    marker order (:meth:`MarkerMap.marker_names`: ikid's six, 18 values; or a one-marker hand's
+    forearm three and ``HND``, 12, which ``ikid stream`` makes six as files' are), from the
+    source's marker label -> its three channels and the marker map."""
     columns: list[int] = []
     absent: list[str] = []
     if marker_map.clusters:
@@ -76,8 +78,8 @@ def marker_columns(
             MarkerMapWarning,
             stacklevel=2,
         )
-    for m in ikid_marker_names():
-        label = marker_map.label_of(m)
+    for m in marker_map.marker_names():
+        label = marker_map.labels[m]
         if label not in positions:
             absent.append(f"{label} ({m})")
             continue
@@ -128,6 +130,8 @@ class LslSource:
     units from its metadata, its nominal rate, its sample time stamps (the sender's clock)."""
 
     kind = "lsl"
+    #: LSL's mocap metadata names no up axis: --up or the marker map's says it.
+    up = None
 
     def __init__(self, name: str, marker_map: MarkerMap, timeout_s: float) -> None:
         self.pylsl = _need_pylsl()
@@ -291,6 +295,8 @@ class QtmSource:
         frequency = root.findtext("./General/Frequency")
         self.labels = names
         self.rate_hz = float(frequency) if frequency else None
+        #: The lab axis QTM's 3D data has pointing up (its AxisUpwards: "+Z" by default).
+        self.up = _qtm_up(root.findtext("./The_3D/AxisUpwards"))
         positions = {name: (3 * k, 3 * k + 1, 3 * k + 2) for k, name in enumerate(names)}
         self.columns = marker_columns(positions, self.marker_map, source)
         self.n_markers = len(names)
@@ -414,6 +420,15 @@ class QtmSource:
         if self.sock is not None:
             self.sock.close()
             self.sock = None
+
+
+def _qtm_up(axis: str | None) -> str | None:
+    """ikid's name (:data:`ikid.io.UP_AXES`) of QTM's AxisUpwards (``+Z``, ``-Y``, ...); None
+    when QTM does not say, or says what is not an axis."""
+    try:
+        return parse_up(axis.strip(), "AxisUpwards") if axis else None
+    except _native.IkidError:
+        return None
 
 
 def open_source(spec: str, marker_map: MarkerMap, timeout_s: float):

@@ -401,8 +401,6 @@ def _stdin_lines(count: int | None):
 
 
 #: Substring of ikid.Stream's refusal of a time stamp that jumped (see Stream::push_at).
-#: The one-hand-marker set's hand marker name (ikid.io.MarkerMap's labels key).
-_HND = ikid._native.HAND_POINT[0]
 _CLOCK_GLITCH = "glitch of the source's clock"
 #: What the core says of stamps steadily further apart than the rate (``SourcePace``).
 _SLOW_SOURCE = "the source runs at about"
@@ -416,6 +414,7 @@ def run(args: argparse.Namespace) -> int:
     skipped silently: the summary on stderr counts frames received, refused (by reason), lost,
     skipped and reconnections; exit status 0 if every frame was processed, 3 if frames were lost,
     skipped or refused, 2 on an error."""
+    from ikid.calibration import map_with_calibration
     from ikid.io.mapping import MarkerMap
     from ikid.pipeline import refusal_reason
 
@@ -441,14 +440,13 @@ def run(args: argparse.Namespace) -> int:
 
     # --map is a live source's (refused above otherwise): loaded once, for its labels and its up.
     marker_map = MarkerMap.load(args.map) if args.map else MarkerMap.identity()
+    args.one_hand = None
     if marker_map.one_hand_marker:
-        # Its six markers are built from four each frame (ikid.io.MarkerMap.ikid_frames), which
-        # the live path does not do: said, not failed on a label the source has.
-        raise ikid.InputError(
-            f"{args.map}: the map's hand is one marker (HND {marker_map.labels[_HND]!r}): ikid stream "
-            "reads three on the hand (MC2, MC5, MCB); the one-hand-marker set runs on recorded files "
-            "(ikid ik, ikid track), not live"
-        )
+        # Its six markers are built from four each frame, as a file's are; a forearm cluster's
+        # anatomical points come from the calibration (refused here, before the source opens,
+        # without one that has them).
+        args.one_hand = _OneMarkerHand(map_with_calibration(marker_map, args.calibration))
+    args.up_from = "--up" if args.up is not None else f"{args.map}'s up" if marker_map.up else None
     args.up = parse_up(args.up, "--up") if args.up is not None else marker_map.up
     source = None
     rate_hz = args.rate
@@ -459,7 +457,7 @@ def run(args: argparse.Namespace) -> int:
         declared = f"{source.rate_hz:g} Hz" if source.rate_hz else "no declared rate"
         print(
             f"ikid stream: reading {args.source} at {declared} "
-            f"({len(source.labels)} markers, ikid's 6 mapped)",
+            f"({len(source.labels)} markers, ikid's {len(marker_map.marker_names())} mapped)",
             file=sys.stderr,
             flush=True,
         )
@@ -475,6 +473,16 @@ def run(args: argparse.Namespace) -> int:
                 )
             else:
                 rate_hz = source.rate_hz
+        if source.up is not None and args.up is None:
+            # QTM says which of its axes points up (+Z by default): taken, as a file's header is.
+            args.up, args.up_from = source.up, f"{source.kind.upper()}'s AxisUpwards"
+        elif source.up is not None and source.up != args.up:
+            print(
+                f"ikid stream: the lab's up is taken as {args.up} ({args.up_from}), where "
+                f"{source.kind.upper()} says its AxisUpwards is {source.up}",
+                file=sys.stderr,
+                flush=True,
+            )
     if rate_hz is None and not args.time:
         if source is not None:
             source.close()
@@ -639,6 +647,15 @@ def _model_streams(args: argparse.Namespace, rate_hz: float | None):
 def _run_with(
     args: argparse.Namespace, source, refusal_reason, streams, names, units, rate, frame_len
 ) -> int:
+    one_hand: _OneMarkerHand | None = getattr(args, "one_hand", None)
+    # What the markers do not determine (a one-marker hand's ra_wr_s_p) is not written: no
+    # column, no channel, as ik and track leave it out of their files.
+    undetermined = one_hand.undetermined if one_hand is not None else {}
+    written = np.array([not _of_undetermined(n, undetermined) for n in names], bool)
+    names = [n for n, w in zip(names, written, strict=True) if w]
+    units = [u for u, w in zip(units, written, strict=True) if w]
+    for name, why in undetermined.items():
+        print(f"ikid stream: {name} not written: {why}", file=sys.stderr, flush=True)
     sink = None
     if args.sink is not None:
         from ikid.live.sinks import LslSink
@@ -670,7 +687,7 @@ def _run_with(
     # The source restarted (reconnected, or its numbering re-anchored): the next output published
     # carries the RESYNCED bit, as ikid.Stream's own after its clock re-anchors.
     resynced = False
-    placement = _PlacementCheck(args) if frame_len == len(ikid.marker_names()) * 3 else None
+    placement = _PlacementCheck(args, one_hand) if frame_len == len(ikid.marker_names()) * 3 else None
     for batch in batches:
         if batch is None:  # reconnected: what follows does not continue what came before
             for s in streams:
@@ -727,17 +744,19 @@ def _run_with(
                             else "late or repeated frame number"
                         )
                         raise _Refused(str(e), key) from None
-                if placement is not None and placement.see(f.values):
+                frame_values = markers = f.values
+                if up != "+y" and frame_len == 18:  # marker frames, from a lab of its own
+                    frame_values = markers = to_ikid_lab(
+                        np.asarray(f.values, np.float64).reshape(-1, 3), up
+                    ).reshape(-1)
+                if one_hand is not None:
+                    frame_values = one_hand.frame(markers)
+                if placement is not None and placement.see(frame_values, markers):
                     # Checked (an error here ends the stream, exit 2): what was held goes out.
                     placement.release(out, sink)
                 if f.time is not None:
                     losses.stamp(f.time)
                 try:
-                    frame_values = f.values
-                    if up != "+y" and frame_len == 18:  # marker frames, from a lab of its own
-                        frame_values = to_ikid_lab(
-                            np.asarray(f.values, np.float64).reshape(6, 3), up
-                        ).reshape(18)
                     stamp = f.time
                     if stamp is None and f.number is not None and args.tracker:
                         # Numbered, not timed: the number is the stamp, so frames lost restart the
@@ -774,6 +793,10 @@ def _run_with(
                         raise _Refused(
                             e.reason or str(e), "time stamp too soon (the source is faster than the model)"
                         ) from e
+                    lacks = one_hand.lacks(markers, frame_values) if one_hand is not None else None
+                    if lacks is not None:
+                        # Said in the map's markers, not the six virtual ones the core was given.
+                        raise _Refused(lacks, lacks) from e
                     # The line's frame column is the one to read: the reason alone goes in the status.
                     raise _Refused(e.reason or str(e), refusal_reason(e)) from e
                 if f.number is None and f.time is not None:
@@ -783,6 +806,7 @@ def _run_with(
                     status = "filling"
                 else:
                     output = np.concatenate(ready) if len(ready) > 1 else ready[0]
+                    output = output[written]
                     bits = _frame_bits(streams)
                     if bits & _IMPLAUSIBLE:
                         # As ik and track: no output no wrist can give is written as a number.
@@ -867,8 +891,13 @@ def _run_with(
     if args.tracker or args.torque_model:
         parts.append(
             f"lab up {up}"
-            + ("" if args.up else " (assumed: give --up, or up in the --map, if yours is another)")
+            + (
+                f" ({args.up_from})"
+                if args.up
+                else " (assumed: give --up, or up in the --map, if yours is another)"
+            )
         )
+    parts.extend(f"{name} not written (the hand is one marker)" for name in undetermined)
     if args.tracker:
         s = streams[0]
         parts.append(f"subject ×{s.length_scale:.3g} length, ×{s.mass_scale:.3g} mass ({s.size_from})")
@@ -971,24 +1000,29 @@ class _PlacementCheck:
 
     CHECKED_FRAMES = 20
 
-    def __init__(self, args: argparse.Namespace) -> None:
+    def __init__(self, args: argparse.Namespace, one_hand: _OneMarkerHand | None = None) -> None:
         from ikid.io import MarkerMap
 
         self.args = args
         self.mapping = MarkerMap.load(args.map) if args.map else None
+        self.one_hand = one_hand
         #: The frames with every marker seen so far; None once checked.
         self.frames: list[np.ndarray] | None = []
+        #: Their markers as the source gave them (a one-marker hand's four).
+        self.markers: list[np.ndarray] = []
         #: Output lines and sink publications held until then.
         self.held_lines: list[str] = []
         self.held_outputs: list[tuple[np.ndarray, int, float]] = []
 
-    def see(self, values) -> bool:
-        """Notes a frame; True when this one completes the check (passed: an error otherwise)."""
+    def see(self, values, markers) -> bool:
+        """Notes a frame (ikid's six markers, and the ``markers`` they were made from);
+        True when this one completes the check (passed: an error otherwise)."""
         if self.frames is None:
             return False
         frame = np.asarray(values, np.float64)
         if frame.shape == (18,) and np.isfinite(frame).all():
             self.frames.append(frame)
+            self.markers.append(np.asarray(markers, np.float64))
         if len(self.frames) < self.CHECKED_FRAMES:
             return False
         self.check()
@@ -1001,6 +1035,10 @@ class _PlacementCheck:
         if len(frames) == 0:  # no frame with every marker: nothing to judge
             return
         source = f"the stream's first {len(frames)} frames with every marker"
+        if self.one_hand is not None:
+            # The wrist bar and the elbow where a one-marker hand's frame needs them, as a
+            # file's whole columns are checked (MarkerMap.anatomical_forearm).
+            self.one_hand.check_forearm(np.array(self.markers), source)
         _subject_calibration(
             frames,
             self.args.calibration,
@@ -1018,6 +1056,64 @@ class _PlacementCheck:
             for published in self.held_outputs:
                 sink.publish(*published)
         self.held_lines, self.held_outputs = [], []
+
+
+class _OneMarkerHand:
+    """A one-marker hand's live frames (the forearm's three markers and ``HND``, 12 values:
+    Plug-in Gait's wrist bar, elbow and finger marker) made ikid's six markers one frame at a
+    time, as a file's are (:meth:`ikid.io.MarkerMap.ikid_frames`), and what a frame lacks said
+    in the map's labels rather than the six virtual markers the core is given."""
+
+    def __init__(self, marker_map) -> None:
+        # A forearm cluster without the calibration that places its anatomical points is
+        # refused here, before any source is opened.
+        self.names = marker_map.marker_names()  # RSP, USP, FAP, HND
+        marker_map.ikid_frames(np.empty((0, 3 * len(self.names))))
+        self.map = marker_map
+        self.undetermined: dict[str, str] = marker_map.undetermined
+
+    def frame(self, markers) -> np.ndarray:
+        """ikid's 18 values (NaN for a segment its markers do not place)."""
+        columns = np.asarray(markers, np.float64).reshape(1, -1)
+        return self.map.ikid_frames(columns, check_bar=False)[0]
+
+    def check_forearm(self, markers: np.ndarray, source: str) -> None:
+        """An error if the forearm's markers over these frames are not a wrist bar and an elbow
+        (:func:`ikid.io.marker_checks.check_wrist_bar`), naming ``source``."""
+        if not self.map.forearm_cluster:
+            try:
+                self.map.anatomical_forearm(markers)
+            except ikid.InputError as e:
+                raise ikid.InputError(f"{source}: {e.reason or e}") from None
+
+    def lacks(self, markers, frame: np.ndarray) -> str | None:
+        """Why this frame gives the core no wrist, counted as such (no numbers in it); None when
+        it gives one."""
+        points = np.asarray(markers, np.float64).reshape(-1, 3)
+        absent = [
+            f"{n} {self.map.labels[n]!r}"
+            for n, p in zip(self.names, points, strict=True)
+            if not np.isfinite(p).all()
+        ]
+        if absent:
+            return f"missing {', '.join(absent)} (with one hand marker every marker is needed)"
+        hand = self.names[-1]
+        if not np.isfinite(frame[:9]).all():
+            return (
+                f"FAP {self.map.labels['FAP']!r} within 3 cm of the wrist bar's middle or along it: "
+                "no forearm axis"
+            )
+        if not np.isfinite(frame).all():
+            return (
+                f"{hand} {self.map.labels[hand]!r} within 3 cm of the wrist bar's middle or along it: "
+                "no hand direction"
+            )
+        return None
+
+
+def _of_undetermined(name: str, undetermined: dict[str, str]) -> bool:
+    """Whether an output column (a coordinate, its ``_moment``, ``_sd``) is one of these."""
+    return any(name == u or name.startswith(u + "_") for u in undetermined)
 
 
 class _Refused(Exception):
