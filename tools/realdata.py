@@ -844,7 +844,7 @@ def _pig_live(trial: Path, side: str, mapping: Path, cal: Path, log: list[str]):
         done = run([a.replace("PORT", str(server.port)) for a in args], [])
     finally:
         server.close()
-    said = done.stderr.strip()
+    said = done.stderr.strip().replace(f"127.0.0.1:{server.port}", "127.0.0.1:PORT")
     log.append(f"$ ikid {' '.join(args)}  # a fake QTM on the loopback sends {trial.name}\n{said}")
     lines = done.stdout.strip().splitlines()
     columns = lines[0].split(",") if lines else []
