@@ -139,18 +139,29 @@ impl Tracker {
                 bad |= 1 << a | 1 << b;
             }
         }
+        // Which marker of one broken distance moved is told by how each moved against the third
+        // in the lab since the shape was last kept: right on the new shape's first frame, not
+        // once the segment has turned since (a marker stuck back 40 mm off its place, its
+        // neighbour rejected instead after a second, read the hand 45° off). While frames keep
+        // the candidate shape, the markers found then stay the ones rejected.
+        let continued = complete && shape.candidate_frames > 1;
         match n_broken {
             1 => {
                 let i = broken.iter().position(|&b| b).unwrap_or(0);
                 let (a, b) = SHAPE_PAIRS[i];
                 let c = 3 - a - b;
-                // How far each moved against the third since the shape was last kept.
-                let moved = |k: usize| ((points[k] - points[c]) - (shape.last[k] - shape.last[c])).norm();
-                let (ma, mb) = (moved(a), moved(b));
-                if ma > 2.0 * mb {
-                    bad = 1 << a;
-                } else if mb > 2.0 * ma {
-                    bad = 1 << b;
+                let found = shape.candidate_rejected;
+                if continued && (found == 1 << a || found == 1 << b) {
+                    bad = found;
+                } else {
+                    // How far each moved against the third since the shape was last kept.
+                    let moved = |k: usize| ((points[k] - points[c]) - (shape.last[k] - shape.last[c])).norm();
+                    let (ma, mb) = (moved(a), moved(b));
+                    if ma > 2.0 * mb {
+                        bad = 1 << a;
+                    } else if mb > 2.0 * ma {
+                        bad = 1 << b;
+                    }
                 }
             }
             2 => {
@@ -161,6 +172,9 @@ impl Tracker {
                 }
             }
             _ => {}
+        }
+        if complete {
+            shape.candidate_rejected = bad;
         }
         (bad << first, false)
     }
@@ -207,6 +221,8 @@ pub(super) struct RigidShape {
     /// Another shape, seen in consecutive complete frames that agree with one another, and how many.
     candidate: Option<[f64; 3]>,
     candidate_frames: usize,
+    /// The segment's markers (bits 0–2) found off their place on the candidate's first frame.
+    candidate_rejected: u8,
     /// The shape the segment's template was taken from (with a calibration).
     pub(super) template: Option<[f64; 3]>,
     /// The segment's markers in the last complete frame that kept the shape.
@@ -220,6 +236,7 @@ impl RigidShape {
             support: 0.0,
             candidate: None,
             candidate_frames: 0,
+            candidate_rejected: 0,
             template: None,
             last: [Vector3::repeat(f64::NAN); 3],
         }
