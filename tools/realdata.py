@@ -208,7 +208,7 @@ class Score:
     rms_gimbal: float = float("nan")
     max_valid: float = float("nan")
     p95_gimbal: float = float("nan")
-    coverage: float = 0.0  # outputs on valid frames / valid frames
+    coverage: float = 0.0  # valid frames with an output / valid frames
     per_angle_gimbal: tuple[float, float, float] = (float("nan"),) * 3
     finite: bool = True
     error: np.ndarray | None = None  # geodesic error per reference frame (NaN: no output/invalid)
@@ -1341,9 +1341,9 @@ def write_report(
         "",
         "| trial | frames scored | ik RMS (valid) | ik RMS (gimbal_ok) | ik p95 / max | ik outputs | "
         "ik per-frame fallback (window filling aside) | "
-        "ik uncalibrated RMS | track RMS (valid) | track RMS (gimbal_ok) | track max | "
+        "ik uncalibrated RMS | track RMS (valid) | track RMS (gimbal_ok) | track max | track outputs | "
         "lag ik / track (ms) | calibration check | how |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results:
         ref, ik, raw, tr = r["ref"], r["ik"], r["ik_raw"], r["track"]
@@ -1355,7 +1355,7 @@ def write_report(
             f"{100 * ik.coverage if ik else 0:.1f} % | {fallback(r)} | "
             f"{fmt(raw.rms_valid) if raw else 'refused'} | "
             f"{fmt(tr.rms_valid if tr else np.nan)} | {fmt(tr.rms_gimbal if tr else np.nan)} | "
-            f"{fmt(tr.max_valid if tr else np.nan)} | "
+            f"{fmt(tr.max_valid if tr else np.nan)} | {100 * tr.coverage if tr else 0:.1f} % | "
             f"{ik.lag_ms if ik else np.nan:.0f} / {tr.lag_ms if tr else np.nan:.0f} | "
             f"{fmt(r['geometry'].rms_valid if r['geometry'] else np.nan)} | "
             f"ik {r['ik_how']}; track {r['track_how']} |"
@@ -1423,7 +1423,9 @@ def write_report(
         "(pyomeca: `wrist-ik-100hz`), else the 1 kHz member on the recording resampled, outputs at the "
         "recording's own frames (racing, 70 Hz); they are compared at the reference's frame times.",
         "- `track`: calibrated when `ikid track` has `--calibration`, else uncalibrated (the body model's "
-        "placement), as the table says; the shipped refiner only where its rate allows.",
+        "placement), as the table says; the shipped refiner only where its rate allows. `track outputs`: "
+        "the valid frames with a row; `track` writes none for an estimate flagged implausible (a torque or "
+        "speed no wrist gives; its summary counts them, in the commands below).",
         f"- diverged (last line): trials and probes whose track output is non-finite or more than "
         f"{DIVERGED_DEG:.0f}° off the reference on some valid frame (garbage frames included), and the "
         "left arm if non-finite.",
