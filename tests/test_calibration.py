@@ -5,14 +5,16 @@ a static trial and two single-coordinate movements."""
 from __future__ import annotations
 
 import dataclasses
+import io as io_text
 import json
 import re
+import sys
 
 import numpy as np
 import pytest
 
 import ikid
-from ikid import _native, io
+from ikid import _native, calibration, io
 from ikid.cli import main as cli
 from ikid.io import MarkerMap
 from ikid.pipeline import run_model
@@ -351,6 +353,39 @@ def test_a_calibration_is_refused_for_markers_laid_out_otherwise_than_it_was_mea
             assert not list(tmp_path.glob(f"t{scale}.*[mo][ot]"))
         else:
             assert code == 0, err
+
+
+@pytest.mark.parametrize(("a", "b"), [(2, 3), (0, 5)])
+def test_two_markers_under_each_others_labels_are_named_against_the_calibration(
+    a, b, tmp_path, monkeypatch, capsys
+):
+    # Review 6: two labels exchanged across the segments (a mocap system's labelling), streamed
+    # with the session's own calibration, were told "another session, subject or cluster:
+    # calibrate this session" (the first frames are too few for the swap check a whole file
+    # gets). Exchanged back, every distance is the calibration's: the two are named, with their
+    # labels where a map gives them. (Two of one segment's markers exchanged keep its distances
+    # to within what skin needs on the body model: the tracker and the stream flag those frames
+    # turned over instead.)
+    q = np.zeros((20, 3))
+    static = io.write_trc(tmp_path / "static.trc", np.arange(20) / 1000.0, ikid.forward_markers(q), 1000.0)
+    cal = tmp_path / "cal.json"
+    assert cli(["calibrate", "--static", str(static), "--method", "neutral", "-o", str(cal)]) == 0
+    trial = ikid.simulate("random", seed=52, duration=0.2)
+    markers = trial.markers.reshape(len(trial.markers), 6, 3).copy()
+    markers[:, [a, b]] = markers[:, [b, a]]
+    frames = markers.reshape(-1, 18)
+    lines = "".join(",".join(f"{v:.9g}" for v in row) + "\n" for row in frames)
+    monkeypatch.setattr(sys, "stdin", io_text.StringIO(lines))
+    capsys.readouterr()
+    code = cli(["stream", "--rate", "1000", "--calibration", str(cal)])
+    captured = capsys.readouterr()
+    names = ikid.marker_names()
+    assert code == 2, captured.err
+    assert f"markers {names[a]} and {names[b]} seem to be each other's" in captured.err, captured.err
+    assert captured.out.strip().count("\n") == 0  # the header alone: nothing before the check
+    labelled = MarkerMap({m: f"Lab_{m}" for m in names}, "lab.toml")
+    with pytest.raises(ikid.InputError, match=f"labels 'Lab_{names[a]}' and 'Lab_{names[b]}'"):
+        calibration.check_marker_distances(cal, frames[:20], "live", whole=False, mapping=labelled)
 
 
 def test_a_marker_put_back_elsewhere_since_the_calibration_is_refused_and_a_sliding_one_is_not(

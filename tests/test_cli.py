@@ -193,6 +193,17 @@ def test_stream_of_unknown_rate_is_refused_and_stamps_at_another_rate_say_which(
     # At its own rate, nothing of the kind.
     monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(frames, with_time=np.arange(100) * 0.01)))
     assert cli(["stream", "--time", "--rate", "100"]) == 0
+    # Review 6: 80 Hz stamps (1.25 periods apart: each the next frame within the jitter allowed)
+    # read with --rate 100 (which the advice then gave) ran as 100 Hz, every line ok, exit 0. The
+    # stamps' mean step stops it, and the advice is the tracker (no network runs at 80 Hz).
+    slow = ikid.simulate("random", seed=9902, duration=2.0).markers[::12]
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(slow, with_time=np.arange(len(slow)) * 0.0125)))
+    assert cli(["stream", "--time", "--rate", "100"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        "a 80 Hz source read at 100 Hz: no member of the model's family runs at it (100, 250, 1000 Hz): "
+        "give --tracker --rate 80 (the Tracker runs at any rate)" in err
+    ), err
     assert "time stamps come" not in capsys.readouterr().err
 
 

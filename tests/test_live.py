@@ -263,14 +263,36 @@ def test_a_source_declaring_another_rate_than_it_sends_says_so_and_rate_override
             assert (
                 "the time stamps come 10 ms apart, a 100 Hz source read at 250 Hz: give --rate 100" in summary
             )
-            assert (
-                _count(summary, "time stamp too late (the source is slower)") == status.count("refused") > 100
-            )
+            refused = _count(summary, "time stamps at another rate than the stream's")
+            assert refused == status.count("refused") > 100
         else:
             assert r.returncode == 0, r.stderr
             assert "--rate 100 Hz overrides the qtm source's declared 250 Hz" in r.stderr
             filling = ikid.load("wrist-ik-100hz").window - 1  # the 100 Hz member's window filling
             assert status == ["filling"] * filling + ["ok"] * (len(frames) - filling), summary
+
+
+def test_a_source_declaring_a_rate_close_to_the_one_it_sends_is_stopped_by_its_stamps(tmp_path):
+    # Review 6: a QTM declaring 100 Hz while it captures at 80 Hz: each stamp 1.25 periods on,
+    # within the jitter a frame may take, so all were read as 100 Hz frames, every line "ok",
+    # nothing said. The stamps' mean step refuses them once it is known (the core's
+    # RATE_CHECK_STEPS), the summary says the source's rate and that no network runs at it.
+    frames = trial_frames(2500)[::12][:200]
+    server = FakeQtm(frames, rate=80.0, declared_rate=100.0)
+    try:
+        r = _qtm_stream(server, tmp_path, count=len(frames))
+    finally:
+        server.close()
+    _, rows = _header_and_rows(r.stdout)
+    status = [row[2] for row in rows]
+    summary = _summary(r.stderr)
+    assert r.returncode == 3, r.stderr
+    first = status.index(next(s for s in status if s.startswith("refused")))
+    assert first == 128 and all(s.startswith("refused:") for s in status[first:]), status[first]
+    assert "the source runs at about 80 Hz; the model was trained at 100 Hz; no member" in status[first]
+    assert _count(summary, "time stamps at another rate than the stream's") == len(frames) - first
+    assert "a 80 Hz source read at 100 Hz: no member of the model's family runs at it" in summary, summary
+    assert "give --tracker --rate 80" in summary
 
 
 def test_a_reader_that_falls_behind_takes_the_newest_frame_and_counts_the_rest(tmp_path):
@@ -500,6 +522,28 @@ def test_the_tracker_path_writes_each_value_with_its_standard_deviation():
         np.testing.assert_allclose(got[:, 0], np.concatenate([out[0], out[3]]), rtol=1e-6, atol=1e-9)
         np.testing.assert_allclose(got[:, 1], np.concatenate([sd[0], sd[1]]), rtol=1e-6)
         assert np.all(got[:, 1] > 0)
+
+
+def test_a_tracker_that_never_starts_for_a_marker_never_seen_says_so_and_exits_non_zero():
+    # Review 6: MC5 left unlabelled by the mocap system: every line "filling", exit 0, even
+    # with --strict, and nothing named the marker (the networks refuse each frame by name).
+    n = 200
+    frames = trial_frames(n)
+    frames[:, 12:15] = np.nan
+    lines = _stamped_lines(frames, np.arange(n) * 1e-3).replace("nan", "")
+    for strict in ([], ["--strict"]):
+        r = subprocess.run(
+            [*IKID, "stream", "--tracker", "--time", "--rate", "1000", *strict],
+            input=lines, capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        _, rows = _header_and_rows(r.stdout)
+        why = "missing MC5: the tracker starts from a frame with every marker"
+        if strict:
+            assert r.returncode == 2 and why in r.stderr and len(rows) == 0, r.stderr
+        else:
+            assert r.returncode == 3, r.stderr
+            assert [row[1] for row in rows] == [f"refused:{why}"] * n
+            assert f"{n} {why}" in r.stderr, r.stderr
 
 
 def test_the_lsl_sink_carries_the_networks_standard_deviations(lab):

@@ -35,6 +35,7 @@ __all__ = [
     "REFINED_SD_SCALE_TAU",
     "RIGID_TOLERANCE_M",
     "MAX_TIME_GAP_S",
+    "RATE_TOLERANCE",
     "RIGID_TOLERANCE_REL",
     "SD_SCALE_TAU",
     "build_model",
@@ -247,6 +248,7 @@ REFINED_SD_SCALE_Q: float
 REFINED_SD_SCALE_TAU: float
 RIGID_TOLERANCE_M: float
 MAX_TIME_GAP_S: float
+RATE_TOLERANCE: float
 RIGID_TOLERANCE_REL: float
 
 @final

@@ -244,7 +244,7 @@ MOVED_MARKER_SPREADS = 4.0
 
 
 def check_marker_distances(
-    path: str | os.PathLike[str], frames: np.ndarray, source: str, whole: bool = True
+    path: str | os.PathLike[str], frames: np.ndarray, source: str, whole: bool = True, mapping=None
 ) -> None:
     """Refuse (``ikid.InputError``) a trial whose markers are not laid out as those the
     calibration at ``path`` was measured with: a distance between two of a segment's markers
@@ -255,7 +255,9 @@ def check_marker_distances(
     When ``frames`` are a ``whole`` trial, also one that holds steady further from the
     calibration's than :data:`MOVED_MARKER_M` and :data:`MOVED_MARKER_SPREADS` times its own
     spread: a marker taken off and put back elsewhere (a live stream's first frames are too few
-    to tell a steady shift from the skin's slide at one posture). A file written before
+    to tell a steady shift from the skin's slide at one posture). Two markers whose labels are
+    exchanged, where exchanging them back lays every distance out as calibrated, are named as
+    such (with their labels in ``mapping``, an :class:`ikid.io.MarkerMap`). A file written before
     calibrations kept the distances passes."""
     stored = calibration_info(path).get("marker_distances_m") or {}
     names = _native.MARKERS
@@ -290,6 +292,19 @@ def check_marker_distances(
                 f"{', '.join(m[0] for m in names)} in that order (three on the forearm, then three on "
                 "the hand)"
             )
+        if (swap := _exchanged_pair(frames, stored, fits)) is not None:
+            # Review 6: two labels exchanged in the mocap system, read live with the right
+            # calibration, were told to calibrate this session.
+            one, other = (names[k][0] for k in swap)
+            labels = ""
+            if mapping is not None:
+                labels = f" (labels {mapping.label_of(one)!r} and {mapping.label_of(other)!r})"
+            raise InputError(
+                f"{source}: markers {one} and {other}{labels} seem to be each other's: exchanged, every "
+                f"distance between a segment's markers is the calibration's ({path}); as they come, the "
+                f"{segment}'s {pair} are {1e3 * here:.0f} mm apart, {1e3 * then:.0f} mm in the calibration. "
+                "Exchange their labels (in the mocap system's labelling, or in the marker map)"
+            )
         raise InputError(
             f"{source}: its {segment}'s markers {pair} are "
             f"{1e3 * here:.0f} mm apart, {1e3 * then:.0f} mm in the calibration ({path}): it was "
@@ -307,6 +322,31 @@ def check_marker_distances(
                 "as much as that turns the segment. Calibrate with a static trial recorded with the "
                 "markers as they are in this one (`ikid calibrate`)"
             )
+
+
+def _exchanged_pair(frames: np.ndarray, stored: dict, fits) -> tuple[int, int] | None:
+    """The one pair of ikid's six markers whose exchange lays ``frames`` out as the stored
+    (calibrated) distances say, each segment's within ``fits``; None if no pair, or more than
+    one, does."""
+    f = np.asarray(frames, np.float64).reshape(len(frames), 6, 3)
+    found = []
+    for i in range(6):
+        for j in range(i + 1, 6):
+            swapped = f.copy()
+            swapped[:, [i, j]] = swapped[:, [j, i]]
+            flat = swapped.reshape(len(f), 18)
+            ok = bool(stored)
+            for segment, first in (("forearm", 0), ("hand", 3)):
+                if segment not in stored:
+                    continue
+                rows = _distance_rows(flat, first)
+                ok = ok and len(rows) > 0
+                if ok:
+                    here = np.median(rows, axis=0)
+                    ok = all(fits(h, t) for h, t in zip(here, stored[segment], strict=True))
+            if ok:
+                found.append((i, j))
+    return found[0] if len(found) == 1 else None
 
 
 #: Where the landmarks may put the wrist against the hand's markers at the neutral frames: the

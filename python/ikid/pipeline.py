@@ -234,7 +234,8 @@ def refusal_reason(error: _native.InputError) -> str:
         early = "locate the joint centre" in (error.reason or "")
         why = (
             ": the gap filler had not yet located the wrist's centre from the motion around it; "
-            "`ikid track` carries through such gaps once it has started"
+            "the Tracker (`ikid track`, `ikid stream --tracker`) carries through such gaps once it has "
+            "started"
             if early
             else ""
         )
@@ -307,8 +308,9 @@ def model_at_rate(
     rates = ", ".join(f"{m.frame_rate_hz:g} Hz ({m.name})" for m in members)
     raise _native.InputError(
         f"{source} runs at {rate_hz:g} Hz; {str(model)!r} has models at {rates}. A live stream is not "
-        "resampled (it would add latency): record at one of those rates, run the recording offline "
-        "(ikid ik resamples), or train a model at yours (ikid train, from ikid-training)"
+        "resampled (it would add latency): record at one of those rates, run the Tracker, which runs at "
+        "any rate (ikid stream --tracker, ikid.Tracker), run the recording offline (ikid ik resamples), "
+        "or train a model at yours (ikid train, from ikid-training)"
     )
 
 

@@ -40,5 +40,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FRAME_STATUS", bits)?;
     // A live stream's largest step in time taken as frames lost (a file's longer gaps restart it).
     m.add("MAX_TIME_GAP_S", ikid::stream::MAX_TIME_GAP_S)?;
+    // How far a source's mean step may be off the rate before it is said to run at another.
+    m.add("RATE_TOLERANCE", ikid::stream::RATE_TOLERANCE)?;
     Ok(())
 }

@@ -87,6 +87,27 @@ fn push_never_allocates() {
 }
 
 #[test]
+fn a_stamped_stream_never_allocates() {
+    // push_at's clock, its pace (the rate check) and a gap's restart run on the stack too.
+    let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let model = random_model(FeatureSet::Angles, 5, &[64], 3, 3);
+    let frames = random_frames(FeatureSet::Angles, 300, 4);
+    let mut stream = model.stream();
+    let mut produced = 0;
+    let n = allocations_in(|| {
+        for (i, frame) in frames.chunks_exact(18).enumerate() {
+            let lost = if i >= 150 { 10 } else { 0 }; // ten frames lost at 150
+            let time = (i + lost) as f64 * 1e-3;
+            if stream.push_at(time, frame).expect("valid frame").is_some() {
+                produced += 1;
+            }
+        }
+    });
+    assert_eq!(n, 0, "{n} allocations in 300 stamped pushes");
+    assert_eq!(produced, 300 - 2 * 4, "predictions once each window (re)filled");
+}
+
+#[test]
 fn filling_a_missing_marker_never_allocates() {
     let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let model = random_model(FeatureSet::Angles, 5, &[64, 64], 3, 5);

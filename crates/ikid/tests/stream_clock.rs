@@ -2,7 +2,7 @@
 //! only a run of stamps that agree with each other is taken as the source's new clock.
 
 use ikid::FeatureSet;
-use ikid::stream::{MAX_TIME_GAP_S, TIME_REANCHOR_FRAMES};
+use ikid::stream::{MAX_TIME_GAP_S, RATE_CHECK_STEPS, TIME_REANCHOR_FRAMES};
 use ikid::testing::{random_frames, random_model};
 
 const N: usize = 3000;
@@ -183,4 +183,58 @@ fn jittered_stamps_are_the_next_frames_and_frames_lost_among_them_restart_the_wi
     let (out, stream) = run(&lost);
     assert!(out.iter().all(Result::is_ok));
     assert_eq!(stream.gap_restarts(), 1);
+}
+
+#[test]
+fn frames_refused_for_their_markers_over_more_than_the_jump_limit_are_a_gap_not_a_clock_glitch() {
+    // The hand hidden for 1.6 s (longer than MAX_TIME_GAP_S) on a regular clock: each of those
+    // frames is refused for its markers, and the frames after it follow the last refused stamp.
+    // The stamps of refused frames used not to count: after a second every frame read as a
+    // jump of the source's clock (a third of them refused as such, a re-anchor, `resynced`).
+    let model = random_model(FeatureSet::Angles, 5, &[16], 3, 4); // 1000 Hz, window 5
+    let mut frames = random_frames(FeatureSet::Angles, N, 21);
+    let hidden = 1000..1000 + (1.6e3 * MAX_TIME_GAP_S) as usize;
+    for i in hidden.clone() {
+        frames[i * 18 + 9..i * 18 + 18].fill(f32::NAN);
+    }
+    let mut stream = model.stream();
+    let out: Vec<Result<bool, String>> = frames
+        .chunks_exact(18)
+        .enumerate()
+        .map(|(i, f)| stream.push_at(i as f64 * 1e-3, f).map(|o| o.is_some()).map_err(|e| e.to_string()))
+        .collect();
+    for i in hidden.clone() {
+        let err = out[i].as_ref().expect_err("a frame without its hand");
+        assert!(!err.contains("glitch"), "frame {i}: {err}");
+    }
+    assert!(out[..hidden.start].iter().chain(&out[hidden.end..]).all(Result::is_ok));
+    assert_eq!((stream.time_reanchors(), stream.gap_restarts()), (0, 1));
+    // The window restarts after the gap: outputs again once it has refilled (5 frames).
+    let first = (hidden.end..N).find(|&i| out[i] == Ok(true)).unwrap();
+    assert_eq!(first, hidden.end + 4);
+}
+
+#[test]
+fn a_source_at_another_rate_whose_steps_pass_as_jitter_is_refused_saying_its_rate() {
+    // 800 and 1250 Hz stamps at a 1 kHz model: every step 1.25 or 0.8 periods, each within
+    // what a jittered frame may take, so every frame was read as the next at 1 kHz (review 6:
+    // torques twice as far off, every line "ok"). Refused from the check on, naming the rate;
+    // a source within RATE_TOLERANCE (a clock a little off its nominal rate) is not.
+    for (source_hz, refused) in [(800.0, true), (1250.0, true), (1030.0, false), (970.0, false)] {
+        let stamps: Vec<_> = (0..N).map(|i| Some(i as f64 / source_hz)).collect();
+        let (out, _) = run(&stamps);
+        let first = out.iter().position(Result::is_err);
+        if !refused {
+            assert_eq!(first, None, "{source_hz} Hz: {:?}", first.map(|i| &out[i]));
+            continue;
+        }
+        let first = first.unwrap_or(N);
+        assert_eq!(first, RATE_CHECK_STEPS as usize, "{source_hz} Hz");
+        assert!(out[first..].iter().all(Result::is_err), "{source_hz} Hz");
+        let err = out[first].as_ref().unwrap_err();
+        assert!(
+            err.contains(&format!("the source runs at about {source_hz} Hz, the model was trained at 1000 Hz")),
+            "{err}"
+        );
+    }
 }

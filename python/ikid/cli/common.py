@@ -250,7 +250,7 @@ def _subject_calibration(
         if calibration:
             if labelled:
                 check_calibration_map(calibration, mapping)
-            check_marker_distances(calibration, frames, source, whole)
+            check_marker_distances(calibration, frames, source, whole, mapping)
             return ikid.load_calibration(calibration)
         # Uncalibrated, the body model's placement; a left arm (the map's side) mirrored into
         # a right one first, as its calibration would.

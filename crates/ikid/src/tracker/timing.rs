@@ -43,7 +43,7 @@ impl Tracker {
             });
         }
         let rate = self.settings.rate_hz;
-        self.pace.note(time_s, rate, "the tracker runs", "give the tracker the source's rate")?;
+        self.pace.note(time_s, rate, "the tracker runs", || "give the tracker the source's rate".to_owned())?;
         let step = match self.clock.last() {
             None => None,
             Some(last) if time_s == last => {
@@ -221,6 +221,25 @@ mod tests {
         bad[0] = f64::INFINITY;
         let e = stamped.push_at(1150.0 / RATE, &bad).unwrap_err();
         assert!(matches!(e, Error::NonFiniteInput { frame: 1150, .. }), "{e}");
+    }
+
+    #[test]
+    fn a_source_at_four_fifths_of_the_rate_is_refused_naming_its_rate() {
+        // Review 6: stamps 1.25 periods apart are each the next frame (within 0.5–1.5), so a
+        // source at 80 % of the tracker's rate was tracked as if at its rate: velocities and
+        // torques off by the ratio, every status 0. Refused from RATE_CHECK_STEPS on.
+        let body = BodyModel::default();
+        let f = frames(&body, &trajectory(400, RATE), SHOULDER);
+        let mut tracker = Tracker::new(body, TrackerSettings::new(RATE)).unwrap();
+        let refused: Vec<usize> = (0..400)
+            .filter(|&i| {
+                tracker.push_at(1.25 * i as f64 / RATE, &f[i * MARKER_FRAME_LEN..][..MARKER_FRAME_LEN]).is_err()
+            })
+            .collect();
+        let first = crate::stream::RATE_CHECK_STEPS as usize;
+        assert_eq!(refused, (first..400).collect::<Vec<_>>());
+        let e = tracker.push_at(400.0 * 1.25 / RATE, &f[..MARKER_FRAME_LEN]).unwrap_err().to_string();
+        assert!(e.contains(&format!("about {} Hz, the tracker runs at {RATE} Hz", RATE / 1.25)), "{e}");
     }
 
     #[test]

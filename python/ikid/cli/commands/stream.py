@@ -248,12 +248,12 @@ class _Losses:
 
     def other_rate(self) -> float | None:
         """The source's rate from its time stamps (their median step) when it is not the
-        stream's, by more than a fifth: then every frame reads as several lost, and the fix is
-        --rate. None when it is the stream's, or with under 10 steps."""
+        stream's, by more than the core's ``RATE_TOLERANCE``: then every frame is mis-timed,
+        or reads as several lost. None when it is the stream's, or with under 10 steps."""
         if len(self.steps) < 10:
             return None
         rate = 1.0 / float(np.median(self.steps))
-        return rate if abs(rate / self.rate_hz - 1.0) > 0.2 else None
+        return rate if abs(rate / self.rate_hz - 1.0) > ikid._native.RATE_TOLERANCE else None
 
     def __init__(self, rate_hz: float) -> None:
         self.rate_hz = rate_hz
@@ -781,14 +781,17 @@ def _run_with(
                             if args.rate is None
                             else f"--rate {args.rate:g} says otherwise"
                         )
-                        hint = _stamps_hint(1.0 / step, rate, _member_rates(args))
+                        hint = _stamps_hint(1.0 / step, rate, _member_rates(args), len(losses.steps))
                         raise ikid.InputError(f"frame {label}: {hint} ({given})") from None
                     if _SLOW_SOURCE in str(e):
-                        # A live source slower than the stream's rate: each frame refused alone,
-                        # the summary says what its stamps show and what to give.
-                        raise _Refused(
-                            e.reason or str(e), "time stamp too late (the source is slower)"
-                        ) from e
+                        # A live source at another rate than the stream's: each frame refused
+                        # alone, the summary says what its stamps show and what to give (the
+                        # core's "resample it" is no way out for a live stream).
+                        said = (e.reason or str(e)).rsplit("; ", 1)[0]
+                        if losses.steps:
+                            source_hz = 1.0 / float(np.median(losses.steps))
+                            said += "; " + _rate_to_give(source_hz, _member_rates(args), len(losses.steps))
+                        raise _Refused(said, "time stamps at another rate than the stream's") from e
                     if "resample the source" in str(e):
                         raise _Refused(
                             e.reason or str(e), "time stamp too soon (the source is faster than the model)"
@@ -802,6 +805,13 @@ def _run_with(
                 if f.number is None and f.time is not None:
                     losses.time(f.time)
                 ready = [r for r in results if r is not None]
+                if not ready and args.tracker and not np.isfinite(frame_values).all():
+                    # The filter starts from a frame with every marker: one never seen would
+                    # leave the whole session "filling" (exit 0, nothing said).
+                    lacks = one_hand.lacks(markers, frame_values) if one_hand is not None else None
+                    absent = lacks or "missing " + ", ".join(_absent_markers(frame_values))
+                    why = f"{absent}: the tracker starts from a frame with every marker"
+                    raise _Refused(why, why)
                 if len(ready) < len(results):
                     status = "filling"
                 else:
@@ -871,7 +881,7 @@ def _run_with(
     else:
         parts.append("lost not counted (no frame numbers or times: --frame-number, --time)")
     if other is not None:
-        parts.append(_stamps_hint(other, rate, _member_rates(args)))
+        parts.append(_stamps_hint(other, rate, _member_rates(args), len(losses.steps)))
     skipped = notes["skipped"]
     if live:
         parts.append(f"{skipped} skipped (read too late: newest taken)")
@@ -912,7 +922,7 @@ def _run_with(
     return EXIT_FRAMES_LOST if refused or losses.lost or skipped or notes["not reconnected"] else 0
 
 
-def _stamps_hint(other: float, rate: float, members: list[float]) -> str:
+def _stamps_hint(other: float, rate: float, members: list[float], steps: int) -> str:
     """What stamps at ``other`` Hz say to a stream at ``rate`` Hz, and what to give: the model
     family's member nearest the stamps' rate when within a quarter of it (stamps that jitter
     say it only roughly), else the stamps' own rate (``members`` empty: any rate runs). Stamps
@@ -927,10 +937,11 @@ def _stamps_hint(other: float, rate: float, members: list[float]) -> str:
     if other <= 1.0 and MS_STAMP_RATES_HZ[0] <= in_ms <= MS_STAMP_RATES_HZ[1]:
         return (
             f"the time stamps step by {1 / other:.3g}, a {in_ms:.4g} Hz source if they are ms: are they "
-            f"in ms? --time reads seconds: divide them by 1000 and {_rate_to_give(in_ms, members)}"
+            f"in ms? --time reads seconds: divide them by 1000 and {_rate_to_give(in_ms, members, steps)}"
         )
     source = f"a {other:.4g} Hz source read at {rate:g} Hz"
-    return f"the time stamps come {1e3 / other:.3g} ms apart, {source}: {_rate_to_give(other, members)}"
+    give = _rate_to_give(other, members, steps)
+    return f"the time stamps come {1e3 / other:.3g} ms apart, {source}: {give}"
 
 
 #: The rates, Hz, that stamps a second or more apart are read as if in milliseconds: motion
@@ -938,15 +949,26 @@ def _stamps_hint(other: float, rate: float, members: list[float]) -> str:
 MS_STAMP_RATES_HZ = (10.0, 10000.0)
 
 
-def _rate_to_give(hz: float, members: list[float]) -> str:
-    """The --rate to give for a source at ``hz``: the family's member nearest, within a quarter."""
-    near = [m for m in members if abs(m / hz - 1.0) <= 0.25]
+#: Steps between stamps from which a source's rate is known well enough to be held to the
+#: core's ``RATE_TOLERANCE``; from fewer (a stream stopped on its third late stamp), the
+#: family's member within a quarter of it is named.
+RATE_KNOWN_STEPS = 32
+
+
+def _rate_to_give(hz: float, members: list[float], steps: int) -> str:
+    """What to give for a source at ``hz`` (from ``steps`` steps between its stamps): its rate
+    (``members`` empty: the tracker runs at any); the family's member the stream takes it as;
+    else the tracker, which runs at any rate (a member further off reads every frame
+    mis-timed: 80 Hz stamps were told to give --rate 100, which then ran them as 100 Hz)."""
+    if not members:
+        return f"give --rate {hz:.4g}"
+    within = ikid._native.RATE_TOLERANCE if steps >= RATE_KNOWN_STEPS else 0.25
+    near = [m for m in members if abs(m / hz - 1.0) <= within]
     if near:
         return f"give --rate {min(near, key=lambda m: abs(m - hz)):g} (the family's member at that rate)"
-    return f"give --rate {hz:.4g}" + (
-        f" (no member of the model's family is near it: {', '.join(f'{m:g}' for m in members)} Hz)"
-        if members
-        else ""
+    return (
+        f"no member of the model's family runs at it ({', '.join(f'{m:g}' for m in members)} Hz): "
+        f"give --tracker --rate {hz:.4g} (the Tracker runs at any rate), or record at one of those rates"
     )
 
 
@@ -1109,6 +1131,12 @@ class _OneMarkerHand:
                 "no hand direction"
             )
         return None
+
+
+def _absent_markers(frame: np.ndarray) -> list[str]:
+    """ikid's markers missing (NaN) in an 18-value frame."""
+    points = np.asarray(frame, np.float64).reshape(-1, 3)
+    return [m for m, p in zip(ikid.marker_names(), points, strict=True) if not np.isfinite(p).all()]
 
 
 def _of_undetermined(name: str, undetermined: dict[str, str]) -> bool:
