@@ -328,6 +328,10 @@ enum ikid_status ikid_stream_push(struct ikid_stream *stream,
 // than the model's rate (three stamps in a row each more than 1.5 periods after the one
 // before: every frame would restart the window, which would never fill) is refused from the
 // third on, the message naming its rate, until a stamp comes one period after the one before.
+// So is a source at another rate whose steps each pass for a jittered frame's (80 Hz at a
+// 100 Hz model: 1.25 periods), once 128 consecutive frames' mean step is more than 10 % off one
+// period. A frame refused for its markers keeps its stamp in order: frames after a long gap
+// of such frames are a gap, not a jump.
 //
 // # Safety
 // As `ikid_stream_push`.
@@ -522,7 +526,8 @@ enum ikid_status ikid_tracker_push(struct ikid_tracker *tracker,
 // or not finite, is refused
 // (`IKID_STATUS_INVALID_ARGUMENT`) and changes nothing. A source slower than `rate_hz` (three
 // stamps in a row each more than 1.5 periods after the one before) is refused from the third
-// on, the message naming its rate, until a stamp comes one period after the one before.
+// on, the message naming its rate, until a stamp comes one period after the one before; so is
+// one whose consecutive frames' mean step, over 128 of them, is more than 10 % off one period.
 //
 // # Safety
 // As `ikid_tracker_push`.

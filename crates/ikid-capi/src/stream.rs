@@ -60,6 +60,10 @@ pub unsafe extern "C" fn ikid_stream_push(
 /// than the model's rate (three stamps in a row each more than 1.5 periods after the one
 /// before: every frame would restart the window, which would never fill) is refused from the
 /// third on, the message naming its rate, until a stamp comes one period after the one before.
+/// So is a source at another rate whose steps each pass for a jittered frame's (80 Hz at a
+/// 100 Hz model: 1.25 periods), once 128 consecutive frames' mean step is more than 10 % off one
+/// period. A frame refused for its markers keeps its stamp in order: frames after a long gap
+/// of such frames are a gap, not a jump.
 ///
 /// # Safety
 /// As `ikid_stream_push`.

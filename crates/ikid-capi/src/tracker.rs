@@ -176,7 +176,8 @@ pub unsafe extern "C" fn ikid_tracker_push(
 /// or not finite, is refused
 /// (`IKID_STATUS_INVALID_ARGUMENT`) and changes nothing. A source slower than `rate_hz` (three
 /// stamps in a row each more than 1.5 periods after the one before) is refused from the third
-/// on, the message naming its rate, until a stamp comes one period after the one before.
+/// on, the message naming its rate, until a stamp comes one period after the one before; so is
+/// one whose consecutive frames' mean step, over 128 of them, is more than 10 % off one period.
 ///
 /// # Safety
 /// As `ikid_tracker_push`.
