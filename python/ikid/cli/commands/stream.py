@@ -402,7 +402,8 @@ def _stdin_lines(count: int | None):
 
 #: Substring of ikid.Stream's refusal of a time stamp that jumped (see Stream::push_at).
 _CLOCK_GLITCH = "glitch of the source's clock"
-#: What the core says of stamps steadily further apart than the rate (``SourcePace``).
+#: What the core says of stamps steadily further apart than the rate, or whose mean step is off
+#: it (``SourcePace``).
 _SLOW_SOURCE = "the source runs at about"
 
 
@@ -923,11 +924,10 @@ def _run_with(
 
 
 def _stamps_hint(other: float, rate: float, members: list[float], steps: int) -> str:
-    """What stamps at ``other`` Hz say to a stream at ``rate`` Hz, and what to give: the model
-    family's member nearest the stamps' rate when within a quarter of it (stamps that jitter
-    say it only roughly), else the stamps' own rate (``members`` empty: any rate runs). Stamps
-    a second or more apart that read as a motion capture rate in milliseconds are said to be in
-    ms, with the rate they say then."""
+    """What stamps at ``other`` Hz (from ``steps`` steps between them) say to a stream at
+    ``rate`` Hz, and what to give (:func:`_rate_to_give`). Stamps a second or more apart that
+    read as a motion capture rate in milliseconds are said to be in ms, with the rate they say
+    then."""
     in_ms = 1e3 * other
     if abs(in_ms / rate - 1.0) <= 0.2:
         return (
