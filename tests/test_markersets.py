@@ -4,6 +4,7 @@ summary say so, flexion and deviation are the hand's direction in the forearm.""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -32,14 +33,15 @@ def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
 
 
 def one_marker_arm(
-    n: int, rate: float, seed: int, moving: bool = True
+    n: int, rate: float, seed: int, moving: bool = True, hand_at=(0.0, -0.085, 0.0)
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A right arm marked as Plug-in Gait marks one: lab positions (n, 12) of the wrist bar on
     the styloids, the lateral epicondyle and one hand marker, and the hand's true flexion and
     deviation (radians). The forearm swings and turns in the lab; its anatomical frame (x volar,
     y proximal, z radial, origin mid-styloids) is where the styloids and the elbow put it; the
     hand is posed by Rot(z, e)·Rot(x, a) in it (no roll: one marker could not show one). Not
-    ``moving``: a static trial, everything held where it is at time 0, 0.3 mm of noise."""
+    ``moving``: a static trial, everything held where it is at time 0, 0.3 mm of noise.
+    ``hand_at``: the hand marker in the hand's frame (m; 85 mm distal of the mid-styloids)."""
     rng = np.random.default_rng(seed)
     t = np.arange(n) / rate if moving else np.zeros(n)
     e = 0.5 * np.sin(2 * np.pi * 0.7 * t + rng.uniform(0, 6))  # ±29°
@@ -55,7 +57,7 @@ def one_marker_arm(
     wrb = lab(np.tile([0.0, -0.003, -0.032], (n, 1)))
     elb = lab(np.tile([0.0, 0.26, 0.0], (n, 1)))
     hand = _rot(2, e) @ _rot(0, a)
-    fin = lab(np.einsum("nij,j->ni", hand, [0.0, -0.085, 0.0]))
+    fin = lab(np.einsum("nij,j->ni", hand, np.asarray(hand_at, np.float64)))
     positions = np.concatenate([wra, wrb, elb, fin], axis=1)
     if not moving:
         positions += rng.normal(0.0, 0.0003, positions.shape)
@@ -394,6 +396,43 @@ def test_a_one_marker_hand_streams_live_flexion_and_deviation_without_s_p(path, 
     err = np.degrees(got - np.stack([e, a], axis=1)[done])
     rms = np.sqrt(np.mean(err**2, axis=0))
     assert (rms < 1.5).all(), rms
+
+
+@pytest.mark.parametrize(
+    ("hand_at", "refused"), [((0.0, -0.045, 0.015), True), ((0.005, -0.080, 0.0), False)]
+)
+def test_another_marker_under_the_hand_markers_label_is_refused_against_the_calibration(
+    hand_at, refused, tmp_path, capsys
+):
+    # Review 6: a marker 67 mm from the wrist under the label of the hand marker calibrated at
+    # 99 mm ran "ok", flexion 7.1° and deviation 4.2° RMS off: one marker's direction is the
+    # hand's only from where it was calibrated. Its distance from the wrist is now kept and a
+    # trial's must agree as a rigid segment's distances do (15 mm + 15 %): here calibrated at
+    # 85 mm, a marker 47 mm out is refused in a file and live, one 80 mm out is not.
+    rate = 100.0
+    static, _, _ = one_marker_arm(100, rate, 1, moving=False)
+    trial, _, _ = one_marker_arm(300, rate, 2, hand_at=hand_at)
+    write_arm(tmp_path / "static.trc", static, rate)
+    write_arm(tmp_path / "trial.trc", trial, rate)
+    (tmp_path / "pig.toml").write_text(MarkerMap.plug_in_gait("right").to_toml())
+    cal = tmp_path / "cal.json"
+    common = ["--map", str(tmp_path / "pig.toml"), "--calibration", str(cal)]
+    assert cli(["calibrate", "--static", str(tmp_path / "static.trc"), "-o", str(cal), *common[:2]]) == 0
+    assert abs(json.loads(cal.read_text())["hand_point_from_wrist_m"] - 0.085) < 0.002
+    capsys.readouterr()
+    code = cli(["ik", str(tmp_path / "trial.trc"), "-o", str(tmp_path / "t.mot"), *common])
+    err = capsys.readouterr().err
+    said = (
+        "the hand's one marker 'RFIN' (HND) sits 47 mm from the wrist bar's middle, 85 mm in the calibration"
+    )
+    if not refused:
+        assert code == 0, err
+        return
+    assert code == 2 and said in err, err
+    assert not (tmp_path / "t.mot").exists()
+    r = _stream_from_qtm(trial[:60], rate, tmp_path, *common)
+    assert r.returncode == 2 and said in r.stderr, r.stderr
+    assert r.stdout.strip().count("\n") == 0  # the header alone
 
 
 def test_a_live_one_marker_hand_whose_wrist_bar_is_not_at_the_wrist_ends_before_any_line(tmp_path):

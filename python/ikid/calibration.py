@@ -168,13 +168,14 @@ def save_calibration(
     marker_map: MarkerMap | None = None,
     forearm_landmarks: dict | None = None,
     marker_distances: dict[str, list[float]] | None = None,
+    hand_point_m: float | None = None,
     **provenance,
 ) -> Path:
     """Write ``calibration`` (its method, side and report, the marker map it was measured
     with — the identity map when None —, a forearm cluster's anatomical points for a
     one-marker hand (``forearm_landmarks``: ``in_frame_of``, ``points_m``; see
-    :func:`map_with_calibration`) and any ``provenance`` given) as JSON,
-    atomically."""
+    :func:`map_with_calibration`), such a hand's marker's distance from the wrist
+    (``hand_point_m``) and any ``provenance`` given) as JSON, atomically."""
     from ikid.io.mapping import MarkerMap
 
     marker_map = marker_map or MarkerMap.identity()
@@ -199,6 +200,8 @@ def save_calibration(
         doc["forearm_landmarks"] = forearm_landmarks
     if marker_distances:
         doc["marker_distances_m"] = marker_distances
+    if hand_point_m is not None and np.isfinite(hand_point_m):
+        doc["hand_point_from_wrist_m"] = float(hand_point_m)
     if calibration.marker_shapes is not None:
         doc["marker_shapes_m"] = np.asarray(calibration.marker_shapes).tolist()
     return write_text_atomic(path, json.dumps(doc, indent=1) + "\n")
@@ -481,12 +484,18 @@ def check_calibration_map(path: str | os.PathLike[str], marker_map: MarkerMap | 
 
 
 def map_with_calibration(marker_map: MarkerMap, path: str | os.PathLike[str] | None) -> MarkerMap:
-    """``marker_map`` with what the calibration file at ``path`` adds to it: a forearm
-    cluster's anatomical points, for a one-marker hand whose forearm is a cluster
-    (:meth:`ikid.io.MarkerMap.with_forearm_landmarks`); the map as it is otherwise. A
-    calibration without them, for such a map, is refused, saying to calibrate with the
-    landmarks."""
-    if path is None or not marker_map.forearm_cluster:
+    """``marker_map`` with what the calibration file at ``path`` adds to it, for a one-marker
+    hand: its marker's distance from the wrist as calibrated
+    (:meth:`ikid.io.MarkerMap.with_hand_point_distance`), and a forearm cluster's anatomical
+    points (:meth:`ikid.io.MarkerMap.with_forearm_landmarks`); the map as it is otherwise. A
+    calibration without the points, for a map whose forearm is a cluster, is refused, saying to
+    calibrate with the landmarks."""
+    if path is None or not marker_map.one_hand_marker:
+        return marker_map
+    distance = calibration_info(path).get("hand_point_from_wrist_m")
+    if isinstance(distance, int | float) and np.isfinite(distance) and distance > 0:
+        marker_map = marker_map.with_hand_point_distance(float(distance))
+    if not marker_map.forearm_cluster:
         return marker_map
     stored = calibration_info(path).get("forearm_landmarks")
     try:

@@ -87,6 +87,9 @@ class MarkerMap:
     #: metres, in the technical frame of RSP, USP, FAP (core ``cluster::technical_frame``), as a
     #: calibration measured them (``ikid.calibration.map_with_calibration``).
     forearm_landmarks: np.ndarray | None = field(default=None, compare=False, repr=False)
+    #: For a one-marker hand: its marker's distance from the mid-styloids as a calibration
+    #: measured it (m), which a trial's must keep (:func:`marker_checks.check_hand_point`).
+    hand_point_m: float | None = field(default=None, compare=False, repr=False)
     #: The lab axis pointing up (one of ``UP_AXES``), if the map says: it decides over the
     #: file's declaration (``MarkerData.lab_up``). Torques depend on it, angles do not.
     up: str | None = None
@@ -399,6 +402,7 @@ class MarkerMap:
         if not self.forearm_cluster:
             if check_bar:
                 marker_checks.check_wrist_bar(self, columns)
+                marker_checks.check_hand_point(self, columns)
             return columns
         if self.forearm_landmarks is None:
             raise _native.InputError(
@@ -411,6 +415,8 @@ class MarkerMap:
             )
         columns = np.array(columns, np.float64)
         columns[:, :9] = _native.points_from_technical_frame(columns[:, :9], self.forearm_landmarks)
+        if check_bar:
+            marker_checks.check_hand_point(self, columns)
         return columns
 
     def forearm_landmark_points(self, data: MarkerData) -> np.ndarray:
@@ -420,6 +426,11 @@ class MarkerMap:
             data.marker(lab, self.up) for lab in self.landmark_labels_in_order(data)
         )
         return np.concatenate([radial, ulnar, (lateral + medial) / 2.0], axis=1)
+
+    def with_hand_point_distance(self, distance_m: float) -> MarkerMap:
+        """This map with its one hand marker's calibrated distance from the wrist (see
+        :attr:`hand_point_m`)."""
+        return replace(self, hand_point_m=float(distance_m))
 
     def with_forearm_landmarks(self, local: np.ndarray) -> MarkerMap:
         """This map with a forearm cluster's anatomical points ``(3, 3)`` (see

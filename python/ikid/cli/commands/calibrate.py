@@ -320,6 +320,7 @@ def run(args: argparse.Namespace) -> int:
         forearm_landmarks=forearm_landmarks,
         # The markers' layout as calibrated: a trial laid out otherwise is refused (another session).
         marker_distances=marker_distances(neutral, mapping.one_hand_marker),
+        hand_point_m=_hand_point_distance(static, mapping, chosen),
         **provenance,
     )
     r = cal.report or {}
@@ -434,6 +435,21 @@ def _stillest_frames(frames: np.ndarray, rate_hz: float) -> tuple[int, int, floa
         return None
     first = int(np.nanargmin(spread))
     return first, first + width - 1, float(np.degrees(spread[first]))
+
+
+def _hand_point_distance(static, mapping, chosen) -> float | None:
+    """A one-marker hand's marker's distance from the wrist over the neutral frames ``chosen``
+    of ``static`` (a trial's must keep it: ``marker_checks.check_hand_point``); None for a
+    hand of three markers."""
+    if not mapping.one_hand_marker:
+        return None
+    from ikid.io.marker_checks import hand_point_distance
+
+    columns = np.concatenate(
+        [static.marker(lab, mapping.up) for lab in mapping.labels_in_ikid_order(static)], axis=1
+    )
+    columns = mapping.anatomical_forearm(mapping.fit_clusters(static, columns), check_bar=False)
+    return hand_point_distance(columns[chosen] if chosen is not None else columns)
 
 
 def _forearm_landmarks(mapping, source, where) -> dict:

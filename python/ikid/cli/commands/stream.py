@@ -1100,13 +1100,13 @@ class _OneMarkerHand:
         return self.map.ikid_frames(columns, check_bar=False)[0]
 
     def check_forearm(self, markers: np.ndarray, source: str) -> None:
-        """An error if the forearm's markers over these frames are not a wrist bar and an elbow
-        (:func:`ikid.io.marker_checks.check_wrist_bar`), naming ``source``."""
-        if not self.map.forearm_cluster:
-            try:
-                self.map.anatomical_forearm(markers)
-            except ikid.InputError as e:
-                raise ikid.InputError(f"{source}: {e.reason or e}") from None
+        """An error if the forearm's markers over these frames are not a wrist bar and an elbow,
+        or the hand's marker does not sit as far from the wrist as calibrated
+        (:meth:`ikid.io.MarkerMap.anatomical_forearm`'s checks), naming ``source``."""
+        try:
+            self.map.anatomical_forearm(markers)
+        except ikid.InputError as e:
+            raise ikid.InputError(f"{source}: {e.reason or e}") from None
 
     def lacks(self, markers, frame: np.ndarray) -> str | None:
         """Why this frame gives the core no wrist, counted as such (no numbers in it); None when
