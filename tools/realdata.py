@@ -828,7 +828,9 @@ def _pig_live(trial: Path, side: str, mapping: Path, cal: Path, log: list[str]):
     127.0.0.1 (the tests' ``live_peers.FakeQtm``: QTM's protocol, float32 mm, the C3D's own up
     as its AxisUpwards), read by ``ikid stream --tracker``: its exit, the ``(n, 3)`` angles in
     degrees of its ``ok`` lines (NaN elsewhere) and its CSV columns."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    peers = str(Path(__file__).resolve().parent.parent / "tests")
+    if peers not in sys.path:
+        sys.path.insert(0, peers)
     from ikid.io import MarkerMap, read_markers
     from live_peers import FakeQtm
 

@@ -639,9 +639,7 @@ impl Stream {
             // must not make the frames after it read as a jump of the source's clock.
             // Only a stamp one period on from the last one that came in order: a refused frame
             // with a stamp of its own (a glitch) leaves the clock as it was.
-            let seen =
-                self.refused_in_order.map_or(self.clock.last(), |r| Some(self.clock.last().map_or(r, |l| l.max(r))));
-            if seen.is_some_and(|t| (FOLLOWS_PERIODS..=GAP_PERIODS).contains(&((time_s - t) * rate))) {
+            if self.last_in_order().is_some_and(|t| (FOLLOWS_PERIODS..=GAP_PERIODS).contains(&((time_s - t) * rate))) {
                 self.refused_in_order = Some(time_s);
             }
             return Err(e);
@@ -685,7 +683,7 @@ impl Stream {
         // After the last accepted frame, and not far on from the last stamp that came in order
         // (that frame, or one refused for its markers since: a refused frame orders nothing,
         // it may be pushed again with its stamp).
-        let seen = self.refused_in_order.map_or(last, |r| r.max(last));
+        let seen = self.last_in_order().unwrap_or(last);
         if time_s > last && time_s - seen <= MAX_TIME_GAP_S {
             let step = self.clock.step(time_s, rate);
             if step == Some(GridStep::Soon) {
@@ -711,6 +709,15 @@ impl Stream {
             return Ok(TimeStep::Reanchor);
         }
         Ok(TimeStep::Jump)
+    }
+
+    /// The last stamp that came in order: the last accepted frame's, or a later one of a frame
+    /// refused for its markers since.
+    fn last_in_order(&self) -> Option<f64> {
+        match (self.clock.last(), self.refused_in_order) {
+            (Some(last), Some(refused)) => Some(last.max(refused)),
+            (last, refused) => last.or(refused),
+        }
     }
 
     /// Remembers a jumped stamp (to re-anchor on should more continue from it) and says why

@@ -381,26 +381,27 @@ class MarkerMap:
         (:func:`marker_checks.flat_segments`)."""
         return marker_checks.flat_segments(self, frames)
 
-    def ikid_frames(self, columns: np.ndarray, *, check_bar: bool = True) -> np.ndarray:
+    def ikid_frames(self, columns: np.ndarray, *, check: bool = True) -> np.ndarray:
         """ikid's ``(n, 18)`` frames from the mapped labels' columns (``labels_in_ikid_order``):
         as they are, or, for a one-marker hand, with its three markers made virtual (and a
         forearm cluster's three its anatomical points: :meth:`anatomical_forearm`).
-        ``check_bar``: see :meth:`anatomical_forearm`."""
+        ``check``: see :meth:`anatomical_forearm`."""
         if not self.one_hand_marker:
             return columns
-        forearm = self.anatomical_forearm(columns, check_bar=check_bar)
+        forearm = self.anatomical_forearm(columns, check=check)
         return _native.hand_from_one_marker(forearm, left=self.side == "left")
 
-    def anatomical_forearm(self, columns: np.ndarray, *, check_bar: bool = True) -> np.ndarray:
+    def anatomical_forearm(self, columns: np.ndarray, *, check: bool = True) -> np.ndarray:
         """A one-marker hand's ``(n, 12)`` columns with a forearm cluster's three replaced by the
         anatomical points its calibration places in the cluster's frame: the radial and ulnar
         styloids and the mid-epicondyles, as Plug-in Gait's wrist bar and elbow give them. As
-        they are for a forearm marked at those points, checked to sit there
-        (:func:`marker_checks.check_wrist_bar`) unless ``check_bar`` is false: a live stream
-        checks its first frames once and then converts one frame at a time. An error says what
-        to do when no calibration gave a cluster's points."""
+        they are for a forearm marked at those points. ``check``: the wrist bar checked to sit
+        there (:func:`marker_checks.check_wrist_bar`) and the hand marker as far from the wrist
+        as calibrated (:func:`marker_checks.check_hand_point`); a live stream checks its first
+        frames once and then converts one frame at a time. An error says what to do when no
+        calibration gave a cluster's points."""
         if not self.forearm_cluster:
-            if check_bar:
+            if check:
                 marker_checks.check_wrist_bar(self, columns)
                 marker_checks.check_hand_point(self, columns)
             return columns
@@ -415,7 +416,7 @@ class MarkerMap:
             )
         columns = np.array(columns, np.float64)
         columns[:, :9] = _native.points_from_technical_frame(columns[:, :9], self.forearm_landmarks)
-        if check_bar:
+        if check:
             marker_checks.check_hand_point(self, columns)
         return columns
 

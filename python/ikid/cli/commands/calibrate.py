@@ -448,7 +448,7 @@ def _hand_point_distance(static, mapping, chosen) -> float | None:
     columns = np.concatenate(
         [static.marker(lab, mapping.up) for lab in mapping.labels_in_ikid_order(static)], axis=1
     )
-    columns = mapping.anatomical_forearm(mapping.fit_clusters(static, columns), check_bar=False)
+    columns = mapping.anatomical_forearm(mapping.fit_clusters(static, columns), check=False)
     return hand_point_distance(columns[chosen] if chosen is not None else columns)
 
 

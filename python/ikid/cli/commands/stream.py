@@ -1097,7 +1097,7 @@ class _OneMarkerHand:
     def frame(self, markers) -> np.ndarray:
         """ikid's 18 values (NaN for a segment its markers do not place)."""
         columns = np.asarray(markers, np.float64).reshape(1, -1)
-        return self.map.ikid_frames(columns, check_bar=False)[0]
+        return self.map.ikid_frames(columns, check=False)[0]
 
     def check_forearm(self, markers: np.ndarray, source: str) -> None:
         """An error if the forearm's markers over these frames are not a wrist bar and an elbow,
