@@ -8,5 +8,7 @@
 pub mod id;
 pub mod ik;
 
-pub use id::{JointState, inverse_dynamics, inverse_dynamics_at, inverse_dynamics_rows};
+pub use id::{
+    ForearmMotion, JointState, inverse_dynamics, inverse_dynamics_at, inverse_dynamics_moving, inverse_dynamics_rows,
+};
 pub use ik::{fit_points, fit_segment, inverse_kinematics, inverse_kinematics_frame};
