@@ -103,6 +103,11 @@ impl ForearmNoise {
         self.variance
     }
 
+    /// [`variance`](Self::variance) once a sample taught it, `None` before.
+    pub(super) fn learned(&self) -> Option<f64> {
+        (self.samples > 0.0).then_some(self.variance)
+    }
+
     /// Takes the forearm markers' residual to their rigid fit at frame `index`; frames must
     /// follow each other for a third difference (a gap starts over). `memory` is the noise's
     /// memory in frames.

@@ -31,8 +31,9 @@
 //!    ([`MANOEUVRE_NIS`]) scale that covariance up by as much (a manoeuvre: an impact the
 //!    white-jerk model did not expect). e_f is kept within ±90° (past it, the other Euler
 //!    triple of the same rotation);
-//! 4. the torques follow from the state by Newton–Euler ([`reference::inverse_dynamics_at`](crate::reference::inverse_dynamics_at),
-//!    gravity's direction from the fitted forearm); one beyond what a wrist can take
+//! 4. the torques follow from the state by Newton–Euler ([`reference::inverse_dynamics_moving`](crate::reference::inverse_dynamics_moving),
+//!    gravity's direction from the fitted forearm, which carries the hand with its own motion
+//!    once that stands out of its noise: `motion`); one beyond what a wrist can take
 //!    ([`status::torque_limit`]) marks the frame [`status::IMPLAUSIBLE`].
 //!
 //! Why it beats a fixed-noise filter (biorbd's `KalmanReconsMarkers`, measured in
@@ -83,7 +84,7 @@
 //! method per step) and [`Tracker::run`]; `settings` its [`TrackerSettings`], `output` its
 //! [`TrackerOutput`] and the torques; `checks` the markers' rigid shapes, jumps and status bits;
 //! `placement` the calibration's templates and each marker's recent place; `forearm` the
-//! forearm's pose from three or two markers; `centre` the wrist centre; `ekf` the filter's
+//! forearm's pose from three or two markers; `motion` the forearm's own motion, for the torques; `centre` the wrist centre; `ekf` the filter's
 //! prediction, gate, correction and restarts; `variance` the noise it learns; `refiner` the
 //! learned refiner; `timing` time-stamped frames ([`Tracker::push_at`]: lost frames restart it).
 
@@ -91,6 +92,7 @@ mod centre;
 mod checks;
 mod ekf;
 mod forearm;
+mod motion;
 mod output;
 mod placement;
 mod refiner;
@@ -104,6 +106,7 @@ pub use checks::{
     missing_markers,
 };
 pub use ekf::{GATE_CHI2, GATE_FLOOR_M, MANOEUVRE_NIS, MAX_ITERATIONS, RELINEARISE_RAD};
+pub use motion::{ANCHOR_EVERY_S, CENTRE_JERK_LEVER_M, MOTION_SIGNIFICANCE};
 pub use output::{MIN_REPORTED_NOISE, SD_SCALE_TAU, TRACKER_VALUES, TrackerOutput, TrackerSd};
 pub use placement::{LIVE_PLACEMENT_S, TEMPLATE_S};
 pub use refiner::{
@@ -121,6 +124,7 @@ use crate::stream::Stream;
 use centre::{JointCentre, WristCentre};
 use checks::RigidShape;
 use forearm::{ForearmNoise, ForearmTurn, Roll};
+use motion::ForearmMotionFilter;
 
 /// State size: angle, velocity and acceleration of each coordinate.
 const N_STATE: usize = 3 * N_COORDINATES;
@@ -211,6 +215,10 @@ pub struct Tracker {
     forearm_noise: ForearmNoise,
     /// ... and its roll about the line through two of its markers while one is missing.
     roll: Roll,
+    /// The forearm's own motion, which the torques carry ([`motion`]), and the point of the
+    /// forearm (its frame) whose acceleration they take: the wrist centre as last learned.
+    motion: ForearmMotionFilter,
+    motion_anchor: Vector3<f64>,
     /// [`status::torque_limit`] for this subject, N·m.
     torque_limit: f64,
     /// Whether the refiner corrected the last estimate ([`Tracker::output_sd`]).
@@ -299,6 +307,8 @@ impl Tracker {
             turn: ForearmTurn::new(),
             forearm_noise: ForearmNoise::new(),
             roll: Roll::idle(),
+            motion: ForearmMotionFilter::new(1.0 / settings.rate_hz),
+            motion_anchor: Vector3::zeros(),
             torque_limit: 0.0,
             refined: false,
             turned_over: status::TurnedOverWatch::new(),
@@ -344,6 +354,8 @@ impl Tracker {
         self.turn = ForearmTurn::new();
         self.forearm_noise = ForearmNoise::new();
         self.roll = Roll::idle();
+        self.motion.reset();
+        self.motion_anchor = Vector3::zeros();
         self.refined = false;
         self.turned_over = status::TurnedOverWatch::new();
         self.clock = crate::stream::FrameGrid::default();
@@ -419,6 +431,7 @@ impl Tracker {
         self.measure_forearm(&mut step);
         self.check_hand(&mut step);
         self.forearm_through_gap(&mut step);
+        self.follow_forearm_motion(&step);
         // The state predicted, or started from this frame's own solution.
         let Some(forearm) = self.forearm else {
             self.learn_noise(&step.hand, step.index);

@@ -59,7 +59,7 @@ impl TrackerOutput {
 
 impl Tracker {
     /// The frame's output: the torques of `state` by Newton–Euler (gravity's direction from the
-    /// forearm's pose `forearm`), and [`status::IMPLAUSIBLE`] for an angle or a torque no wrist
+    /// forearm's pose `forearm`, the forearm's own motion as far as it is seen), and [`status::IMPLAUSIBLE`] for an angle or a torque no wrist
     /// reaches, or a hand that reads turned over on the forearm ([`status::TURNED_OVER`]).
     pub(super) fn output(
         &mut self,
@@ -73,7 +73,9 @@ impl Tracker {
             step.flags |= status::IMPLAUSIBLE;
         }
         step.flags |= self.turned_over.update(&state.q);
-        let tau = reference::inverse_dynamics_at(&self.body, &forearm.rotation.to_rotation_matrix(), &state)?;
+        let motion = self.forearm_motion(step, forearm);
+        let tau =
+            reference::inverse_dynamics_moving(&self.body, &forearm.rotation.to_rotation_matrix(), &motion, &state)?;
         if tau.iter().any(|&t| status::torque_implausible(t, self.torque_limit)) {
             step.flags |= status::IMPLAUSIBLE;
         }
@@ -114,6 +116,7 @@ impl Tracker {
         let (x, p) = self.state.as_ref()?;
         let pose = self.forearm?;
         let forearm = pose.rotation.to_rotation_matrix();
+        let motion = self.forearm_motion_now();
         // Angles: the filter's covariance, which counts the hand's noise alone, plus what the
         // forearm's adds. Torques: the markers' noise (the hand's and the forearm's) through
         // the filter's gain, without the white-jerk allowance (see `SD_SCALE_TAU`).
@@ -133,8 +136,8 @@ impl Tracker {
             let (mut up, mut down) = (*x, *x);
             up[k] += h;
             down[k] -= h;
-            let tau_up = reference::inverse_dynamics_at(&self.body, &forearm, &state_of(&up)).ok()?;
-            let tau_down = reference::inverse_dynamics_at(&self.body, &forearm, &state_of(&down)).ok()?;
+            let tau_up = reference::inverse_dynamics_moving(&self.body, &forearm, &motion, &state_of(&up)).ok()?;
+            let tau_down = reference::inverse_dynamics_moving(&self.body, &forearm, &motion, &state_of(&down)).ok()?;
             for c in 0..N_COORDINATES {
                 jacobian[(c, k)] = (tau_up[c] - tau_down[c]) / (2.0 * h);
             }

@@ -63,6 +63,7 @@ impl Tracker {
             self.shapes[s].template = self.shapes[s].learned;
             // The centre was learned in the old placement's frames.
             self.centre = JointCentre::new();
+            self.motion_anchor = Vector3::zeros();
         }
     }
 

@@ -96,6 +96,7 @@ impl Tracker {
         self.frames += lost;
         self.state = None;
         self.forearm = None;
+        self.motion.reset();
         self.history_len = 0;
         self.gated_streak = 0;
         self.coast_streak = 0;
