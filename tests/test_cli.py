@@ -1197,6 +1197,48 @@ def test_stream_restarts_the_window_after_frames_lost_by_number(trial, monkeypat
     )
 
 
+def test_an_uncalibrated_track_takes_the_subjects_size_from_its_markers(tmp_path, capsys) -> None:
+    # Review 7: a subject 10 % larger than the body model, tracked uncalibrated without
+    # --length-scale, was read as the default one: angles 1-3° off, torques 20-60× their size,
+    # every row status 0. The markers' distances say the size; the oracle is the simulator's
+    # own torques for that subject.
+    t = ikid.simulate("random", seed=9905, duration=3.0, length_scale=1.1, mass_scale=1.1**3)
+    write_trc(tmp_path / "big.trc", t.time, t.markers, 1000.0)
+    assert cli(["track", str(tmp_path / "big.trc"), "-o", str(tmp_path / "big")]) == 0
+    said = capsys.readouterr().out
+    assert "subject ×1.1 length, ×1.33 mass (estimated from the markers' distances, uncalibrated)" in said, (
+        said
+    )
+    time_sto, tau = read_sto(tmp_path / "big.sto")
+    truth = t.tau[np.searchsorted(t.time, time_sto - 1e-9)]
+    settled = time_sto > 0.5
+    error = np.sqrt(np.mean((tau[settled] - truth[settled]) ** 2, axis=0))
+    size = np.sqrt(np.mean(truth[settled] ** 2))  # all three coordinates' (s_p's alone is 0.05 N·m)
+    assert np.all(error < 0.2 * size), (error, size)
+    # A size given against the markers' is refused before any file, naming both.
+    wrong = ["track", str(tmp_path / "big.trc"), "-o", str(tmp_path / "wrong"), "--length-scale", "1"]
+    assert exit_status(wrong) == 2
+    err = capsys.readouterr().err
+    assert "--length-scale 1, but the markers' distances say the subject is ×1.1" in err, err
+    assert "give --length-scale 1.1" in err and not (tmp_path / "wrong.mot").exists()
+
+
+def test_an_uncalibrated_stream_tracker_refuses_markers_of_another_size(monkeypatch, capsys) -> None:
+    # A stream has no size options: an uncalibrated tracker takes the body model's, so markers
+    # that say another size end the stream before any line (as the placement check does).
+    t = ikid.simulate("random", seed=9906, duration=0.3, length_scale=0.9)
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(t.markers)))
+    assert exit_status(["stream", "--tracker", "--rate", "1000"]) == 2
+    captured = capsys.readouterr()
+    assert "the markers' distances say the subject is ×0.9 the body model's" in captured.err, captured.err
+    assert "calibrate the subject" in captured.err
+    assert captured.out.startswith("frame,status,") and captured.out.count("\n") == 1  # the header alone
+    # The default subject's markers pass.
+    t = ikid.simulate("random", seed=9906, duration=0.3)
+    monkeypatch.setattr(sys, "stdin", io.StringIO(csv_lines(t.markers)))
+    assert exit_status(["stream", "--tracker", "--rate", "1000"]) == 0
+
+
 def test_stream_tracker_starts_again_after_frames_lost_by_time(trial, monkeypatch, capsys):
     # Frames 200-299 never arrive: across the gap the filter's motion model would take 0.1 s for
     # one period (torques 4 N·m off). It starts again: the rows after the gap are the

@@ -302,14 +302,25 @@ def _training_package(what: str):
 
 
 def subject_size(
-    calibration: str | None, length_scale: float | None = None, mass_scale: float | None = None
+    calibration: str | None,
+    length_scale: float | None = None,
+    mass_scale: float | None = None,
+    markers: np.ndarray | None = None,
+    source: str = "",
 ) -> tuple[float, float, str]:
     """The subject's (length, mass) scales for a tracker, and where they came from: those given;
     else the calibration's size estimate (its landmarks: the forearm's length over the default
-    subject's; a mirror calibration carries the other arm's), mass its cube; else the default
-    subject. One rule for ``ikid track`` and ``ikid stream --tracker``: the same calibration
-    gives the same torques."""
+    subject's; a mirror calibration carries the other arm's); else, uncalibrated, the size the
+    ``markers``' distances say (:func:`~ikid.io.marker_checks.marker_length_scale`) when it is
+    more than :data:`~ikid.io.marker_checks.TRACKER_SIZE_TOLERANCE` from the default subject's;
+    else the default subject. The mass is the length's cube unless given. One rule for
+    ``ikid track`` and ``ikid stream --tracker``: the same calibration gives the same torques.
+
+    Uncalibrated, the tracker measures the hand by where its markers sit from the body model's
+    wrist centre, so a ``length_scale`` given against what the markers say is refused (an
+    error naming ``source``): read at the wrong size, the torques were 20-60× their size."""
     from ikid.calibration import calibration_info
+    from ikid.io.marker_checks import TRACKER_SIZE_TOLERANCE, marker_length_scale
 
     estimate, estimated_from = None, "the calibration's landmarks"
     if calibration:
@@ -318,13 +329,39 @@ def subject_size(
         estimate = landmarks.get("length_scale")
         if estimate is None and (mirrored := (info.get("provenance") or {}).get("mirror_length_scale")):
             estimate, estimated_from = mirrored, "the other arm's landmarks (mirror calibration)"
+    said = marker_length_scale(markers) if markers is not None and not calibration else None
+    if (
+        said is not None
+        and length_scale is not None
+        and abs(length_scale / said - 1.0) > TRACKER_SIZE_TOLERANCE
+    ):
+        raise ikid.InputError(
+            f"{source}: --length-scale {length_scale:g}, but the markers' distances say the subject is "
+            f"×{said:.3g} the body model's: an uncalibrated tracker measures the hand by where its markers "
+            f"sit from the model's wrist centre, so read at ×{length_scale:g} its angles and torques are "
+            f"wrong; give --length-scale {said:.3g}, or calibrate the subject (ikid calibrate) and pass "
+            "--calibration"
+        )
+    if said is not None and estimate is None and abs(said - 1.0) > TRACKER_SIZE_TOLERANCE:
+        estimate, estimated_from = said, "the markers' distances, uncalibrated"
     if length_scale is not None:
-        length, source = length_scale, "given"
+        length, where = length_scale, "given"
     elif estimate is not None:
         lo, hi = ikid._native.LENGTH_SCALE_RANGE
         length = min(max(float(estimate), lo), hi)
-        source = f"estimated from {estimated_from}"
+        where = f"estimated from {estimated_from}"
     else:
-        length, source = 1.0, "the default subject"
-    mass = mass_scale if mass_scale is not None else length**3
-    return length, mass, source
+        length, where = 1.0, "the default subject"
+    if mass_scale is not None:
+        mass = mass_scale
+        if length_scale is not None:
+            where = "given"
+        elif estimate is None:
+            where = "the default subject's length, mass given"
+        else:
+            where = f"length {where}, mass given"
+    else:
+        mass = length**3
+        if length_scale is not None:
+            where = "length given, mass its cube"
+    return length, mass, where

@@ -43,6 +43,35 @@ FOREARM_LENGTH_M = (0.120, 0.400)
 MIN_HAND_TRAVEL_M = 0.003
 
 
+#: How far an uncalibrated tracker's subject size may lie from the one its markers' distances
+#: say (a share of it) before it is not the subject they were put on. The tracker measures the
+#: hand by where its markers sit from the body model's wrist centre: a subject 10 % larger read
+#: as the default one had its angles 1-3° off and its torques 20-60× their size, every row
+#: status 0 (review 7), where the placement check above only refuses at 25 %.
+TRACKER_SIZE_TOLERANCE = 0.02
+
+
+def marker_length_scale(frames: np.ndarray) -> float | None:
+    """The subject's length scale its markers say, for markers at the body model's anatomical
+    points (which move out with the subject's length): per frame with every marker, the sum of
+    the three distances within each segment over the default subject's, the median over the
+    frames. ``None`` without such a frame."""
+    frames = np.asarray(frames, np.float64).reshape(-1, 6, 3)
+    frames = frames[np.isfinite(frames).all(axis=(1, 2))]
+    if len(frames) == 0:
+        return None
+    model = np.array([m["offset"] for m in _native.body_model()["markers"]], np.float64)
+
+    def spans(points: np.ndarray) -> np.ndarray:
+        return sum(
+            np.linalg.norm(points[..., first + a, :] - points[..., first + b, :], axis=-1)
+            for first in (0, 3)
+            for a, b in _PAIRS
+        )
+
+    return float(np.median(spans(frames)) / spans(model))
+
+
 def stretched_segments(mapping: MarkerMap, frames: np.ndarray) -> list[str]:
     """What says that a segment's markers, as this map names them, are not on one segment:
     per pair of markers of a segment (frames ``(n, 18)``, ikid's order, metres) whose

@@ -1069,6 +1069,24 @@ class _PlacementCheck:
             whole=False,
             labelled=self.mapping is not None,
         )
+        if self.args.tracker and not self.args.calibration:
+            self.check_size(frames, source)
+
+    @staticmethod
+    def check_size(frames: np.ndarray, source: str) -> None:
+        """An uncalibrated tracker takes the default subject (a stream has no size options):
+        markers whose distances say another size are refused, as ``ikid track`` would read
+        them at their own (:func:`~ikid.cli.common.subject_size`)."""
+        from ikid.io.marker_checks import TRACKER_SIZE_TOLERANCE, marker_length_scale
+
+        said = marker_length_scale(frames)
+        if said is not None and abs(said - 1.0) > TRACKER_SIZE_TOLERANCE:
+            raise ikid.InputError(
+                f"{source}: the markers' distances say the subject is ×{said:.3g} the body model's, and "
+                "an uncalibrated tracker takes the body model's size (it measures the hand by where its "
+                "markers sit from the model's wrist centre: read at another size its angles and torques "
+                "are wrong); calibrate the subject (ikid calibrate) and pass --calibration"
+            )
 
     def release(self, out, sink) -> None:
         """Writes the lines and publishes the outputs held while the frames were checked."""

@@ -137,7 +137,13 @@ def run(args: argparse.Namespace) -> int:
     )
     # Gravity's direction: the torques depend on it (the frames come turned into ikid's +Y up).
     up, up_from = first.lab_up(mapping.up if mapping else None)
-    length_scale, mass_scale, size_from = subject_size(args.calibration, args.length_scale, args.mass_scale)
+    length_scale, mass_scale, size_from = subject_size(
+        args.calibration,
+        args.length_scale,
+        args.mass_scale,
+        first.frames(mapping, whole=False),
+        str(args.input),
+    )
     try:
         tracker = ikid.Tracker(
             length_scale=length_scale,
