@@ -116,7 +116,7 @@ impl Tracker {
         let (x, p) = self.state.as_ref()?;
         let pose = self.forearm?;
         let forearm = pose.rotation.to_rotation_matrix();
-        let motion = self.forearm_motion_now();
+        let (motion, (accel_noise, alpha_noise)) = self.forearm_motion_now();
         // Angles: the filter's covariance, which counts the hand's noise alone, plus what the
         // forearm's adds. Torques: the markers' noise (the hand's and the forearm's) through
         // the filter's gain, without the white-jerk allowance (see `SD_SCALE_TAU`).
@@ -142,7 +142,27 @@ impl Tracker {
                 jacobian[(c, k)] = (tau_up[c] - tau_down[c]) / (2.0 * h);
             }
         }
-        let tau_cov = jacobian * all_noise * jacobian.transpose();
+        let mut tau_cov = jacobian * all_noise * jacobian.transpose();
+        // The forearm's counted accelerations carry their own noise into the torques, linearly:
+        // each axis's column is the torques' change per unit of it.
+        let state = state_of(x);
+        let base = reference::inverse_dynamics_moving(&self.body, &forearm, &motion, &state).ok()?;
+        for (variance, alpha) in [(accel_noise, false), (alpha_noise, true)] {
+            if variance <= 0.0 {
+                continue;
+            }
+            for k in 0..3 {
+                let mut nudged = motion;
+                if alpha {
+                    nudged.alpha[k] += 1.0
+                } else {
+                    nudged.accel[k] += 1.0
+                }
+                let tau = reference::inverse_dynamics_moving(&self.body, &forearm, &nudged, &state).ok()?;
+                let column = nalgebra::Vector3::from_fn(|c, _| tau[c] - base[c]);
+                tau_cov += column * column.transpose() * variance;
+            }
+        }
         // Just (re)started from a frame's own solution, at rest, the velocities and
         // accelerations are the filter's guesses, not yet the markers' noise through its gain:
         // until they settle the torques' σ is also at least the filter's own covariance (the
