@@ -282,6 +282,60 @@ def test_id_from_a_mot_file_equals_the_api(trial, tmp_path, capsys):
     np.testing.assert_allclose(tau, model.predict(joint_state), rtol=1e-5, atol=1e-6)
 
 
+def test_id_refuses_a_subject_or_shoulder_the_network_cannot_take(tmp_path, capsys):
+    # Review 7: without --reference these were ignored: a recording at 45° came out with torques
+    # as far off as they are large, exit 0, the summary saying "shoulder flexed 0°". Refused now,
+    # naming them; with --reference they are the subject's (the simulator's torques, the oracle).
+    t = ikid.simulate("random", seed=9907, duration=2.0, shoulder_flexion=math.radians(45.0))
+    write_mot(tmp_path / "s45.mot", t.time, t.q)
+    for option in (["--shoulder-deg", "45"], ["--length-scale", "1.1"], ["--mass-scale", "2"]):
+        assert exit_status(["id", str(tmp_path / "s45.mot"), "-o", str(tmp_path / "x.sto"), *option]) == 2
+        err = capsys.readouterr().err
+        assert f"ikid id {option[0]} {option[1]}: the network" in err and "add --reference" in err, err
+        assert not (tmp_path / "x.sto").exists()
+    out = tmp_path / "ref.sto"
+    assert cli(["id", str(tmp_path / "s45.mot"), "-o", str(out), "--reference", "--shoulder-deg", "45"]) == 0
+    time_sto, tau = read_sto(out)
+    truth = t.tau[np.searchsorted(t.time, time_sto - 1e-9)]
+    inner = (time_sto > 0.3) & (time_sto < time_sto[-1] - 0.3)  # past the low-pass's edges
+    assert np.sqrt(np.mean((tau[inner] - truth[inner]) ** 2)) < 0.1 * np.sqrt(np.mean(truth[inner] ** 2))
+
+
+def test_id_takes_jittered_or_rounded_time_stamps_as_the_sampling_grid(tmp_path, capsys):
+    # Review 7: a .mot's times jittered by ±0.1 ms at 1 kHz, differenced as stamped, put the
+    # torques 0.17 N·m RMS off where they are 0.125 (status 0); times rounded to the millisecond
+    # made a 120 Hz file "125 Hz". The oracle: the simulator's own torques.
+    t = ikid.simulate("random", seed=9909, duration=3.0)
+    jitter = np.random.default_rng(0).uniform(-1e-4, 1e-4, len(t.time))
+    write_mot(tmp_path / "j.mot", t.time + jitter, t.q)
+    assert cli(["id", str(tmp_path / "j.mot"), "-o", str(tmp_path / "j.sto"), "--reference"]) == 0
+    time_sto, tau = read_sto(tmp_path / "j.sto")
+    truth = t.tau[np.rint(time_sto * 1000.0).astype(int)]
+    inner = (time_sto > 0.3) & (time_sto < time_sto[-1] - 0.3)  # past the low-pass's edges
+    error = np.sqrt(np.mean((tau[inner] - truth[inner]) ** 2, axis=0))
+    assert np.all(error < 0.1 * np.sqrt(np.mean(truth[inner] ** 2))), error
+    t120 = np.arange(0.0, 2.9, 1.0 / 120.0)
+    q120 = np.stack([np.interp(t120, t.time, t.q[:, c]) for c in range(3)], axis=1)
+    write_mot(tmp_path / "r.mot", np.round(t120, 3), q120)
+    assert cli(["id", str(tmp_path / "r.mot"), "-o", str(tmp_path / "r.sto")]) == 2  # the network is 1 kHz
+    err = capsys.readouterr().err
+    assert re.search(r"\b1(19\.9|20)[0-9.]* Hz", err) and "125 Hz" not in err, err
+
+
+def test_id_warns_of_radians_under_a_header_saying_degrees(tmp_path, capsys):
+    # Review 7: a radians .mot labelled inDegrees=yes gave the torques of a hand hardly moving
+    # (98 % off), status 0, nothing said. Its angles as read never leave ±3.14°: said, and
+    # --strict fails it; the same angles labelled right pass.
+    t = ikid.simulate("random", seed=9910, duration=2.0)
+    write_mot(tmp_path / "mislabelled.mot", t.time, np.radians(t.q))  # radians' numbers, as degrees
+    argv = ["id", str(tmp_path / "mislabelled.mot"), "-o", str(tmp_path / "m.sto"), "--reference"]
+    assert exit_status([*argv, "--strict"]) == 3
+    assert "as radians under a header saying degrees would" in capsys.readouterr().err
+    write_mot(tmp_path / "right.mot", t.time, t.q)
+    argv = ["id", str(tmp_path / "right.mot"), "-o", str(tmp_path / "r.sto"), "--reference", "--strict"]
+    assert exit_status(argv) == 0 and "header saying degrees" not in capsys.readouterr().err
+
+
 def test_id_refuses_a_file_at_another_rate(trial, tmp_path, capsys):
     write_mot(tmp_path / "slow.mot", trial.time[::4], trial.q[::4])  # 250 Hz
     assert cli(["id", str(tmp_path / "slow.mot"), "-o", str(tmp_path / "x.sto")]) == 2
@@ -1221,6 +1275,54 @@ def test_an_uncalibrated_track_takes_the_subjects_size_from_its_markers(tmp_path
     err = capsys.readouterr().err
     assert "--length-scale 1, but the markers' distances say the subject is ×1.1" in err, err
     assert "give --length-scale 1.1" in err and not (tmp_path / "wrong.mot").exists()
+
+
+def test_track_strict_passes_clean_markers_and_fails_a_flagged_frame(tmp_path) -> None:
+    # Review 7: --strict exited 3 on every file, clean simulated markers too, for the rows every
+    # track flags while the filter's rates settle: it could not tell a clean file from a bad one.
+    t = ikid.simulate("random", seed=9908, duration=1.0)
+    write_trc(tmp_path / "clean.trc", t.time, t.markers, 1000.0)
+    assert exit_status(["track", str(tmp_path / "clean.trc"), "-o", str(tmp_path / "c"), "--strict"]) == 0
+    stored = ikid.io.read_storage(tmp_path / "c.sto")
+    assert stored.values[:, -1].any()  # the settling rows are still flagged in the file
+    markers = t.markers.copy()
+    markers[500:520, 9:12] = np.nan  # MC2 gone for 20 ms mid-file
+    write_trc(tmp_path / "gap.trc", t.time, markers, 1000.0)
+    assert exit_status(["track", str(tmp_path / "gap.trc"), "-o", str(tmp_path / "g"), "--strict"]) == 3
+
+
+def test_run_on_gaps_closer_than_its_window_says_what_reads_the_file(tmp_path, capsys) -> None:
+    # Review 7: every 40th frame dropped, the torque model's 50-frame window never fills: `ikid
+    # run` wrote nothing and said only "window filling". It says what reads such a file.
+    t = ikid.simulate("random", seed=9911, duration=1.0)
+    keep = np.ones(len(t.time), bool)
+    keep[::40] = False
+    write_trc(tmp_path / "d.trc", t.time[keep], t.markers[keep], 1000.0)
+    assert exit_status(["run", str(tmp_path / "d.trc"), "-o", str(tmp_path / "d")]) == 2
+    err = capsys.readouterr().err
+    assert (
+        "window never filled between the file's time gaps" in err and "`ikid ik` gives the angles" in err
+    ), err
+    assert cli(["ik", str(tmp_path / "d.trc"), "-o", str(tmp_path / "d.mot")]) == 0
+
+
+def test_simulate_and_track_take_one_subject_for_one_length_scale(tmp_path, capsys) -> None:
+    # Review 7: `simulate --length-scale 1.1` kept the default mass where `track` takes the
+    # length's cube: checked against each other, 76 % torque error. One rule now; and the thesis
+    # protocol's own duration is not silently kept over --duration.
+    stem = tmp_path / "s"
+    assert cli(["simulate", "--length-scale", "1.1", "--duration", "3", "--seed", "12", "-o", str(stem)]) == 0
+    assert cli(["track", f"{stem}.trc", "-o", str(tmp_path / "t")]) == 0
+    assert "×1.1 length, ×1.33 mass (estimated from the markers' distances" in capsys.readouterr().out
+    time_truth, truth = read_sto(f"{stem}.sto")
+    time_sto, tau = read_sto(tmp_path / "t.sto")
+    truth = truth[np.searchsorted(time_truth, time_sto - 1e-9)]
+    settled = time_sto > 0.5
+    error = np.sqrt(np.mean((tau[settled] - truth[settled]) ** 2, axis=0))
+    assert np.all(error < 0.2 * np.sqrt(np.mean(truth[settled] ** 2))), error
+    thesis = ["simulate", "--protocol", "thesis", "--duration", "5", "-o", str(tmp_path / "th")]
+    assert exit_status(thesis) == 2
+    assert "the thesis protocol has its own duration" in capsys.readouterr().err
 
 
 def test_an_uncalibrated_stream_tracker_refuses_markers_of_another_size(monkeypatch, capsys) -> None:

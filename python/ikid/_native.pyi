@@ -36,6 +36,7 @@ __all__ = [
     "RIGID_TOLERANCE_M",
     "MAX_TIME_GAP_S",
     "RATE_TOLERANCE",
+    "LOST_S",
     "RIGID_TOLERANCE_REL",
     "SD_SCALE_TAU",
     "build_model",
@@ -249,6 +250,7 @@ REFINED_SD_SCALE_TAU: float
 RIGID_TOLERANCE_M: float
 MAX_TIME_GAP_S: float
 RATE_TOLERANCE: float
+LOST_S: float
 RIGID_TOLERANCE_REL: float
 
 @final

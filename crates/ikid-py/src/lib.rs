@@ -42,5 +42,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MAX_TIME_GAP_S", ikid::stream::MAX_TIME_GAP_S)?;
     // How far a source's mean step may be off the rate before it is said to run at another.
     m.add("RATE_TOLERANCE", ikid::stream::RATE_TOLERANCE)?;
+    // How long a tracker's first estimates are flagged restarted while its rates settle.
+    m.add("LOST_S", ikid::tracker::LOST_S)?;
     Ok(())
 }

@@ -405,6 +405,23 @@ pub fn check_recording_span(frames: &[f64]) -> crate::Result<()> {
         .chunks_exact(MARKER_FRAME_LEN)
         .position(|f| marker_span(f).is_some_and(|s| !(MARKER_SPAN_M.0..=MARKER_SPAN_M.1).contains(&s)))
         .unwrap_or(0);
+    // A marker at exactly the lab's origin in most frames is a missing one exported as zeros
+    // (review 7: read as a marker, it was told "are the units mm, read as cm?").
+    let n = frames.len() / MARKER_FRAME_LEN;
+    let zeroed = (0..N_MARKERS).find(|&m| {
+        let at_origin = frames.chunks_exact(MARKER_FRAME_LEN).filter(|f| f[3 * m..3 * m + 3] == [0.0; 3]).count();
+        2 * at_origin > n
+    });
+    if let Some(m) = zeroed {
+        return Err(crate::Error::ImplausibleMarkers {
+            frame: first,
+            detail: format!(
+                "marker {} sits at exactly (0, 0, 0) in most frames: a missing marker exported as zeros? ikid \
+                 reads a missing marker as an empty cell or NaN; export gaps as such (or relabel the marker)",
+                MARKERS[m].name
+            ),
+        });
+    }
     Err(crate::Error::ImplausibleMarkers {
         frame: first,
         detail: format!("{} (the median over the recording)", span_problem(median)),

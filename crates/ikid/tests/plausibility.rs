@@ -101,6 +101,17 @@ fn markers_in_the_wrong_units_are_refused_naming_the_likely_cause() {
     let wrong: Vec<f64> = recording.iter().map(|v| v * 10.0).collect();
     let err = body::check_recording_span(&wrong).unwrap_err();
     assert!(err.to_string().contains("median"), "{err}");
+    // A marker exported as (0, 0, 0) where it was missing, in every frame (the arm a metre from
+    // the lab's origin): named as such, not taken for wrong units (review 7).
+    let far: Vec<f64> = (0..9).flat_map(|_| scaled_frame(1.0)).collect();
+    let far: Vec<f64> = far.iter().enumerate().map(|(i, v)| if i % 3 == 1 { v + 1.0 } else { *v }).collect();
+    assert!(body::check_recording_span(&far).is_ok());
+    let mut zeroed = far.clone();
+    for frame in zeroed.chunks_exact_mut(MARKER_FRAME_LEN) {
+        frame[12..15].fill(0.0);
+    }
+    let err = body::check_recording_span(&zeroed).unwrap_err().to_string();
+    assert!(err.contains("marker MC5 sits at exactly (0, 0, 0)") && !err.contains("units mm"), "{err}");
 }
 
 #[test]

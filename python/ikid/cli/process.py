@@ -110,7 +110,18 @@ def _process_one(job: tuple[str, dict]) -> dict:
                     on_rows=to_file,
                 )
                 if runs[kind].n_outputs == 0:
-                    raise ikid.InputError(f"{path}: no frame gave {kind}: {runs[kind].summary()}")
+                    # A window that never filled (time gaps closer than it, review 7: every 40th
+                    # frame dropped) said only "window filling": say what does read such a file.
+                    unfilled = set(runs[kind].refused) == {"window filling"}
+                    advice = (
+                        "; the model's window never filled between the file's time gaps (rows missing "
+                        "from its time column, closer together than the window): `ikid ik` gives the "
+                        "angles (per frame where its window cannot fill); a recording without dropped "
+                        "frames gives both"
+                        if unfilled
+                        else ""
+                    )
+                    raise ikid.InputError(f"{path}: no frame gave {kind}: {runs[kind].summary()}{advice}")
         first_run = next(iter(runs.values()))
         row.update(
             clean=all(r.clean for r in runs.values()),

@@ -215,12 +215,15 @@ impl ForearmMotionFilter {
 }
 
 impl Tracker {
-    /// Step 1c: the forearm's motion follows its pose when it was seen this frame (measured, or
-    /// from two markers), and goes on as predicted when it was held. The pose's noise is its
-    /// markers' as learned ([`ForearmNoise`](super::forearm::ForearmNoise)), the tracker's
-    /// initial guess until a sample taught it (the first frames then count as noisy, not exact).
+    /// Step 1c: the forearm's motion follows its pose when its three markers measured it this
+    /// frame, and goes on as predicted otherwise. A pose from two markers is not the three's (its
+    /// roll filtered, its markers where they sat lately): each gap's ends stepped it, and the
+    /// steps read as accelerations (the exam's dropouts of a forearm marker: torques 0.036 →
+    /// 0.235 N·m RMS off). The pose's noise is its markers' as learned
+    /// ([`ForearmNoise`](super::forearm::ForearmNoise)), the tracker's initial guess until a
+    /// sample taught it (the first frames then count as noisy, not exact).
     pub(super) fn follow_forearm_motion(&mut self, step: &Step) {
-        let pose = if step.forearm_seen { self.forearm.as_ref() } else { None };
+        let pose = if step.forearm_measured { self.forearm.as_ref() } else { None };
         let sigma2 = self
             .forearm_noise
             .learned()
@@ -461,6 +464,44 @@ mod tests {
             // errors (48-55 % without it; the rest is the lag a white-jerk model leaves).
             let coverage = within as f64 / judged as f64;
             assert!(coverage > 0.7, "calibrated {calibrated}: ±2σ holds {coverage} of the torques' errors");
+        }
+    }
+
+    #[test]
+    fn a_forearm_marker_gap_is_no_forearm_motion() {
+        // A resting forearm whose marker drops out for 0.3 s: the pose from its two others is
+        // not the three's, and each end of the gap stepped it. Taken as motion, the exam's
+        // dropouts put the torques 6.5× further off (0.036 → 0.235 N·m RMS); the forearm must
+        // stay at rest through the gap and after it, as without one.
+        let (rate, shoulder) = (1000.0, 0.3);
+        let body = BodyModel::default();
+        let q = super::super::testkit::trajectory(4000, rate);
+        let pose = body.forearm_pose(shoulder);
+        let mut at_rest = 0;
+        for gap in [None, Some(0), Some(1), Some(2)] {
+            let mut tracker = Tracker::new(body.clone(), TrackerSettings::new(rate)).unwrap();
+            tracker.set_calibration(Some(crate::calibration::Calibration::body_model()));
+            let mut noise = lcg_gaussian(5);
+            let mut moving = 0;
+            for (i, q) in q.iter().enumerate() {
+                let mut frame: Vec<f64> = body.marker_frame(q, &pose).iter().map(|v| v + 1e-4 * noise()).collect();
+                if let Some(m) = gap
+                    && (2000..2300).contains(&i)
+                {
+                    frame[3 * m..3 * m + 3].fill(f64::NAN);
+                }
+                tracker.push(&frame).unwrap();
+                if i >= 1000 && tracker.forearm_motion_now().0 != ForearmMotion::default() {
+                    moving += 1;
+                }
+            }
+            if gap.is_none() {
+                at_rest = moving; // what noise alone lets through (MOTION_SIGNIFICANCE)
+            }
+            assert!(
+                moving <= at_rest + 5,
+                "marker {gap:?} gone 0.3 s: the resting forearm moved on {moving} of 3000 frames ({at_rest} without the gap)"
+            );
         }
     }
 }

@@ -49,10 +49,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="exact Newton-Euler for the subject below instead of the network",
     )
-    p.add_argument("--length-scale", type=SUBJECT_LENGTH, default=1.0, help="subject size (--reference)")
-    p.add_argument("--mass-scale", type=SUBJECT_MASS, default=1.0, help="subject mass factor (--reference)")
+    p.add_argument("--length-scale", type=SUBJECT_LENGTH, help="subject size (--reference only; default 1)")
     p.add_argument(
-        "--shoulder-deg", type=SHOULDER_DEG, default=0.0, help="shoulder flexion, degrees (--reference)"
+        "--mass-scale", type=SUBJECT_MASS, help="subject mass factor (--reference only; default 1)"
+    )
+    p.add_argument(
+        "--shoulder-deg", type=SHOULDER_DEG, help="shoulder flexion, degrees (--reference only; default 0)"
     )
     p.add_argument(
         "--resample",
@@ -94,9 +96,29 @@ def run(args: argparse.Namespace) -> int:
     time: memory does not grow with its length."""
     from ikid.io import mot_blocks, sto_writer
     from ikid.io.resample import resample_stretches
-    from ikid.kinematics import gap_edge_s, joint_state_blocks_near_edges, min_stretch_rows
+    from ikid.kinematics import gap_edge_s, joint_state_blocks_near_edges, min_stretch_rows, sample_rate
     from ikid.pipeline import check_rate, run_blocks
 
+    subject = [
+        f"--{name} {value:g}"
+        for name, value in (
+            ("length-scale", args.length_scale),
+            ("mass-scale", args.mass_scale),
+            ("shoulder-deg", args.shoulder_deg),
+        )
+        if value is not None
+    ]
+    if subject and not args.reference:
+        # Review 7: ignored without --reference, a 45° recording's torques came out as large as
+        # the true ones wrong, exit 0, the summary saying "shoulder flexed 0°".
+        raise ikid.ArgumentError(
+            f"ikid id {' '.join(subject)}: the network (--model {args.model}) gives the torques of the "
+            "subject and shoulder pose it was trained for and takes no other; these set the exact "
+            "Newton-Euler reference's: add --reference, or leave them out"
+        )
+    args.length_scale = 1.0 if args.length_scale is None else args.length_scale
+    args.mass_scale = 1.0 if args.mass_scale is None else args.mass_scale
+    args.shoulder_deg = 0.0 if args.shoulder_deg is None else args.shoulder_deg
     if args.sd and args.reference:
         raise ikid.ArgumentError(
             "ikid id --sd: the exact Newton-Euler reference (--reference) has no standard deviation to "
@@ -140,11 +162,26 @@ def run(args: argparse.Namespace) -> int:
             "markers gives the torques they determine (docs/markersets.md)"
         )
     # The rate of the first block (a file's first 65,536 rows): time gaps are steps over 1.5 of it.
-    rate = 1.0 / float(np.median(np.diff(first[0])))
+    rate = sample_rate(first[0])
     angles: Iterator[tuple[np.ndarray, np.ndarray]] = _at_one_rate(
         itertools.chain([first], blocks), rate, args.input
     )
     notes = [f"angles low-passed at {lowpass:g} Hz" if lowpass else "angles not low-passed"]
+    # The angles' extent as read: radians under a header saying degrees read as a wrist that
+    # never leaves ±3.14° (review 7: torques of a still hand, 98 % off, status 0).
+    extent = [0.0, math.inf, -math.inf]  # largest |angle|, smallest, largest
+
+    def noted(blocks: Iterator[tuple[np.ndarray, np.ndarray]]) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        for time_s, q in blocks:
+            if np.isfinite(q).any():
+                extent[0] = max(extent[0], float(np.nanmax(np.abs(q))))
+                extent[1], extent[2] = (
+                    min(extent[1], float(np.nanmin(q))),
+                    max(extent[2], float(np.nanmax(q))),
+                )
+            yield time_s, q
+
+    angles = noted(angles)
     model = None
     if not args.reference:
         model = _model_for(args.model, "ikid id --model", ("id",), allow_unchecked=args.allow_unchecked_model)
@@ -300,8 +337,16 @@ def run(args: argparse.Namespace) -> int:
         summary = ", ".join([summary, *notes])
         if written == 0:
             raise ikid.InputError(f"{args.input}: no frame gave torques: {summary}")
+    radians_as_degrees = extent[0] <= math.radians(math.pi) and extent[2] - extent[1] > math.radians(0.5)
+    if radians_as_degrees:
+        print(
+            f"ikid: warning: {args.input}: every angle lies within ±{math.degrees(extent[0]):.3g}° as "
+            "read, as radians under a header saying degrees would: if the file is in radians its "
+            "header's inDegrees must say no (its torques here are those of a hand hardly moving)",
+            file=sys.stderr,
+        )
     print(f"{args.input}: {summary} -> {output}")
-    if args.strict and not (clean and not short):
+    if args.strict and not (clean and not short and not radians_as_degrees):
         print(f"ikid: --strict: {args.input} has refused, implausible or flagged frames", file=sys.stderr)
         return 3
     return 0
@@ -320,12 +365,14 @@ def _reference(args: argparse.Namespace, state: np.ndarray) -> np.ndarray:
 
 
 def _at_one_rate(blocks, rate_hz: float, source: str) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """The blocks, each checked to be at the first block's rate (its median step): a file that
-    changes rate is refused, not read as stretches too short to use."""
+    """The blocks, each checked to be at the first block's rate
+    (:func:`~ikid.kinematics.sample_rate`): a file that changes rate is refused, not read as
+    stretches too short to use."""
+    from ikid.kinematics import sample_rate
     from ikid.pipeline import same_rate
 
     for time_s, q in blocks:
-        if len(time_s) > 10 and not same_rate(rate := 1.0 / float(np.median(np.diff(time_s))), rate_hz):
+        if len(time_s) > 10 and not same_rate(rate := sample_rate(time_s), rate_hz):
             raise ikid.InputError(
                 f"{source}: the rows from {time_s[0]:g} s are at {rate:g} Hz, the first rows at "
                 f"{rate_hz:g} Hz: `ikid id` takes a file at one rate (write one file per rate)"
