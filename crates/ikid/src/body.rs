@@ -407,12 +407,15 @@ pub fn check_recording_span(frames: &[f64]) -> crate::Result<()> {
         .unwrap_or(0);
     // A marker at exactly the lab's origin in most frames is a missing one exported as zeros
     // (review 7: read as a marker, it was told "are the units mm, read as cm?").
+    // (All of them there: no data at all, said by the span itself.)
     let n = frames.len() / MARKER_FRAME_LEN;
-    let zeroed = (0..N_MARKERS).find(|&m| {
-        let at_origin = frames.chunks_exact(MARKER_FRAME_LEN).filter(|f| f[3 * m..3 * m + 3] == [0.0; 3]).count();
-        2 * at_origin > n
-    });
-    if let Some(m) = zeroed {
+    let zeroed: Vec<usize> = (0..N_MARKERS)
+        .filter(|&m| {
+            let at_origin = frames.chunks_exact(MARKER_FRAME_LEN).filter(|f| f[3 * m..3 * m + 3] == [0.0; 3]).count();
+            2 * at_origin > n
+        })
+        .collect();
+    if let Some(&m) = zeroed.first().filter(|_| zeroed.len() + 2 <= N_MARKERS) {
         return Err(crate::Error::ImplausibleMarkers {
             frame: first,
             detail: format!(
