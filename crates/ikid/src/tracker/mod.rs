@@ -307,7 +307,7 @@ impl Tracker {
             turn: ForearmTurn::new(),
             forearm_noise: ForearmNoise::new(),
             roll: Roll::idle(),
-            motion: ForearmMotionFilter::new(1.0 / settings.rate_hz),
+            motion: ForearmMotionFilter::new(1.0 / settings.rate_hz, settings.jerk_noise),
             motion_anchor: Vector3::zeros(),
             torque_limit: 0.0,
             refined: false,
