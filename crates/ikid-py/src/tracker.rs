@@ -150,9 +150,11 @@ impl Tracker {
     /// the filter. Holds the GIL (a push takes microseconds).
     ///
     /// ``time``: the frame's acquisition time, seconds (any origin), for a source that can lose
-    /// frames: a stamp more than 1.5 periods after the last one, or not after it, restarts the
-    /// filter (keeping what it learned of the subject; ``gap_restarts`` counts it) instead of
-    /// bridging the gap as one step; one less than half a period after it is refused.
+    /// frames: a stamp more than 1.5 periods after the last one carries the filter through the
+    /// frames lost when they are fewer than 30 ms (``bridged_frames`` counts them), and
+    /// restarts it otherwise, or when the stamp is not after the last one (keeping what it
+    /// learned of the subject; ``gap_restarts`` counts it); one less than half a period after
+    /// it is refused.
     #[pyo3(signature = (frame, time=None))]
     fn push<'py>(
         &mut self,
@@ -269,6 +271,13 @@ impl Tracker {
     #[getter]
     fn gap_restarts(&self) -> usize {
         self.inner.gap_restarts()
+    }
+
+    /// How many lost frames ``push(..., time=)`` or ``run(..., times=)`` carried the filter
+    /// through (fewer than 30 ms of them in a row: bridged, not restarted).
+    #[getter]
+    fn bridged_frames(&self) -> usize {
+        self.inner.bridged_frames()
     }
 
     /// Forget everything seen (state, forearm pose, noise estimates).

@@ -192,6 +192,9 @@ impl Tracker {
         self.forearm_jumps += 1;
         if self.forearm_jumps >= lost && jump <= MAX_RELOCATION_M {
             self.forearm_jumps = 0;
+            // Its position re-learned: the step to it is no motion (a whole lab shifted 20 cm
+            // read as kN·m of carried torque).
+            self.motion.reset();
             return true;
         }
         false

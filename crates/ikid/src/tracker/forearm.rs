@@ -154,6 +154,7 @@ impl Tracker {
             if relearned {
                 step.flags |= status::RESTARTED;
                 self.templated[Segment::Forearm as usize] = false;
+                self.motion.reset(); // a new shape, a new pose: no step of it is motion
             }
             if rejected == 0 && self.templating(Segment::Forearm) {
                 self.take_template(Segment::Forearm, frame);

@@ -231,8 +231,10 @@ pub struct Tracker {
     /// Where the stamped frames fall in time ([`push_at`](Tracker::push_at)); an unstamped
     /// push moves it on by a period.
     clock: crate::stream::FrameGrid,
-    /// Restarts after time gaps ([`push_at`](Tracker::push_at)) since the start.
+    /// Restarts after time gaps ([`push_at`](Tracker::push_at)) since the start, and lost
+    /// frames bridged (fewer than [`LOST_S`] in a row).
     gap_restarts: usize,
+    bridged: usize,
     /// How the stamps follow each other (a source slower than the rate).
     pace: crate::stream::SourcePace,
 }
@@ -315,6 +317,7 @@ impl Tracker {
             lab,
             clock: crate::stream::FrameGrid::default(),
             gap_restarts: 0,
+            bridged: 0,
             pace: crate::stream::SourcePace::default(),
         };
         // The subject's mass scale: its hand's mass over the default subject's.
@@ -360,6 +363,7 @@ impl Tracker {
         self.turned_over = status::TurnedOverWatch::new();
         self.clock = crate::stream::FrameGrid::default();
         self.gap_restarts = 0;
+        self.bridged = 0;
         self.pace = crate::stream::SourcePace::default();
         if let Some(r) = self.refiner.as_mut() {
             r.reset();

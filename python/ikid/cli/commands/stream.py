@@ -523,14 +523,20 @@ class _TrackerStream:
         self.status = math.nan
         self.time_reanchors = 0
         self.restarts_before = 0  # gap restarts of the trackers a reset replaced
+        self.bridged_before = 0  # and the lost frames they bridged
 
     @property
     def gap_restarts(self) -> int:
         return self.restarts_before + self.tracker.gap_restarts
 
+    @property
+    def bridged_frames(self) -> int:
+        return self.bridged_before + self.tracker.bridged_frames
+
     def push(self, frame: np.ndarray, time: float | None = None) -> np.ndarray | None:
         # Frames lost (or a slower source): the filter's motion model would bridge the gap as
-        # one period (torques 4 N·m off after 0.1 s lost); stamped, the core restarts it.
+        # one period (torques 4 N·m off after 0.1 s lost); stamped, the core carries it through
+        # the lost frames when they are few, and restarts it otherwise.
         out = self.tracker.push(frame, time=time)
         sd = self.tracker.output_sd
         if out is None or sd is None:
@@ -550,7 +556,7 @@ class _TrackerStream:
         )
 
     def reset(self) -> None:
-        self.restarts_before = self.gap_restarts
+        self.restarts_before, self.bridged_before = self.gap_restarts, self.bridged_frames
         self.tracker = self._new_tracker()
 
 
@@ -889,6 +895,9 @@ def _run_with(
         parts.append(f"{notes['reconnected']} reconnected")
         if notes["not reconnected"]:
             parts.append("the source was lost and did not come back")
+    bridged = getattr(streams[0], "bridged_frames", 0)
+    if bridged:
+        parts.append(f"{bridged} lost frames bridged (the filter carried through them)")
     gap_restarts = getattr(streams[0], "gap_restarts", 0)
     if gap_restarts:
         parts.append(f"{gap_restarts} restarts after time gaps (the window or filter started again)")

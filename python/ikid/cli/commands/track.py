@@ -159,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
     except ikid.IkidError as e:
         raise type(e)(_naming(args.input, e)) from None
     bits = ikid.FRAME_STATUS
-    gap_restarts = 0
+    gap_restarts = bridged = 0
     k: int | None = None  # the first frame with an estimate
     n_frames = kept = lost = turned_over = 0
     counts = dict.fromkeys(bits, 0)
@@ -237,7 +237,7 @@ def run(args: argparse.Namespace) -> int:
             n_frames += len(frames)
             kept += int(keep.sum())
             lost += int(implausible.sum())
-        gap_restarts = tracker.gap_restarts
+        gap_restarts, bridged = tracker.gap_restarts, tracker.bridged_frames
         check_markers_seen(seen, mapping or MarkerMap.identity(), args.input)
         if k is None:
             raise ikid.InputError(
@@ -267,6 +267,11 @@ def run(args: argparse.Namespace) -> int:
         notes.append(f"{turned_over} of them because {TURNED_OVER_REASON}")
     if tracker.restarts:
         notes.append(f"{tracker.restarts} restarts after losing the hand")
+    if bridged:
+        notes.append(
+            f"{bridged} lost frames bridged (under {_native.LOST_S * 1e3:g} ms in a row: the filter carried "
+            "through them)"
+        )
     if gap_restarts:
         notes.append(f"{gap_restarts} restarts after time gaps (frames lost: the filter started again)")
     print(
