@@ -20,6 +20,7 @@
 
 use nalgebra::{Isometry3, Matrix3, UnitQuaternion, Vector3};
 
+use super::checks::JUMP_TOLERANCE_M;
 use super::output::MIN_REPORTED_NOISE;
 use super::{Step, Tracker};
 use crate::reference::ForearmMotion;
@@ -46,10 +47,9 @@ pub const MOTION_SIGNIFICANCE: [f64; 2] = [3.0, 2.0];
 pub const ACCEL_NOISE_SHARE: f64 = 0.41;
 
 /// How far a measured pose's origin may miss the prediction before it is a new start and not
-/// motion (see [`ForearmMotionFilter::step`]): both this far, m (a forearm's prediction over a
-/// frame is off by millimetres: 1 cm at a lab's 70 Hz is a jerk of 22 000 m/s³) ...
-const JUMP_M: f64 = 0.01;
-/// ... and this many standard deviations of the predicted miss.
+/// motion (see [`ForearmMotionFilter::step`]): both the slack the tracker gives a forearm's
+/// jump ([`JUMP_TOLERANCE_M`], 5 cm: a forearm's prediction over a frame is off by millimetres,
+/// racing's at 70 Hz too) and this many standard deviations of the predicted miss.
 const JUMP_SIGMAS: f64 = 30.0;
 
 /// How often a calibrated tracker takes the learned wrist centre's place in the forearm for the
@@ -210,7 +210,7 @@ impl ForearmMotionFilter {
         // a whole lab shifted 20 cm read as 13 N·m of carried torque, status 0.
         if let Some(c) = self.centre.as_ref() {
             let miss = (at - c.x.row(0).transpose()).norm();
-            if miss > JUMP_M && miss > JUMP_SIGMAS * (c.p[(0, 0)] + centre_variance).sqrt() {
+            if miss > JUMP_TOLERANCE_M && miss > JUMP_SIGMAS * (c.p[(0, 0)] + centre_variance).sqrt() {
                 self.reset();
             }
         }
