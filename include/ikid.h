@@ -519,10 +519,11 @@ enum ikid_status ikid_tracker_push(struct ikid_tracker *tracker,
 // for a source that can lose frames: a stamp more than 1.5 periods of `rate_hz` after the
 // last one and after the frame grid the stamps before it keep (frames lost: jitter of up to
 // ±0.35 periods is not a gap), or not after the last one (the source's clock restarted), restarts the
-// filter instead of bridging the gap as one step (0.1 s lost gave torques 3.8 N·m off);
-// what was learned of the subject is kept, and the first frames after are flagged
-// `IKID_FRAME_RESTARTED` while the velocities settle. `ikid_tracker_gap_restarts` counts
-// them. A stamp less than half a period after the last one, equal to it (a frame sent twice),
+// filter instead of bridging the gap as one step (0.1 s lost gave torques 3.8 N·m off) —
+// but for fewer lost frames than 30 ms of them, which it carries itself through as frames
+// with every marker missing; what was learned of the subject is kept, and the first frames
+// after a restart are flagged `IKID_FRAME_RESTARTED` while the velocities settle.
+// `ikid_tracker_gap_restarts` counts the restarts. A stamp less than half a period after the last one, equal to it (a frame sent twice),
 // or not finite, is refused
 // (`IKID_STATUS_INVALID_ARGUMENT`) and changes nothing. A source slower than `rate_hz` (three
 // stamps in a row each more than 1.5 periods after the one before) is refused from the third
