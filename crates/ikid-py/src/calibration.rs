@@ -19,13 +19,15 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 
 /// Refuses (`ArgumentError` saying what to do) a recording `(n, 18)` (metres) that the body
 /// model's own marker placement cannot read: its markers' distances, or the median posture
-/// read that way, are not a wrist's. What every uncalibrated run checks first.
+/// read that way, are not a wrist's, or they are the mirror image of a `side` arm's (the other
+/// arm's). What every uncalibrated run checks first.
 #[pyfunction]
-#[pyo3(signature = (frames, length_scale = 1.0))]
-fn check_default_placement(frames: &Bound<'_, PyAny>, length_scale: f64) -> PyResult<()> {
+#[pyo3(signature = (frames, length_scale = 1.0, side = "right"))]
+fn check_default_placement(frames: &Bound<'_, PyAny>, length_scale: f64, side: &str) -> PyResult<()> {
     let body = ikid::body::BodyModel::try_scaled(length_scale, 1.0).py_err()?;
+    let side = ikid::calibration::Side::from_name(side).py_err()?;
     with_f64_rows(frames, "frames", MARKER_FRAME_LEN, |v, _| {
-        ikid::calibration::check_default_placement(v, &body).py_err()
+        ikid::calibration::check_default_placement(v, &body, side).py_err()
     })
 }
 

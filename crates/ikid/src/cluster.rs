@@ -405,7 +405,7 @@ fn width_of(points: &[Vector3<f64>], used: &[bool]) -> f64 {
 
 /// Rotation and translation taking the `local` points onto the `lab` ones, least squares with
 /// a weight per point (0: not used; Kabsch, a reflection excluded).
-fn kabsch(local: &[Vector3<f64>], lab: &[Vector3<f64>], weight: &[f64]) -> (Matrix3<f64>, Vector3<f64>) {
+pub(crate) fn kabsch(local: &[Vector3<f64>], lab: &[Vector3<f64>], weight: &[f64]) -> (Matrix3<f64>, Vector3<f64>) {
     let total: f64 = weight.iter().sum();
     let lc = local.iter().zip(weight).map(|(p, w)| p * *w).sum::<Vector3<f64>>() / total;
     let gc = lab.iter().zip(weight).filter(|(_, w)| **w > 0.0).map(|(p, w)| p * *w).sum::<Vector3<f64>>() / total;

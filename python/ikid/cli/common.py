@@ -229,7 +229,6 @@ def _subject_calibration(
     from ikid.calibration import (
         check_calibration_map,
         check_marker_distances,
-        mirrored_to_right,
         uncalibrated,
     )
     from ikid.io import MarkerMap
@@ -255,7 +254,7 @@ def _subject_calibration(
         # Uncalibrated, the body model's placement; a left arm (the map's side) mirrored into
         # a right one first, as its calibration would.
         try:
-            ikid.check_default_placement(mirrored_to_right(frames, checked.side))
+            ikid.check_default_placement(frames, side=checked.side)
         except ikid.InputError as e:
             if not checked.one_hand_marker:
                 raise

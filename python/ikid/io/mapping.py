@@ -518,7 +518,8 @@ class MarkerMap:
         lines = [
             "# ikid marker = the label in your C3D/TRC files",
             f'side = "{self.side}"  # "right" or "left": the arm these markers are on (check it: a wrong '
-            "side mirrors every flexion and supination, and markers cannot show it)",
+            "side mirrors every flexion and supination; uncalibrated, markers at ikid's anatomical points "
+            "that read as the other arm's are refused, a cluster's cannot show it)",
             (f'up = "{self.up}"' if self.up else '# up = "+z"')
             + "  # the lab axis pointing up (torques depend on it): a C3D's POINT:Y_SCREEN says it; for a "
             "TRC, CSV or live source that does not, +y (OpenSim's) is assumed",

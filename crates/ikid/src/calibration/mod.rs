@@ -69,7 +69,8 @@ pub use mirror::{ForearmGeometry, MAX_MIRROR_CLUSTER_M, MAX_MIRROR_LANDMARK_DEG,
 pub use neutral::SUBJECT_SCALES;
 use neutral::neutral_posture;
 pub use placement::{
-    PLACEMENT_DISTANCE_SHARE, PLACEMENT_DISTANCE_SLACK_M, PLACEMENT_POSTURE_MARGIN_RAD, check_default_placement,
+    MIRROR_FIT_SHARE, MIRROR_MIN_RESIDUAL_M, PLACEMENT_DISTANCE_SHARE, PLACEMENT_DISTANCE_SLACK_M,
+    PLACEMENT_POSTURE_MARGIN_RAD, check_default_placement, hand_about_wrist_residual,
 };
 
 /// How long a segment's marker shape is averaged over, s, from the first frame with all its
@@ -1816,35 +1817,39 @@ mod tests {
     fn the_default_placement_check_takes_the_models_own_markers_and_its_slack() {
         let body = body::BodyModel::default();
         // The body model's own markers, at a posture inside every range: nothing to refuse.
-        check_default_placement(&spread_frames(5, [1.0, 1.0], [0.4, -0.3, 0.2]), &body).unwrap();
+        check_default_placement(&spread_frames(5, [1.0, 1.0], [0.4, -0.3, 0.2]), &body, Side::Right).unwrap();
         // Every distance 25% longer: at PLACEMENT_DISTANCE_SHARE exactly, 1 cm inside the
         // limit (share × model + slack); a limit of share × model − slack would refuse it.
         let d =
             |i: usize, j: usize| (Vector3::from(body.marker_offsets[i]) - Vector3::from(body.marker_offsets[j])).norm();
         assert!((PLACEMENT_DISTANCE_SHARE - 0.25).abs() < 1e-12 && PLACEMENT_DISTANCE_SLACK_M == 0.01);
         assert!([(0, 1), (0, 2), (1, 2), (3, 4), (3, 5), (4, 5)].iter().all(|&(i, j)| d(i, j) > 0.02));
-        check_default_placement(&spread_frames(5, [1.25, 1.25], [0.0; 3]), &body).unwrap();
+        check_default_placement(&spread_frames(5, [1.25, 1.25], [0.0; 3]), &body, Side::Right).unwrap();
         // A recording with no complete frame has nothing to judge.
-        check_default_placement(&[f64::NAN; MARKER_FRAME_LEN * 3], &body).unwrap();
+        check_default_placement(&[f64::NAN; MARKER_FRAME_LEN * 3], &body, Side::Right).unwrap();
     }
 
     #[test]
     fn markers_farther_apart_than_the_model_puts_them_name_the_pair() {
         let body = body::BodyModel::default();
         // Forearm markers 50% farther apart: RSP–USP, the first pair checked, is refused.
-        let e = check_default_placement(&spread_frames(5, [1.5, 1.0], [0.0; 3]), &body).unwrap_err().to_string();
+        let e = check_default_placement(&spread_frames(5, [1.5, 1.0], [0.0; 3]), &body, Side::Right)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("markers RSP and USP are") && e.contains("ikid calibrate"), "{e}");
         // Hand markers 50% farther apart (the forearm's as the model has them): MC2–MC5.
-        let e = check_default_placement(&spread_frames(5, [1.0, 1.5], [0.0; 3]), &body).unwrap_err().to_string();
+        let e = check_default_placement(&spread_frames(5, [1.0, 1.5], [0.0; 3]), &body, Side::Right)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("markers MC2 and MC5 are"), "{e}");
         // The same with the median over frames: three of five frames as the model has them
         // pass, three of five spread do not.
         let mut mixed = spread_frames(3, [1.0, 1.0], [0.0; 3]);
         mixed.extend(spread_frames(2, [1.0, 1.5], [0.0; 3]));
-        check_default_placement(&mixed, &body).unwrap();
+        check_default_placement(&mixed, &body, Side::Right).unwrap();
         let mut mixed = spread_frames(2, [1.0, 1.0], [0.0; 3]);
         mixed.extend(spread_frames(3, [1.0, 1.5], [0.0; 3]));
-        assert!(check_default_placement(&mixed, &body).is_err());
+        assert!(check_default_placement(&mixed, &body, Side::Right).is_err());
     }
 
     #[test]
@@ -1856,7 +1861,7 @@ mod tests {
         assert!((PLACEMENT_POSTURE_MARGIN_RAD.to_degrees() - 15.0).abs() < 0.01);
         for (deg, ok) in [(-30.0, true), (-40.0, false), (40.0, true), (50.0, false)] {
             let q = [0.0, 0.0, f64::to_radians(deg)];
-            let got = check_default_placement(&spread_frames(5, [1.0, 1.0], q), &body);
+            let got = check_default_placement(&spread_frames(5, [1.0, 1.0], q), &body, Side::Right);
             match got {
                 Ok(()) => assert!(ok, "{deg}° passed"),
                 Err(e) => {
@@ -1864,6 +1869,60 @@ mod tests {
                     assert!(!ok, "{deg}° refused: {e}");
                     assert!(e.contains(&format!("ra_wr_ad_ab = {deg:.0}°")) && e.contains("-20° to 30°"), "{e}");
                 }
+            }
+        }
+    }
+
+    /// Frames of a `length`-scaled subject's right arm at postures spread over every range
+    /// (shoulder at 0.3 rad), and the same frames mirrored (lab `z` negated: the left arm in
+    /// the same anatomical postures, as a left-arm recording has it).
+    fn right_and_left_arm(length: f64) -> (Vec<f64>, Vec<f64>) {
+        let body = body::BodyModel::scaled(length, 1.0);
+        let pose = body.forearm_pose(0.3);
+        let mut right = Vec::new();
+        for k in 0..40 {
+            let t = k as f64 / 40.0;
+            let q: [f64; 3] = std::array::from_fn(|c| {
+                let (lo, hi) = COORDINATES[c].range;
+                lo + (hi - lo) * (0.5 + 0.45 * (std::f64::consts::TAU * t * (c + 1) as f64).sin())
+            });
+            right.extend(body.marker_frame(&q, &pose));
+        }
+        let left = right.iter().enumerate().map(|(i, v)| if i % 3 == 2 { -v } else { *v }).collect();
+        (right, left)
+    }
+
+    #[test]
+    fn the_other_arms_markers_are_refused_naming_the_side_to_give() {
+        let body = body::BodyModel::default();
+        for length in [0.85, 1.0, 1.15] {
+            let (right, left) = right_and_left_arm(length);
+            // Each arm read as itself: passes (any size; the check scales to the markers).
+            check_default_placement(&right, &body, Side::Right).unwrap();
+            check_default_placement(&left, &body, Side::Left).unwrap();
+            // Each read as the other: every distance is the same, the handedness is not.
+            for (frames, given, other) in [(&left, Side::Right, "left"), (&right, Side::Left, "right")] {
+                let e = check_default_placement(frames, &body, given).unwrap_err().to_string();
+                assert!(
+                    e.contains(&format!("read as a {} arm, the markers are its mirror image", given.name()))
+                        && e.contains(&format!("side = \"{other}\"")),
+                    "{length}: {e}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_hand_fits_about_the_wrist_centre_at_any_posture_and_not_mirrored() {
+        let body = body::BodyModel::default();
+        for length in [0.85, 1.15] {
+            let (right, left) = right_and_left_arm(length);
+            for (r, l) in right.chunks_exact(MARKER_FRAME_LEN).zip(left.chunks_exact(MARKER_FRAME_LEN)) {
+                // Exact for the arm as it is; the mirror image's tetrahedron (the wrist centre
+                // ~26 mm out of the hand markers' plane) fits no rotation of the model's.
+                assert!(hand_about_wrist_residual(r, &body) < 1e-6);
+                let mirrored = hand_about_wrist_residual(l, &body);
+                assert!(mirrored > 1.5 * MIRROR_MIN_RESIDUAL_M, "{mirrored}");
             }
         }
     }

@@ -4,6 +4,7 @@ map (Plug-in Gait) when the file's labels are that set's."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 
 from ikid.cli.common import _refuse_over_inputs, _stdout_fd
 
@@ -20,7 +21,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--side",
         choices=["right", "left"],
-        help="the arm, for a file with a shipped set's labels of both (default: right if present)",
+        help="the arm the map is for (default right; for a file with a shipped set's labels of both "
+        "arms, the one to map: right if present)",
     )
     p.set_defaults(func=run)
 
@@ -28,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ikid.io import MarkerMap, read_markers
 
-    text = MarkerMap.identity().to_toml()
+    text = dataclasses.replace(MarkerMap.identity(), side=args.side or "right").to_toml()
     if args.input:
         _refuse_over_inputs([_stdout_fd()], [args.input])
         data = read_markers(args.input)
@@ -43,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
                 f"the {other} arm: --side {other}\n"
             )
             text = known.to_toml()
-        elif args.side:
+        elif args.side and MarkerMap.recognise(labels) is not None:
             raise SystemExit(
                 f"ikid: error: --side: {args.input} has no Plug-in Gait labels of the {args.side} arm"
             )
