@@ -547,6 +547,14 @@ enum ikid_status ikid_tracker_push_at(struct ikid_tracker *tracker,
 // `tracker` must be a live handle; `restarts` must point to writable storage.
 enum ikid_status ikid_tracker_gap_restarts(const struct ikid_tracker *tracker, size_t *restarts);
 
+// Writes into `*frames` how many lost frames `ikid_tracker_push_at` carried the filter through
+// (a loss shorter than 30 ms is bridged as frames with every marker missing, instead of
+// restarting) since the tracker was made or reset.
+//
+// # Safety
+// `tracker` must be a live handle; `frames` must point to writable storage.
+enum ikid_status ikid_tracker_bridged_frames(const struct ikid_tracker *tracker, size_t *frames);
+
 // Pushes a block of frames in order, exactly as `ikid_tracker_push` one at a time: `frames`
 // holds `n_values` doubles, a whole number of 18-value frames back to back. For frame `i`,
 // `out` (room for `out_len` doubles, at least 12 per frame) receives its 12 values at

@@ -155,7 +155,13 @@ int main(int argc, char **argv) {
     CHECK(ikid_tracker_push_at(tracker, 0.0, frames64, 18, estimate, 12, &flags) == IKID_STATUS_OK, "ikid_tracker_push_at");
     CHECK(ikid_tracker_push_at(tracker, 50.0 * period, frames64 + 18, 18, estimate, 12, &flags) == IKID_STATUS_OK, "push_at after a gap");
     CHECK(ikid_tracker_gap_restarts(tracker, &gap_restarts) == IKID_STATUS_OK && gap_restarts == 1, "ikid_tracker_gap_restarts");
-    CHECK(ikid_tracker_push_at(tracker, 50.1 * period, frames64 + 36, 18, estimate, 12, &flags) == IKID_STATUS_INVALID_ARGUMENT, "a stamp too soon");
+    /* Two periods lost after it: carried through as two frames without markers, no restart. */
+    size_t bridged = 99;
+    CHECK(ikid_tracker_push_at(tracker, 53.0 * period, frames64 + 18, 18, estimate, 12, &flags) == IKID_STATUS_OK, "push_at after two lost frames");
+    CHECK(ikid_tracker_bridged_frames(tracker, &bridged) == IKID_STATUS_OK && bridged == 2, "ikid_tracker_bridged_frames");
+    CHECK(ikid_tracker_gap_restarts(tracker, &gap_restarts) == IKID_STATUS_OK && gap_restarts == 1, "no restart for two lost frames");
+    CHECK(ikid_tracker_bridged_frames(tracker, NULL) == IKID_STATUS_NULL_PARAMETER, "bridged_frames into NULL");
+    CHECK(ikid_tracker_push_at(tracker, 53.1 * period, frames64 + 36, 18, estimate, 12, &flags) == IKID_STATUS_INVALID_ARGUMENT, "a stamp too soon");
     ikid_tracker_free(tracker);
 
     /* The NULL-safe frees and a failure's message. */

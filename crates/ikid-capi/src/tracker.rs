@@ -239,6 +239,21 @@ pub unsafe extern "C" fn ikid_tracker_gap_restarts(tracker: *const ikid_tracker,
     })
 }
 
+/// Writes into `*frames` how many lost frames `ikid_tracker_push_at` carried the filter through
+/// (a loss shorter than 30 ms is bridged as frames with every marker missing, instead of
+/// restarting) since the tracker was made or reset.
+///
+/// # Safety
+/// `tracker` must be a live handle; `frames` must point to writable storage.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ikid_tracker_bridged_frames(tracker: *const ikid_tracker, frames: *mut usize) -> ikid_status {
+    guard(|| {
+        let t = &unsafe { non_null(tracker, "tracker") }?.tracker;
+        *unsafe { non_null_mut(frames, "frames") }? = t.bridged_frames();
+        Ok(())
+    })
+}
+
 /// Pushes a block of frames in order, exactly as `ikid_tracker_push` one at a time: `frames`
 /// holds `n_values` doubles, a whole number of 18-value frames back to back. For frame `i`,
 /// `out` (room for `out_len` doubles, at least 12 per frame) receives its 12 values at

@@ -40,6 +40,7 @@ def _process_one(job: tuple[str, dict]) -> dict:
     from contextlib import ExitStack
 
     from ikid.calibration import map_with_calibration
+    from ikid.forearm_motion import ForearmMotion
     from ikid.io import MarkerMap, mot_writer, open_markers, sto_writer
     from ikid.io.markers import check_markers_seen, seen_markers
     from ikid.pipeline import run_blocks
@@ -60,14 +61,20 @@ def _process_one(job: tuple[str, dict]) -> dict:
         up, up_from = first.lab_up(mapping.up if mapping else None)
         runs = {}
 
-        def frames_of_file():
-            """The file's (time, frames) blocks; after the last, every marker must have been seen."""
+        def frames_of_file(motion: ForearmMotion | None = None):
+            """The file's (time, frames) blocks; after the last, every marker must have been seen.
+            ``motion`` (if given) is fed each block."""
             seen = np.zeros(6, bool)
             for block in data.blocks():
                 frames = block.frames(mapping, whole=False)
                 seen |= seen_markers(frames)
+                if motion is not None:
+                    motion.add(block.time, frames)
                 yield block.time, frames
             check_markers_seen(seen, mapping or MarkerMap.identity(), path)
+
+        # The torque networks take the forearm at rest: how much it moves is measured and said.
+        forearm_motion = ForearmMotion()
 
         # Coordinates the markers do not determine (a one-marker hand's s_p): not written.
         undetermined = mapping.undetermined if mapping else {}
@@ -98,7 +105,7 @@ def _process_one(job: tuple[str, dict]) -> dict:
                 # (ikid.pipeline.pick_model); a file or a per-rate name is that model.
                 runs[kind] = run_blocks(
                     name,
-                    frames_of_file(),
+                    frames_of_file(forearm_motion if kind == "torques" else None),
                     rate_hz=data.rate_hz,
                     n_frames=data.n_frames,
                     resample_to_model=opt["resample"],
@@ -123,6 +130,7 @@ def _process_one(job: tuple[str, dict]) -> dict:
                     )
                     raise ikid.InputError(f"{path}: no frame gave {kind}: {runs[kind].summary()}{advice}")
         first_run = next(iter(runs.values()))
+        carried = forearm_motion.note() if "torques" in runs else None
         row.update(
             clean=all(r.clean for r in runs.values()),
             ok=True,
@@ -132,6 +140,7 @@ def _process_one(job: tuple[str, dict]) -> dict:
                 [first_run.summary()]
                 + [f"{kind}: {r.summary()}" for kind, r in list(runs.items())[1:]]
                 + ([f"torques with lab up {up} ({up_from})"] if "torques" in runs else [])
+                + ([carried] if carried else [])
                 + [f"{name} not written: {why}" for name, why in undetermined.items()]
                 + [
                     f"{n} {kind} rows without a standard deviation (the first frames after the window "
