@@ -1123,10 +1123,13 @@ fn rigid_fit<const N: usize>(
     let h: Matrix3<f64> = (0..N).map(|k| (local[k] - lc) * (lab[k] - gc).transpose() * weight[k]).sum();
     let svd = h.svd(true, true);
     let (u, v_t) = (svd.u?, svd.v_t?);
-    // Three points span a plane: the second singular value must be clearly non-zero.
+    // Three points span a plane: the second singular value must be non-zero beyond rounding,
+    // as a share of the first. The weights are relative: a joint centre weighted 1e-6 (its
+    // misfit large) scales σ₂ down to ~1e-10 m² while it still fixes the turn about the two
+    // markers' line; an absolute floor of 1e-10 m² refused such fills (the soak's frames).
     let mut singular = svd.singular_values;
     singular.as_mut_slice().sort_by(|a, b| b.total_cmp(a));
-    if singular[1] < 1e-10 {
+    if singular[1] <= 1e-12 * singular[0] {
         return None;
     }
     let mut fix = Matrix3::identity();
@@ -1142,6 +1145,24 @@ mod label_tests;
 mod tests {
     use super::*;
     use crate::body::BodyModel;
+
+    #[test]
+    fn a_lightly_weighted_third_point_still_fixes_the_fit_and_a_line_does_not() {
+        let local = [Vector3::new(0.0, 0.0, 0.0), Vector3::new(0.05, 0.0, 0.0), Vector3::new(0.02, 0.03, 0.01)];
+        let turn = nalgebra::Rotation3::new(Vector3::new(0.3, -1.2, 0.7)).into_inner();
+        let shift = Vector3::new(0.1, 0.9, -0.2);
+        let lab = local.map(|p| turn * p + shift);
+        // The third point at a millionth of the others' weight: σ₂ ≈ 1e-9 m², and a marker
+        // filled 5 cm off the line lands within 20 µm, far under any marker's noise (the SVD's
+        // rounding over σ₂ turns it by ~1e-4 rad about the line).
+        let (rot, t) = rigid_fit(&local, &lab, &[1.0, 1.0, 1e-6]).expect("three points off a line");
+        let missing = Vector3::new(0.01, 0.05, -0.02);
+        let off = (rot * missing + t - (turn * missing + shift)).norm();
+        assert!(off < 2e-5, "{off}");
+        // On the line through the other two: no turn about it is known.
+        let line = [local[0], local[1], Vector3::new(0.02, 0.0, 0.0)];
+        assert!(rigid_fit(&line, &line.map(|p| turn * p + shift), &[1.0, 1.0, 1.0]).is_none());
+    }
 
     /// Smooth 3-DoF wrist motion at a shoulder pose, one frame per 10 ms.
     fn trial(body: &BodyModel, shoulder: f64, n: usize) -> Vec<[f32; 18]> {
