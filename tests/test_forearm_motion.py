@@ -72,3 +72,15 @@ def test_run_says_the_torque_its_network_leaves_out_when_the_forearm_moves(tmp_p
         assert ("the torque to carry the hand with it" in out) == said, out
         if said:
             assert float(got.group(1)) == pytest.approx(0.03 * (4 * np.pi) ** 2 / np.sqrt(2), rel=0.05)
+
+
+def test_two_takes_a_long_time_apart_are_measured_each_alone():
+    # Joined 30 years apart (and the second arm elsewhere in the lab): nothing is held
+    # for the time between, and no fit spans the join, which would read as a huge acceleration.
+    t, frames = _swung(1000.0, 2.0, 0.0, 2.0)
+    motion = ForearmMotion()
+    motion.add(t, frames)
+    motion.add(t + 1e9, frames + 0.5)
+    acc = motion.acceleration()
+    bins = int(np.floor(t[-1] / 0.005 + 0.5)) + 1  # 5-ms bins of one take; a fit spans 21 of them
+    assert len(acc) == 2 * (bins - 20) and acc.max() < 1e-6

@@ -57,24 +57,28 @@ class ForearmMotion:
 
     def acceleration(self) -> np.ndarray:
         """The centroid's acceleration magnitude, m/s², one value per bin whose whole fit
-        window was seen (none if the recording is shorter than a fit)."""
+        window was seen (none if the recording is shorter than a fit). Only the bins seen are
+        held: a time gap of any length (two takes joined) costs nothing, and no fit spans it."""
         if not self._bins:
             return np.empty(0)
-        bins = np.concatenate(self._bins)
-        sums = np.concatenate(self._sums)
-        total = np.zeros((int(bins.max()) + 1, 4))
-        np.add.at(total, bins, sums)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            centre = total[:, :3] / total[:, 3:]  # NaN where a bin had no frame
+        bins, inverse = np.unique(np.concatenate(self._bins), return_inverse=True)
+        total = np.zeros((len(bins), 4))
+        np.add.at(total, inverse, np.concatenate(self._sums))
+        centre = total[:, :3] / total[:, 3:]
         half = max(2, round(FIT_S / self._bin_s / 2))
-        if len(centre) < 2 * half + 1:
-            return np.empty(0)
         # The second derivative at the middle of a least-squares quadratic over 2·half + 1 bins.
         j = np.arange(-half, half + 1, dtype=np.float64) * self._bin_s
         second = 2.0 * np.linalg.pinv(np.vander(j, 3, increasing=True))[2]
-        acc = np.stack([np.convolve(centre[:, k], second[::-1], mode="valid") for k in range(3)], axis=1)
-        norm = np.linalg.norm(acc, axis=1)
-        return norm[np.isfinite(norm)]
+        runs = np.split(np.arange(len(bins)), np.flatnonzero(np.diff(bins) != 1) + 1)
+        found = [
+            np.linalg.norm(
+                np.stack([np.convolve(centre[run, k], second[::-1], mode="valid") for k in range(3)], axis=1),
+                axis=1,
+            )
+            for run in runs
+            if len(run) >= 2 * half + 1
+        ]
+        return np.concatenate(found) if found else np.empty(0)
 
     def note(self, length_scale: float = 1.0, mass_scale: float = 1.0) -> str | None:
         """What the torques leave out, for a run's summary; ``None`` if it is negligible
