@@ -48,10 +48,6 @@ pub fn check_default_placement(frames: &[f64], body: &body::BodyModel, side: Sid
     if complete.is_empty() {
         return Ok(());
     }
-    let median = |mut v: Vec<f64>| {
-        let mid = v.len() / 2;
-        *v.select_nth_unstable_by(mid, f64::total_cmp).1
-    };
     let advice = "calibrate the subject (ikid calibrate with the styloid and epicondyle landmarks of this session's static \
          trial; its neutral frames alone only for markers at the body model's anatomical points) and pass --calibration";
     for segment in [Segment::Forearm, Segment::Hand] {
@@ -110,6 +106,12 @@ pub fn check_default_placement(frames: &[f64], body: &body::BodyModel, side: Sid
     Ok(())
 }
 
+/// The median of `v` (the upper one of an even count), which must not be empty.
+fn median(mut v: Vec<f64>) -> f64 {
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
 /// Refuses frames (a right arm's, complete) whose mirror image fits the body model's hand
 /// about its wrist centre better than they do: the other arm's markers (see
 /// [`MIRROR_FIT_SHARE`]). `side` is the arm they were given as, to name.
@@ -122,10 +124,6 @@ fn check_handedness(complete: &[&[f64]], body: &body::BodyModel, side: Side) -> 
         as_is.push(hand_about_wrist_residual(f, body));
         mirrored.push(hand_about_wrist_residual(&mirror(f), body));
     }
-    let median = |mut v: Vec<f64>| {
-        let mid = v.len() / 2;
-        *v.select_nth_unstable_by(mid, f64::total_cmp).1
-    };
     let (as_is, mirrored) = (median(as_is), median(mirrored));
     if as_is > MIRROR_MIN_RESIDUAL_M && mirrored < MIRROR_FIT_SHARE * as_is {
         let other = match side {
