@@ -1159,6 +1159,12 @@ mod tests {
         let missing = Vector3::new(0.01, 0.05, -0.02);
         let off = (rot * missing + t - (turn * missing + shift)).norm();
         assert!(off < 2e-5, "{off}");
+        // The floor is a share of σ₁, so the fit does not depend on the points' scale: a
+        // millimetre triangle (σ₁ ≈ 1e-6 m²) with its third point at a thousandth is fitted.
+        let small = local.map(|p| p * 0.02);
+        let (rot, _) =
+            rigid_fit(&small, &small.map(|p| turn * p + shift), &[1.0, 1.0, 1e-3]).expect("a small triangle");
+        assert!((rot - turn).abs().max() < 1e-6);
         // On the line through the other two: no turn about it is known.
         let line = [local[0], local[1], Vector3::new(0.02, 0.0, 0.0)];
         assert!(rigid_fit(&line, &line.map(|p| turn * p + shift), &[1.0, 1.0, 1.0]).is_none());

@@ -218,11 +218,12 @@ mod tests {
         assert!(best_fit(&triangle, &line, [1.0; 3], 1e-15).is_none());
         assert!(best_fit(&line, &triangle, [1.0; 3], 1e-15).is_none());
         assert!(best_fit(&triangle, &triangle, [1.0; 3], 1e-15).is_some());
-        // Off the line by a micrometre: a plane, with σ₂ ≈ 3e-8 m²: no fit under a floor of
-        // 1e-7, one under 1e-9.
+        // Off the line by a micrometre: a plane, with σ₂ ≈ 3e-8 m² (the SVD's): no fit under a
+        // floor a half above it, one under a floor a third below.
         let nearly = [line[0], line[1], line[2] + Vector3::new(0.0, 0.0, 1e-6)];
-        assert!(best_fit(&triangle, &nearly, [1.0; 3], 1e-7).is_none());
-        assert!(best_fit(&triangle, &nearly, [1.0; 3], 1e-9).is_some());
+        let (_, sigma2) = kabsch_by_svd(&triangle, &nearly, [1.0; 3]);
+        assert!(best_fit(&triangle, &nearly, [1.0; 3], 1.5 * sigma2).is_none());
+        assert!(best_fit(&triangle, &nearly, [1.0; 3], sigma2 / 1.5).is_some());
     }
 
     fn range(i: usize) -> std::ops::Range<f64> {
